@@ -96,34 +96,29 @@ def forward(model: RobotModel, joints, params=None, setup: bool = True) -> np.nd
 
 def forward_with_jacobian(model: RobotModel, joints, params=None, setup: bool = True) -> KinematicsResult:
     """Forward kinematics and the analytic Jacobian with respect to every model parameter."""
-    T, pres, consts, p = _chain(model, joints, params, setup, keep_frames=True)
+    T, pres, _, p = _chain(model, joints, params, setup, keep_frames=True)
     p_tool = T[..., :3, 3]
-    cols = []
-    zeros3 = np.zeros(p_tool.shape)
-    for t in range(len(model.transforms)):
-        if t == 0 and not setup:
-            cols.extend([np.zeros(p_tool.shape[:-1] + (6,))] * 6)
-            continue
-        P = pres[t]
-        Rp = P[..., :3, :3]
-        pp = np.broadcast_to(P[..., :3, 3], p_tool.shape)
-        yaw = p[..., 6 * t + 5][..., None]
-        pitch = p[..., 6 * t + 4][..., None]
-        # The rotation parameters turn about axes through the transform's own origin.
-        origin = pp + np.einsum("...ij,...j->...i", Rp, np.broadcast_to(p[..., None, 6 * t: 6 * t + 3], p_tool.shape))
-        Rz = rot_z(yaw)
-        Rzy = Rz @ rot_y(pitch)
-        a_yaw = np.broadcast_to(Rp[..., :, 2], p_tool.shape)
-        a_pitch = np.einsum("...ij,...j->...i", Rp, Rz[..., :, 1])
-        a_roll = np.einsum("...ij,...j->...i", Rp, Rzy[..., :, 0])
-        lever = p_tool - origin
-        for k in range(3):
-            axis = np.broadcast_to(Rp[..., :, k], p_tool.shape)
-            cols.append(np.concatenate([axis, zeros3], axis=-1))
-        for axis in (a_roll, a_pitch, a_yaw):
-            axis = np.broadcast_to(axis, p_tool.shape)
-            cols.append(np.concatenate([np.cross(axis, lever), axis], axis=-1))
-    J = np.stack(cols, axis=-1)
+    nt = len(model.transforms)
+    P = np.stack(np.broadcast_arrays(*pres), axis=-3)  # (..., n, nt, 4, 4) frame before each transform
+    Rp = P[..., :3, :3]
+    pt = p.reshape(p.shape[:-1] + (1, nt, 6))  # (..., 1, nt, 6)
+    # The rotation parameters turn about axes through the transform's own origin.
+    origin = P[..., :3, 3] + np.einsum("...ij,...j->...i", Rp, pt[..., :3])
+    Rz = rot_z(pt[..., 5])
+    local = np.empty(Rz.shape)
+    local[..., :, 0] = (Rz @ rot_y(pt[..., 4]))[..., :, 0]  # roll axis
+    local[..., :, 1] = Rz[..., :, 1]  # pitch axis
+    local[..., :, 2] = 0.0
+    local[..., 2, 2] = 1.0  # yaw axis
+    W = np.swapaxes(Rp @ local, -1, -2)  # (..., n, nt, 3 [roll, pitch, yaw], 3 [vector])
+    lever = (p_tool[..., None, :] - origin)[..., None, :]
+    blk = np.zeros(W.shape[:-2] + (6, 6))
+    blk[..., :3, :3] = Rp
+    blk[..., :3, 3:] = np.swapaxes(np.cross(W, lever), -1, -2)
+    blk[..., 3:, 3:] = np.swapaxes(W, -1, -2)
+    if not setup:
+        blk[..., 0, :, :] = 0.0
+    J = np.moveaxis(blk, -3, -2).reshape(blk.shape[:-3] + (6, nt * 6))
     return KinematicsResult(T, J)
 
 
