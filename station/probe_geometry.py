@@ -39,7 +39,8 @@ origin with axes parallel to MKKS, every probe then reads 0. Contact points in M
 Every contact is at least 5 mm inside its face, which covers the robot's positioning error.
 
 Sensitivity (``contact_pose_covariance`` at the nominal pose, 1 µm reading σ on every probe):
-position σ ≈ 0.8-1.2 µm, roll/pitch σ ≈ 8-9″, yaw σ ≈ 12″ (see the test that checks it). It
+position σ ≈ 1.3-1.7 µm, roll 8.4″, pitch 9.7″, yaw 12.2″ (a test checks these against a
+Monte Carlo of the solver). It
 scales linearly with the reading noise and inversely with the probe spacing; the chapter's
 50 mm spacing would give "a few arc seconds" per µm.
 """
@@ -99,7 +100,7 @@ class ProbeHeadGeometry:
     tip_radius_mm: float = 1.0
     stroke_mm: float = 10.0
     cube_edge_mm: float = 40.0
-    #: the pose every probe reads 0 at; see nominal_contact_pose()
+    #: (4,4) the pose every probe reads 0 at (checked); None means the identity
     nominal_pose: np.ndarray | None = None
 
     def __post_init__(self) -> None:
@@ -118,6 +119,14 @@ class ProbeHeadGeometry:
                           ("nominal_pose", M0)):
             arr.flags.writeable = False
             object.__setattr__(self, name, arr)
+        # A geometry whose probes do not all touch their faces at mid-stroke in the nominal
+        # pose is a wrong geometry file; better to fail here than in every solve.
+        zero = readings_from_poses(self, M0)
+        if not np.all(np.abs(zero) < 1e-6):
+            raise ValueError(
+                f"probes do not read 0 at the nominal pose (readings {np.round(zero, 4)}): "
+                "check mount points, directions, faces and nominal_pose of the head geometry"
+            )
 
     @property
     def n_probes(self) -> int:

@@ -1,0 +1,51 @@
+"""Modbus loopback figures: round trip of one status read, and a 20 000-value correction table
+upload + read-back. ``python benchmarks/bench_modbus.py [--runs 5] [--reads 500]``.
+Prints medians; asserts nothing about time."""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import numpy as np
+
+from drivers.controller import CorrectionTableData, ModbusController, TableAxis
+from simulators.controller_server import SimulatedController
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--runs", type=int, default=5)
+    ap.add_argument("--reads", type=int, default=500)
+    args = ap.parse_args()
+    axes = (TableAxis(300.0, 20.0, 25), TableAxis(-400.0, 32.0, 25), TableAxis(250.0, 100.0, 2),
+            TableAxis(-np.pi, np.pi / 2, 4, periodic=True))
+    table = CorrectionTableData(axes, np.random.default_rng(0).normal(0, 1e-3, (1, 25, 25, 2, 4, 4)))
+    with SimulatedController() as sim, ModbusController("127.0.0.1", sim.port, heartbeat_period=None) as c:
+        rt = []
+        for _ in range(args.runs):
+            t = time.perf_counter()
+            for _ in range(args.reads):
+                c.status()
+            rt.append((time.perf_counter() - t) / args.reads)
+        up, rb = [], []
+        for _ in range(args.runs):
+            t = time.perf_counter()
+            c.upload_table(table)
+            up.append(time.perf_counter() - t)
+            t = time.perf_counter()
+            back = c.read_table()
+            rb.append(time.perf_counter() - t)
+            if not back.same_as(table):
+                raise RuntimeError("read-back differs from the upload")
+    med_rt = statistics.median(rt)
+    print(f"status read round trip (7 registers, loopback): median {med_rt * 1e3:.3f} ms "
+          f"over {args.runs} runs x {args.reads} reads")
+    print(f"table of {table.n_values} values: upload median {statistics.median(up):.3f} s, "
+          f"read-back median {statistics.median(rb):.3f} s, total "
+          f"{statistics.median(np.add(up, rb)):.3f} s (target <= 2 s) over {args.runs} runs")
+
+
+if __name__ == "__main__":
+    main()

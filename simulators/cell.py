@@ -1,0 +1,300 @@
+"""Physics of the simulated calibration cell (brief §3, §8): the true robot, the calibration
+body, and what the probe head touches.
+
+* :class:`CellTruth` - the robot model (nominal, with the configured nominal set-up R) and the
+  TRUE parameter vector = nominal + seeded errors, plus repeatability, reversal error (backlash)
+  and encoder resolution. This is the oracle the station's identification is judged against.
+* :class:`CalibrationBody` - cubes on a plate at several heights; each top corner is a measuring
+  point with an MPKS frame (origin at the top corner, cube locally in x>=0, y>=0, z<=0). Nominal
+  geometry (the CMM report the station gets) and true geometry (nominal + manufacturing
+  deviations of a few µm / arc seconds).
+* :class:`SimulatedCell` - the actual joint state: commanded joints -> encoder reading and
+  physical joints (backlash by approach direction, repeatability noise), the true probe-head
+  pose world<-MKKS = R_true A(q_phys) K_true, the measuring point in capture range and the true
+  contact pose ``M_true = inv(world<-MKKS) I_true_j`` fed to the probe-head physics.
+
+"World" is the calibration-body frame KKS. Units mm and rad.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+
+from station.kinematics import forward
+from station.model import RobotModel, load_robot
+from station.transforms import invert, matrix_to_pose, pose_to_matrix, rotation_log
+
+__all__ = ["CellTruth", "CubeSpec", "CalibrationBody", "SimulatedCell", "DEFAULT_SETUP",
+           "ARCMIN", "ARCSEC"]
+
+ARCMIN = np.pi / (180 * 60)
+ARCSEC = ARCMIN / 60
+#: Nominal pose of the robot base in the calibration-body frame: the robot stands 550 mm in -x
+#: of the body origin and 200 mm below the plate surface, so the cube corners lie mid-stroke of
+#: the SR 800's prismatic axis.
+DEFAULT_SETUP = np.array([-550.0, 0.0, -200.0, 0.0, 0.0, 0.0])
+
+
+def _readonly(a) -> np.ndarray:
+    a = np.array(a, dtype=float)
+    a.flags.writeable = False
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class CellTruth:
+    """The true robot of the cell.
+
+    ``model``: the station's robot model whose nominal R is the configured nominal set-up.
+    ``params``: true parameters (n_params,). ``repeatability`` (g,) σ of the physical joint
+    position per move; ``backlash`` (g,) full reversal error per joint; ``encoder_resolution``
+    (g,). Units rad or mm per joint type.
+    """
+
+    model: RobotModel
+    params: np.ndarray
+    repeatability: np.ndarray
+    backlash: np.ndarray
+    encoder_resolution: np.ndarray
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("params", "repeatability", "backlash", "encoder_resolution"):
+            object.__setattr__(self, name, _readonly(getattr(self, name)))
+        if self.params.shape != self.model.nominal.shape:
+            raise ValueError(f"params must have shape {self.model.nominal.shape}")
+        for name in ("repeatability", "backlash", "encoder_resolution"):
+            if getattr(self, name).shape != (self.model.n_joints,):
+                raise ValueError(f"{name} must have one entry per joint ({self.model.n_joints})")
+
+    @property
+    def errors(self) -> np.ndarray:
+        """True minus nominal parameters."""
+        return self.params - self.model.nominal
+
+    @property
+    def setup(self) -> np.ndarray:
+        """True pose (6,) of the robot base in the calibration-body frame."""
+        return self.params[self.model.setup_slice()].copy()
+
+    @classmethod
+    def generate(cls, model: RobotModel | None = None, seed: int = 0,
+                 setup_nominal: np.ndarray = DEFAULT_SETUP,
+                 length_sigma_mm: float = 0.04, angle_sigma_rad: float = 2.5 * ARCMIN,
+                 setup_sigma_mm: float = 1.5, setup_yaw_sigma_rad: float = np.deg2rad(0.2),
+                 setup_tilt_sigma_rad: float = np.deg2rad(0.03),
+                 repeatability_mm: float = 0.005, backlash_mm: float = 0.1,
+                 prismatic_backlash_mm: float = 0.02, lever_mm: float = 450.0,
+                 encoder_resolution: float = 1e-6) -> "CellTruth":
+        """Seeded true robot: lengths of A1..Ag and K with σ ``length_sigma_mm``, angles with
+        σ ``angle_sigma_rad``; set-up R = ``setup_nominal`` + σ ``setup_sigma_mm`` in x, y, z,
+        ``setup_yaw_sigma_rad`` in yaw and ``setup_tilt_sigma_rad`` in roll, pitch.
+        Revolute joints get backlash ``backlash_mm/lever_mm`` rad and repeatability
+        ``repeatability_mm/lever_mm`` rad; prismatic joints the mm values directly."""
+        model = load_robot("sr800") if model is None else model
+        model = model.with_setup(np.asarray(setup_nominal, dtype=float))
+        rng = np.random.default_rng(seed)
+        n_t = model.n_params // 6
+        err = np.zeros((n_t, 6))
+        err[1:, :3] = rng.normal(0.0, length_sigma_mm, (n_t - 1, 3))
+        err[1:, 3:] = rng.normal(0.0, angle_sigma_rad, (n_t - 1, 3))
+        err[0, :3] = rng.normal(0.0, setup_sigma_mm, 3)
+        err[0, 3:5] = rng.normal(0.0, setup_tilt_sigma_rad, 2)
+        err[0, 5] = rng.normal(0.0, setup_yaw_sigma_rad)
+        rev = np.array([t == "revolute" for t in model.joint_types])
+        rep = np.where(rev, repeatability_mm / lever_mm, repeatability_mm)
+        bl = np.where(rev, backlash_mm / lever_mm, prismatic_backlash_mm)
+        enc = np.full(model.n_joints, float(encoder_resolution))
+        return cls(model, model.nominal + err.ravel(), rep, bl, enc, seed)
+
+    def head_pose(self, joints_physical: np.ndarray) -> np.ndarray:
+        """True world<-MKKS ``(n, 4, 4)`` for physical joints ``(n, g)``."""
+        q = np.atleast_2d(np.asarray(joints_physical, dtype=float))
+        return forward(self.model, q, params=self.params, setup=True)
+
+
+@dataclass(frozen=True)
+class CubeSpec:
+    """A cube on the plate: centre (x, y) [mm] in KKS, pillar height [mm] (plate at z=0), yaw."""
+
+    x: float
+    y: float
+    pillar: float
+    yaw: float
+
+
+DEFAULT_CUBES = (
+    CubeSpec(0.0, -300.0, 0.0, np.deg2rad(10.0)),
+    CubeSpec(150.0, -150.0, 60.0, np.deg2rad(-20.0)),
+    CubeSpec(0.0, 0.0, 120.0, np.deg2rad(30.0)),
+    CubeSpec(150.0, 150.0, 0.0, np.deg2rad(5.0)),
+    CubeSpec(0.0, 300.0, 60.0, np.deg2rad(-15.0)),
+    CubeSpec(-150.0, 0.0, 0.0, np.deg2rad(45.0)),
+)
+
+
+@dataclass(frozen=True, eq=False)
+class CalibrationBody:
+    """Measuring points of the body: ``nominal (n,4,4)`` KKS<-MPKS from the CMM report,
+    ``true (n,4,4)`` as manufactured, ``labels`` ``(cube, corner)`` per point."""
+
+    cube_edge_mm: float
+    cubes: tuple[CubeSpec, ...]
+    nominal: np.ndarray
+    true: np.ndarray
+    labels: tuple[tuple[int, int], ...]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "nominal", _readonly(self.nominal))
+        object.__setattr__(self, "true", _readonly(self.true))
+
+    @property
+    def n_points(self) -> int:
+        return len(self.labels)
+
+    @staticmethod
+    def corner_frames(cube: CubeSpec, edge: float) -> np.ndarray:
+        """(4,4,4) KKS<-MPKS of the four top corners, each rotated 90° about z from the last."""
+        E = edge
+        c, s = np.cos(cube.yaw), np.sin(cube.yaw)
+        Rz = np.array([[c, -s], [s, c]])
+        origin = np.array([cube.x, cube.y]) - Rz @ np.array([E / 2, E / 2])
+        top = cube.pillar + E
+        out = []
+        for k, (cx, cy) in enumerate(((0, 0), (E, 0), (E, E), (0, E))):
+            p = origin + Rz @ np.array([cx, cy])
+            out.append(pose_to_matrix(np.array([p[0], p[1], top, 0.0, 0.0, cube.yaw + k * np.pi / 2])))
+        return np.stack(out)
+
+    @classmethod
+    def generate(cls, cubes: tuple[CubeSpec, ...] = DEFAULT_CUBES, cube_edge_mm: float = 40.0,
+                 corners: tuple[int, ...] = (0, 1, 2, 3), seed: int = 0,
+                 position_sigma_mm: float = 0.002, angle_sigma_rad: float = 3 * ARCSEC) -> "CalibrationBody":
+        rng = np.random.default_rng(seed + 7919)
+        nominal, labels = [], []
+        for i, cube in enumerate(cubes):
+            frames = cls.corner_frames(cube, cube_edge_mm)
+            for k in corners:
+                nominal.append(frames[k])
+                labels.append((i, k))
+        nominal = np.stack(nominal)
+        dev = np.concatenate([rng.normal(0, position_sigma_mm, (len(labels), 3)),
+                              rng.normal(0, angle_sigma_rad, (len(labels), 3))], axis=1)
+        true = nominal @ pose_to_matrix(dev)
+        return cls(cube_edge_mm, tuple(cubes), nominal, true, tuple(labels))
+
+
+class SimulatedCell:
+    """The cell's state. Thread-safe: the controller simulator moves it, the probe-head
+    simulator reads it."""
+
+    def __init__(self, truth: CellTruth | None = None, body: CalibrationBody | None = None,
+                 probe=None, seed: int = 0, capture_mm: float = 8.0,
+                 capture_angle_rad: float = np.deg2rad(10.0), probe_noise_mm: float = 0.0005,
+                 initial_joints: np.ndarray | None = None):
+        from simulators.probe_head_sim import ProbeHeadPhysics  # the other simulator's physics
+
+        self.truth = truth if truth is not None else CellTruth.generate(seed=seed)
+        self.body = body if body is not None else CalibrationBody.generate(seed=seed)
+        self.probe = probe if probe is not None else ProbeHeadPhysics(noise_mm=probe_noise_mm, seed=seed + 1)
+        self.capture_mm = float(capture_mm)
+        self.capture_angle_rad = float(capture_angle_rad)
+        self._rng = np.random.default_rng(seed + 104729)
+        self._lock = threading.Lock()
+        g = self.truth.model.n_joints
+        if initial_joints is None:
+            lim = self.truth.model.joint_limits
+            initial_joints = np.clip(np.zeros(g), lim[:, 0], lim[:, 1])
+            if self.truth.model.joint_types[2:3] == ("prismatic",):
+                initial_joints[2] = 0.5 * (lim[2, 0] + lim[2, 1])
+        self._cmd = np.array(initial_joints, dtype=float)
+        self._direction = np.ones(g)
+        self._phys = self._physical(self._cmd, noise=False)
+        # what the head must see at a contact: pose of MPKS in MKKS at mid-stroke
+        self._M_nominal = np.asarray(self.probe.geometry.nominal_contact_pose(), dtype=float)
+
+    # ----------------------------------------------------------------- joints
+    def _physical(self, cmd: np.ndarray, noise: bool = True) -> np.ndarray:
+        t = self.truth
+        q = cmd - 0.5 * t.backlash * self._direction
+        if noise:
+            q = q + self._rng.normal(0.0, 1.0, q.shape) * t.repeatability
+        return q
+
+    def command_joints(self, q_cmd: np.ndarray) -> np.ndarray:
+        """The servo reaches ``q_cmd`` (motor side); the physical joints lag by half the
+        backlash against the direction of approach plus repeatability noise. Returns the
+        encoder reading (``q_cmd`` quantised to the encoder resolution)."""
+        q_cmd = np.asarray(q_cmd, dtype=float).ravel()
+        with self._lock:
+            d = np.sign(q_cmd - self._cmd)
+            self._direction = np.where(d != 0, d, self._direction)
+            self._cmd = q_cmd.copy()
+            self._phys = self._physical(q_cmd)
+            return self._encoder()
+
+    def _encoder(self) -> np.ndarray:
+        res = self.truth.encoder_resolution
+        return np.round(self._cmd / res) * res
+
+    def encoder_joints(self) -> np.ndarray:
+        with self._lock:
+            return self._encoder()
+
+    @property
+    def joints_commanded(self) -> np.ndarray:
+        with self._lock:
+            return self._cmd.copy()
+
+    @property
+    def joints_physical(self) -> np.ndarray:
+        with self._lock:
+            return self._phys.copy()
+
+    @property
+    def approach_direction(self) -> np.ndarray:
+        with self._lock:
+            return self._direction.copy()
+
+    # ----------------------------------------------------------------- head and contact
+    def head_pose(self) -> np.ndarray:
+        """True world(KKS)<-MKKS (4,4) at the current physical joints."""
+        return self.truth.head_pose(self.joints_physical)[0]
+
+    def contact_for_head_pose(self, T_head: np.ndarray) -> tuple[int | None, np.ndarray | None]:
+        """Measuring point in capture range of a head at ``T_head`` and the true contact pose
+        ``M_true`` (pose of MPKS in MKKS), or ``(None, None)``."""
+        T_head = np.asarray(T_head, dtype=float)
+        expected = T_head @ self._M_nominal  # where the head expects MPKS (world)
+        I = self.body.true
+        d = np.linalg.norm(I[:, :3, 3] - expected[:3, 3], axis=1)
+        j = int(np.argmin(d))
+        if d[j] > self.capture_mm:
+            return None, None
+        rel = expected[:3, :3].T @ I[j, :3, :3]
+        if np.linalg.norm(rotation_log(rel)) > self.capture_angle_rad:
+            return None, None
+        return j, invert(T_head) @ I[j]
+
+    def contact(self) -> tuple[int | None, np.ndarray | None]:
+        return self.contact_for_head_pose(self.head_pose())
+
+    def probe_values(self) -> np.ndarray:
+        """Probe readings (6,) [mm] with +inf/-inf/NaN markers at the current state."""
+        _j, M = self.contact()
+        return self.probe.readings(M)
+
+    def nominal_head_target(self, point: int, nominal_body: bool = True) -> np.ndarray:
+        """World<-MKKS that puts the head at mid-stroke on measuring point ``point``."""
+        I = self.body.nominal if nominal_body else self.body.true
+        return I[point] @ invert(self._M_nominal)
+
+    def describe(self) -> dict:
+        """Summary of the truth for reports (parameters as names -> error)."""
+        m = self.truth.model
+        return {"seed": self.truth.seed, "setup_true": matrix_to_pose(pose_to_matrix(self.truth.setup)).tolist(),
+                "errors": dict(zip(m.param_names, self.truth.errors.tolist())),
+                "n_points": self.body.n_points}

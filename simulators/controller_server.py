@@ -1,0 +1,551 @@
+"""Simulated robot controller: pymodbus async TCP server + robot program, in a background thread.
+
+The register map and the handshake are those of :mod:`drivers.controller_map` /
+``docs/protocols.md``. The robot program reacts to writes of the command block, acknowledges,
+validates (soft limits, reachability, correction-table range), moves with a simple max-speed
+motion-time model scaled by ``time_scale`` (0 = instant), and reports done or error with the
+same sequence number. Cartesian moves use the controller's NOMINAL kinematics in the robot base
+frame (``station.kinematics.scara_ik``) plus the multilinear table correction
+(:meth:`drivers.controller.CorrectionTableData.interpolate`) when a table is active.
+
+Faults are injected at run time through methods of :class:`SimulatedController` (thread-safe).
+
+Requires the pymodbus 3.16 server data model (``pymodbus.simulator.SimDevice`` with ``action``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import threading
+import time
+import zlib
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from pymodbus.constants import ExcCodes
+from pymodbus.server import ModbusTcpServer
+from pymodbus.simulator import DataType, SimData, SimDevice
+
+from drivers.controller import CorrectionTableData, TableError, TableRangeError
+from drivers.controller_map import (
+    MAP_VERSION,
+    MAX_JOINTS,
+    REG,
+    REGISTERS,
+    TABLE_DATA_ADDRESS,
+    Command,
+    ErrorCode,
+    StatusBit,
+    WordOrder,
+    decode,
+    decode_f32_array,
+    encode,
+    encode_f32_array,
+    register_span,
+)
+from station.errors import UnreachableError
+from station.kinematics import forward, scara_ik
+from station.model import RobotModel, load_robot
+from station.transforms import matrix_to_pose, pose_to_matrix
+
+if TYPE_CHECKING:
+    from simulators.cell import SimulatedCell
+
+__all__ = ["SimulatedController", "ModbusFault"]
+
+log = logging.getLogger(__name__)
+
+_CMD_FIRST, _CMD_COUNT = register_span("cmd_code", "cmd_pose")
+_HDR_FIRST, _HDR_COUNT = register_span("table_format", "table_crc")
+_LATCHING = (ErrorCode.ESTOP, ErrorCode.DRIVE_FAULT, ErrorCode.WATCHDOG_TIMEOUT)
+
+
+@dataclass
+class ModbusFault:
+    """Reply with Modbus exception ``code`` to the next ``times`` requests touching ``address``
+    (with function code ``function_code``, or any if None)."""
+
+    address: int
+    function_code: int | None
+    code: int
+    times: int
+
+
+class _Abort(Exception):
+    def __init__(self, code: ErrorCode, joint: int = 0):
+        super().__init__(code.name)
+        self.code = code
+        self.joint = joint
+
+
+class SimulatedController:
+    """The simulated controller. ``start()`` returns once the port accepts connections."""
+
+    def __init__(self, model: RobotModel | None = None, cell: "SimulatedCell | None" = None,
+                 host: str = "127.0.0.1", port: int = 0, word_order: WordOrder = WordOrder.BIG,
+                 time_scale: float = 0.0, heartbeat_period: float = 0.1, watchdog: float = 1.0,
+                 max_speed: np.ndarray | None = None, soft_limits: np.ndarray | None = None):
+        if model is None:
+            model = cell.truth.model if cell is not None else load_robot("sr800")
+        self.model = model
+        self.cell = cell
+        self.g = model.n_joints
+        if self.g > MAX_JOINTS:
+            raise ValueError(f"the register map holds at most {MAX_JOINTS} joints")
+        self.host, self._port_req = host, int(port)
+        self.port = 0
+        self.word_order = word_order
+        self.time_scale = float(time_scale)
+        self.heartbeat_period = float(heartbeat_period)
+        self.watchdog = float(watchdog)
+        if max_speed is None:
+            max_speed = np.array([2.5 if t == "revolute" else 1000.0 for t in model.joint_types])
+        self.max_speed = np.asarray(max_speed, dtype=float)
+        self.soft_limits = np.array(model.joint_limits if soft_limits is None else soft_limits, float)
+        self._regs = [0] * 65536
+        self._lock = threading.Lock()
+        # robot state
+        self._q = np.zeros(self.g)
+        self._bits = StatusBit.READY | StatusBit.IN_POSITION
+        self._last_seq = 0
+        self._latched: ErrorCode | None = None
+        self._staged: CorrectionTableData | None = None
+        self._active: CorrectionTableData | None = None
+        self._previous: CorrectionTableData | None = None
+        self._move_task: asyncio.Task | None = None
+        self._stop_request = False
+        self._hb_robot = 0
+        self._hb_pc_last = 0
+        self._hb_pc_changed = time.monotonic()
+        # faults
+        self._faults: list[ModbusFault] = []
+        self._latency = 0.0
+        self._lose_ack = False
+        self._estop_next = False
+        self._drive_fault_next: int = 0
+        self._hb_frozen = False
+        # introspection
+        self.command_writes: list[tuple[int, int]] = []  # (code, seq) per write of the command block
+        self.requests = 0
+        self.failure: BaseException | None = None
+        # thread/loop
+        self._thread: threading.Thread | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._ready = threading.Event()
+        self._cmd_event: asyncio.Event | None = None
+        self._stop_event: asyncio.Event | None = None
+        self._server: ModbusTcpServer | None = None
+        self._init_registers()
+        if cell is not None:
+            self._q = np.array(cell.encoder_joints(), dtype=float)
+        self._publish_state()
+
+    # ------------------------------------------------------------------ registers
+    def _set(self, name: str, value) -> None:
+        r = REG[name]
+        words = encode(r, value, self.word_order)
+        self._regs[r.address:r.address + len(words)] = words
+
+    def _get(self, name: str):
+        r = REG[name]
+        return decode(r, self._regs[r.address:r.end], self.word_order)
+
+    def _init_registers(self) -> None:
+        self._set("map_version", MAP_VERSION)
+        self._set("n_joints", self.g)
+        self._set("watchdog_ms", int(round(self.watchdog * 1000)))
+        lim = np.zeros(2 * MAX_JOINTS)
+        lim[:2 * self.g] = self.soft_limits.ravel()
+        self._set("soft_limits", lim)
+
+    def _publish_state(self) -> None:
+        q = np.zeros(MAX_JOINTS)
+        q[:self.g] = self._q
+        self._set("act_joints", q)
+        T = forward(self.model, self._q[None], setup=False)[0]
+        self._set("act_pose", matrix_to_pose(T))
+        bits = self._bits
+        bits = bits | StatusBit.TABLE_ACTIVE if self._active is not None else bits & ~StatusBit.TABLE_ACTIVE
+        bits = bits | StatusBit.TABLE_STAGED if self._staged is not None else bits & ~StatusBit.TABLE_STAGED
+        bits = (bits | StatusBit.TABLE_PREVIOUS if self._previous is not None
+                else bits & ~StatusBit.TABLE_PREVIOUS)
+        self._bits = StatusBit(bits)
+        self._set("status", int(self._bits))
+        for k, t in (("staged", self._staged), ("active", self._active), ("previous", self._previous)):
+            self._set(f"table_{k}_crc", 0 if t is None else t.crc32())
+
+    def _build_device(self) -> SimDevice:
+        blocks = [SimData(r.address, count=r.n_registers, values=0, datatype=DataType.REGISTERS,
+                          readonly=(r.access == "r")) for r in sorted(REGISTERS, key=lambda r: r.address)]
+        return SimDevice(0, simdata=blocks, action=self._action)
+
+    async def _action(self, function_code: int, start_address: int, address: int, count: int,
+                      registers: list[int], set_values) -> ExcCodes | None:
+        """pymodbus hook: runs on every request before it is served (on the server loop)."""
+        self.requests += 1
+        if self._latency > 0:
+            await asyncio.sleep(self._latency)
+        with self._lock:
+            for f in self._faults:
+                if (address <= f.address < address + count
+                        and (f.function_code is None or f.function_code == function_code)):
+                    f.times -= 1
+                    if f.times <= 0:
+                        self._faults.remove(f)
+                    return ExcCodes(f.code)
+            if set_values:
+                vals = [int(v) for v in set_values]
+                self._regs[address:address + len(vals)] = vals
+                hb = REG["hb_pc"].address
+                if address <= hb < address + len(vals) and vals[hb - address] != self._hb_pc_last:
+                    self._hb_pc_last = vals[hb - address]
+                    self._hb_pc_changed = time.monotonic()
+                seq_addr = REG["cmd_seq"].address
+                if address <= seq_addr < address + len(vals):
+                    self.command_writes.append((int(self._get("cmd_code")), int(self._get("cmd_seq"))))
+                    if self._cmd_event is not None:
+                        self._cmd_event.set()
+            else:
+                off = address - start_address
+                registers[off:off + count] = self._regs[address:address + count]
+        return None
+
+    # ------------------------------------------------------------------ lifetime
+    def start(self, timeout: float = 10.0) -> "SimulatedController":
+        if self._thread is not None:
+            raise RuntimeError("controller simulator already started")
+        self._thread = threading.Thread(target=self._run, name="controller-sim", daemon=True)
+        self._thread.start()
+        if not self._ready.wait(timeout):
+            raise RuntimeError(f"controller simulator did not start within {timeout} s")
+        if self.failure is not None:
+            raise RuntimeError(f"controller simulator failed to start: {self.failure}") from self.failure
+        return self
+
+    def _run(self) -> None:
+        loop = asyncio.new_event_loop()
+        self._loop = loop
+        try:
+            loop.run_until_complete(self._main())
+        except BaseException as exc:  # reported through .failure and stop()
+            self.failure = exc
+            log.exception("controller simulator failed")
+        finally:
+            self._ready.set()
+            loop.close()
+
+    async def _main(self) -> None:
+        self._cmd_event = asyncio.Event()
+        self._stop_event = asyncio.Event()
+        self._server = ModbusTcpServer(self._build_device(), address=(self.host, self._port_req))
+        await self._server.serve_forever(background=True)
+        self.port = int(self._server.transport.sockets[0].getsockname()[1])
+        program = asyncio.create_task(self._program())
+        self._ready.set()
+        await self._stop_event.wait()
+        program.cancel()
+        if self._move_task is not None:
+            self._move_task.cancel()
+        await asyncio.gather(program, *( [self._move_task] if self._move_task else []),
+                             return_exceptions=True)
+        await self._server.shutdown()
+        if program.done() and not program.cancelled() and program.exception() is not None:
+            raise program.exception()  # type: ignore[misc]
+
+    def stop(self) -> None:
+        if self._thread is None:
+            return
+        if self._loop is not None and self._stop_event is not None and self._thread.is_alive():
+            self._loop.call_soon_threadsafe(self._stop_event.set)
+        self._thread.join(10.0)
+        if self._thread.is_alive():
+            raise RuntimeError("controller simulator thread did not stop")
+        self._thread = None
+        if self.failure is not None:
+            raise RuntimeError("controller simulator failed while running") from self.failure
+
+    def __enter__(self) -> "SimulatedController":
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    @property
+    def address(self) -> str:
+        return f"{self.host}:{self.port}"
+
+    # ------------------------------------------------------------------ fault injection (thread-safe)
+    def inject_modbus_exception(self, address: int, function_code: int | None = None, code: int = 2,
+                                times: int = 1) -> None:
+        with self._lock:
+            self._faults.append(ModbusFault(int(address), function_code, int(code), int(times)))
+
+    def set_latency(self, seconds: float) -> None:
+        self._latency = float(seconds)
+
+    def lose_next_ack(self) -> None:
+        self._lose_ack = True
+
+    def estop_during_next_move(self) -> None:
+        self._estop_next = True
+
+    def drive_fault_during_next_move(self, axis: int = 1) -> None:
+        self._drive_fault_next = int(axis)
+
+    def freeze_heartbeat(self, frozen: bool = True) -> None:
+        self._hb_frozen = bool(frozen)
+
+    def drop_connections(self, timeout: float = 5.0) -> None:
+        """Close every client connection (the listener stays open)."""
+        done = threading.Event()
+
+        def _drop() -> None:
+            assert self._server is not None
+            for conn in list(self._server.active_connections.values()):
+                conn.close()
+            done.set()
+
+        assert self._loop is not None
+        self._loop.call_soon_threadsafe(_drop)
+        if not done.wait(timeout):
+            raise RuntimeError("could not drop connections")
+
+    def corrupt_staging_value(self, index: int, delta: float = 1e-3) -> None:
+        """Change value ``index`` of the staging data area (as a flaky link would)."""
+        with self._lock:
+            a = TABLE_DATA_ADDRESS + 2 * int(index)
+            v = decode_f32_array(self._regs[a:a + 2], self.word_order)[0]
+            self._regs[a:a + 2] = encode_f32_array([float(v) + delta], self.word_order)
+
+    # ------------------------------------------------------------------ introspection
+    @property
+    def joints(self) -> np.ndarray:
+        return self._q.copy()
+
+    @property
+    def active_table(self) -> CorrectionTableData | None:
+        return self._active
+
+    def register(self, name: str):
+        with self._lock:
+            return self._get(name)
+
+    # ------------------------------------------------------------------ the robot program
+    async def _program(self) -> None:
+        assert self._cmd_event is not None
+        next_tick = time.monotonic()
+        while True:
+            timeout = max(0.0, next_tick - time.monotonic())
+            try:
+                await asyncio.wait_for(self._cmd_event.wait(), timeout)
+            except asyncio.TimeoutError:
+                pass
+            self._cmd_event.clear()
+            if time.monotonic() >= next_tick:
+                next_tick = time.monotonic() + self.heartbeat_period
+                if not self._hb_frozen:
+                    with self._lock:
+                        self._hb_robot = (self._hb_robot + 1) & 0xFFFF
+                        self._set("hb_robot", self._hb_robot)
+            await self._poll_command()
+
+    def _watchdog_expired(self) -> bool:
+        return time.monotonic() - self._hb_pc_changed > self.watchdog
+
+    async def _poll_command(self) -> None:
+        with self._lock:
+            seq = int(self._get("cmd_seq"))
+            if seq == self._last_seq:
+                return
+            expected = self._last_seq % 0xFFFF + 1
+            self._last_seq = seq
+            code = int(self._get("cmd_code"))
+            elbow = int(self._get("cmd_elbow"))
+            speed = float(self._get("cmd_speed"))
+            joints = np.asarray(self._get("cmd_joints"))[:self.g]
+            pose = np.asarray(self._get("cmd_pose"))
+            if self._lose_ack:
+                self._lose_ack = False
+                log.info("fault: command seq %d lost (not acknowledged)", seq)
+                return
+            self._set("ack_seq", seq)
+        if seq != expected:
+            return self._error(seq, ErrorCode.SEQUENCE_ERROR)
+        try:
+            cmd = Command(code)
+        except ValueError:
+            return self._error(seq, ErrorCode.BAD_COMMAND)
+        busy = self._move_task is not None and not self._move_task.done()
+        if cmd is Command.STOP:
+            if busy:
+                self._stop_request = True
+                await asyncio.gather(self._move_task, return_exceptions=True)  # type: ignore[arg-type]
+            return self._done(seq)
+        if cmd is Command.RESET:
+            if busy:
+                return self._error(seq, ErrorCode.BAD_COMMAND)
+            with self._lock:
+                self._latched = None
+                self._bits = (self._bits & ~(StatusBit.ERROR | StatusBit.ESTOP)) | StatusBit.READY
+                self._set("error_code", 0)
+                self._set("error_joint", 0)
+                self._set("error_bound", 0)
+                self._publish_state()
+            return self._done(seq)
+        if busy:
+            return self._error(seq, ErrorCode.BAD_COMMAND)
+        if cmd in (Command.MOVE_JOINTS, Command.MOVE_CARTESIAN):
+            if self._latched is not None:
+                return self._error(seq, ErrorCode.NOT_READY)
+            if not 0.001 <= speed <= 1.0:
+                return self._error(seq, ErrorCode.BAD_COMMAND)
+            if cmd is Command.MOVE_JOINTS:
+                target = joints.astype(float)
+            else:
+                if elbow not in (1, -1):
+                    return self._error(seq, ErrorCode.BAD_COMMAND)
+                try:
+                    target = self.cartesian_target(pose, elbow)
+                except _Abort as a:
+                    return self._error(seq, a.code, a.joint)
+            for j in range(self.g):
+                lo, hi = self.soft_limits[j]
+                if target[j] < lo or target[j] > hi:
+                    return self._error(seq, ErrorCode.SOFT_LIMIT, j + 1, -1 if target[j] < lo else 1)
+            self._move_task = asyncio.create_task(self._move(seq, target, speed))
+            return None
+        return self._table_command(seq, cmd)
+
+    def cartesian_target(self, pose: np.ndarray, elbow: int) -> np.ndarray:
+        """Joints the controller commands for a Cartesian target (nominal IK + table)."""
+        T = pose_to_matrix(np.asarray(pose, dtype=float))
+        try:
+            q = scara_ik(self.model, T[None], elbow=elbow, setup=False, check_limits=False)[0]
+        except UnreachableError as exc:
+            raise _Abort(ErrorCode.UNREACHABLE) from exc
+        if not np.all(np.isfinite(q)):
+            raise _Abort(ErrorCode.UNREACHABLE)
+        table = self._active
+        if table is not None:
+            cfg = 0 if (elbow == 1 or table.n_configs == 1) else 1
+            point = np.array([pose[0], pose[1], pose[2], pose[5]])[:len(table.axes)]
+            try:
+                q = q + table.interpolate(point, cfg)
+            except TableRangeError as exc:
+                raise _Abort(ErrorCode.TARGET_OUTSIDE_TABLE) from exc
+        return q
+
+    def _error(self, seq: int, code: ErrorCode, joint: int = 0, bound: int = 0) -> None:
+        with self._lock:
+            self._set("error_code", int(code))
+            self._set("error_joint", joint)
+            self._set("error_bound", bound)
+            if code in _LATCHING:
+                self._latched = code
+                self._bits = (self._bits | StatusBit.ERROR) & ~StatusBit.READY
+                if code is ErrorCode.ESTOP:
+                    self._bits |= StatusBit.ESTOP
+                self._publish_state()
+            self._set("error_seq", seq)
+
+    def _done(self, seq: int) -> None:
+        with self._lock:
+            self._set("done_seq", seq)
+
+    def _physical_move(self, q: np.ndarray) -> np.ndarray:
+        if self.cell is not None:
+            return np.asarray(self.cell.command_joints(q), dtype=float)
+        return np.array(q, dtype=float)
+
+    async def _move(self, seq: int, target: np.ndarray, speed: float) -> None:
+        q0 = self._q.copy()
+        dq = target - q0
+        duration = self.time_scale * (float(np.max(np.abs(dq) / (self.max_speed * speed))) + 0.05)
+        estop, self._estop_next = self._estop_next, False
+        drive, self._drive_fault_next = self._drive_fault_next, 0
+        self._stop_request = False
+        with self._lock:
+            self._bits = (self._bits | StatusBit.MOVING) & ~StatusBit.IN_POSITION
+            self._publish_state()
+        t0 = time.monotonic()
+        try:
+            while True:
+                frac = 1.0 if duration <= 0 else min(1.0, (time.monotonic() - t0) / duration)
+                if (estop or drive) and (frac >= 0.5 or duration <= 0):
+                    frac = 0.5
+                    raise _Abort(ErrorCode.ESTOP) if estop else _Abort(ErrorCode.DRIVE_FAULT, drive)
+                if self._stop_request:
+                    raise _Abort(ErrorCode.MOTION_ABORTED)
+                if duration > 0 and self._watchdog_expired():
+                    raise _Abort(ErrorCode.WATCHDOG_TIMEOUT)
+                with self._lock:
+                    self._q = q0 + frac * dq
+                    if frac < 1.0:
+                        self._publish_state()
+                if frac >= 1.0:
+                    break
+                await asyncio.sleep(min(0.01, duration / 20))
+            enc = self._physical_move(target)
+            with self._lock:
+                self._q = enc
+                self._bits = (self._bits & ~StatusBit.MOVING) | StatusBit.IN_POSITION
+                self._publish_state()
+            self._done(seq)
+        except _Abort as a:
+            enc = self._physical_move(q0 + frac * dq)
+            with self._lock:
+                self._q = enc
+                self._bits = self._bits & ~StatusBit.MOVING
+                self._publish_state()
+            self._error(seq, a.code, a.joint)
+        finally:
+            self._stop_request = False
+
+    def _table_command(self, seq: int, cmd: Command) -> None:
+        if cmd is Command.TABLE_STAGE:
+            with self._lock:
+                header = self._regs[_HDR_FIRST:_HDR_FIRST + _HDR_COUNT]
+                try:
+                    h = CorrectionTableData.decode_header(header, self.word_order)
+                except TableError:
+                    code = ErrorCode.TABLE_SHAPE_INVALID
+                else:
+                    data = self._regs[TABLE_DATA_ADDRESS:TABLE_DATA_ADDRESS + 2 * h["n_values"]]
+                    vals = decode_f32_array(data, self.word_order)
+                    if h["n_joints"] != self.g or not np.all(np.isfinite(vals)):
+                        code = ErrorCode.TABLE_SHAPE_INVALID
+                    elif zlib.crc32(vals.astype(">f4").tobytes()) & 0xFFFFFFFF != h["crc"]:
+                        code = ErrorCode.TABLE_CRC_MISMATCH
+                    else:
+                        shape = (h["n_configs"], *[a.count for a in h["axes"]], h["n_joints"])
+                        self._staged = CorrectionTableData(h["axes"], vals.reshape(shape))
+                        self._publish_state()
+                        code = ErrorCode.NONE
+            if code is not ErrorCode.NONE:
+                return self._error(seq, code)
+            return self._done(seq)
+        with self._lock:
+            if cmd is Command.TABLE_ACTIVATE:
+                if self._staged is None:
+                    code = ErrorCode.TABLE_NOT_STAGED
+                else:
+                    self._previous, self._active, self._staged = self._active, self._staged, None
+                    code = ErrorCode.NONE
+            elif cmd is Command.TABLE_DEACTIVATE:
+                if self._active is not None:
+                    self._previous, self._active = self._active, None
+                code = ErrorCode.NONE
+            elif cmd is Command.TABLE_ROLLBACK:
+                if self._previous is None:
+                    code = ErrorCode.NO_PREVIOUS_TABLE
+                else:
+                    self._previous, self._active = self._active, self._previous
+                    code = ErrorCode.NONE
+            else:
+                code = ErrorCode.BAD_COMMAND
+            self._publish_state()
+        if code is not ErrorCode.NONE:
+            return self._error(seq, code)
+        return self._done(seq)

@@ -1,0 +1,424 @@
+"""Simulated probe-head unit: physics (true geometry + noise) and a serial server.
+
+* :class:`ProbeHeadPhysics` turns the true cube pose into readings: exact geometry from
+  :mod:`station.probe_geometry`, Gaussian noise per probe (default σ 0.5 µm), quantised to the
+  protocol's 0.1 µm, markers where a probe misses or leaves its stroke.
+* :class:`ProbeHeadServer` speaks the protocol of :mod:`drivers.probe_protocol` on a
+  pseudo-terminal; ``.port`` is the slave device path for ``serial.serial_for_url``. Replies are
+  paced at the configured baud rate (10 bits per byte) so throughput is realistic.
+  :class:`ProbeHeadTcpServer` serves the same unit on ``socket://127.0.0.1:<port>``.
+* :class:`ProbeFaults` scripts faults at run time: one-shot garble / truncate / drop / busy,
+  added latency, a per-channel forced marker; ``server.disconnect()`` makes the port vanish.
+"""
+
+from __future__ import annotations
+
+import collections
+import enum
+import math
+import os
+import select
+import socket
+import threading
+import time
+import tty
+from typing import Callable
+
+import numpy as np
+
+from drivers.probe_protocol import (
+    ERR_BUSY,
+    ERR_NO_CHANNEL,
+    ERR_NOT_MEASURING,
+    ERR_OUT_OF_RANGE,
+    MAX_REQUEST_BYTES,
+    VALUE_LIMIT_MM,
+    ChannelStatus,
+    ProbeDeviceError,
+    format_error,
+    format_reply,
+    parse_request,
+)
+from station.probe_geometry import ProbeHeadGeometry, default_probe_head, readings_from_pose
+
+__all__ = ["ProbeHeadPhysics", "FaultKind", "ProbeFaults", "ProbeHeadServer",
+           "ProbeHeadTcpServer"]
+
+_STATUS_VALUE = {
+    ChannelStatus.OVER_RANGE: math.inf,
+    ChannelStatus.UNDER_RANGE: -math.inf,
+    ChannelStatus.INVALID: math.nan,
+}
+
+
+class ProbeHeadPhysics:
+    """True probe head: ``readings(M_true)`` -> ``(n,)`` mm, +inf/-inf/NaN markers.
+
+    ``M_true`` is the true pose of MPKS in MKKS, or None when no cube is near (all INVALID).
+    """
+
+    def __init__(self, geometry: ProbeHeadGeometry | None = None, noise_mm: float = 0.0005,
+                 quantum_mm: float = 0.0001, seed: int | None = 0) -> None:
+        self.geometry = geometry if geometry is not None else default_probe_head()
+        self.noise_mm = noise_mm
+        self.quantum_mm = quantum_mm
+        self._rng = np.random.default_rng(seed)
+
+    def readings(self, M_true: np.ndarray | None) -> np.ndarray:
+        n = self.geometry.n_probes
+        if M_true is None:
+            return np.full(n, np.nan)
+        exact = readings_from_pose(self.geometry, M_true)
+        noisy = exact + self._rng.normal(0.0, self.noise_mm, n)
+        half = self.geometry.stroke_mm / 2.0
+        # Noise may carry a reading just across the stroke end; markers stay markers.
+        out = np.where(noisy > half, np.inf, np.where(noisy < -half, -np.inf, noisy))
+        if self.quantum_mm > 0:
+            out = np.where(np.isfinite(out), np.round(out / self.quantum_mm) * self.quantum_mm, out)
+        return out
+
+
+class FaultKind(enum.Enum):
+    GARBLE = "garble"      # next reply: a byte gets its top bit set (as a UART glitch would)
+    TRUNCATE = "truncate"  # next reply: only its first half, no CR LF
+    DROP = "drop"          # next reply: not sent at all (lost)
+    BUSY = "busy"          # next request: answered ER,<cmd>,05 instead
+
+
+class ProbeFaults:
+    """Fault script, safe to change from the test thread while the server runs."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._queue: collections.deque[FaultKind] = collections.deque()
+        self._forced: dict[int, ChannelStatus] = {}
+        self.latency_s = 0.0  # added before every reply
+
+    def inject(self, kind: FaultKind, count: int = 1) -> None:
+        """Queue ``count`` one-shot faults, applied to the next replies in order."""
+        with self._lock:
+            self._queue.extend([kind] * count)
+
+    def force_status(self, channel: int, status: ChannelStatus | None) -> None:
+        """Make a channel report a marker (a probe fault) until called again with None."""
+        with self._lock:
+            if status is None or status is ChannelStatus.OK:
+                self._forced.pop(channel, None)
+            else:
+                self._forced[channel] = status
+
+    def clear(self) -> None:
+        with self._lock:
+            self._queue.clear()
+            self._forced.clear()
+            self.latency_s = 0.0
+
+    @property
+    def pending(self) -> int:
+        with self._lock:
+            return len(self._queue)
+
+    def _next(self) -> FaultKind | None:
+        with self._lock:
+            return self._queue.popleft() if self._queue else None
+
+    def _forced_now(self) -> dict[int, ChannelStatus]:
+        with self._lock:
+            return dict(self._forced)
+
+
+class _Unit:
+    """Protocol state of the unit: offsets (zero/preset) and request handling. No I/O."""
+
+    def __init__(self, source: Callable[[], np.ndarray], n_channels: int, model: str,
+                 firmware: str, faults: ProbeFaults) -> None:
+        self.source = source
+        self.n = n_channels
+        self.model = model
+        self.firmware = firmware
+        self.faults = faults
+        self.offsets = np.zeros(n_channels)
+        self.requests = 0
+
+    def _raw(self) -> np.ndarray:
+        values = np.asarray(self.source(), dtype=float)
+        if values.shape != (self.n,):
+            raise ValueError(f"snapshot_source returned shape {values.shape}, expected ({self.n},)")
+        for ch, status in self.faults._forced_now().items():
+            if ch < self.n:
+                values = values.copy()
+                values[ch] = _STATUS_VALUE[status]
+        return values
+
+    def _displayed(self) -> np.ndarray:
+        return self._raw() - self.offsets  # inf/NaN stay markers
+
+    def handle(self, line: bytes) -> bytes:
+        """Reply (CR LF terminated) to one request line without its terminator."""
+        self.requests += 1
+        try:
+            req = parse_request(line)
+            return self._execute(req.name, req.args)
+        except ProbeDeviceError as exc:
+            return format_error(exc.command, exc.code)
+
+    def _check(self, name: str, ch: int) -> None:
+        if ch >= self.n:
+            raise ProbeDeviceError(name, ERR_NO_CHANNEL)
+
+    def _execute(self, name: str, args: tuple) -> bytes:
+        if name == "M0":
+            return format_reply("M0", *self._displayed())
+        if name == "MS":
+            self._check(name, args[0])
+            return format_reply("MS", args[0], self._displayed()[args[0]])
+        if name == "ID":
+            return format_reply("ID", self.model, self.firmware, self.n)
+        ch = args[0]
+        self._check(name, ch)
+        if name == "ZC":
+            self.offsets[ch] = 0.0
+            return format_reply("ZC", ch)
+        raw = self._raw()[ch]
+        if not math.isfinite(raw):
+            raise ProbeDeviceError(name, ERR_NOT_MEASURING)
+        if name == "ZS":
+            self.offsets[ch] = raw
+            return format_reply("ZS", ch)
+        # PS: the present reading becomes the preset value
+        if abs(args[1]) > VALUE_LIMIT_MM:
+            raise ProbeDeviceError(name, ERR_OUT_OF_RANGE)
+        self.offsets[ch] = raw - args[1]
+        return format_reply("PS", ch, args[1])
+
+
+def _split_lines(buf: bytearray) -> list[bytes]:
+    """Pop complete request lines (CR or CR LF terminated) from ``buf``; a stray LF left by a
+    CR LF is dropped at the start of the next line. Over-long garbage is cut off as one line."""
+    lines = []
+    while True:
+        while buf[:1] == b"\n":
+            del buf[:1]
+        idx = buf.find(b"\r")
+        if idx < 0:
+            if len(buf) > MAX_REQUEST_BYTES:
+                lines.append(bytes(buf))  # answered ER,??,.. like a unit whose buffer overran
+                buf.clear()
+            return lines
+        lines.append(bytes(buf[:idx]))
+        del buf[: idx + 1]
+
+
+class ProbeHeadServer:
+    """The unit on a pseudo-terminal, served by a background thread.
+
+    ``snapshot_source()`` returns the channel values [mm] at the moment of the call (+inf over
+    range, -inf under range, NaN invalid); it is called once per request that needs readings,
+    so an ``M0`` reply is one consistent snapshot (``n_channels=None``: called once here to
+    count them). ``pace``: hold replies to the time the bytes would take at ``baudrate``
+    (10 bits per byte), including the request's own transfer.
+    """
+
+    def __init__(self, snapshot_source: Callable[[], np.ndarray], n_channels: int | None = None,
+                 baudrate: int = 38400, pace: bool = True, model: str = "SIM-PH6",
+                 firmware: str = "1.0.0", faults: ProbeFaults | None = None) -> None:
+        if n_channels is None:
+            n_channels = len(np.asarray(snapshot_source()))
+        self.faults = faults if faults is not None else ProbeFaults()
+        self.unit = _Unit(snapshot_source, n_channels, model, firmware, self.faults)
+        self.baudrate = baudrate
+        self.pace = pace
+        self.failure: BaseException | None = None
+        #: requests fully answered (or deliberately dropped); tests wait on it
+        self.requests_done = 0
+        self._byte_s = 10.0 / baudrate
+        self._stop = threading.Event()
+        self._ready = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._wake_r, self._wake_w = -1, -1
+        self._fd = -1          # the fd the loop reads and writes
+        self._closed = False
+        self.port = ""
+
+    # ---------------------------------------------------------------- transport hooks
+
+    def _open(self) -> None:
+        master, slave = os.openpty()
+        # Raw mode: no echo, no CR/LF translation - the bytes are the protocol.
+        tty.setraw(slave)
+        # Keep our slave fd open so the master does not see EIO whenever the driver closes
+        # its port; the pty only dies when disconnect()/stop() closes the master.
+        self._slave = slave
+        os.set_blocking(master, False)
+        self._fd = master
+        self.port = os.ttyname(slave)
+
+    def _wait_client(self) -> bool:
+        return True  # a pty is always "connected"
+
+    def _close(self) -> None:
+        for fd in (self._fd, getattr(self, "_slave", -1)):
+            if fd >= 0:
+                os.close(fd)
+        self._fd = -1
+        self._slave = -1
+
+    # ---------------------------------------------------------------- lifetime
+
+    def start(self) -> "ProbeHeadServer":
+        if self._thread is not None:
+            raise RuntimeError("server already started")
+        self._open()
+        self._wake_r, self._wake_w = os.pipe()
+        self._thread = threading.Thread(target=self._run, name="probe-head-sim", daemon=True)
+        self._thread.start()
+        if not self._ready.wait(5.0):
+            raise RuntimeError("probe-head simulator thread did not start")
+        return self
+
+    def stop(self) -> None:
+        """Stop serving and close the port; re-raises a failure of the serving thread."""
+        if self._thread is not None and not self._closed:
+            self._stop.set()
+            os.write(self._wake_w, b"x")
+            self._thread.join(5.0)
+            if self._thread.is_alive():
+                raise RuntimeError("probe-head simulator thread did not stop")
+            self._close()
+            os.close(self._wake_r)
+            os.close(self._wake_w)
+            self._closed = True
+        if self.failure is not None:
+            raise RuntimeError("probe-head simulator failed while serving") from self.failure
+
+    def disconnect(self) -> None:
+        """Fault: the unit vanishes (pty master closed); the driver sees the port gone."""
+        self.stop()
+
+    def __enter__(self) -> "ProbeHeadServer":
+        return self.start()
+
+    def __exit__(self, *exc_info) -> None:
+        self.stop()
+
+    # ---------------------------------------------------------------- serving
+
+    def _run(self) -> None:
+        self._ready.set()
+        try:
+            buf = bytearray()
+            while not self._stop.is_set():
+                if not self._wait_client():
+                    continue
+                ready, _, _ = select.select([self._fd, self._wake_r], [], [], 1.0)
+                if self._wake_r in ready or self._stop.is_set():
+                    return
+                if not ready:
+                    continue
+                try:
+                    data = os.read(self._fd, 4096)
+                except BlockingIOError:
+                    continue
+                except ConnectionResetError:
+                    data = b""
+                if not data:
+                    self._client_gone()
+                    buf.clear()
+                    continue
+                received_at = time.monotonic()
+                buf += data
+                lines = _split_lines(buf)
+                wire_bytes = 0
+                for line in lines:
+                    # Request transfer time: the pty delivered instantly, a wire would not.
+                    wire_bytes += len(line) + 1
+                    self._pace_until(received_at + wire_bytes * self._byte_s)
+                    self._reply(self.unit.handle(line), line)
+        except BaseException as exc:  # recorded and re-raised by stop(), never dropped
+            self.failure = exc
+
+    def _client_gone(self) -> None:
+        raise ConnectionError("pty master read returned EOF")
+
+    def _pace_until(self, deadline: float) -> None:
+        if self.pace:
+            delay = deadline - time.monotonic()
+            if delay > 0:
+                self._stop.wait(delay)
+
+    def _reply(self, reply: bytes, line: bytes) -> None:
+        fault = self.faults._next()
+        if fault is FaultKind.BUSY:
+            name = line[:2].decode("ascii", "replace") if line[:2].isalnum() else "??"
+            reply = format_error(name, ERR_BUSY)
+        elif fault is FaultKind.DROP:
+            self.requests_done += 1
+            return
+        elif fault is FaultKind.TRUNCATE:
+            reply = reply[: max(1, len(reply) // 2)]
+        elif fault is FaultKind.GARBLE:
+            b = bytearray(reply)
+            b[3] |= 0x80  # the first field starts at index 3 in every reply
+            reply = bytes(b)
+        if self.faults.latency_s > 0:
+            self._stop.wait(self.faults.latency_s)
+        self._send(reply)
+        self.requests_done += 1
+
+    def _send(self, data: bytes) -> None:
+        """Write paced in small chunks: a chunk goes out when its last byte would have arrived."""
+        start = time.monotonic()
+        chunk = 8 if self.pace else len(data)
+        for i in range(0, len(data), chunk):
+            part = data[i: i + chunk]
+            self._pace_until(start + (i + len(part)) * self._byte_s)
+            try:
+                os.write(self._fd, part)
+            except (BrokenPipeError, ConnectionResetError):
+                return  # TCP client went away; the next read notices and waits for another
+            except BlockingIOError:
+                return  # nobody is draining the line: a real UART would lose these bytes too
+
+
+class ProbeHeadTcpServer(ProbeHeadServer):
+    """The same unit on TCP (``.url`` = ``socket://127.0.0.1:<port>``), one client at a time,
+    like a serial-to-Ethernet adapter."""
+
+    def _open(self) -> None:
+        self._listener = socket.create_server(("127.0.0.1", 0))
+        self._listener.setblocking(False)
+        host, port = self._listener.getsockname()[:2]
+        self.port = f"socket://{host}:{port}"
+        self._conn: socket.socket | None = None
+        self._fd = -1
+
+    @property
+    def url(self) -> str:
+        return self.port
+
+    def _wait_client(self) -> bool:
+        if self._conn is not None:
+            return True
+        ready, _, _ = select.select([self._listener, self._wake_r], [], [], 1.0)
+        if self._listener in ready:
+            conn, _ = self._listener.accept()
+            conn.setblocking(False)
+            # Paced replies go out in small chunks; Nagle + delayed ACK would add ~40 ms each.
+            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            self._conn = conn
+            self._fd = conn.fileno()
+            return True
+        return False
+
+    def _client_gone(self) -> None:
+        assert self._conn is not None
+        self._conn.close()
+        self._conn = None
+        self._fd = -1
+
+    def _close(self) -> None:
+        if self._conn is not None:
+            self._conn.close()
+            self._conn = None
+        self._listener.close()
+        self._fd = -1

@@ -1,0 +1,143 @@
+"""Register map: encoding, word orders, decoders that fail only with the driver's errors."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from drivers.controller import ControllerStatus, CorrectionTableData, TableAxis
+from drivers.controller_map import (
+    REG, REGISTERS, ControllerError, RegisterDecodeError, WordOrder, decode, decode_f32_array,
+    encode, encode_f32_array, register_span,
+)
+
+WORDS = st.integers(min_value=0, max_value=0xFFFF)
+
+
+def test_map_has_no_overlaps_and_fits_modbus():
+    spans = sorted((r.address, r.end) for r in REGISTERS)
+    assert all(b[0] >= a[1] for a, b in zip(spans, spans[1:]))
+    assert spans[-1][1] <= 65536
+    # the command block fits one FC 16 request, the status block one FC 3 request
+    assert register_span("cmd_code", "cmd_pose")[1] <= 123
+    assert register_span("table_format", "table_crc")[1] <= 123
+    assert REG["table_data"].count >= 20000
+
+
+@pytest.mark.parametrize("order,expected", [(WordOrder.BIG, [0x3F80, 0x0000]),
+                                            (WordOrder.LITTLE, [0x0000, 0x3F80])])
+def test_f32_word_order(order, expected):
+    assert encode("cmd_pose", [1.0], order) == expected
+    assert decode_f32_array(expected, order)[0] == 1.0
+
+
+@pytest.mark.parametrize("order", list(WordOrder))
+def test_u32_and_scaled_and_signed(order):
+    words = encode("table_crc", 0x12345678, order)
+    assert words == ([0x1234, 0x5678] if order is WordOrder.BIG else [0x5678, 0x1234])
+    assert decode("table_crc", words, order) == 0x12345678
+    assert encode("cmd_speed", 0.5) == [500]
+    assert decode("cmd_speed", [500]) == pytest.approx(0.5)
+    assert encode("cmd_elbow", -1) == [0xFFFF]
+    assert decode("cmd_elbow", [0xFFFF]) == -1
+
+
+@pytest.mark.parametrize("order", list(WordOrder))
+def test_roundtrip_arrays(order):
+    v = np.array([1.5, -2.25, 1e-7, 800.0, -3.14159, 0.0], dtype=np.float32)
+    assert np.array_equal(decode("cmd_pose", encode("cmd_pose", v, order), order), v)
+    assert np.array_equal(decode_f32_array(encode_f32_array(v, order), order), v)
+    # vectorised and scalar encoders agree
+    assert encode_f32_array(v, order) == encode("cmd_pose", v, order)
+
+
+def test_encode_rejects_what_does_not_fit():
+    with pytest.raises(ValueError, match="does not fit"):
+        encode("cmd_seq", 70000)
+    with pytest.raises(ValueError, match="non-finite"):
+        encode("cmd_pose", [np.nan])
+    with pytest.raises(ValueError, match="at most"):
+        encode("cmd_pose", np.zeros(7))
+
+
+def test_decode_rejects_wrong_count_and_range():
+    with pytest.raises(RegisterDecodeError, match="expected 12"):
+        decode("cmd_pose", [0] * 11)
+    with pytest.raises(RegisterDecodeError, match="outside"):
+        decode("status", [70000])
+    with pytest.raises(RegisterDecodeError, match="even"):
+        decode_f32_array([1, 2, 3])
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.sampled_from(REGISTERS[:-1]), st.sampled_from(list(WordOrder)), st.data())
+def test_fuzz_entry_decoders(reg, order, data):
+    n = data.draw(st.integers(0, reg.n_registers + 2))
+    words = data.draw(st.lists(st.integers(-5, 0x1FFFF), min_size=n, max_size=n))
+    try:
+        decode(reg, words, order)
+    except ControllerError:
+        pass
+
+
+_STATUS_N = register_span("ack_seq", "error_bound")[1]
+_HDR_N = register_span("table_format", "table_crc")[1]
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(WORDS, min_size=_STATUS_N, max_size=_STATUS_N))
+def test_fuzz_status(words):
+    s = ControllerStatus.from_registers(words)
+    assert s.moving == bool(words[4] & 2)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(WORDS, min_size=_HDR_N, max_size=_HDR_N), st.lists(WORDS, max_size=64),
+       st.sampled_from(list(WordOrder)))
+def test_fuzz_table_decoder_raises_only_driver_errors(header, data, order):
+    try:
+        t = CorrectionTableData.from_registers(header, data, order)
+    except ControllerError:
+        return
+    assert t.n_values * 2 == len(data)
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.lists(WORDS, min_size=_HDR_N, max_size=_HDR_N), st.sampled_from(list(WordOrder)))
+def test_fuzz_valid_looking_headers(header, order):
+    header = list(header)
+    header[0] = 1  # plausible format version to get deeper into the decoder
+    header[1] = header[1] % 5
+    try:
+        CorrectionTableData.decode_header(header, order)
+    except ControllerError:
+        pass
+
+
+@pytest.mark.parametrize("order", list(WordOrder))
+def test_table_roundtrip_and_crc(order):
+    rng = np.random.default_rng(1)
+    axes = (TableAxis(100.0, 50.0, 3), TableAxis(-20.0, 10.0, 2), TableAxis(0.0, np.pi / 2, 4, periodic=True))
+    t = CorrectionTableData(axes, rng.normal(0, 1e-3, (2, 3, 2, 4, 4)))
+    t2 = CorrectionTableData.from_registers(t.header_registers(order), t.data_registers(order), order)
+    assert t2.same_as(t) and t2.crc32() == t.crc32()
+    import zlib
+    assert t.crc32() == zlib.crc32(t.values.astype(">f4").tobytes())
+    changed = np.array(t.values)
+    changed[1, 2, 1, 3, 0] += 1e-6
+    t3 = CorrectionTableData(axes, changed)
+    assert t3.crc32() != t.crc32() and "flat index" in t.first_difference(t3)
+
+
+def test_interpolation_rule():
+    axes = (TableAxis(0.0, 10.0, 3), TableAxis(0.0, np.pi / 2, 4, periodic=True))
+    vals = np.zeros((1, 3, 4, 1))
+    vals[0, :, :, 0] = np.arange(3)[:, None] * 10 + np.arange(4)[None, :]  # linear in node index
+    t = CorrectionTableData(axes, vals)
+    assert t.interpolate([5.0, 0.0])[0] == pytest.approx(5.0)
+    assert t.interpolate([20.0, np.pi / 4])[0] == pytest.approx(20.5)
+    # periodic wrap: between node 3 (value 3) and node 0 (value 0)
+    assert t.interpolate([0.0, 3.5 * np.pi / 2])[0] == pytest.approx(1.5)
+    assert t.interpolate([0.0, -np.pi / 4])[0] == pytest.approx(1.5)
+    from drivers.controller import TableRangeError
+    with pytest.raises(TableRangeError, match="outside"):
+        t.interpolate([25.0, 0.0])
