@@ -211,17 +211,27 @@ class SimulatedCell:
             if self.truth.model.joint_types[2:3] == ("prismatic",):
                 initial_joints[2] = 0.5 * (lim[2, 0] + lim[2, 1])
         self._cmd = np.array(initial_joints, dtype=float)
+        self._prev_cmd = self._cmd.copy()
+        self._reads_since_move = 0
         self._direction = np.ones(g)
         self._phys = self._physical(self._cmd, noise=False)
         # what the head must see at a contact: pose of MPKS in MKKS at mid-stroke
         self._M_nominal = np.asarray(self.probe.geometry.nominal_contact_pose(), dtype=float)
 
     # ----------------------------------------------------------------- joints
+    def _keyed_rng(self, salt: int) -> np.random.Generator:
+        """Noise keyed to the last two commands (the path into the pose) rather than to a
+        stream position: a station that crashes and repeats a measurement's command sequence
+        gets the same physics, so a resumed run reproduces an uninterrupted one exactly."""
+        key = np.round(np.concatenate([self._prev_cmd, self._cmd]) * 1e9).astype(np.int64)
+        words = [int(k) & 0xFFFFFFFFFFFFFFFF for k in key]
+        return np.random.default_rng(np.random.SeedSequence([self.truth.seed, salt, *words]))
+
     def _physical(self, cmd: np.ndarray, noise: bool = True) -> np.ndarray:
         t = self.truth
         q = cmd - 0.5 * t.backlash * self._direction
         if noise:
-            q = q + self._rng.normal(0.0, 1.0, q.shape) * t.repeatability
+            q = q + self._keyed_rng(0).normal(0.0, 1.0, q.shape) * t.repeatability
         return q
 
     def command_joints(self, q_cmd: np.ndarray) -> np.ndarray:
@@ -232,7 +242,9 @@ class SimulatedCell:
         with self._lock:
             d = np.sign(q_cmd - self._cmd)
             self._direction = np.where(d != 0, d, self._direction)
+            self._prev_cmd = self._cmd
             self._cmd = q_cmd.copy()
+            self._reads_since_move = 0
             self._phys = self._physical(q_cmd)
             return self._encoder()
 
@@ -285,7 +297,10 @@ class SimulatedCell:
     def probe_values(self) -> np.ndarray:
         """Probe readings (6,) [mm] with +inf/-inf/NaN markers at the current state."""
         _j, M = self.contact()
-        return self.probe.readings(M)
+        with self._lock:
+            self._reads_since_move += 1
+            rng = self._keyed_rng(self._reads_since_move)
+        return self.probe.readings(M, rng=rng)
 
     def nominal_head_target(self, point: int, nominal_body: bool = True) -> np.ndarray:
         """World<-MKKS that puts the head at mid-stroke on measuring point ``point``."""

@@ -64,12 +64,14 @@ class ProbeHeadPhysics:
         self.quantum_mm = quantum_mm
         self._rng = np.random.default_rng(seed)
 
-    def readings(self, M_true: np.ndarray | None) -> np.ndarray:
+    def readings(self, M_true: np.ndarray | None, rng: np.random.Generator | None = None) -> np.ndarray:
+        """``rng``: draw the noise from this generator (the cell keys it to the robot's state
+        so that a repeated command sequence reproduces its readings exactly)."""
         n = self.geometry.n_probes
         if M_true is None:
             return np.full(n, np.nan)
         exact = readings_from_pose(self.geometry, M_true)
-        noisy = exact + self._rng.normal(0.0, self.noise_mm, n)
+        noisy = exact + (self._rng if rng is None else rng).normal(0.0, self.noise_mm, n)
         half = self.geometry.stroke_mm / 2.0
         # Noise may carry a reading just across the stroke end; markers stay markers.
         out = np.where(noisy > half, np.inf, np.where(noisy < -half, -np.inf, noisy))

@@ -1,0 +1,244 @@
+"""The runner: one place that owns time, device I/O, pause/abort and the run database.
+
+Measurement procedures are generators of small messages (``MoveJoints``, ``ReadProbes`` …);
+they decide *what* to do and receive each result back through ``send``. The :class:`Runner`
+decides *how*: it checks every motion against the soft limits before commanding it, waits on
+status objects with timeouts, averages and spread-checks probe readings, and stops at safe points
+for pause and abort. The CLI and the terminal UI both drive this one implementation.
+
+Every finished measurement is committed to the run database before the next motion starts.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any, Callable, Generator
+
+import numpy as np
+
+from station.config import CellConfig
+from station.events import Event, MeasurementRecorded, Notice, StepStarted
+from station.plan import approach_offsets, check_joints, retract_offset
+from station.protocols import ProbeHead, RobotController
+from station.runcontrol import RunControl
+from station.transforms import invert, matrix_to_pose, pose_to_matrix
+
+
+# --- messages -------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Checkpoint:
+    """A safe point: the robot stands still; pause and abort take effect here."""
+
+
+@dataclass(frozen=True)
+class MoveJoints:
+    q: np.ndarray
+    why: str
+
+
+@dataclass(frozen=True)
+class MoveCartesian:
+    pose: np.ndarray  # (6,) base frame [mm, rad]
+    elbow: int
+    expected_q: np.ndarray  # nominal IK, checked against the soft limits before the move
+    why: str
+
+
+@dataclass(frozen=True)
+class Settle:
+    seconds: float
+
+
+@dataclass(frozen=True)
+class ReadProbes:
+    pass
+
+
+@dataclass(frozen=True)
+class ReadJoints:
+    pass
+
+
+@dataclass(frozen=True)
+class Reading:
+    """What one measurement produced."""
+
+    joints_commanded: np.ndarray
+    joints_read: np.ndarray | None
+    raw: bytes
+    readings_mm: np.ndarray | None
+    status: tuple | None
+    pose: np.ndarray | None  # (4,4) MPKS in MKKS
+    residual_um: float | None
+    ok: bool
+    message: str
+
+
+Procedure = Generator[Any, Any, Reading]
+
+
+# --- procedures -----------------------------------------------------------------------------
+
+def approach_and_read(cfg: CellConfig, q_target: np.ndarray, direction: int = 1,
+                      cartesian: tuple[np.ndarray, int] | None = None) -> Procedure:
+    """Retract, approach ``q_target`` so that every joint arrives from the same side, settle,
+    read; re-centre (bounded) when a probe is near the end of its stroke or out of range.
+
+    ``cartesian``: ``(pose6_base, elbow)`` to make the final move a Cartesian one (corrected by
+    the controller's active table), as verification does.
+    """
+    from station.probe_geometry import PoseSolveError, default_probe_head, solve_pose
+
+    geom = default_probe_head(cube_edge_mm=cfg.cube_edge_mm)
+    M_nom = geom.nominal_contact_pose()
+    half = geom.stroke_mm / 2
+    a, r = approach_offsets(cfg, direction), retract_offset(cfg)
+    raw = b""
+    q = np.asarray(q_target, dtype=float)
+    pose_cmd = None if cartesian is None else np.asarray(cartesian[0], dtype=float)
+    last: Reading | None = None
+    for attempt in range(cfg.plan.recenter_attempts + 1):
+        yield Checkpoint()
+        yield MoveJoints(None, "retract")
+        yield MoveJoints(q - a + r, "approach")
+        yield MoveJoints(q + r, "above the point")
+        if pose_cmd is None:
+            yield MoveJoints(q, "touch")
+        else:
+            yield MoveCartesian(pose_cmd, cartesian[1], q, "touch (Cartesian)")
+        yield Settle(cfg.plan.settle_s)
+        snap = yield ReadProbes()
+        q_read = yield ReadJoints()
+        raw += snap.raw
+        values = np.asarray(snap.values_mm, dtype=float)
+        status = tuple(str(s) for s in snap.status)
+        try:
+            sol = solve_pose(geom, values, noise_mm=cfg.plan.max_residual_um * 1e-3 / 3)
+        except PoseSolveError as exc:
+            last = Reading(q, q_read, raw, values, status, None, None, False,
+                           f"pose not solved: {exc}")
+            # Without a pose there is no safe re-centre direction: report and move on.
+            break
+        res_um = float(np.sqrt(np.mean(sol.residuals_mm**2)) * 1e3)
+        near = np.max(np.abs(values)) > half - cfg.plan.recenter_margin_mm
+        ok = res_um <= cfg.plan.max_residual_um
+        last = Reading(q, q_read, raw, values, status, sol.M, res_um, ok,
+                       "" if ok else f"plane residual {res_um:.1f} µm exceeds {cfg.plan.max_residual_um} µm")
+        if not near or attempt == cfg.plan.recenter_attempts:
+            if near:
+                last = Reading(q, q_read, raw, values, status, sol.M, res_um, ok,
+                               "probes near the end of their stroke after re-centring")
+            break
+        # Re-centre: the head frame must move by D = M_measured · M_nominal⁻¹ (SCARA: x, y, z, yaw).
+        D = matrix_to_pose(sol.M @ invert(M_nom))
+        D[3:5] = 0.0
+        T_now = _fk_base(cfg, q)
+        T_new = T_now @ pose_to_matrix(D)
+        from station.plan import joints_for
+
+        elbow = 1 if q[1] > 0 else -1
+        q = joints_for(cfg, cfg_setup_matrix(cfg) @ T_new, elbow)[0]
+        if pose_cmd is not None:
+            pose_cmd = matrix_to_pose(T_new)
+    yield MoveJoints(None, "retract after reading")  # None: retract from where we stand
+    return last
+
+
+def _fk_base(cfg: CellConfig, q) -> np.ndarray:
+    from station.kinematics import forward
+
+    return forward(cfg.model, np.asarray(q)[None], setup=False)[0]
+
+
+def cfg_setup_matrix(cfg: CellConfig) -> np.ndarray:
+    return pose_to_matrix(cfg.model.nominal[:6])
+
+
+# --- the runner -----------------------------------------------------------------------------
+
+class Runner:
+    """Executes procedures on real (or simulated) devices."""
+
+    def __init__(self, cfg: CellConfig, probe: ProbeHead, controller: RobotController,
+                 emit: Callable[[Event], None], control: RunControl | None = None,
+                 sleep: Callable[[float], None] = time.sleep):
+        self.cfg = cfg
+        self.probe = probe
+        self.controller = controller
+        self.emit = emit
+        self.control = control or RunControl()
+        self._sleep = sleep
+        self._last_q: np.ndarray | None = None
+
+    def execute(self, proc: Procedure, index: int = 0) -> Reading:
+        """Run one procedure to its end and return its result."""
+        value = None
+        while True:
+            try:
+                msg = proc.send(value)
+            except StopIteration as stop:
+                return stop.value
+            value = self._do(msg, index)
+
+    def _do(self, msg, index: int):
+        cfg = self.cfg
+        if isinstance(msg, Checkpoint):
+            self.control.checkpoint(emit=self.emit, index=index)
+            return None
+        if isinstance(msg, ReadJoints):
+            q = np.asarray(self.controller.read_joints(), dtype=float)
+            self._last_q = q
+            return q
+        if isinstance(msg, MoveJoints):
+            q = msg.q
+            if q is None:  # retract: lift from where the robot stands, never past the soft limit
+                cur = np.asarray(self.controller.read_joints(), dtype=float)
+                q = np.minimum(cur + retract_offset(cfg), np.maximum(cur, cfg.soft_limits[:, 1]))
+            q = np.asarray(q, dtype=float)
+            if self._last_q is not None and np.allclose(q, self._last_q, atol=1e-9, rtol=0):
+                return None
+            check_joints(cfg, q, msg.why)
+            status = self.controller.move_joints(q, speed=cfg.plan.speed)
+            status.wait(timeout=cfg.devices.motion_timeout_s)
+            self._last_q = q
+            return None
+        if isinstance(msg, MoveCartesian):
+            check_joints(cfg, msg.expected_q, msg.why)
+            status = self.controller.move_cartesian(msg.pose, elbow=msg.elbow, speed=cfg.plan.speed)
+            status.wait(timeout=cfg.devices.motion_timeout_s)
+            self._last_q = None
+            return None
+        if isinstance(msg, Settle):
+            if msg.seconds > 0:
+                self._sleep(msg.seconds)
+            return None
+        if isinstance(msg, ReadProbes):
+            return self.probe.read_averaged(cfg.plan.samples, cfg.plan.max_spread_um * 1e-3)
+        raise TypeError(f"unknown runner message {msg!r}")
+
+    def measure_steps(self, db, run_id: int, steps: list[dict], kind_filter: set[str],
+                      total: int, make_proc: Callable[[dict], Procedure]) -> int:
+        """Measure every step of ``steps`` not yet in the database; each is committed before the
+        next motion. Returns the number measured now."""
+        done = db.completed_steps(run_id)
+        n = 0
+        for st in steps:
+            if st["kind"] not in kind_filter or st["index"] in done:
+                continue
+            label = f"{st['point_id']} elbow {st['elbow']:+d}" + (f" cycle {st['cycle'] + 1}" if st.get("cycle") else "")
+            self.emit(StepStarted(st["index"], total, f"{st['kind']}: {label}"))
+            reading = self.execute(make_proc(st), st["index"])
+            db.record_measurement(
+                run_id, st["index"], kind=st["kind"], point_id=st["point_id"], label=label,
+                joints_commanded=reading.joints_commanded, joints_read=reading.joints_read,
+                raw_frames=reading.raw, readings_mm=reading.readings_mm,
+                channel_status=reading.status, pose=reading.pose,
+                pose_residual_um=reading.residual_um, ok=reading.ok, message=reading.message)
+            self.emit(MeasurementRecorded(st["index"], total, label, reading.ok,
+                                          float(reading.residual_um or float("nan")), reading.message))
+            if not reading.ok:
+                self.emit(Notice("warning", f"{label}: {reading.message}"))
+            n += 1
+        return n
