@@ -139,7 +139,7 @@ def run_calibration(cfg: CellConfig, probe, controller, db, emit: Callable[[Even
                     resume_run: int | None = None, seed: int | None = None) -> dict:
     """Measure → identify → correct → upload → verify. Returns the JSON-able summary; raises the
     typed error of whatever stopped it (everything measured so far is on disk)."""
-    from station.correction import build_table_for, upload_verified
+    from station.correction import upload_verified
 
     control = control or RunControl()
     runner = Runner(cfg, probe, controller, emit, control)
@@ -168,6 +168,17 @@ def run_calibration(cfg: CellConfig, probe, controller, db, emit: Callable[[Even
         db.log(run_id, "error", f"{type(exc).__name__}: {exc}")
         db.set_status(run_id, "failed")
         raise
+
+
+def build_table_for(cfg: CellConfig, params: np.ndarray):
+    """The correction table of ``params`` on the configured grid (the controller's nominal model)."""
+    from station.correction import GridSpec, build_correction_table
+
+    c = cfg.correction
+    grid = GridSpec(x_range=c.x_mm[:2], x_step=c.x_mm[2], y_range=c.y_mm[:2], y_step=c.y_mm[2],
+                    z_range=c.z_mm[:2], z_step=c.z_mm[2], yaw_step=np.deg2rad(c.yaw_step_deg),
+                    elbows=tuple(cfg.plan.elbows))
+    return build_correction_table(cfg.model, params, grid)
 
 
 def _proc_for(cfg: CellConfig, R_world_base: np.ndarray | None):

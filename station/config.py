@@ -245,11 +245,11 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
     co = data.get("correction", {})
     _check_keys(co, {"x_mm", "y_mm", "z_mm", "yaw_step_deg", "max_interpolation_um"}, "correction")
     corr = CorrectionConfig(
-        x_mm=tuple(_vec(co, "x_mm", "correction", 3, [350.0, 750.0, 25.0])),
-        y_mm=tuple(_vec(co, "y_mm", "correction", 3, [-250.0, 250.0, 25.0])),
-        z_mm=tuple(_vec(co, "z_mm", "correction", 3, [250.0, 450.0, 100.0])),
+        x_mm=tuple(_vec(co, "x_mm", "correction", 3, [250.0, 650.0, 40.0])),
+        y_mm=tuple(_vec(co, "y_mm", "correction", 3, [-350.0, 350.0, 50.0])),
+        z_mm=tuple(_vec(co, "z_mm", "correction", 3, [250.0, 450.0, 200.0])),
         yaw_step_deg=_get(co, "yaw_step_deg", "correction", float, 30.0),
-        max_interpolation_um=_get(co, "max_interpolation_um", "correction", float, 5.0))
+        max_interpolation_um=_get(co, "max_interpolation_um", "correction", float, 30.0))
     for key in ("x_mm", "y_mm", "z_mm"):
         lo, hi, step = getattr(corr, key)
         if not (hi > lo and step > 0):
@@ -288,7 +288,7 @@ name = "cell 1"
 model = "sr800"                  # built-in robot or a robot file (docs/robot-file.md)
 # Nominal pose of the robot base in the calibration-body frame: x, y, z [mm], roll, pitch, yaw [deg].
 # It only has to be right to a few mm / a few tenths of a degree; the calibration identifies it.
-setup = [-550.0, 0.0, -200.0, 0.0, 0.0, 0.0]
+setup = [-450.0, 0.0, -170.0, 0.0, 0.0, 0.0]
 
 [limits]
 # Soft limits the station never commands a motion beyond: [lower, upper] per joint (deg | mm).
@@ -341,9 +341,9 @@ sigma_angle_arcsec = 20.0
 
 [correction]
 # Grid of the correction table in the robot base frame: [start, stop, step].
-x_mm = [350.0, 750.0, 25.0]
-y_mm = [-250.0, 250.0, 25.0]
-z_mm = [250.0, 450.0, 100.0]
+x_mm = [250.0, 650.0, 40.0]
+y_mm = [-350.0, 350.0, 50.0]
+z_mm = [250.0, 450.0, 200.0]
 yaw_step_deg = 30.0
 max_interpolation_um = 5.0       # refuse a table whose interpolation bound exceeds this
 """

@@ -78,6 +78,22 @@ class Identifiability:
         }
 
 
+STRUCTURAL_SNAP_RAD = np.deg2rad(5.0)
+
+
+def structural_params(model: RobotModel, params) -> np.ndarray:
+    """The design geometry behind ``params``: every angle within 5° of a multiple of 90° snapped
+    onto it. Identifiability is structural: a small identified tilt turns an exact dependency
+    (e.g. R.z ≡ K.z) into a near one that would pass a rank test as round-off-sized rank, so
+    the choice of parameters is made at the design point and the fit then starts from ``params``."""
+    p = np.array(params, dtype=float)
+    ang = model.is_angle()
+    snapped = np.round(p[ang] / (np.pi / 2)) * (np.pi / 2)
+    near = np.abs(p[ang] - snapped) < STRUCTURAL_SNAP_RAD
+    p[np.nonzero(ang)[0][near]] = snapped[near]
+    return p
+
+
 def weighted_jacobian(model: RobotModel, data: MeasurementSet, params=None) -> np.ndarray:
     """The σ-normalised identification Jacobian ``(n_rows, n_params)``."""
     p = model.nominal if params is None else params
@@ -103,6 +119,10 @@ def analyze(model: RobotModel, data: MeasurementSet, params=None, prefer=(), fix
     for n in (*prefer, *fix, *exclude):
         model.param_index(n)
     J = weighted_jacobian(model, data, params)
+    # Everything below depends only on inner products of columns, which the triangular factor
+    # R of J = QR keeps: work on the (P, P) factor instead of the (rows, P) Jacobian.
+    if J.shape[0] > J.shape[1]:
+        J = np.linalg.qr(J, mode="r")
     norms = np.linalg.norm(J, axis=0)
     zero = norms <= ZERO_COLUMN_RTOL * norms.max()
     held = set(fix) | set(exclude)
@@ -138,11 +158,13 @@ def analyze(model: RobotModel, data: MeasurementSet, params=None, prefer=(), fix
         if zero[i]:
             deps.append(Dependency(names[i], ()))
             continue
-        coef, *_ = np.linalg.lstsq(J[:, chosen], J[:, i], rcond=None)
-        resid = np.linalg.norm(J[:, chosen] @ coef - J[:, i]) / norms[i]
+        # Solve on unit columns (mm and rad comparable), report in physical units.
+        cs, *_ = np.linalg.lstsq(Jc, J[:, i] / norms[i], rcond=None)
+        resid = np.linalg.norm(Jc @ cs - J[:, i] / norms[i])
         if resid > 1e-6:
             continue  # held by the user but not a combination: identifiable, just not chosen
-        terms = tuple((names[c], float(v)) for c, v in zip(chosen, coef) if abs(v) > 1e-6)
+        coef = cs * norms[i] / norms[chosen]
+        terms = tuple((names[c], float(v)) for c, v, w in zip(chosen, coef, cs) if abs(w) > 1e-6)
         deps.append(Dependency(names[i], terms))
     cond = float(s[0] / s[rank - 1]) if rank else float("inf")
     return Identifiability(

@@ -17,7 +17,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from station.errors import IdentificationError
-from station.identifiability import Identifiability, analyze
+from station.identifiability import Identifiability, analyze, structural_params
 from station.measurements import MeasurementSet, residuals_and_jacobian
 from station.model import RobotModel
 from station.uncertainty import LinearUncertainty, linear_uncertainty
@@ -78,7 +78,7 @@ def identify(model: RobotModel, data: MeasurementSet, start=None, prefer=None, f
     p0 = np.array(model.nominal if start is None else start, dtype=float)
     if p0.shape != (model.n_params,) or not np.all(np.isfinite(p0)):
         raise IdentificationError("start parameters must be a finite vector of the model's size")
-    ident = analyze(model, data, p0, prefer=model.prefer if prefer is None else prefer,
+    ident = analyze(model, data, structural_params(model, p0), prefer=model.prefer if prefer is None else prefer,
                     fix=fix, exclude=exclude, describe=False)
     if chosen is not None:
         idx = np.array(model.param_indices(chosen), dtype=int)

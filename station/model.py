@@ -228,6 +228,9 @@ def robot_from_dict(data: dict, source: str = "<dict>") -> RobotModel:
                 raise ConfigError(
                     f"{source}: joint transform {e['name']!r} needs limits = [lower, upper]"
                 )
+            if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in lim):
+                raise ConfigError(
+                    f"{source}: transform {e['name']!r}: limits must be two finite numbers [lower, upper]")
             s = a_scale if joint == "revolute" else l_scale
             limits.append([float(lim[0]) * s, float(lim[1]) * s])
         elif "limits" in e:
