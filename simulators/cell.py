@@ -32,10 +32,12 @@ __all__ = ["CellTruth", "CubeSpec", "CalibrationBody", "SimulatedCell", "DEFAULT
 
 ARCMIN = np.pi / (180 * 60)
 ARCSEC = ARCMIN / 60
-#: Nominal pose of the robot base in the calibration-body frame: the robot stands 550 mm in -x
-#: of the body origin and 200 mm below the plate surface, so the cube corners lie mid-stroke of
+#: Nominal pose of the robot base in the calibration-body frame: the robot stands 450 mm in -x
+#: (every corner well inside the 800 mm reach, away from the stretched-arm singularity)
+#: of the body origin and 170 mm below the plate surface, so every cube corner, with 20 mm of
+#: retract clearance above it, lies within the stroke of
 #: the SR 800's prismatic axis.
-DEFAULT_SETUP = np.array([-550.0, 0.0, -200.0, 0.0, 0.0, 0.0])
+DEFAULT_SETUP = np.array([-450.0, 0.0, -170.0, 0.0, 0.0, 0.0])
 
 
 def _readonly(a) -> np.ndarray:
