@@ -170,6 +170,17 @@ def run_calibration(cfg: CellConfig, probe, controller, db, emit: Callable[[Even
         raise
 
 
+def oracle_params(cfg: CellConfig, truth) -> np.ndarray:
+    """The simulator's true parameters as seen through the station's approach: every joint
+    arrives from the same side, so half the reversal error is a constant joint offset (revolute
+    joints from below, the quill from above), which belongs to the true model of this cell."""
+    p = np.array(truth.params, dtype=float)
+    for k, (t, kind) in enumerate(zip(cfg.model.joint_transforms, cfg.model.joint_types)):
+        direction = 1.0 if kind == "revolute" else -1.0
+        p[6 * t + (5 if kind == "revolute" else 2)] -= 0.5 * truth.backlash[k] * direction
+    return p
+
+
 def build_table_for(cfg: CellConfig, params: np.ndarray):
     """The correction table of ``params`` on the configured grid (the controller's nominal model)."""
     from station.correction import GridSpec, build_correction_table
@@ -187,11 +198,12 @@ def _proc_for(cfg: CellConfig, R_world_base: np.ndarray | None):
     def make(st: dict):
         q = np.array(st["joints"])
         if st["kind"] in ("identification", "reversal"):
-            return approach_and_read(cfg, q, st.get("direction", 1))
+            return approach_and_read(cfg, q, st.get("direction", 1), cycle=st.get("cycle", 0))
         # Verification: a Cartesian target in the base frame, as a user of the robot gives it.
         T_base = invert(pose_to_matrix(R_world_base)) @ heads[st["point"]]
         q_nom = joints_for(cfg, heads[st["point"]], st["elbow"], R_world_base)[0]
-        return approach_and_read(cfg, q_nom, 1, cartesian=(matrix_to_pose(T_base), st["elbow"]))
+        return approach_and_read(cfg, q_nom, 1, cartesian=(matrix_to_pose(T_base), st["elbow"]),
+                                 cycle=st.get("cycle", 0))
 
     return make
 
@@ -259,9 +271,10 @@ def _pipeline(cfg, runner, db, run_id, plan, total, emit, options, with_oracle, 
     if with_oracle:
         truth = options.oracle_truth
         emit(PhaseChanged("verify", "oracle (true parameters)"))
-        oracle_table = build_table_for(cfg, truth.params)
+        p_true = oracle_params(cfg, truth)
+        oracle_table = build_table_for(cfg, p_true)
         upload_verified(controller, oracle_table.data)
-        runner.measure_steps(db, run_id, plan, {"oracle"}, total, _proc_for(cfg, truth.params[:6]))
+        runner.measure_steps(db, run_id, plan, {"oracle"}, total, _proc_for(cfg, p_true[:6]))
         summary["oracle"] = _error_stats(verification_errors(cfg, db.measurements(run_id, kind="oracle")))
         controller.rollback_table()  # the station's own table is the one left active
     gain = before.get("rms_um", np.nan) / max(after.get("rms_um", np.nan), 1e-9)

@@ -73,6 +73,14 @@ motion_timeout_s = 30.0
 
 [plan]
 settle_s = 0.0
+repeats = 4
+verification_cycles = 5
+
+[identification]
+# The simulated head: 0.5 µm probe noise over ~25 mm probe spacing (≈ 4″) on top of the robot's
+# ≈ 5 µm repeatability; weights follow the measurement, not the data sheet.
+sigma_position_um = 6.0
+sigma_angle_arcsec = 6.0
 
 [simulation]
 seed = {seed}

@@ -49,6 +49,7 @@ class PlanConfig:
     verification_every: int  # every k-th (point, elbow) is held out for verification
     verification_cycles: int
     select: int  # > 0: keep this many identification steps, chosen by D-optimality
+    repeats: int  # visits per identification target (each with a slightly varied approach)
     recenter_attempts: int
     recenter_margin_mm: float
     max_residual_um: float
@@ -217,14 +218,16 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
         verification_every=_get(pl, "verification_every", "plan", int, 4),
         verification_cycles=_get(pl, "verification_cycles", "plan", int, 3),
         select=_get(pl, "select", "plan", int, 0),
+        repeats=_get(pl, "repeats", "plan", int, 2),
         recenter_attempts=_get(pl, "recenter_attempts", "plan", int, 2),
         recenter_margin_mm=_get(pl, "recenter_margin_mm", "plan", float, 1.5),
         max_residual_um=_get(pl, "max_residual_um", "plan", float, 10.0),
     )
     if not 0 < plan.speed <= 1:
         raise ConfigError("plan.speed is a fraction of the maximum speed: 0 < speed <= 1")
-    if plan.samples < 1 or plan.verification_cycles < 1 or plan.verification_every < 2:
-        raise ConfigError("plan.samples and plan.verification_cycles must be >= 1, plan.verification_every >= 2")
+    if plan.samples < 1 or plan.verification_cycles < 1 or plan.verification_every < 2 or plan.repeats < 1:
+        raise ConfigError("plan.samples, plan.repeats and plan.verification_cycles must be >= 1, "
+                          "plan.verification_every >= 2")
     if plan.approach_deg <= 0 or plan.approach_mm <= 0 or plan.clearance_mm <= 0:
         raise ConfigError("plan.approach_deg, plan.approach_mm and plan.clearance_mm must be > 0")
 
@@ -327,6 +330,7 @@ both_directions = false          # also approach from above to measure the rever
 verification_every = 4           # every 4th (point, elbow) is held out for verification
 verification_cycles = 3          # ISO 9283 repetitions per verification pose
 select = 0                       # > 0: keep only this many most informative steps (D-optimal)
+repeats = 2                      # visits per identification pose (robot repeatability averages out)
 recenter_attempts = 2            # re-centre when a probe is near the end of its stroke
 recenter_margin_mm = 1.5
 max_residual_um = 10.0           # plane residual above which a reading is not valid

@@ -144,10 +144,11 @@ def build_plan(cfg: CellConfig) -> Plan:
         ident = select_d_optimal(cfg, ident, cfg.plan.select)
     ident = order_by_travel(ident)
     steps = []
-    for t in ident:
-        steps.append(Step(len(steps), "identification", t, 1))
-        if cfg.plan.both_directions:
-            steps.append(Step(len(steps), "reversal", t, -1))
+    for rep in range(cfg.plan.repeats):
+        for t in (ident if rep % 2 == 0 else ident[::-1]):
+            steps.append(Step(len(steps), "identification", t, 1, cycle=rep))
+            if cfg.plan.both_directions:
+                steps.append(Step(len(steps), "reversal", t, -1, cycle=rep))
     return Plan(tuple(steps), verification, tuple(rejected))
 
 

@@ -82,19 +82,21 @@ Procedure = Generator[Any, Any, Reading]
 # --- procedures -----------------------------------------------------------------------------
 
 def approach_and_read(cfg: CellConfig, q_target: np.ndarray, direction: int = 1,
-                      cartesian: tuple[np.ndarray, int] | None = None) -> Procedure:
+                      cartesian: tuple[np.ndarray, int] | None = None, cycle: int = 0) -> Procedure:
     """Retract, approach ``q_target`` so that every joint arrives from the same side, settle,
     read; re-centre (bounded) when a probe is near the end of its stroke or out of range.
 
     ``cartesian``: ``(pose6_base, elbow)`` to make the final move a Cartesian one (corrected by
-    the controller's active table), as verification does.
+    the controller's active table), as verification does. ``cycle`` (ISO 9283 repetitions)
+    varies the approach a little from cycle to cycle, from the same side, as a real path would.
     """
     from station.probe_geometry import PoseSolveError, default_probe_head, solve_pose
 
     geom = default_probe_head(cube_edge_mm=cfg.cube_edge_mm)
     M_nom = geom.nominal_contact_pose()
     half = geom.stroke_mm / 2
-    a, r = approach_offsets(cfg, direction), retract_offset(cfg)
+    a = approach_offsets(cfg, direction) * (1.0 + 0.25 * cycle)
+    r = retract_offset(cfg) * (1.0 + 0.1 * cycle)
     raw = b""
     q = np.asarray(q_target, dtype=float)
     pose_cmd = None if cartesian is None else np.asarray(cartesian[0], dtype=float)
@@ -103,10 +105,12 @@ def approach_and_read(cfg: CellConfig, q_target: np.ndarray, direction: int = 1,
         yield Checkpoint()
         yield MoveJoints(None, "retract")
         yield MoveJoints(q - a + r, "approach")
-        yield MoveJoints(q + r, "above the point")
         if pose_cmd is None:
+            yield MoveJoints(q + r, "above the point")
             yield MoveJoints(q, "touch")
         else:
+            # Straight from the offset approach pose: the controller's corrected joints differ
+            # from q by the table's Δq, whose sign must not decide the direction of arrival.
             yield MoveCartesian(pose_cmd, cartesian[1], q, "touch (Cartesian)")
         yield Settle(cfg.plan.settle_s)
         snap = yield ReadProbes()
