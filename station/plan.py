@@ -91,6 +91,33 @@ def retract_offset(cfg: CellConfig) -> np.ndarray:
     return np.array([cfg.plan.clearance_mm if k == "prismatic" else 0.0 for k in cfg.model.joint_types])
 
 
+_TRAVEL: dict[int, tuple[CellConfig, np.ndarray]] = {}
+
+
+def travel_joints(cfg: CellConfig) -> np.ndarray:
+    """Per joint, the travel position of the prismatic joints (NaN for the others): the clearance
+    above the highest measuring point, capped by the soft limit. Lateral moves happen only at
+    this height, so the head never sweeps through a cube, wherever a crash left the robot."""
+    hit = _TRAVEL.get(id(cfg))
+    if hit is not None and hit[0] is cfg:  # the config is kept in the entry, so ids stay unique
+        return hit[1]
+    heads = head_targets_world(cfg)
+    q = joints_for(cfg, heads, cfg.plan.elbows[0])
+    out = np.full(cfg.model.n_joints, np.nan)
+    for j, kind in enumerate(cfg.model.joint_types):
+        if kind == "prismatic":
+            out[j] = min(cfg.soft_limits[j, 1], float(q[:, j].max()) + cfg.plan.clearance_mm)
+    out.setflags(write=False)
+    _TRAVEL[id(cfg)] = (cfg, out)
+    return out
+
+
+def retracted(cfg: CellConfig, q: np.ndarray) -> np.ndarray:
+    """``q`` with every prismatic joint raised to the travel height (never lowered)."""
+    t = travel_joints(cfg)
+    return np.where(np.isnan(t), q, np.maximum(q, np.nan_to_num(t, nan=-np.inf)))
+
+
 def check_joints(cfg: CellConfig, q: np.ndarray, what: str) -> None:
     """Refuse (UnreachableError) any joint vector outside the configured soft limits."""
     q = np.asarray(q, dtype=float)
@@ -113,10 +140,17 @@ def joints_for(cfg: CellConfig, head_world: np.ndarray, elbow: int, setup_world_
     return scara_ik(cfg.model, T_base, elbow, setup=False, check_limits=False)
 
 
+def approach_pose(cfg: CellConfig, q: np.ndarray, direction: int = 1, cycle: int = 0) -> np.ndarray:
+    """Where a measurement at ``q`` starts its final approach: every revolute joint offset
+    against its direction of arrival, the quill at travel height. ``cycle`` varies the offset a
+    little between repetitions (from the same side)."""
+    a = approach_offsets(cfg, direction) * (1.0 + 0.25 * cycle)
+    return retracted(cfg, np.where(retract_offset(cfg) > 0, q, q - a))
+
+
 def all_motion_poses(cfg: CellConfig, q: np.ndarray, direction: int = 1) -> list[np.ndarray]:
-    """Every joint vector a measurement at ``q`` commands (retracted approach, approach, target)."""
-    a, r = approach_offsets(cfg, direction), retract_offset(cfg)
-    return [q - a + r, q + r, q]
+    """Every joint vector a measurement at ``q`` commands (approach, above the point, target)."""
+    return [approach_pose(cfg, q, direction), q + retract_offset(cfg), q]
 
 
 def build_plan(cfg: CellConfig) -> Plan:

@@ -19,7 +19,7 @@ import numpy as np
 
 from station.config import CellConfig
 from station.events import Event, MeasurementRecorded, Notice, StepStarted
-from station.plan import approach_offsets, check_joints, retract_offset
+from station.plan import approach_pose, check_joints, retract_offset, retracted
 from station.protocols import ProbeHead, RobotController
 from station.runcontrol import RunControl
 from station.transforms import invert, matrix_to_pose, pose_to_matrix
@@ -95,7 +95,6 @@ def approach_and_read(cfg: CellConfig, q_target: np.ndarray, direction: int = 1,
     geom = default_probe_head(cube_edge_mm=cfg.cube_edge_mm)
     M_nom = geom.nominal_contact_pose()
     half = geom.stroke_mm / 2
-    a = approach_offsets(cfg, direction) * (1.0 + 0.25 * cycle)
     r = retract_offset(cfg) * (1.0 + 0.1 * cycle)
     raw = b""
     q = np.asarray(q_target, dtype=float)
@@ -103,8 +102,8 @@ def approach_and_read(cfg: CellConfig, q_target: np.ndarray, direction: int = 1,
     last: Reading | None = None
     for attempt in range(cfg.plan.recenter_attempts + 1):
         yield Checkpoint()
-        yield MoveJoints(None, "retract")
-        yield MoveJoints(q - a + r, "approach")
+        yield MoveJoints(None, "retract to travel height")
+        yield MoveJoints(approach_pose(cfg, q, direction, cycle), "approach")
         if pose_cmd is None:
             yield MoveJoints(q + r, "above the point")
             yield MoveJoints(q, "touch")
@@ -197,9 +196,8 @@ class Runner:
             return q
         if isinstance(msg, MoveJoints):
             q = msg.q
-            if q is None:  # retract: lift from where the robot stands, never past the soft limit
-                cur = np.asarray(self.controller.read_joints(), dtype=float)
-                q = np.minimum(cur + retract_offset(cfg), np.maximum(cur, cfg.soft_limits[:, 1]))
+            if q is None:  # retract: lift the quill to travel height from where the robot stands
+                q = retracted(cfg, np.asarray(self.controller.read_joints(), dtype=float))
             q = np.asarray(q, dtype=float)
             if self._last_q is not None and np.allclose(q, self._last_q, atol=1e-9, rtol=0):
                 return None
