@@ -174,6 +174,9 @@ class Runner:
         self.control = control or RunControl()
         self._sleep = sleep
         self._last_q: np.ndarray | None = None
+        # Where the wall time goes: waiting for motions, settling, sampling the probes, and the
+        # rest (the station's own computation and bookkeeping). benchmarks/ reads this.
+        self.timing = {"motion": 0.0, "settle": 0.0, "sampling": 0.0}
 
     def execute(self, proc: Procedure, index: int = 0) -> Reading:
         """Run one procedure to its end and return its result."""
@@ -202,22 +205,31 @@ class Runner:
             if self._last_q is not None and np.allclose(q, self._last_q, atol=1e-9, rtol=0):
                 return None
             check_joints(cfg, q, msg.why)
+            t0 = time.perf_counter()
             status = self.controller.move_joints(q, speed=cfg.plan.speed)
             status.wait(timeout=cfg.devices.motion_timeout_s)
+            self.timing["motion"] += time.perf_counter() - t0
             self._last_q = q
             return None
         if isinstance(msg, MoveCartesian):
             check_joints(cfg, msg.expected_q, msg.why)
+            t0 = time.perf_counter()
             status = self.controller.move_cartesian(msg.pose, elbow=msg.elbow, speed=cfg.plan.speed)
             status.wait(timeout=cfg.devices.motion_timeout_s)
+            self.timing["motion"] += time.perf_counter() - t0
             self._last_q = None
             return None
         if isinstance(msg, Settle):
             if msg.seconds > 0:
+                t0 = time.perf_counter()
                 self._sleep(msg.seconds)
+                self.timing["settle"] += time.perf_counter() - t0
             return None
         if isinstance(msg, ReadProbes):
-            return self.probe.read_averaged(cfg.plan.samples, cfg.plan.max_spread_um * 1e-3)
+            t0 = time.perf_counter()
+            snap = self.probe.read_averaged(cfg.plan.samples, cfg.plan.max_spread_um * 1e-3)
+            self.timing["sampling"] += time.perf_counter() - t0
+            return snap
         raise TypeError(f"unknown runner message {msg!r}")
 
     def measure_steps(self, db, run_id: int, steps: list[dict], kind_filter: set[str],
