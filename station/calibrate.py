@@ -79,6 +79,21 @@ def _world_heads(cfg: CellConfig, records) -> tuple[np.ndarray, np.ndarray, list
     return np.array(T), np.array(q), pts
 
 
+def reversal_error(cfg: CellConfig, forward_records, reverse_records) -> dict:
+    """Position difference [µm] between approaching each pose from below and from above (the
+    robot's reversal error, brief §8); empty without reversal measurements."""
+    def heads(records):
+        index = {pid: i for i, pid in enumerate(cfg.point_ids)}
+        return {r.label: (cfg.body_points[index[r.point_id]] @ invert(r.pose))[:3, 3]
+                for r in records if r.ok and r.pose is not None}
+
+    fwd, rev = heads(forward_records), heads(reverse_records)
+    d = np.array([np.linalg.norm(fwd[k] - rev[k]) for k in fwd.keys() & rev.keys()]) * 1e3
+    if not d.size:
+        return {}
+    return {"n": int(d.size), "rms_um": float(np.sqrt(np.mean(d**2))), "max_um": float(d.max())}
+
+
 def identify_run(cfg: CellConfig, records):
     """Identification from the run's stored measurements (pose or distance objective)."""
     from station.identification import identify
@@ -215,8 +230,13 @@ def _pipeline(cfg, runner, db, run_id, plan, total, emit, options, with_oracle, 
     runner.measure_steps(db, run_id, plan, {"identification", "reversal"}, total, _proc_for(cfg, None))
     db.set_status(run_id, "measured")
 
-    emit(PhaseChanged("identify"))
     records = db.measurements(run_id, kind="identification")
+    reversal = reversal_error(cfg, records, db.measurements(run_id, kind="reversal"))
+    if reversal:
+        summary["reversal"] = reversal
+        emit(Notice("info", f"reversal error (both approach directions): RMS {reversal['rms_um']:.1f} µm, "
+                            f"max {reversal['max_um']:.1f} µm over {reversal['n']} poses"))
+    emit(PhaseChanged("identify"))
     res = identify_run(cfg, records)
     db.save_result(run_id, "identification", {
         "params": res.params, "chosen": list(res.chosen), "sigma": res.uncertainty.sigma,

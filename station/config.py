@@ -129,6 +129,7 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
     _check_keys(data, {"cell", "robot", "body", "devices", "limits", "plan", "identification",
                        "correction", "simulation"}, source)
     cell = data.get("cell", {})
+    _check_keys(cell, {"name"}, "cell")
     name = _get(cell, "name", "cell", str, "calibration cell")
 
     rob = data.get("robot")
@@ -259,7 +260,8 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
             raise ConfigError(f"correction.{key} = [start, stop, step] needs stop > start and step > 0")
 
     sim = data.get("simulation", {})
-    seed = sim.get("seed") if isinstance(sim, dict) else None
+    _check_keys(sim, {"seed"}, "simulation")
+    seed = _get(sim, "seed", "simulation", int, None)
     return CellConfig(name, model, soft, tuple(ids), pose_to_matrix(np.array(poses)), edge, devices,
                       plan, ident, corr, text, seed)
 
