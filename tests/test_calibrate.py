@@ -156,3 +156,28 @@ def test_a_motion_outside_the_soft_limits_is_refused_before_the_plan_runs(tmp_pa
                 check_joints(c.cfg, q, "planned")
     finally:
         c.close()
+
+
+def test_operator_abort_stops_at_a_safe_point_and_the_run_resumes(cell):
+    from station.runcontrol import RunAborted, RunControl
+
+    control = RunControl()
+    emit = _after_n_measurements(cell, 6, control.abort)
+    with pytest.raises(RunAborted) as exc:
+        run_calibration(cell.cfg, cell.probe, cell.ctrl, cell.db, emit, control)
+    assert outcome_for(exc.value) == Outcome.ABORTED == 6
+    run = cell.db.latest_run()
+    assert run.status == "aborted" and cell.db.completed_steps(run.id) == set(range(6))
+    assert cell.ctrl.status().ready and not cell.ctrl.status().moving  # stopped between motions
+    summary = run_calibration(cell.cfg, cell.probe, cell.ctrl, cell.db, cell.events.append, resume_run=run.id)
+    assert summary["outcome"] == "SUCCESS"
+
+
+def test_drive_fault_is_a_safety_stop(cell):
+    from drivers.controller import DriveFault
+
+    emit = _after_n_measurements(cell, 2, lambda: cell.srv.controller_server.drive_fault_during_next_move(2))
+    with pytest.raises(DriveFault) as exc:
+        run_calibration(cell.cfg, cell.probe, cell.ctrl, cell.db, emit)
+    assert outcome_for(exc.value) == Outcome.SAFETY_STOP
+    assert cell.db.completed_steps(cell.db.latest_run().id) == {0, 1}
