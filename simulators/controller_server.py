@@ -16,6 +16,7 @@ Requires the pymodbus 3.16 server data model (``pymodbus.simulator.SimDevice`` w
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import threading
 import time
@@ -338,10 +339,9 @@ class SimulatedController:
         next_tick = time.monotonic()
         while True:
             timeout = max(0.0, next_tick - time.monotonic())
-            try:
+            # Wake on a new command or at the next program tick, whichever comes first.
+            with contextlib.suppress(asyncio.TimeoutError):
                 await asyncio.wait_for(self._cmd_event.wait(), timeout)
-            except asyncio.TimeoutError:
-                pass
             self._cmd_event.clear()
             if time.monotonic() >= next_tick:
                 next_tick = time.monotonic() + self.heartbeat_period

@@ -253,7 +253,7 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
         y_mm=tuple(_vec(co, "y_mm", "correction", 3, [-350.0, 350.0, 50.0])),
         z_mm=tuple(_vec(co, "z_mm", "correction", 3, [250.0, 450.0, 200.0])),
         yaw_step_deg=_get(co, "yaw_step_deg", "correction", float, 30.0),
-        max_interpolation_um=_get(co, "max_interpolation_um", "correction", float, 30.0))
+        max_interpolation_um=_get(co, "max_interpolation_um", "correction", float, 15.0))
     for key in ("x_mm", "y_mm", "z_mm"):
         lo, hi, step = getattr(corr, key)
         if not (hi > lo and step > 0):
@@ -351,5 +351,5 @@ x_mm = [250.0, 650.0, 40.0]
 y_mm = [-350.0, 350.0, 50.0]
 z_mm = [250.0, 450.0, 200.0]
 yaw_step_deg = 30.0
-max_interpolation_um = 5.0       # refuse a table whose interpolation bound exceeds this
+max_interpolation_um = 15.0      # refuse a table whose interpolation bound exceeds this
 """

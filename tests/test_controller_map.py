@@ -1,5 +1,6 @@
 """Register map: encoding, word orders, decoders that fail only with the driver's errors."""
 
+import contextlib
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
@@ -73,10 +74,9 @@ def test_decode_rejects_wrong_count_and_range():
 def test_fuzz_entry_decoders(reg, order, data):
     n = data.draw(st.integers(0, reg.n_registers + 2))
     words = data.draw(st.lists(st.integers(-5, 0x1FFFF), min_size=n, max_size=n))
-    try:
+    # Any outcome but a foreign exception is fine: a value, or the driver's own error.
+    with contextlib.suppress(ControllerError):
         decode(reg, words, order)
-    except ControllerError:
-        pass
 
 
 _STATUS_N = register_span("ack_seq", "error_bound")[1]
@@ -107,10 +107,8 @@ def test_fuzz_valid_looking_headers(header, order):
     header = list(header)
     header[0] = 1  # plausible format version to get deeper into the decoder
     header[1] = header[1] % 5
-    try:
+    with contextlib.suppress(ControllerError):  # only the driver's own error may escape
         CorrectionTableData.decode_header(header, order)
-    except ControllerError:
-        pass
 
 
 @pytest.mark.parametrize("order", list(WordOrder))
