@@ -157,6 +157,7 @@ def run_calibration(cfg: CellConfig, probe, controller, db, emit: Callable[[Even
     from station.correction import upload_verified
 
     control = control or RunControl()
+    emit(PhaseChanged("connect", "devices connected"))
     runner = Runner(cfg, probe, controller, emit, control)
     with_oracle = options.oracle_truth is not None and options.upload
     if resume_run is None:
@@ -275,6 +276,7 @@ def _pipeline(cfg, runner, db, run_id, plan, total, emit, options, with_oracle, 
     if not options.upload:
         summary["upload"] = "skipped (--no-upload)"
         summary["outcome"] = Outcome.SUCCESS.name
+        summary["exit_code"] = int(Outcome.SUCCESS)
         db.save_result(run_id, "summary", summary)
         emit(RunFinished(Outcome.SUCCESS.name, summary))
         return summary
@@ -303,6 +305,7 @@ def _pipeline(cfg, runner, db, run_id, plan, total, emit, options, with_oracle, 
         summary["after_vs_oracle"] = after["rms_um"] / summary["oracle"]["rms_um"]
     outcome = Outcome.SUCCESS if gain >= options.min_gain else Outcome.TARGET_MISSED
     summary["outcome"] = outcome.name
+    summary["exit_code"] = int(outcome)
     db.set_status(run_id, "verified")
     db.save_result(run_id, "summary", summary)
     emit(RunFinished(outcome.name, summary))

@@ -20,7 +20,7 @@ import numpy as np
 
 from .errors import ConfigError
 
-__all__ = ["ReportData", "write_report", "MM_TO_UM", "RAD_TO_ARCSEC"]
+__all__ = ["ReportData", "write_report", "summary_figures", "MM_TO_UM", "RAD_TO_ARCSEC"]
 
 MM_TO_UM = 1000.0
 RAD_TO_ARCSEC = 180.0 / math.pi * 3600.0
@@ -195,11 +195,10 @@ def _plot_residuals(d: ReportData, path: Path) -> None:
     ori = d.orientation_residuals_arcsec
     n = pos.shape[0]
     x = np.arange(1, n + 1)
-    fig = _new_figure(9, 6.5 if ori is not None else 3.8)
+    fig = _new_figure(10, 6.5 if ori is not None else 3.8)
     axes = fig.subplots(2 if ori is not None else 1, 1, sharex=True, squeeze=False)[:, 0]
-    comps = ("x", "y", "z")
 
-    def draw(ax, data, unit, what):
+    def draw(ax, data, unit, what, comps):
         if data.shape[1] == 1:
             ax.bar(x, data[:, 0], color="tab:blue", label="distance residual")
         else:
@@ -212,11 +211,11 @@ def _plot_residuals(d: ReportData, path: Path) -> None:
         ax.axhline(rms, color="tab:red", ls="--", lw=1, label=f"RMS |{what}| = {rms:.1f} {unit}")
         ax.set_ylabel(f"{what} residual [{unit}]")
         ax.grid(True, alpha=0.3)
-        ax.legend(loc="upper right", fontsize=8, ncol=5)
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
 
-    draw(axes[0], pos, "µm", "position")
+    draw(axes[0], pos, "µm", "position", ("x", "y", "z"))
     if ori is not None:
-        draw(axes[1], ori, "″", "orientation")
+        draw(axes[1], ori, "″", "orientation", ("about x", "about y", "about z"))
     axes[-1].set_xlabel("identification pose")
     if d.pose_labels is not None and n <= 40:
         axes[-1].set_xticks(x, d.pose_labels, rotation=60, ha="right", fontsize=7)
@@ -238,8 +237,12 @@ def _plot_parameters(d: ReportData, path: Path) -> None:
         sigma = d.param_sigma[mask] * scale
         idx = np.arange(mask.sum())
         held = ~np.isfinite(sigma)
-        ax.bar(idx, delta, color=np.where(held, "lightgray", "tab:blue"),
-               yerr=np.where(held, 0.0, np.nan_to_num(sigma)), capsize=3, ecolor="black")
+        ax.bar(idx, delta, color=np.where(held, "lightgray", "tab:blue"))
+        ok = ~held
+        if ok.any():
+            ax.errorbar(idx[ok], delta[ok], yerr=sigma[ok], fmt="none", ecolor="black", capsize=3)
+        for i in np.flatnonzero(held):
+            ax.text(i, 0.0, "held", ha="center", va="bottom", fontsize=7, color="gray")
         ax.axhline(0.0, color="black", lw=0.6)
         ax.set_xticks(idx, names[mask], rotation=60, ha="right", fontsize=7)
         ax.set_ylabel(f"identified − nominal [{unit}]")
@@ -274,7 +277,7 @@ def _plot_accuracy(d: ReportData, path: Path) -> None:
 def _plot_verification(d: ReportData, path: Path) -> None:
     k = d.errors_before_um.shape[0]
     x = np.arange(1, k + 1)
-    fig = _new_figure(9, 4.5)
+    fig = _new_figure(10, 4.5)
     ax = fig.subplots()
     floor = 0.1  # µm: keeps zeros visible on a log axis
 
@@ -302,20 +305,58 @@ def _plot_verification(d: ReportData, path: Path) -> None:
     elif k <= 40:
         ax.set_xticks(x)
     ax.grid(True, which="both", axis="y", alpha=0.3)
-    ax.legend(fontsize=8, ncol=2, loc="upper right")
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     ax.set_title(f"{d.robot_name} — run {d.run_id}: verification before / after correction", fontsize=10)
     _save(fig, path)
 
 
 # ----------------------------------------------------------------------------- markdown
-_SUMMARY_LABELS = {
-    "outcome": ("outcome", ""),
-    "rms_before_um": ("RMS error before correction", "µm"),
-    "rms_after_um": ("RMS error after correction", "µm"),
-    "ratio": ("improvement ratio (before / after)", "×"),
-    "oracle_rms_after_um": ("RMS error after correction, oracle", "µm"),
-    "exit_code": ("exit code", ""),
-}
+def _sub(summary: Mapping[str, Any], key: str, sub: str) -> Any:
+    v = summary.get(key)
+    return v.get(sub) if isinstance(v, Mapping) else None
+
+
+def summary_figures(summary: Mapping[str, Any]) -> list[tuple[str, float, str, int]]:
+    """(label, value, unit, digits) of the figures a run summary carries, in display order.
+
+    Accepts flat keys (``rms_before_um``, ``rms_after_um``, ``ratio``, ``oracle_rms_after_um``)
+    and the pipeline's nested form (``before.rms_um``, ``after.rms_um``, ``gain``,
+    ``oracle.rms_um``, ``after_vs_oracle``, ``after.ap_max_um`` / ``rp_max_um``,
+    ``identification.n_parameters`` / ``rms_residual_um``).  Used by the UI and the report.
+    """
+
+    def first(*cands):
+        for c in cands:
+            if isinstance(c, (int, float, np.integer, np.floating)) and not isinstance(c, (bool, np.bool_)):
+                return c
+        return None
+
+    spec = [
+        ("RMS before", first(summary.get("rms_before_um"), _sub(summary, "before", "rms_um")), "µm", 1),
+        ("RMS after", first(summary.get("rms_after_um"), _sub(summary, "after", "rms_um")), "µm", 1),
+        ("improvement ratio", first(summary.get("ratio"), summary.get("gain")), "×", 1),
+        ("oracle RMS after", first(summary.get("oracle_rms_after_um"), _sub(summary, "oracle", "rms_um")), "µm", 1),
+        ("after / oracle", first(summary.get("after_vs_oracle")), "×", 2),
+        ("AP max after (ISO 9283)", first(_sub(summary, "after", "ap_max_um")), "µm", 1),
+        ("RP max after (ISO 9283)", first(_sub(summary, "after", "rp_max_um")), "µm", 1),
+        ("identified parameters", first(_sub(summary, "identification", "n_parameters")), "", 0),
+        ("identification residual RMS", first(_sub(summary, "identification", "rms_residual_um")), "µm", 1),
+    ]
+    return [(label, value, unit, digits) for label, value, unit, digits in spec if value is not None]
+
+
+def _flat_scalars(summary: Mapping[str, Any]) -> list[tuple[str, Any]]:
+    """Scalar leaves of the summary, one nesting level deep, as dotted keys (lists skipped)."""
+    out = []
+    for key, v in summary.items():
+        if isinstance(v, Mapping):
+            for k2, v2 in v.items():
+                if not isinstance(v2, (Mapping, list, tuple, np.ndarray)):
+                    out.append((f"{key}.{k2}", v2))
+        elif not isinstance(v, (list, tuple, np.ndarray)):
+            out.append((str(key), v))
+    return out
+
 
 
 def _markdown(d: ReportData, files: Mapping[str, str]) -> str:
@@ -335,14 +376,13 @@ def _markdown(d: ReportData, files: Mapping[str, str]) -> str:
     L.append("| quantity | value |")
     L.append("|---|---|")
     summary = dict(d.summary)
-    for key, (label, unit) in _SUMMARY_LABELS.items():
-        if key in summary:
-            v = summary.pop(key)
-            L.append(f"| {label} | {_fmt(v, 2 if key == 'ratio' else 1)}{(' ' + unit) if unit else ''} |")
-    for key, v in summary.items():
-        if isinstance(v, (dict, list, tuple)):
-            continue
-        L.append(f"| {_fmt(key)} | {_fmt(v, 3)} |")
+    for key in ("outcome", "robot", "cell"):
+        if key in summary and not isinstance(summary[key], (Mapping, list, tuple)):
+            L.append(f"| {key} | {_fmt(summary[key])} |")
+    for label, value, unit, digits in summary_figures(summary):
+        L.append(f"| {label} | {_fmt(value, digits)}{(' ' + unit) if unit else ''} |")
+    if "exit_code" in summary:
+        L.append(f"| exit code | {_fmt(summary['exit_code'])} |")
     before, after = d.errors_before_um, d.errors_after_um
     if before.size:
         L.append(f"| verification poses | {before.size} |")
@@ -350,6 +390,17 @@ def _markdown(d: ReportData, files: Mapping[str, str]) -> str:
         if d.oracle_after_um is not None:
             L.append(f"| RMS after, oracle (this report) | {_rms(d.oracle_after_um):.1f} µm |")
     L.append("")
+    details = _flat_scalars(d.summary)
+    if details:
+        L.append("<details><summary>All summary values</summary>")
+        L.append("")
+        L.append("| key | value |")
+        L.append("|---|---|")
+        for key, v in details:
+            L.append(f"| {_fmt(key)} | {_fmt(v, 3)} |")
+        L.append("")
+        L.append("</details>")
+        L.append("")
 
     # parameters
     n_id = int(np.isfinite(d.param_sigma).sum())

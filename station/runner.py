@@ -251,7 +251,7 @@ class Runner:
                 channel_status=reading.status, pose=reading.pose,
                 pose_residual_um=reading.residual_um, ok=reading.ok, message=reading.message)
             self.emit(MeasurementRecorded(st["index"], total, label, reading.ok,
-                                          float(reading.residual_um or float("nan")), reading.message))
+                                          float("nan") if reading.residual_um is None else float(reading.residual_um), reading.message))
             if not reading.ok:
                 self.emit(Notice("warning", f"{label}: {reading.message}"))
             n += 1

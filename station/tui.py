@@ -41,9 +41,13 @@ from .events import (
     RunStarted,
     StepStarted,
 )
+from .report import summary_figures
 from .runcontrol import RunAborted, RunControl
 
-__all__ = ["StationApp", "EventMessage", "ConfirmScreen", "StartRun", "PHASES", "exit_code_for"]
+__all__ = [
+    "StationApp", "EventMessage", "ConfirmScreen", "StartRun", "PHASES", "OUTCOME_EXIT_CODES",
+    "exit_code_for", "summary_figures",
+]
 
 StartRun = Callable[[Callable[[Event], None], RunControl], dict]
 
@@ -88,13 +92,24 @@ def _fmt_num(value: Any, unit: str = "", digits: int = 1) -> str:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         return f"{value}{(' ' + unit) if unit else ''}"
     if not math.isfinite(value):
-        return f"{value}"
+        return "—"
+    if isinstance(value, int):
+        return f"{value}{(' ' + unit) if unit else ''}"
     return f"{value:.{digits}f}{(' ' + unit) if unit else ''}"
 
 
 def _esc(text: Any) -> str:
     """Escape runner text for Textual markup (Static widgets)."""
     return _markup_escape(str(text))
+
+
+# Mirror of station.calibrate.Outcome (name -> exit code) for a RunFinished without "exit_code"
+# in its summary; the UI does not import the pipeline (tests check the two agree).
+OUTCOME_EXIT_CODES: dict[str, int] = {
+    "SUCCESS": 0, "CONFIG_ERROR": 2, "IDENTIFICATION_FAILED": 3, "UNREACHABLE": 4,
+    "DATABASE_ERROR": 5, "ABORTED": 6, "DEVICE_FAULT": 7, "SAFETY_STOP": 8,
+    "UPLOAD_FAILED": 9, "TARGET_MISSED": 10,
+}
 
 
 class EventMessage(Message):
@@ -169,9 +184,9 @@ class StationApp(App[dict]):
     #progress { padding: 0 1; height: 1; }
     #progress Bar { width: 1fr; }
     #middle { height: 1fr; }
-    #measurements { width: 3fr; border: round $primary; }
-    #notices { width: 2fr; border: round $secondary; }
-    #summary { height: auto; max-height: 12; padding: 0 1; border: round $accent; display: none; }
+    #measurements { width: 3fr; height: 100%; border: round $primary; }
+    #notices { width: 2fr; height: 100%; border: round $secondary; }
+    #summary { height: auto; max-height: 16; padding: 0 1; border: round $accent; display: none; }
     #summary.-shown { display: block; }
     #summary.-ok { border: round $success; }
     #summary.-failed { border: thick $error; }
@@ -210,6 +225,7 @@ class StationApp(App[dict]):
         self.step_index: int | None = None
         self._quit_when_done = False
         self._got_terminal_event = False
+        self._visited: set[str] = set()
 
     # ------------------------------------------------------------------ layout
     def compose(self) -> ComposeResult:
@@ -225,7 +241,7 @@ class StationApp(App[dict]):
             table: DataTable = DataTable(id="measurements", zebra_stripes=True, cursor_type="row")
             table.border_title = "Measurements"
             yield table
-            log = RichLog(id="notices", markup=True, wrap=True)
+            log = RichLog(id="notices", wrap=True, min_width=20)
             log.border_title = "Notices"
             yield log
         summary = Static("", id="summary")
@@ -255,17 +271,15 @@ class StationApp(App[dict]):
         return self.state in ACTIVE_STATES
 
     def _phase_markup(self, current: str | None) -> str:
+        """connect › plan › …: visited phases ticked, the current one highlighted."""
         parts = []
-        reached = current is None
-        idx = PHASES.index(current) if current in PHASES else -1
-        for i, name in enumerate(PHASES):
-            if i == idx:
+        for name in PHASES:
+            if name == current:
                 parts.append(f"[b reverse $accent] {name} [/]")
-            elif idx >= 0 and i < idx:
+            elif name in self._visited:
                 parts.append(f"[$success]✓ {name}[/]")
             else:
                 parts.append(f"[dim]{name}[/]")
-        del reached
         return " › ".join(parts)
 
     def _set_state(self, state: str) -> None:
@@ -291,6 +305,7 @@ class StationApp(App[dict]):
         # A runner that does not announce Paused still shows up as standing in checkpoint().
         if self.state == PAUSING and self.control is not None and self.control.waiting:
             self._set_state(PAUSED)
+            self._log(("Paused", "yellow"), " — the robot stands at a safe point")
 
     def _reset_view(self) -> None:
         self.run_id = None
@@ -301,6 +316,7 @@ class StationApp(App[dict]):
         self.exit_code = None
         self.step_index = None
         self._got_terminal_event = False
+        self._visited = set()
         self.query_one("#measurements", DataTable).clear()
         self.query_one("#progress", ProgressBar).update(total=None, progress=0)
         self.query_one("#run-id", Static).update("run —")
@@ -405,6 +421,7 @@ class StationApp(App[dict]):
             self._set_state(self.state)
         elif isinstance(ev, PhaseChanged):
             self.phase = ev.phase
+            self._visited.add(ev.phase)
             self.query_one("#phases", Static).update(self._phase_markup(ev.phase))
             self.query_one("#phase-detail", Static).update(_esc(ev.detail))
             self._log("phase ", (ev.phase, "bold"), f": {ev.detail}" if ev.detail else "")
@@ -453,30 +470,26 @@ class StationApp(App[dict]):
                 table.update_cell(key, col, value)
         else:
             table.add_row(*cells, key=key)
-        table.move_cursor(row=table.get_row_index(key))
+        # Follow the newest row; after the refresh, so the table's size already includes it.
+        self.call_after_refresh(self._follow_row, key)
         if not ev.ok:
             self._log((f"measurement {ev.index + 1} not valid", "yellow"), f": {ev.message}")
 
+    def _follow_row(self, key: str) -> None:
+        table = self.query_one("#measurements", DataTable)
+        if key in table.rows:
+            table.move_cursor(row=table.get_row_index(key), animate=False)
+
     # ------------------------------------------------------------------ end of run
     def _summary_markup(self, outcome: str, summary: dict) -> str:
+        """Result panel text; understands flat keys and the pipeline's nested summary."""
         rows: list[tuple[str, str]] = [("outcome", f"[b]{_esc(outcome)}[/]")]
-        rest = dict(summary)
-        rest.pop("outcome", None)
-        known = [
-            ("rms_before_um", "RMS before", "µm", 1),
-            ("rms_after_um", "RMS after", "µm", 1),
-            ("ratio", "improvement ratio", "×", 2),
-            ("oracle_rms_after_um", "oracle RMS after", "µm", 1),
-            ("oracle_after_um", "oracle RMS after", "µm", 1),
-        ]
-        for key, label, unit, digits in known:
-            if key in rest:
-                rows.append((label, _fmt_num(rest.pop(key), unit, digits)))
-        exit_code = rest.pop("exit_code", self.exit_code)
-        for key, value in rest.items():
-            if isinstance(value, (dict, list, tuple)):
-                continue
-            rows.append((_esc(key), _fmt_num(value, digits=3) if isinstance(value, float) else _esc(value)))
+        for key in ("robot", "cell"):
+            if isinstance(summary.get(key), (str, int)):
+                rows.append((key, _esc(summary[key])))
+        for label, value, unit, digits in summary_figures(summary):
+            rows.append((label, _fmt_num(value, unit, digits)))
+        exit_code = summary.get("exit_code", self.exit_code)
         rows.append(("exit code", f"[b]{exit_code}[/]"))
         width = max(len(label) for label, _ in rows)
         return "\n".join(f"{label:<{width}}  {value}" for label, value in rows)
@@ -484,20 +497,26 @@ class StationApp(App[dict]):
     def _show_finished(self, outcome: str, summary: dict) -> None:
         self.outcome = outcome
         self.summary = {"outcome": outcome, **summary}
-        self.exit_code = int(summary.get("exit_code", 0) or 0)
+        if "exit_code" in summary:
+            self.exit_code = int(summary["exit_code"])
+        else:
+            self.exit_code = OUTCOME_EXIT_CODES.get(outcome, 0)
         panel = self.query_one("#summary", Static)
         panel.update(self._summary_markup(outcome, summary))
-        panel.remove_class("-failed")
-        panel.add_class("-shown", "-ok")
+        ok = self.exit_code == 0
+        panel.set_class(ok, "-ok")
+        panel.set_class(not ok, "-failed")
+        panel.add_class("-shown")
+        self._visited.add("done")
         self.query_one("#phases", Static).update(self._phase_markup("done"))
-        self._log(("Run finished", "bold green"), f": {outcome}")
+        self._log(("Run finished", "bold green" if ok else "bold yellow"), f": {outcome}")
         self._set_state(FINISHED)
 
-    def _show_failed(self, ev: RunFailed) -> None:
+    def _show_failed(self, ev: RunFailed, exit_code: int | None = None) -> None:
         self.failure = ev
         aborted = ev.error_type == "RunAborted"
         self.outcome = "aborted" if aborted else "failed"
-        self.exit_code = exit_code_for(ev.error_type)
+        self.exit_code = exit_code_for(ev.error_type) if exit_code is None else exit_code
         self.summary = {
             "outcome": self.outcome,
             "error_type": ev.error_type,
@@ -516,7 +535,8 @@ class StationApp(App[dict]):
         panel.update(text)
         panel.remove_class("-ok")
         panel.add_class("-shown", "-failed")
-        self._log((head_plain, "bold red"), f": {ev.message}")
+        if self.state not in (FAILED, ABORTED):
+            self._log((head_plain, "bold red"), f": {ev.message}")
         self._set_state(ABORTED if aborted else FAILED)
 
     def on_worker_state_changed(self, event: Worker.StateChanged) -> None:
@@ -528,6 +548,11 @@ class StationApp(App[dict]):
             if not self._got_terminal_event:
                 outcome = str(result.get("outcome", "done"))
                 self._show_finished(outcome, {k: v for k, v in result.items() if k != "outcome"})
+            elif self.state in (FAILED, ABORTED) and "exit_code" in result:
+                # The runner reported the failure as an event and returned its exit code.
+                code = int(result["exit_code"])
+                if code != self.exit_code and self.failure is not None:
+                    self._show_failed(self.failure, exit_code=code)
             elif self.state == FINISHED and result:
                 # Fill in what the RunFinished summary left out (e.g. exit_code) from the return value.
                 merged = {**result, **self.summary}
@@ -539,17 +564,19 @@ class StationApp(App[dict]):
             error = worker.error
             if isinstance(error, RunAborted):
                 if self.state != ABORTED:
-                    self._show_failed(RunFailed("RunAborted", str(error), "re-run to continue"))
+                    self._show_failed(RunFailed(
+                        "RunAborted", str(error), "the measurements so far are on disk; the run can be resumed"))
             elif not self._got_terminal_event:
                 hint = ""
                 if isinstance(error, _errors.StationError) and type(error).__doc__:
                     hint = type(error).__doc__.strip().splitlines()[0]
+                code = getattr(error, "exit_code", None)
+                if not isinstance(code, int) or isinstance(code, bool):
+                    code = None
                 self._show_failed(
-                    RunFailed(type(error).__name__ if error else "Cancelled", str(error or "run cancelled"), hint)
+                    RunFailed(type(error).__name__ if error else "Cancelled", str(error or "run cancelled"), hint),
+                    exit_code=code,
                 )
-                if isinstance(error, _errors.StationError):
-                    self.exit_code = int(error.exit_code)
-                    self.summary["exit_code"] = self.exit_code
             elif self.running:
                 self._set_state(FAILED)
         else:

@@ -91,9 +91,10 @@ def test_summary_and_verification_tables(tmp_path):
     d = make_data()
     text = write_report(tmp_path, d).read_text(encoding="utf-8")
     assert "| outcome | calibrated |" in text
-    assert "| RMS error before correction | 812.4 µm |" in text
-    assert "| RMS error after correction | 23.6 µm |" in text
-    assert "| improvement ratio (before / after) | 34.41 ×|" in text or "| improvement ratio (before / after) | 34.41 × |" in text
+    assert "| RMS before | 812.4 µm |" in text
+    assert "| RMS after | 23.6 µm |" in text
+    assert "| improvement ratio | 34.4 × |" in text
+    assert "| oracle RMS after | 21.9 µm |" in text
     assert "| exit code | 0 |" in text
     assert "oracle µm" in text
     b, a, o = d.errors_before_um[0], d.errors_after_um[0], d.oracle_after_um[0]
@@ -146,3 +147,24 @@ def test_report_data_is_frozen():
         d.run_id = 3  # type: ignore[misc]
     with pytest.raises(ValueError):
         d.param_nominal[0] = 1.0
+
+
+def test_pipeline_summary_layout(tmp_path):
+    """station.calibrate's summary: nested stats and ``gain``."""
+    summary = {
+        "run_id": 7, "cell": "sim", "robot": "SR 800", "outcome": "SUCCESS", "exit_code": 0,
+        "identification": {"n_parameters": 20, "rms_residual_um": 9.87, "parameters": {"A2.x": {"value": 1.0}}},
+        "before": {"n": 12, "rms_um": 1012.34, "ap_max_um": 1400.0, "errors_um": [1.0, 2.0]},
+        "after": {"n": 12, "rms_um": 24.61, "ap_max_um": 35.5, "rp_max_um": 30.2},
+        "oracle": {"n": 12, "rms_um": 20.1}, "gain": 41.15, "after_vs_oracle": 1.224,
+        "upload": {"crc32": "deadbeef", "verified": True},
+    }
+    d = make_data()
+    d = ReportData(**{**d.__dict__, "summary": summary})
+    text = write_report(tmp_path, d).read_text(encoding="utf-8")
+    for row in ("| outcome | SUCCESS |", "| robot | SR 800 |", "| RMS before | 1012.3 µm |",
+                "| RMS after | 24.6 µm |", "| improvement ratio | 41.1 × |", "| oracle RMS after | 20.1 µm |",
+                "| after / oracle | 1.22 × |", "| AP max after (ISO 9283) | 35.5 µm |",
+                "| identified parameters | 20 |", "| upload.crc32 | deadbeef |", "| exit code | 0 |"):
+        assert row in text, row
+    assert "errors_um" not in text

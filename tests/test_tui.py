@@ -42,8 +42,12 @@ class FakeRunner:
     records what happened.
     """
 
-    def __init__(self, *, fail: RunFailed | None = None, gated: bool = False, raise_exc: Exception | None = None):
+    def __init__(self, *, fail: RunFailed | None = None, gated: bool = False, raise_exc: Exception | None = None,
+                 summary: dict | None = None, returns: dict | None = None, outcome: str = "calibrated"):
         self.fail = fail
+        self.summary = dict(SUMMARY) if summary is None else summary
+        self.returns = returns
+        self.outcome = outcome
         self.raise_exc = raise_exc
         self.gate = threading.Semaphore(0) if gated else None
         self.checkpoints_passed = 0
@@ -76,13 +80,13 @@ class FakeRunner:
                 raise self.raise_exc
             if self.fail is not None:
                 emit(self.fail)
-                return {}
+                return dict(self.returns) if self.returns is not None else {}
             emit(Notice("warning", "backlash 0.1 mm dominates the attainable accuracy"))
             emit(PhaseChanged("identify", "20 parameters"))
             emit(PhaseChanged("verify"))
-            emit(RunFinished(outcome="calibrated", summary=dict(SUMMARY)))
+            emit(RunFinished(outcome=self.outcome, summary=dict(self.summary)))
             self.finished = True
-            return dict(SUMMARY)
+            return dict(self.returns) if self.returns is not None else dict(self.summary)
         except RunAborted:
             self.aborted = True
             self.in_checkpoint.clear()
@@ -139,7 +143,7 @@ async def test_full_run_progress_table_and_summary():
         assert "run #42" in plain(app.query_one("#run-id", Static))
         summary = plain(app.query_one("#summary", Static))
         assert app.query_one("#summary").display
-        for needle in ("calibrated", "812.4 µm", "23.6 µm", "34.42", "21.9 µm", "exit code"):
+        for needle in ("calibrated", "812.4 µm", "23.6 µm", "34.4 ×", "21.9 µm", "exit code"):
             assert needle in summary, (needle, summary)
         assert app.outcome == "calibrated" and app.exit_code == 0
         assert "done" in plain(app.query_one("#phases", Static))
@@ -346,3 +350,65 @@ def test_exit_code_mapping():
     assert exit_code_for("UnreachableError") == 4
     assert exit_code_for("RunAborted") == 6
     assert exit_code_for("ZeroDivisionError") == 1
+
+
+# The pipeline's own summary layout (station.calibrate): nested stats, "gain", exit code only in
+# the return value (added by the launcher), outcome names of station.calibrate.Outcome.
+PIPELINE_SUMMARY = {
+    "run_id": 7, "cell": "sim", "robot": "SR 800",
+    "identification": {"n_parameters": 20, "rms_residual_um": 9.87, "parameters": {"A2.x": {"value": 445.0}}},
+    "before": {"n": 12, "rms_um": 1012.3, "max_um": 1500.0, "ap_max_um": 1400.0, "rp_max_um": 31.0,
+               "errors_um": [1.0, 2.0]},
+    "after": {"n": 12, "rms_um": 24.6, "max_um": 40.0, "ap_max_um": 35.5, "rp_max_um": 30.2, "errors_um": []},
+    "oracle": {"n": 12, "rms_um": 20.1},
+    "gain": 41.15, "after_vs_oracle": 1.224, "upload": {"crc32": "deadbeef", "verified": True},
+    "outcome": "TARGET_MISSED",
+}
+
+
+async def test_pipeline_summary_layout_and_exit_code_from_return_value():
+    runner = FakeRunner(summary=PIPELINE_SUMMARY, outcome="TARGET_MISSED",
+                        returns={**PIPELINE_SUMMARY, "exit_code": 10})
+    app = StationApp(runner)
+    async with app.run_test(size=(120, 45)) as pilot:
+        await pilot.press("s")
+        await wait_until(pilot, lambda: app.state == "finished" and app.exit_code == 10, "finished, code 10")
+        text = plain(app.query_one("#summary", Static))
+        for needle in ("TARGET_MISSED", "SR 800", "RMS before         1012.3 µm", "24.6 µm", "41.1 ×",
+                       "20.1 µm", "1.22 ×", "35.5 µm", "30.2 µm", "identified parameters", "exit code          10"):
+            assert needle.split("  ")[-1].strip() in text, (needle, text)
+        assert "-failed" in app.query_one("#summary").classes  # non-zero code: red frame
+        await pilot.press("q")
+        await wait_until(pilot, lambda: not app.is_running, "exit")
+    assert app.return_code == 10
+
+
+async def test_outcome_name_gives_exit_code_without_explicit_one():
+    summary = {k: v for k, v in PIPELINE_SUMMARY.items()}
+    runner = FakeRunner(summary=summary, outcome="SUCCESS", returns={})
+    app = StationApp(runner)
+    async with app.run_test(size=(120, 45)) as pilot:
+        await pilot.press("s")
+        await wait_until(pilot, lambda: app.state == "finished", "finished")
+        assert app.exit_code == 0
+        assert "-ok" in app.query_one("#summary").classes
+
+
+async def test_run_failed_then_returned_exit_code_wins():
+    # The launcher emits RunFailed for a driver's own error type and returns its exit code.
+    fail = RunFailed("DeviceFault", "controller heartbeat lost", "check the fieldbus cable")
+    runner = FakeRunner(fail=fail, returns={"outcome": "DeviceFault", "exit_code": 7})
+    app = StationApp(runner)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await pilot.press("s")
+        await wait_until(pilot, lambda: app.exit_code == 7, "exit code 7")
+        text = plain(app.query_one("#summary", Static))
+        assert "DeviceFault" in text and "check the fieldbus cable" in text and "exit code 7" in text
+        assert app.state == "failed"
+
+
+def test_outcome_mirror_matches_pipeline():
+    calibrate = pytest.importorskip("station.calibrate")
+    from station.tui import OUTCOME_EXIT_CODES
+
+    assert OUTCOME_EXIT_CODES == {o.name: int(o) for o in calibrate.Outcome}
