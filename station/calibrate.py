@@ -18,10 +18,10 @@ from typing import Callable
 
 import numpy as np
 
-from station.config import CellConfig, parse_text
-from station.errors import IdentificationError, StationError
+from station.config import CellConfig
+from station.errors import IdentificationError
 from station.events import Event, Notice, PhaseChanged, RunFinished, RunStarted
-from station.plan import Target, build_plan, head_targets_world, joints_for
+from station.plan import build_plan, head_targets_world, joints_for
 from station.runcontrol import RunControl
 from station.runner import Runner, approach_and_read
 from station.transforms import invert, matrix_to_pose, pose_to_matrix
@@ -104,10 +104,10 @@ def identify_run(cfg: CellConfig, records):
         raise IdentificationError(
             f"only {len(T)} valid measurements on disk; check the warnings of the measurement "
             f"phase (probes out of range, residuals) and re-run")
-    sp = cfg.identification.sigma_position_um * 1e-3
-    sa = cfg.identification.sigma_angle_arcsec * ARCSEC
+    sig = cfg.identification.pose_sigma()
+    sp = sig[0]
     if cfg.identification.objective == "pose":
-        data = MeasurementSet("pose", q, T, np.array([sp, sp, sp, sa, sa, sa]))
+        data = MeasurementSet("pose", q, T, sig)
     else:
         pos = T[:, :3, 3]
         iu = np.array(np.triu_indices(len(pos), 1)).T
@@ -154,8 +154,6 @@ def run_calibration(cfg: CellConfig, probe, controller, db, emit: Callable[[Even
                     resume_run: int | None = None, seed: int | None = None) -> dict:
     """Measure → identify → correct → upload → verify. Returns the JSON-able summary; raises the
     typed error of whatever stopped it (everything measured so far is on disk)."""
-    from station.correction import upload_verified
-
     control = control or RunControl()
     emit(PhaseChanged("connect", "devices connected"))
     runner = Runner(cfg, probe, controller, emit, control)
@@ -174,15 +172,10 @@ def run_calibration(cfg: CellConfig, probe, controller, db, emit: Callable[[Even
     db.log(run_id, "info", f"run {'resumed' if resume_run else 'started'}: {total} steps, {resumed} on disk")
     summary: dict = {"run_id": run_id, "cell": cfg.name, "robot": cfg.model.name}
     try:
-        return _pipeline(cfg, runner, db, run_id, plan, total, emit, options, with_oracle, summary,
-                         build_table_for, upload_verified)
-    except StationError as exc:
+        return _pipeline(cfg, runner, db, run_id, plan, total, emit, options, with_oracle, summary)
+    except Exception as exc:  # station and driver errors alike: log, mark the run, re-raise
         db.log(run_id, "error", f"{type(exc).__name__}: {exc}")
         db.set_status(run_id, "aborted" if type(exc).__name__ == "RunAborted" else "failed")
-        raise
-    except Exception as exc:  # device drivers' own typed errors
-        db.log(run_id, "error", f"{type(exc).__name__}: {exc}")
-        db.set_status(run_id, "failed")
         raise
 
 
@@ -224,8 +217,9 @@ def _proc_for(cfg: CellConfig, R_world_base: np.ndarray | None):
     return make
 
 
-def _pipeline(cfg, runner, db, run_id, plan, total, emit, options, with_oracle, summary,
-              build_table_for, upload_verified):
+def _pipeline(cfg, runner, db, run_id, plan, total, emit, options, with_oracle, summary):
+    from station.correction import upload_verified
+
     emit(PhaseChanged("measure", "identification poses"))
     db.set_status(run_id, "measuring")
     runner.measure_steps(db, run_id, plan, {"identification", "reversal"}, total, _proc_for(cfg, None))

@@ -64,6 +64,11 @@ class IdentificationConfig:
     fix: tuple[str, ...]
     exclude: tuple[str, ...]
 
+    def pose_sigma(self) -> np.ndarray:
+        """σ of the six pose residual rows (x, y, z [mm], rx, ry, rz [rad])."""
+        s, a = self.sigma_position_um * 1e-3, self.sigma_angle_arcsec * ARCSEC
+        return np.array([s, s, s, a, a, a])
+
 
 @dataclass(frozen=True)
 class CorrectionConfig:

@@ -160,7 +160,7 @@ def build_plan(cfg: CellConfig) -> Plan:
         for elbow in cfg.plan.elbows:
             try:
                 q = joints_for(cfg, heads[j], elbow)[0]
-                for k, qq in enumerate(all_motion_poses(cfg, q)):
+                for qq in all_motion_poses(cfg, q):
                     check_joints(cfg, qq, f"{pid} elbow {elbow:+d}")
                 if cfg.plan.both_directions:
                     for qq in all_motion_poses(cfg, q, -1):
@@ -206,7 +206,7 @@ def select_d_optimal(cfg: CellConfig, targets: list[Target], n: int) -> list[Tar
     from station.measurements import synthetic_set
 
     q = np.array([t.joints for t in targets])
-    sig = _sigma(cfg)
+    sig = cfg.identification.pose_sigma()
     data = synthetic_set(cfg.model, "pose", q, cfg.model.nominal, sigma=sig)
     a = analyze(cfg.model, data, prefer=cfg.identification.prefer, fix=cfg.identification.fix,
                 exclude=cfg.identification.exclude, describe=False)
@@ -228,9 +228,3 @@ def select_d_optimal(cfg: CellConfig, targets: list[Target], n: int) -> list[Tar
         chosen.append(best)
         info = info + J[best].T @ J[best]
     return [targets[i] for i in sorted(chosen)]
-
-
-def _sigma(cfg: CellConfig) -> np.ndarray:
-    s = cfg.identification.sigma_position_um * 1e-3
-    a = np.deg2rad(cfg.identification.sigma_angle_arcsec / 3600)
-    return np.array([s, s, s, a, a, a])

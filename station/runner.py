@@ -22,6 +22,7 @@ from station.events import Event, MeasurementRecorded, Notice, StepStarted
 from station.plan import approach_pose, check_joints, retract_offset, retracted
 from station.protocols import ProbeHead, RobotController
 from station.runcontrol import RunControl
+from station.kinematics import scara_ik
 from station.transforms import invert, matrix_to_pose, pose_to_matrix
 
 
@@ -137,12 +138,8 @@ def approach_and_read(cfg: CellConfig, q_target: np.ndarray, direction: int = 1,
         # Re-centre: the head frame must move by D = M_measured · M_nominal⁻¹ (SCARA: x, y, z, yaw).
         D = matrix_to_pose(sol.M @ invert(M_nom))
         D[3:5] = 0.0
-        T_now = _fk_base(cfg, q)
-        T_new = T_now @ pose_to_matrix(D)
-        from station.plan import joints_for
-
-        elbow = 1 if q[1] > 0 else -1
-        q = joints_for(cfg, cfg_setup_matrix(cfg) @ T_new, elbow)[0]
+        T_new = _fk_base(cfg, q) @ pose_to_matrix(D)
+        q = scara_ik(cfg.model, T_new[None], 1 if q[1] > 0 else -1, setup=False, check_limits=False)[0]
         if pose_cmd is not None:
             pose_cmd = matrix_to_pose(T_new)
     yield MoveJoints(None, "retract after reading")  # None: retract from where we stand
@@ -153,10 +150,6 @@ def _fk_base(cfg: CellConfig, q) -> np.ndarray:
     from station.kinematics import forward
 
     return forward(cfg.model, np.asarray(q)[None], setup=False)[0]
-
-
-def cfg_setup_matrix(cfg: CellConfig) -> np.ndarray:
-    return pose_to_matrix(cfg.model.nominal[:6])
 
 
 # --- the runner -----------------------------------------------------------------------------

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from station.identification import identify
-from station.measurements import default_sigma, random_pairs, synthetic_set
+from station.measurements import random_pairs, synthetic_set
 from station.model import RobotModel
 from station.poses import spread_joints
 from station.uncertainty import monte_carlo, pose_accuracy
