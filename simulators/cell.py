@@ -23,9 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from station.kinematics import forward
-from station.model import RobotModel, load_robot
-from station.transforms import invert, matrix_to_pose, pose_to_matrix, rotation_log
+from station.core.kinematics import forward
+from station.core.model import RobotModel, load_robot
+from station.core.transforms import invert, matrix_to_pose, pose_to_matrix, rotation_log
 
 __all__ = ["CellTruth", "CubeSpec", "CalibrationBody", "SimulatedCell", "DEFAULT_SETUP",
            "ARCMIN", "ARCSEC"]

@@ -5,7 +5,7 @@ The register map and the handshake are those of :mod:`drivers.controller_map` /
 validates (soft limits, reachability, correction-table range), moves with a simple max-speed
 motion-time model scaled by ``time_scale`` (0 = instant), and reports done or error with the
 same sequence number. Cartesian moves use the controller's NOMINAL kinematics in the robot base
-frame (``station.kinematics.scara_ik``) plus the multilinear table correction
+frame (``station.core.kinematics.scara_ik``) plus the multilinear table correction
 (:meth:`drivers.controller.CorrectionTableData.interpolate`) when a table is active.
 
 Faults are injected at run time through methods of :class:`SimulatedController` (thread-safe).
@@ -47,9 +47,9 @@ from drivers.controller_map import (
     register_span,
 )
 from station.errors import UnreachableError
-from station.kinematics import forward, scara_ik
-from station.model import RobotModel, load_robot
-from station.transforms import matrix_to_pose, pose_to_matrix
+from station.core.kinematics import forward, scara_ik
+from station.core.model import RobotModel, load_robot
+from station.core.transforms import matrix_to_pose, pose_to_matrix
 
 if TYPE_CHECKING:
     from simulators.cell import SimulatedCell

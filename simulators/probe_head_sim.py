@@ -1,7 +1,7 @@
 """Simulated probe-head unit: physics (true geometry + noise) and a serial server.
 
 * :class:`ProbeHeadPhysics` turns the true cube pose into readings: exact geometry from
-  :mod:`station.probe_geometry`, Gaussian noise per probe (default σ 0.5 µm), quantised to the
+  :mod:`station.core.probe_geometry`, Gaussian noise per probe (default σ 0.5 µm), quantised to the
   protocol's 0.1 µm, markers where a probe misses or leaves its stroke.
 * :class:`ProbeHeadServer` speaks the protocol of :mod:`drivers.probe_protocol` on a
   pseudo-terminal; ``.port`` is the slave device path for ``serial.serial_for_url``. Replies are
@@ -39,7 +39,7 @@ from drivers.probe_protocol import (
     format_reply,
     parse_request,
 )
-from station.probe_geometry import ProbeHeadGeometry, default_probe_head, readings_from_pose
+from station.core.probe_geometry import ProbeHeadGeometry, default_probe_head, readings_from_pose
 
 __all__ = ["ProbeHeadPhysics", "FaultKind", "ProbeFaults", "ProbeHeadServer",
            "ProbeHeadTcpServer"]

@@ -1,0 +1,72 @@
+"""Typed progress events of a calibration run, consumed alike by the CLI and the terminal UI."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+Phase = Literal["connect", "plan", "measure", "identify", "correct", "upload", "verify", "done"]
+
+
+@dataclass(frozen=True)
+class Event:
+    """Base of all events."""
+
+
+@dataclass(frozen=True)
+class PhaseChanged(Event):
+    phase: Phase
+    detail: str = ""
+
+
+@dataclass(frozen=True)
+class RunStarted(Event):
+    run_id: int
+    n_steps: int
+    resumed_from: int = 0  # steps already on disk from an earlier attempt
+
+
+@dataclass(frozen=True)
+class StepStarted(Event):
+    index: int
+    total: int
+    label: str  # e.g. "point C2.a, elbow +1"
+
+
+@dataclass(frozen=True)
+class MeasurementRecorded(Event):
+    index: int
+    total: int
+    label: str
+    ok: bool
+    residual_um: float  # plane residual of the pose solve (RMS), µm
+    message: str = ""
+
+
+@dataclass(frozen=True)
+class Notice(Event):
+    level: Literal["info", "warning"]
+    message: str
+
+
+@dataclass(frozen=True)
+class Paused(Event):
+    index: int
+
+
+@dataclass(frozen=True)
+class Resumed(Event):
+    index: int
+
+
+@dataclass(frozen=True)
+class RunFinished(Event):
+    outcome: str  # one of station.cell.pipeline.Outcome names
+    summary: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class RunFailed(Event):
+    error_type: str
+    message: str
+    hint: str = ""

@@ -1,0 +1,230 @@
+"""The measurement plan over the calibration body (issue: measuring points × elbow
+configurations × wrist angles × heights).
+
+Each body point is a cube corner at a known height whose frame fixes the wrist angle at which
+the 3-2-1 head fits it, so the plan's dimensions are: points (their corners carry the wrist
+angles and pillars the heights) × elbows. Every candidate is checked for reachability and the
+soft limits — including the approach and retract poses — before any motion. Every k-th
+candidate is held out for verification. Identification steps are ordered to keep joint travel
+short; optionally only the most informative are kept (greedy D-optimality on the identification
+Jacobian of the minimal parameter set).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from station.cell.config import CellConfig
+from station.errors import ConfigError, UnreachableError
+from station.core.kinematics import scara_ik
+from station.core.transforms import invert
+
+
+@dataclass(frozen=True)
+class Target:
+    """One (point, elbow) pose. ``head_world``: KKS←MKKS (4,4) where the head must be;
+    ``joints``: nominal-model joints reaching it with the nominal set-up."""
+
+    point: int
+    point_id: str
+    elbow: int
+    head_world: np.ndarray
+    joints: np.ndarray
+
+    @property
+    def label(self) -> str:
+        return f"{self.point_id} elbow {'+' if self.elbow > 0 else '-'}"
+
+
+@dataclass(frozen=True)
+class Step:
+    """A planned measurement. ``kind``: identification | reversal (approached from the other
+    side) | verification_before | verification_after | oracle. ``direction``: +1 normal approach."""
+
+    index: int
+    kind: str
+    target: Target
+    direction: int = 1
+    cycle: int = 0
+
+    def to_dict(self) -> dict:
+        return {"index": self.index, "kind": self.kind, "point": self.target.point,
+                "point_id": self.target.point_id, "elbow": self.target.elbow,
+                "direction": self.direction, "cycle": self.cycle,
+                "joints": self.target.joints.tolist()}
+
+
+@dataclass(frozen=True)
+class Plan:
+    identification: tuple[Step, ...]
+    verification: tuple[Target, ...]
+    rejected: tuple[tuple[str, int, str], ...]  # (point id, elbow, reason)
+
+    def to_list(self) -> list[dict]:
+        return [s.to_dict() for s in self.identification]
+
+
+def nominal_contact(cfg: CellConfig) -> np.ndarray:
+    from station.core.probe_geometry import default_probe_head
+
+    return default_probe_head(cube_edge_mm=cfg.cube_edge_mm).nominal_contact_pose()
+
+
+def head_targets_world(cfg: CellConfig) -> np.ndarray:
+    """KKS←MKKS (n, 4, 4): the head at mid-stroke on every measuring point."""
+    return cfg.body_points @ invert(nominal_contact(cfg))
+
+
+def approach_offsets(cfg: CellConfig, direction: int = 1) -> np.ndarray:
+    """Joint offsets (g,) subtracted from a target so the last move of every joint runs in
+    ``direction`` (backlash becomes a repeatable offset); prismatic joints come from above."""
+    off = []
+    for kind in cfg.model.joint_types:
+        off.append(np.deg2rad(cfg.plan.approach_deg) if kind == "revolute" else -cfg.plan.approach_mm)
+    return direction * np.array(off)
+
+
+def retract_offset(cfg: CellConfig) -> np.ndarray:
+    """Joint offset (g,) that lifts the head by the clearance (prismatic joints only)."""
+    return np.array([cfg.plan.clearance_mm if k == "prismatic" else 0.0 for k in cfg.model.joint_types])
+
+
+_TRAVEL: dict[int, tuple[CellConfig, np.ndarray]] = {}
+
+
+def travel_joints(cfg: CellConfig) -> np.ndarray:
+    """Per joint, the travel position of the prismatic joints (NaN for the others): the clearance
+    above the highest measuring point, capped by the soft limit. Lateral moves happen only at
+    this height, so the head never sweeps through a cube, wherever a crash left the robot."""
+    hit = _TRAVEL.get(id(cfg))
+    if hit is not None and hit[0] is cfg:  # the config is kept in the entry, so ids stay unique
+        return hit[1]
+    heads = head_targets_world(cfg)
+    q = joints_for(cfg, heads, cfg.plan.elbows[0])
+    out = np.full(cfg.model.n_joints, np.nan)
+    for j, kind in enumerate(cfg.model.joint_types):
+        if kind == "prismatic":
+            out[j] = min(cfg.soft_limits[j, 1], float(q[:, j].max()) + cfg.plan.clearance_mm)
+    out.setflags(write=False)
+    _TRAVEL[id(cfg)] = (cfg, out)
+    return out
+
+
+def retracted(cfg: CellConfig, q: np.ndarray) -> np.ndarray:
+    """``q`` with every prismatic joint raised to the travel height (never lowered)."""
+    t = travel_joints(cfg)
+    return np.where(np.isnan(t), q, np.maximum(q, np.nan_to_num(t, nan=-np.inf)))
+
+
+def check_joints(cfg: CellConfig, q: np.ndarray, what: str) -> None:
+    """Refuse (UnreachableError) any joint vector outside the configured soft limits."""
+    q = np.asarray(q, dtype=float)
+    lo, hi = cfg.soft_limits[:, 0], cfg.soft_limits[:, 1]
+    bad = np.nonzero((q < lo) | (q > hi) | ~np.isfinite(q))[0]
+    if bad.size:
+        j = int(bad[0])
+        raise UnreachableError(
+            f"{what}: joint {j + 1} = {q[j]:.5g} is outside the soft limits "
+            f"[{lo[j]:.5g}, {hi[j]:.5g}]; the motion was not commanded. Move the point or widen "
+            f"[limits] if the robot allows it")
+
+
+def joints_for(cfg: CellConfig, head_world: np.ndarray, elbow: int, setup_world_base=None) -> np.ndarray:
+    """Nominal-model joints (n, g) that put the head at ``head_world`` (n, 4, 4)."""
+    R = cfg.model.nominal[:6] if setup_world_base is None else setup_world_base
+    from station.core.transforms import pose_to_matrix
+
+    T_base = invert(pose_to_matrix(R))[None] @ np.asarray(head_world).reshape(-1, 4, 4)
+    return scara_ik(cfg.model, T_base, elbow, setup=False, check_limits=False)
+
+
+def approach_pose(cfg: CellConfig, q: np.ndarray, direction: int = 1, cycle: int = 0) -> np.ndarray:
+    """Where a measurement at ``q`` starts its final approach: every revolute joint offset
+    against its direction of arrival, the quill at travel height. ``cycle`` varies the offset a
+    little between repetitions (from the same side)."""
+    a = approach_offsets(cfg, direction) * (1.0 + 0.25 * cycle)
+    return retracted(cfg, np.where(retract_offset(cfg) > 0, q, q - a))
+
+
+def all_motion_poses(cfg: CellConfig, q: np.ndarray, direction: int = 1) -> list[np.ndarray]:
+    """Every joint vector a measurement at ``q`` commands (approach, above the point, target)."""
+    return [approach_pose(cfg, q, direction), q + retract_offset(cfg), q]
+
+
+def build_plan(cfg: CellConfig) -> Plan:
+    heads = head_targets_world(cfg)
+    cands, rejected = [], []
+    for j, pid in enumerate(cfg.point_ids):
+        for elbow in cfg.plan.elbows:
+            try:
+                q = joints_for(cfg, heads[j], elbow)[0]
+                for qq in all_motion_poses(cfg, q):
+                    check_joints(cfg, qq, f"{pid} elbow {elbow:+d}")
+                if cfg.plan.both_directions:
+                    for qq in all_motion_poses(cfg, q, -1):
+                        check_joints(cfg, qq, f"{pid} elbow {elbow:+d} (reverse approach)")
+            except UnreachableError as exc:
+                rejected.append((pid, elbow, str(exc)))
+                continue
+            cands.append(Target(j, pid, elbow, heads[j], q))
+    if not cands:
+        raise ConfigError("no measuring point is reachable within the soft limits; check [robot].setup and [limits]")
+    k = cfg.plan.verification_every
+    verification = tuple(c for i, c in enumerate(cands) if i % k == k - 1)
+    ident = [c for i, c in enumerate(cands) if i % k != k - 1]
+    if cfg.plan.select and cfg.plan.select < len(ident):
+        ident = select_d_optimal(cfg, ident, cfg.plan.select)
+    ident = order_by_travel(ident)
+    steps = []
+    for rep in range(cfg.plan.repeats):
+        for t in (ident if rep % 2 == 0 else ident[::-1]):
+            steps.append(Step(len(steps), "identification", t, 1, cycle=rep))
+            if cfg.plan.both_directions:
+                steps.append(Step(len(steps), "reversal", t, -1, cycle=rep))
+    return Plan(tuple(steps), verification, tuple(rejected))
+
+
+def order_by_travel(targets: list[Target]) -> list[Target]:
+    """Greedy nearest neighbour in joint space (rad weighted as 500 mm, roughly the arm)."""
+    if not targets:
+        return targets
+    w = np.array([500.0, 500.0, 1.0, 100.0])[: len(targets[0].joints)]
+    left = list(range(len(targets)))
+    order = [left.pop(0)]
+    while left:
+        cur = targets[order[-1]].joints
+        d = [np.sum(np.abs((targets[i].joints - cur) * w)) + (0 if targets[i].elbow == targets[order[-1]].elbow else 1e4) for i in left]
+        order.append(left.pop(int(np.argmin(d))))
+    return [targets[i] for i in order]
+
+
+def select_d_optimal(cfg: CellConfig, targets: list[Target], n: int) -> list[Target]:
+    """Greedy D-optimal subset: maximise log det of the information matrix of the minimal set."""
+    from station.core.identifiability import analyze
+    from station.core.measurements import synthetic_set
+
+    q = np.array([t.joints for t in targets])
+    sig = cfg.identification.pose_sigma()
+    data = synthetic_set(cfg.model, "pose", q, cfg.model.nominal, sigma=sig)
+    a = analyze(cfg.model, data, prefer=cfg.identification.prefer, fix=cfg.identification.fix,
+                exclude=cfg.identification.exclude, describe=False)
+    from station.core.measurements import residuals_and_jacobian
+
+    _, J = residuals_and_jacobian(cfg.model, data, cfg.model.nominal)
+    J = (J / data.sigma[:, None])[:, a.chosen_indices()].reshape(len(targets), 6, -1)
+    p = J.shape[-1]
+    info = 1e-9 * np.eye(p)
+    chosen: list[int] = []
+    for _ in range(n):
+        best, best_val = None, -np.inf
+        for i in range(len(targets)):
+            if i in chosen:
+                continue
+            sign, val = np.linalg.slogdet(info + J[i].T @ J[i])
+            if sign > 0 and val > best_val:
+                best, best_val = i, val
+        chosen.append(best)
+        info = info + J[best].T @ J[best]
+    return [targets[i] for i in sorted(chosen)]

@@ -1,0 +1,787 @@
+"""The run database: one SQLite file that holds every run of the station (docs/run-database.md).
+
+A *run* is one calibration campaign: the configuration snapshot it was started with, the
+measurement plan (one dict per step), and then, step by step, the measurements, the results of
+identification / correction / verification, and an audit trail of events.
+
+Guarantees
+----------
+* ``record_measurement`` commits (WAL journal, ``synchronous=FULL``) before it returns, so a
+  measurement survives a ``kill -9`` or a power cut right after the call. The measuring loop must
+  call it before it commands the next robot motion.
+* Each step of a run is stored at most once (``UNIQUE(run_id, step_index)``); a second write of the
+  same step raises :class:`DuplicateMeasurementError` unless ``replace=True`` is passed, and a
+  replacement is logged as an event.
+* A crashed run resumes at :meth:`RunDB.next_missing`: the lowest step index of the plan that has
+  no stored measurement.
+
+Units: joints in rad (revolute) / mm (prismatic), readings and positions in mm, angles in rad,
+pose residuals in µm; times are UTC ISO-8601 strings ending in ``Z``.
+
+One :class:`RunDB` may be created in one thread and used from another (a worker), one thread at a
+time; every public method holds an internal lock.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import math
+import sqlite3
+import threading
+import tomllib
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+
+from station.errors import StationError
+
+SCHEMA_VERSION = 1
+
+RUN_STATUSES = ("created", "measuring", "measured", "identified", "uploaded", "verified",
+                "failed", "aborted")
+MEASUREMENT_KINDS = ("identification", "verification_before", "verification_after", "reversal")
+EVENT_LEVELS = ("debug", "info", "warning", "error")
+
+_MISSING = object()
+
+
+# --------------------------------------------------------------------------------------- errors
+
+class RunDatabaseError(StationError):
+    """The run database cannot be opened or the requested operation is not consistent with it."""
+
+    exit_code = 5
+
+
+class SchemaVersionError(RunDatabaseError):
+    """The database file was written with a schema this station does not know."""
+
+
+class RunNotFoundError(RunDatabaseError, KeyError):
+    """No run with the requested id."""
+
+    def __str__(self) -> str:  # KeyError would repr() the message
+        return str(self.args[0]) if self.args else ""
+
+
+class DuplicateMeasurementError(RunDatabaseError):
+    """A measurement for this (run, step) is already stored."""
+
+
+# -------------------------------------------------------------------------------------- records
+
+@dataclass(frozen=True)
+class RunRecord:
+    """One run. ``plan`` is the measurement plan as stored (a tuple of step dicts)."""
+
+    id: int
+    created_utc: str
+    station_version: str
+    status: str
+    config_toml: str
+    plan: tuple
+    seed: int | None
+    note: str
+
+    @property
+    def n_steps(self) -> int:
+        return len(self.plan)
+
+
+@dataclass(frozen=True, eq=False)
+class MeasurementRecord:
+    """One stored measurement. Arrays are read-only float64 arrays; NaN marks a missing value.
+
+    ``eq=False``: records hold numpy arrays, so they compare by identity; compare fields instead.
+    The field names equal the keyword arguments of :meth:`RunDB.record_measurement`, so a record
+    can be written again with ``db.record_measurement(**dataclasses.asdict(rec))``.
+    """
+
+    run_id: int
+    step_index: int
+    kind: str
+    point_id: str
+    label: str
+    joints_commanded: np.ndarray          # (g,) rad | mm
+    joints_read: np.ndarray | None        # (g,) rad | mm, None when the controller gave none
+    raw_frames: bytes                     # probe frames exactly as received
+    readings_mm: np.ndarray | None        # (n_channels,) mm, NaN where a channel gave no value
+    channel_status: tuple | None          # one entry per channel, as the driver reported it
+    pose: np.ndarray | None               # (4, 4) measured pose of MPKS in MKKS, mm
+    pose_residual_um: float | None
+    ok: bool
+    message: str
+    t_utc: str
+
+
+@dataclass(frozen=True)
+class EventRecord:
+    """One entry of a run's audit trail."""
+
+    run_id: int
+    t_utc: str
+    level: str
+    message: str
+
+
+# --------------------------------------------------------------------------------------- schema
+
+_SCHEMA = """
+CREATE TABLE schema_version (
+    version     INTEGER NOT NULL
+);
+CREATE TABLE runs (
+    id              INTEGER PRIMARY KEY AUTOINCREMENT,
+    created_utc     TEXT NOT NULL,
+    station_version TEXT NOT NULL,
+    status          TEXT NOT NULL CHECK (status IN ({statuses})),
+    config_toml     TEXT NOT NULL,
+    plan_json       TEXT NOT NULL,
+    seed            TEXT,               -- decimal integer as TEXT: seeds may exceed 64 bit
+    note            TEXT NOT NULL DEFAULT ''
+);
+CREATE TABLE measurements (
+    run_id           INTEGER NOT NULL REFERENCES runs(id) ON DELETE CASCADE,
+    step_index       INTEGER NOT NULL CHECK (step_index >= 0),
+    kind             TEXT NOT NULL,
+    point_id         TEXT NOT NULL DEFAULT '',
+    label            TEXT NOT NULL DEFAULT '',
+    joints_commanded TEXT NOT NULL,     -- JSON list, rad | mm
+    joints_read      TEXT,              -- JSON list or NULL, rad | mm
+    raw_frames       BLOB NOT NULL,
+    readings_mm      TEXT,              -- JSON list, NaN as null
+    channel_status   TEXT,              -- JSON list
+    pose             TEXT,              -- JSON 4x4 nested list or NULL
+    pose_residual_um REAL,
+    ok               INTEGER NOT NULL CHECK (ok IN (0, 1)),
+    message          TEXT NOT NULL DEFAULT '',
+    t_utc            TEXT NOT NULL,
+    UNIQUE (run_id, step_index)
+);
+CREATE TABLE results (
+    run_id  INTEGER NOT NULL REFERENCES runs(id) ON DELETE CASCADE,
+    key     TEXT NOT NULL,
+    json    TEXT NOT NULL,
+    t_utc   TEXT NOT NULL,
+    UNIQUE (run_id, key)
+);
+CREATE TABLE events (
+    id      INTEGER PRIMARY KEY AUTOINCREMENT,
+    run_id  INTEGER REFERENCES runs(id) ON DELETE CASCADE,
+    t_utc   TEXT NOT NULL,
+    level   TEXT NOT NULL,
+    message TEXT NOT NULL
+);
+CREATE INDEX events_run ON events(run_id, id);
+""".format(statuses=", ".join(f"'{s}'" for s in RUN_STATUSES))
+
+_TABLES = {"schema_version", "runs", "measurements", "results", "events"}
+
+
+# ------------------------------------------------------------------------------------- helpers
+
+def utc_now() -> str:
+    """Current UTC time as ``YYYY-MM-DDTHH:MM:SS.ffffffZ``."""
+    return datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+
+
+def _station_version() -> str:
+    from importlib import metadata
+    try:
+        return metadata.version("calibration-station")
+    except metadata.PackageNotFoundError:
+        return "unknown"
+
+
+def _float_list(values: Any, what: str, ndim: int = 1) -> list | None:
+    """Array-like of numbers -> nested list of floats with NaN/±inf as None (JSON null)."""
+    if values is None:
+        return None
+    try:
+        a = np.asarray(values, dtype=float)
+    except (TypeError, ValueError) as e:
+        raise RunDatabaseError(f"{what}: not an array of numbers ({e}); pass a list or numpy "
+                               f"array of floats") from e
+    if a.ndim != ndim:
+        raise RunDatabaseError(f"{what}: expected a {ndim}-D array, got shape {a.shape}")
+    return _nan_to_none(a)
+
+
+def _nan_to_none(a: np.ndarray) -> list:
+    if a.ndim == 1:
+        return [float(v) if math.isfinite(v) else None for v in a.tolist()]
+    return [_nan_to_none(row) for row in a]
+
+
+def _array_from_json(text: str | None, ndim: int = 1) -> np.ndarray | None:
+    if text is None:
+        return None
+    data = json.loads(text)
+    if ndim == 1:
+        a = np.array([np.nan if v is None else v for v in data], dtype=float)
+    else:
+        a = np.array([[np.nan if v is None else v for v in row] for row in data], dtype=float)
+    a.setflags(write=False)
+    return a
+
+
+_FLOAT_TAG = "__float__"
+_NONFINITE = {"nan": math.nan, "inf": math.inf, "-inf": -math.inf}
+
+
+def _to_json_value(obj: Any, where: str = "value") -> Any:
+    """Python/numpy object -> JSON-able object; non-finite floats become ``{"__float__": "nan"}``."""
+    if obj is None or isinstance(obj, (bool, str)):
+        return obj
+    if isinstance(obj, (np.bool_,)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        f = float(obj)
+        if math.isfinite(f):
+            return f
+        return {_FLOAT_TAG: "nan" if math.isnan(f) else ("inf" if f > 0 else "-inf")}
+    if isinstance(obj, np.ndarray):
+        if obj.dtype.kind not in "biuf":
+            raise RunDatabaseError(f"{where}: numpy array of dtype {obj.dtype} cannot be stored; "
+                                   f"convert it to numbers or a list of strings")
+        return _to_json_value(obj.tolist(), where)
+    if isinstance(obj, dict):
+        out = {}
+        for k, v in obj.items():
+            if not isinstance(k, str):
+                raise RunDatabaseError(f"{where}: dict key {k!r} is not a string; JSON objects "
+                                       f"need string keys, convert it with str()")
+            if k == _FLOAT_TAG:
+                raise RunDatabaseError(f"{where}: the key {_FLOAT_TAG!r} is reserved for "
+                                       f"non-finite floats; rename it")
+            out[k] = _to_json_value(v, f"{where}[{k!r}]")
+        return out
+    if isinstance(obj, (list, tuple)):
+        return [_to_json_value(v, f"{where}[{i}]") for i, v in enumerate(obj)]
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return _to_json_value({f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)},
+                              where)
+    raise RunDatabaseError(f"{where}: a {type(obj).__name__} cannot be stored as JSON; convert it "
+                           f"to dicts, lists, numbers, strings or numpy arrays first")
+
+
+def _from_json_value(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        if len(obj) == 1 and _FLOAT_TAG in obj:
+            return _NONFINITE[obj[_FLOAT_TAG]]
+        return {k: _from_json_value(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_from_json_value(v) for v in obj]
+    return obj
+
+
+def _dumps(obj: Any, where: str) -> str:
+    return json.dumps(_to_json_value(obj, where), allow_nan=False, separators=(",", ":"))
+
+
+def _loads(text: str) -> Any:
+    return _from_json_value(json.loads(text))
+
+
+def _num(v: float | None) -> str:
+    """CSV cell: shortest repr that round-trips; '' for missing, 'nan'/'inf' for non-finite."""
+    if v is None:
+        return ""
+    return repr(float(v))
+
+
+# --------------------------------------------------------------------------------------- the DB
+
+class RunDB:
+    """The station's run database (one SQLite file). Use as a context manager or call close()."""
+
+    def __init__(self, path: str | Path, *, timeout_s: float = 10.0):
+        self.path = Path(path)
+        self._lock = threading.RLock()
+        self._conn: sqlite3.Connection | None = None
+        if self.path.is_dir():
+            raise RunDatabaseError(f"{self.path}: is a directory; give the path of a run database "
+                                   f"file (it is created if it does not exist)")
+        if not self.path.parent.exists():
+            raise RunDatabaseError(f"{self.path}: folder {self.path.parent} does not exist; "
+                                   f"create it first")
+        try:
+            conn = sqlite3.connect(str(self.path), timeout=timeout_s, isolation_level=None,
+                                   check_same_thread=False)
+        except sqlite3.Error as e:
+            raise RunDatabaseError(f"{self.path}: cannot open the run database ({e}); check the "
+                                   f"path and its permissions") from e
+        self._conn = conn
+        try:
+            self._setup(timeout_s)
+        except sqlite3.DatabaseError as e:
+            conn.close()
+            self._conn = None
+            raise RunDatabaseError(
+                f"{self.path}: not a usable run database ({e}). If it is a damaged run database, "
+                f"keep it for inspection and restore the last backup; otherwise move it away or "
+                f"choose another path, the station then creates a new one") from e
+        except BaseException:
+            conn.close()
+            self._conn = None
+            raise
+
+    # -- opening -------------------------------------------------------------------------------
+
+    def _setup(self, timeout_s: float) -> None:
+        c = self._conn
+        assert c is not None
+        c.execute(f"PRAGMA busy_timeout = {int(timeout_s * 1000)}")
+        # Reading the schema fails right here with 'file is not a database' for foreign files.
+        names = {r[0] for r in c.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+        mode = c.execute("PRAGMA journal_mode = WAL").fetchone()[0]
+        if str(mode).lower() != "wal":
+            raise RunDatabaseError(
+                f"{self.path}: SQLite refused the WAL journal (mode is {mode!r}); put the run "
+                f"database on a local disk (network file systems do not support WAL)")
+        c.execute("PRAGMA synchronous = FULL")
+        c.execute("PRAGMA foreign_keys = ON")
+        if c.execute("PRAGMA foreign_keys").fetchone()[0] != 1:
+            raise RunDatabaseError("this SQLite build does not enforce foreign keys; use a "
+                                   "Python built with a standard SQLite")
+        check = c.execute("PRAGMA quick_check").fetchone()[0]
+        if check != "ok":
+            raise RunDatabaseError(
+                f"{self.path}: the run database is damaged (SQLite quick_check: {check}); keep "
+                f"the file for inspection, restore the last backup or start a new database")
+        if "schema_version" not in names:
+            if names - {"sqlite_sequence"}:
+                raise RunDatabaseError(
+                    f"{self.path}: an SQLite file, but not a station run database (tables: "
+                    f"{', '.join(sorted(names))}); choose another path for the run database")
+            self._create_schema()
+            return
+        rows = c.execute("SELECT version FROM schema_version").fetchall()
+        if len(rows) != 1:
+            raise RunDatabaseError(f"{self.path}: schema_version table holds {len(rows)} rows "
+                                   f"instead of 1; the file is damaged, restore a backup")
+        version = rows[0][0]
+        if not isinstance(version, int):
+            raise RunDatabaseError(f"{self.path}: schema version {version!r} is not an integer; "
+                                   f"the file is damaged, restore a backup")
+        if version > SCHEMA_VERSION:
+            raise SchemaVersionError(
+                f"{self.path}: written by a newer station (run-database schema {version}; this "
+                f"station reads up to {SCHEMA_VERSION}). Update the station software, or use a "
+                f"new database file with this one")
+        if version < SCHEMA_VERSION:  # no older schemas exist yet; migrations go here
+            raise SchemaVersionError(
+                f"{self.path}: run-database schema {version} is older than any this station "
+                f"supports ({SCHEMA_VERSION}); open it with the station version that wrote it")
+        missing = _TABLES - names
+        if missing:
+            raise RunDatabaseError(f"{self.path}: tables {', '.join(sorted(missing))} are "
+                                   f"missing; the file is damaged, restore a backup")
+
+    def _create_schema(self) -> None:
+        c = self._conn
+        assert c is not None
+        c.execute("BEGIN IMMEDIATE")
+        try:
+            # Another process may have created it between our check and the write lock.
+            exists = c.execute("SELECT 1 FROM sqlite_master WHERE type='table' AND "
+                               "name='schema_version'").fetchone()
+            if not exists:
+                for stmt in _SCHEMA.split(";"):
+                    if stmt.strip():
+                        c.execute(stmt)
+                c.execute("INSERT INTO schema_version(version) VALUES (?)", (SCHEMA_VERSION,))
+            c.execute("COMMIT")
+        except BaseException:
+            c.execute("ROLLBACK")
+            raise
+
+    # -- plumbing ------------------------------------------------------------------------------
+
+    def __enter__(self) -> "RunDB":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Close the file. Everything recorded is already committed; closing loses nothing."""
+        with self._lock:
+            if self._conn is not None:
+                self._conn.close()
+                self._conn = None
+
+    @property
+    def closed(self) -> bool:
+        return self._conn is None
+
+    def _c(self) -> sqlite3.Connection:
+        if self._conn is None:
+            raise RunDatabaseError(f"{self.path}: the run database is closed; open a new RunDB")
+        return self._conn
+
+    def _write(self, statements: Iterable[tuple[str, tuple]]) -> list[sqlite3.Cursor]:
+        """Run statements in one IMMEDIATE transaction and commit (durable on return)."""
+        c = self._c()
+        try:
+            c.execute("BEGIN IMMEDIATE")
+            try:
+                curs = [c.execute(sql, params) for sql, params in statements]
+                c.execute("COMMIT")
+            except BaseException:
+                if c.in_transaction:
+                    c.execute("ROLLBACK")
+                raise
+        except sqlite3.IntegrityError:
+            raise  # the caller turns it into a specific error
+        except sqlite3.OperationalError as e:
+            raise RunDatabaseError(
+                f"{self.path}: write failed, nothing of it was stored ({e}); check free disk "
+                f"space and permissions, and that no other station process holds the database "
+                f"locked") from e
+        except sqlite3.DatabaseError as e:
+            raise RunDatabaseError(f"{self.path}: write failed, nothing of it was stored ({e}); "
+                                   f"the file may be damaged, keep it and restore a backup") from e
+        return curs
+
+    def _require_run(self, run_id: int) -> sqlite3.Row | tuple:
+        row = self._c().execute(
+            "SELECT id, created_utc, station_version, status, config_toml, plan_json, seed, note "
+            "FROM runs WHERE id = ?", (int(run_id),)).fetchone()
+        if row is None:
+            raise RunNotFoundError(f"{self.path}: no run {run_id}; list the runs with "
+                                   f"'station runs' (RunDB.runs())")
+        return row
+
+    @staticmethod
+    def _run_from_row(row: tuple) -> RunRecord:
+        rid, created, version, status, config, plan_json, seed, note = row
+        return RunRecord(id=rid, created_utc=created, station_version=version, status=status,
+                         config_toml=config, plan=tuple(_loads(plan_json)),
+                         seed=None if seed is None else int(seed), note=note)
+
+    # -- runs ----------------------------------------------------------------------------------
+
+    def create_run(self, config_toml: str, plan: Sequence[dict], seed: int | None = None,
+                   note: str = "", *, station_version: str | None = None) -> int:
+        """Store a new run (status 'created') with its configuration snapshot and plan."""
+        if not isinstance(config_toml, str):
+            raise RunDatabaseError("config_toml must be the text of the configuration (str), "
+                                   f"not {type(config_toml).__name__}; read the file first")
+        try:
+            tomllib.loads(config_toml)
+        except tomllib.TOMLDecodeError as e:
+            raise RunDatabaseError(f"config_toml is not valid TOML ({e}); pass the full text "
+                                   f"of the configuration file, not its path") from e
+        if isinstance(plan, (str, bytes)) or not all(isinstance(s, dict) for s in plan):
+            raise RunDatabaseError("plan must be a list of step dicts (one per measurement)")
+        plan_json = _dumps(list(plan), "plan")
+        if seed is not None:
+            if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+                raise RunDatabaseError(f"seed must be an integer or None, not {seed!r}")
+            seed = str(int(seed))
+        version = _station_version() if station_version is None else str(station_version)
+        now = utc_now()
+        with self._lock:
+            cur, _ = self._write([
+                ("INSERT INTO runs(created_utc, station_version, status, config_toml, plan_json, "
+                 "seed, note) VALUES (?, ?, 'created', ?, ?, ?, ?)",
+                 (now, version, config_toml, plan_json, seed, str(note))),
+                ("INSERT INTO events(run_id, t_utc, level, message) VALUES "
+                 "(last_insert_rowid(), ?, 'info', ?)",
+                 (now, f"run created: {len(plan)} planned steps, station {version}")),
+            ])
+            return int(cur.lastrowid)
+
+    def run(self, run_id: int) -> RunRecord:
+        with self._lock:
+            return self._run_from_row(self._require_run(run_id))
+
+    def runs(self) -> list[RunRecord]:
+        """All runs, newest first."""
+        with self._lock:
+            rows = self._c().execute(
+                "SELECT id, created_utc, station_version, status, config_toml, plan_json, seed, "
+                "note FROM runs ORDER BY id DESC").fetchall()
+        return [self._run_from_row(r) for r in rows]
+
+    def latest_run(self) -> RunRecord | None:
+        with self._lock:
+            row = self._c().execute(
+                "SELECT id, created_utc, station_version, status, config_toml, plan_json, seed, "
+                "note FROM runs ORDER BY id DESC LIMIT 1").fetchone()
+        return None if row is None else self._run_from_row(row)
+
+    def set_status(self, run_id: int, status: str) -> None:
+        """Set the run's status (one of RUN_STATUSES); the change is logged as an event."""
+        if status not in RUN_STATUSES:
+            raise RunDatabaseError(f"unknown run status {status!r}; use one of "
+                                   f"{', '.join(RUN_STATUSES)}")
+        with self._lock:
+            old = self._require_run(run_id)[3]
+            self._write([
+                ("UPDATE runs SET status = ? WHERE id = ?", (status, int(run_id))),
+                ("INSERT INTO events(run_id, t_utc, level, message) VALUES (?, ?, 'info', ?)",
+                 (int(run_id), utc_now(), f"status {old} -> {status}")),
+            ])
+
+    # -- measurements --------------------------------------------------------------------------
+
+    def record_measurement(self, run_id: int, step_index: int, *, kind: str,
+                           joints_commanded: Any, joints_read: Any = None,
+                           raw_frames: bytes = b"", readings_mm: Any = None,
+                           channel_status: Sequence | None = None, pose: Any = None,
+                           pose_residual_um: float | None = None, ok: bool = True,
+                           message: str = "", point_id: str = "", label: str = "",
+                           t_utc: str | None = None, replace: bool = False) -> MeasurementRecord:
+        """Store one measurement and commit it durably before returning.
+
+        Call this before commanding the next robot motion. ``step_index`` must lie in the run's
+        plan (0 <= step_index < len(plan)). A step that is already stored raises
+        :class:`DuplicateMeasurementError`; pass ``replace=True`` to overwrite it on purpose (the
+        replacement is logged). Returns the record as it will be read back.
+        """
+        if not isinstance(kind, str) or not kind:
+            raise RunDatabaseError(f"kind must be a non-empty string such as "
+                                   f"{', '.join(MEASUREMENT_KINDS)}; got {kind!r}")
+        if isinstance(step_index, bool) or not isinstance(step_index, (int, np.integer)):
+            raise RunDatabaseError(f"step_index must be an integer, not {step_index!r}")
+        step_index = int(step_index)
+        if not isinstance(raw_frames, (bytes, bytearray, memoryview)):
+            raise RunDatabaseError(f"raw_frames must be the bytes received from the probe head, "
+                                   f"not {type(raw_frames).__name__}; concatenate the frames")
+        raw = bytes(raw_frames)
+        jc = _float_list(joints_commanded, "joints_commanded")
+        jr = _float_list(joints_read, "joints_read")
+        rd = _float_list(readings_mm, "readings_mm")
+        ps = _float_list(pose, "pose", ndim=2)
+        if ps is not None and (len(ps), len(ps[0]) if ps else 0) != (4, 4):
+            raise RunDatabaseError(f"pose must be a 4x4 homogeneous matrix or None, got shape "
+                                   f"{np.shape(pose)}")
+        cs = None if channel_status is None else list(channel_status)
+        cs_json = None if cs is None else _dumps(cs, "channel_status")
+        res = None if pose_residual_um is None else float(pose_residual_um)
+        if res is not None and math.isnan(res):
+            res = None
+        t = utc_now() if t_utc is None else str(t_utc)
+        row = (int(run_id), step_index, kind, str(point_id), str(label),
+               json.dumps(jc, allow_nan=False),
+               None if jr is None else json.dumps(jr, allow_nan=False), raw,
+               None if rd is None else json.dumps(rd, allow_nan=False), cs_json,
+               None if ps is None else json.dumps(ps, allow_nan=False),
+               res, 1 if ok else 0, str(message), t)
+        with self._lock:
+            run = self._run_from_row(self._require_run(run_id))
+            if not 0 <= step_index < run.n_steps:
+                raise RunDatabaseError(
+                    f"run {run_id}: step {step_index} is outside its plan of {run.n_steps} steps "
+                    f"(0..{run.n_steps - 1}); record only planned steps, or start a new run with "
+                    f"a longer plan")
+            planned_kind = run.plan[step_index].get("kind")
+            if planned_kind is not None and planned_kind != kind:
+                raise RunDatabaseError(
+                    f"run {run_id}: step {step_index} is planned as {planned_kind!r} but was "
+                    f"recorded as {kind!r}; the measuring loop and the stored plan disagree")
+            insert = ("INSERT INTO measurements(run_id, step_index, kind, point_id, label, "
+                      "joints_commanded, joints_read, raw_frames, readings_mm, channel_status, "
+                      "pose, pose_residual_um, ok, message, t_utc) "
+                      "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)", row)
+            stmts = [insert]
+            if replace:  # delete, log only if something was deleted, insert: one transaction
+                stmts = [("DELETE FROM measurements WHERE run_id = ? AND step_index = ?",
+                          (int(run_id), step_index)),
+                         ("INSERT INTO events(run_id, t_utc, level, message) SELECT ?, ?, "
+                          "'warning', ? WHERE changes() > 0",
+                          (int(run_id), t, f"step {step_index} replaced by a new measurement")),
+                         insert]
+            try:
+                self._write(stmts)
+            except sqlite3.IntegrityError as e:
+                if "UNIQUE" in str(e):
+                    raise DuplicateMeasurementError(
+                        f"run {run_id}: step {step_index} is already recorded; resume at "
+                        f"next_missing() = {self._next_missing(run)} instead, or pass "
+                        f"replace=True to overwrite it on purpose") from e
+                raise RunDatabaseError(f"run {run_id}: measurement {step_index} rejected by the "
+                                       f"database ({e})") from e
+        return self._measurement_from_row(row)
+
+    @staticmethod
+    def _measurement_from_row(r: tuple) -> MeasurementRecord:
+        (run_id, step, kind, point_id, label, jc, jr, raw, rd, cs, pose, res, ok, msg, t) = r
+        return MeasurementRecord(
+            run_id=run_id, step_index=step, kind=kind, point_id=point_id, label=label,
+            joints_commanded=_array_from_json(jc), joints_read=_array_from_json(jr),
+            raw_frames=bytes(raw), readings_mm=_array_from_json(rd),
+            channel_status=None if cs is None else tuple(_loads(cs)),
+            pose=_array_from_json(pose, ndim=2),
+            pose_residual_um=None if res is None else float(res), ok=bool(ok), message=msg,
+            t_utc=t)
+
+    def measurements(self, run_id: int, kind: str | None = None) -> list[MeasurementRecord]:
+        """The run's measurements ordered by step index, optionally only those of one kind."""
+        sql = ("SELECT run_id, step_index, kind, point_id, label, joints_commanded, joints_read, "
+               "raw_frames, readings_mm, channel_status, pose, pose_residual_um, ok, message, "
+               "t_utc FROM measurements WHERE run_id = ?")
+        params: tuple = (int(run_id),)
+        if kind is not None:
+            sql += " AND kind = ?"
+            params += (kind,)
+        with self._lock:
+            self._require_run(run_id)
+            rows = self._c().execute(sql + " ORDER BY step_index", params).fetchall()
+        return [self._measurement_from_row(r) for r in rows]
+
+    def completed_steps(self, run_id: int, ok_only: bool = False) -> set[int]:
+        """Step indices that have a stored measurement (also failed ones unless ``ok_only``)."""
+        sql = "SELECT step_index FROM measurements WHERE run_id = ?"
+        if ok_only:
+            sql += " AND ok = 1"
+        with self._lock:
+            self._require_run(run_id)
+            return {r[0] for r in self._c().execute(sql, (int(run_id),))}
+
+    def _next_missing(self, run: RunRecord) -> int | None:
+        done = {r[0] for r in self._c().execute(
+            "SELECT step_index FROM measurements WHERE run_id = ?", (run.id,))}
+        return next((i for i in range(run.n_steps) if i not in done), None)
+
+    def next_missing(self, run_id: int) -> int | None:
+        """Lowest planned step without a stored measurement; None when every step is stored.
+
+        Failed measurements (ok=False) count as stored: re-measure them with ``replace=True``.
+        """
+        with self._lock:
+            return self._next_missing(self._run_from_row(self._require_run(run_id)))
+
+    # -- results and events --------------------------------------------------------------------
+
+    def save_result(self, run_id: int, key: str, obj: Any) -> None:
+        """Store ``obj`` as JSON under ``key`` (overwrites). numpy arrays become lists; NaN and
+        ±inf are stored as ``{"__float__": "nan" | "inf" | "-inf"}`` and come back as floats."""
+        if not isinstance(key, str) or not key:
+            raise RunDatabaseError(f"result key must be a non-empty string, not {key!r}")
+        text = _dumps(obj, f"result {key!r}")
+        with self._lock:
+            self._require_run(run_id)
+            self._write([("INSERT INTO results(run_id, key, json, t_utc) VALUES (?, ?, ?, ?) "
+                          "ON CONFLICT(run_id, key) DO UPDATE SET json = excluded.json, "
+                          "t_utc = excluded.t_utc", (int(run_id), key, text, utc_now()))])
+
+    def load_result(self, run_id: int, key: str, default: Any = _MISSING) -> Any:
+        """The stored result (lists for arrays, floats restored); ``default`` when absent, else
+        :class:`RunDatabaseError`."""
+        with self._lock:
+            self._require_run(run_id)
+            row = self._c().execute("SELECT json FROM results WHERE run_id = ? AND key = ?",
+                                    (int(run_id), key)).fetchone()
+        if row is None:
+            if default is _MISSING:
+                raise RunDatabaseError(f"run {run_id}: no result {key!r}; run the step that "
+                                       f"produces it first, or pass default=")
+            return default
+        return _loads(row[0])
+
+    def result_keys(self, run_id: int) -> list[str]:
+        with self._lock:
+            self._require_run(run_id)
+            return [r[0] for r in self._c().execute(
+                "SELECT key FROM results WHERE run_id = ? ORDER BY key", (int(run_id),))]
+
+    def log(self, run_id: int, level: str, message: str) -> None:
+        """Append an event to the run's audit trail (committed on return)."""
+        if level not in EVENT_LEVELS:
+            raise RunDatabaseError(f"unknown event level {level!r}; use one of "
+                                   f"{', '.join(EVENT_LEVELS)}")
+        with self._lock:
+            self._require_run(run_id)
+            self._write([("INSERT INTO events(run_id, t_utc, level, message) VALUES (?, ?, ?, ?)",
+                          (int(run_id), utc_now(), level, str(message)))])
+
+    def events(self, run_id: int) -> list[EventRecord]:
+        with self._lock:
+            self._require_run(run_id)
+            rows = self._c().execute("SELECT run_id, t_utc, level, message FROM events WHERE "
+                                     "run_id = ? ORDER BY id", (int(run_id),)).fetchall()
+        return [EventRecord(*r) for r in rows]
+
+    # -- export --------------------------------------------------------------------------------
+
+    def export_csv(self, run_id: int, path: str | Path,
+                   joint_units: Sequence[str] | None = None) -> Path:
+        """Write one CSV row per measurement (docs/run-database.md, "Export").
+
+        ``joint_units`` ('rad' or 'mm' per joint) labels the joint columns; by default it is
+        taken from the joint types in the run's configuration snapshot (``joint = "revolute" |
+        "prismatic"`` entries), and joints of unknown type are labelled ``rad|mm``.
+        """
+        from station.core.transforms import matrix_to_pose
+
+        run = self.run(run_id)
+        ms = self.measurements(run_id)
+        n_q = max((len(m.joints_commanded) for m in ms), default=0)
+        n_q = max([n_q] + [len(m.joints_read) for m in ms if m.joints_read is not None])
+        n_p = max((len(m.readings_mm) for m in ms if m.readings_mm is not None), default=0)
+        units = list(joint_units) if joint_units is not None else _joint_units(run.config_toml)
+        units = (units + ["rad|mm"] * n_q)[:n_q]
+        header = (["step", "kind", "point_id", "label", "t_utc"]
+                  + [f"q{i + 1} [{u}]" for i, u in enumerate(units)]
+                  + [f"q{i + 1}_cmd [{u}]" for i, u in enumerate(units)]
+                  + ["x [mm]", "y [mm]", "z [mm]", "roll [rad]", "pitch [rad]", "yaw [rad]",
+                     "residual [um]"]
+                  + [f"p{i + 1} [mm]" for i in range(n_p)]
+                  + ["status", "ok", "message"])
+
+        def cells(a: np.ndarray | None, n: int) -> list[str]:
+            vals = [] if a is None else [_num(v) for v in a]
+            return (vals + [""] * n)[:n]
+
+        out = Path(path)
+        try:
+            with open(out, "w", newline="", encoding="utf-8") as f:
+                w = csv.writer(f)
+                w.writerow(header)
+                for m in ms:
+                    pose = None if m.pose is None else matrix_to_pose(m.pose)
+                    status = "" if m.channel_status is None else ";".join(
+                        str(s) for s in m.channel_status)
+                    w.writerow([m.step_index, m.kind, m.point_id, m.label, m.t_utc]
+                               + cells(m.joints_read, n_q) + cells(m.joints_commanded, n_q)
+                               + cells(pose, 6) + [_num(m.pose_residual_um)]
+                               + cells(m.readings_mm, n_p)
+                               + [status, int(m.ok), m.message])
+        except OSError as e:
+            raise RunDatabaseError(f"{out}: cannot write the CSV export ({e}); check the folder "
+                                   f"and its permissions") from e
+        return out
+
+
+def _joint_units(config_toml: str) -> list[str]:
+    """'rad'/'mm' per joint from ``joint = "revolute"|"prismatic"`` tables in the config."""
+    try:
+        cfg = tomllib.loads(config_toml)
+    except tomllib.TOMLDecodeError:
+        return []
+    found: list[list[str]] = []
+
+    def walk(obj: Any) -> None:
+        if isinstance(obj, dict):
+            for v in obj.values():
+                walk(v)
+        elif isinstance(obj, list):
+            types = [t.get("joint") for t in obj if isinstance(t, dict)]
+            joints = [t for t in types if t in ("revolute", "prismatic")]
+            if joints:
+                found.append(["rad" if t == "revolute" else "mm" for t in joints])
+            for v in obj:
+                walk(v)
+
+    walk(cfg)
+    return found[0] if len(found) == 1 else []

@@ -1,0 +1,251 @@
+"""The runner: one place that owns time, device I/O, pause/abort and the run database.
+
+Measurement procedures are generators of small messages (``MoveJoints``, ``ReadProbes`` …);
+they decide *what* to do and receive each result back through ``send``. The :class:`Runner`
+decides *how*: it checks every motion against the soft limits before commanding it, waits on
+status objects with timeouts, averages and spread-checks probe readings, and stops at safe points
+for pause and abort. The CLI and the terminal UI both drive this one implementation.
+
+Every finished measurement is committed to the run database before the next motion starts.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any, Callable, Generator
+
+import numpy as np
+
+from station.cell.config import CellConfig
+from station.cell.events import Event, MeasurementRecorded, Notice, StepStarted
+from station.cell.plan import approach_pose, check_joints, retract_offset, retracted
+from station.cell.devices import ProbeHead, RobotController
+from station.cell.runcontrol import RunControl
+from station.core.kinematics import scara_ik
+from station.core.transforms import invert, matrix_to_pose, pose_to_matrix
+
+
+# --- messages -------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Checkpoint:
+    """A safe point: the robot stands still; pause and abort take effect here."""
+
+
+@dataclass(frozen=True)
+class MoveJoints:
+    q: np.ndarray
+    why: str
+
+
+@dataclass(frozen=True)
+class MoveCartesian:
+    pose: np.ndarray  # (6,) base frame [mm, rad]
+    elbow: int
+    expected_q: np.ndarray  # nominal IK, checked against the soft limits before the move
+    why: str
+
+
+@dataclass(frozen=True)
+class Settle:
+    seconds: float
+
+
+@dataclass(frozen=True)
+class ReadProbes:
+    pass
+
+
+@dataclass(frozen=True)
+class ReadJoints:
+    pass
+
+
+@dataclass(frozen=True)
+class Reading:
+    """What one measurement produced."""
+
+    joints_commanded: np.ndarray
+    joints_read: np.ndarray | None
+    raw: bytes
+    readings_mm: np.ndarray | None
+    status: tuple | None
+    pose: np.ndarray | None  # (4,4) MPKS in MKKS
+    residual_um: float | None
+    ok: bool
+    message: str
+
+
+Procedure = Generator[Any, Any, Reading]
+
+
+# --- procedures -----------------------------------------------------------------------------
+
+def approach_and_read(cfg: CellConfig, q_target: np.ndarray, direction: int = 1,
+                      cartesian: tuple[np.ndarray, int] | None = None, cycle: int = 0) -> Procedure:
+    """Retract, approach ``q_target`` so that every joint arrives from the same side, settle,
+    read; re-centre (bounded) when a probe is near the end of its stroke or out of range.
+
+    ``cartesian``: ``(pose6_base, elbow)`` to make the final move a Cartesian one (corrected by
+    the controller's active table), as verification does. ``cycle`` (ISO 9283 repetitions)
+    varies the approach a little from cycle to cycle, from the same side, as a real path would.
+    """
+    from station.core.probe_geometry import PoseSolveError, default_probe_head, solve_pose
+
+    geom = default_probe_head(cube_edge_mm=cfg.cube_edge_mm)
+    M_nom = geom.nominal_contact_pose()
+    half = geom.stroke_mm / 2
+    r = retract_offset(cfg) * (1.0 + 0.1 * cycle)
+    raw = b""
+    q = np.asarray(q_target, dtype=float)
+    pose_cmd = None if cartesian is None else np.asarray(cartesian[0], dtype=float)
+    last: Reading | None = None
+    for attempt in range(cfg.plan.recenter_attempts + 1):
+        yield Checkpoint()
+        yield MoveJoints(None, "retract to travel height")
+        yield MoveJoints(approach_pose(cfg, q, direction, cycle), "approach")
+        if pose_cmd is None:
+            yield MoveJoints(q + r, "above the point")
+            yield MoveJoints(q, "touch")
+        else:
+            # Straight from the offset approach pose: the controller's corrected joints differ
+            # from q by the table's Δq, whose sign must not decide the direction of arrival.
+            yield MoveCartesian(pose_cmd, cartesian[1], q, "touch (Cartesian)")
+        yield Settle(cfg.plan.settle_s)
+        snap = yield ReadProbes()
+        q_read = yield ReadJoints()
+        raw += snap.raw
+        values = np.asarray(snap.values_mm, dtype=float)
+        status = tuple(str(s) for s in snap.status)
+        try:
+            sol = solve_pose(geom, values, noise_mm=cfg.plan.max_residual_um * 1e-3 / 3)
+        except PoseSolveError as exc:
+            last = Reading(q, q_read, raw, values, status, None, None, False,
+                           f"pose not solved: {exc}")
+            # Without a pose there is no safe re-centre direction: report and move on.
+            break
+        res_um = float(np.sqrt(np.mean(sol.residuals_mm**2)) * 1e3)
+        near = np.max(np.abs(values)) > half - cfg.plan.recenter_margin_mm
+        ok = res_um <= cfg.plan.max_residual_um
+        last = Reading(q, q_read, raw, values, status, sol.M, res_um, ok,
+                       "" if ok else f"plane residual {res_um:.1f} µm exceeds {cfg.plan.max_residual_um} µm")
+        if not near or attempt == cfg.plan.recenter_attempts:
+            if near:
+                last = Reading(q, q_read, raw, values, status, sol.M, res_um, ok,
+                               "probes near the end of their stroke after re-centring")
+            break
+        # Re-centre: the head frame must move by D = M_measured · M_nominal⁻¹ (SCARA: x, y, z, yaw).
+        D = matrix_to_pose(sol.M @ invert(M_nom))
+        D[3:5] = 0.0
+        T_new = _fk_base(cfg, q) @ pose_to_matrix(D)
+        q = scara_ik(cfg.model, T_new[None], 1 if q[1] > 0 else -1, setup=False, check_limits=False)[0]
+        if pose_cmd is not None:
+            pose_cmd = matrix_to_pose(T_new)
+    yield MoveJoints(None, "retract after reading")  # None: retract from where we stand
+    return last
+
+
+def _fk_base(cfg: CellConfig, q) -> np.ndarray:
+    from station.core.kinematics import forward
+
+    return forward(cfg.model, np.asarray(q)[None], setup=False)[0]
+
+
+# --- the runner -----------------------------------------------------------------------------
+
+class Runner:
+    """Executes procedures on real (or simulated) devices."""
+
+    def __init__(self, cfg: CellConfig, probe: ProbeHead, controller: RobotController,
+                 emit: Callable[[Event], None], control: RunControl | None = None,
+                 sleep: Callable[[float], None] = time.sleep):
+        self.cfg = cfg
+        self.probe = probe
+        self.controller = controller
+        self.emit = emit
+        self.control = control or RunControl()
+        self._sleep = sleep
+        self._last_q: np.ndarray | None = None
+        # Where the wall time goes: waiting for motions, settling, sampling the probes, and the
+        # rest (the station's own computation and bookkeeping). benchmarks/ reads this.
+        self.timing = {"motion": 0.0, "settle": 0.0, "sampling": 0.0}
+
+    def execute(self, proc: Procedure, index: int = 0) -> Reading:
+        """Run one procedure to its end and return its result."""
+        value = None
+        while True:
+            try:
+                msg = proc.send(value)
+            except StopIteration as stop:
+                return stop.value
+            value = self._do(msg, index)
+
+    def _do(self, msg, index: int):
+        cfg = self.cfg
+        if isinstance(msg, Checkpoint):
+            self.control.checkpoint(emit=self.emit, index=index)
+            return None
+        if isinstance(msg, ReadJoints):
+            q = np.asarray(self.controller.read_joints(), dtype=float)
+            self._last_q = q
+            return q
+        if isinstance(msg, MoveJoints):
+            q = msg.q
+            if q is None:  # retract: lift the quill to travel height from where the robot stands
+                q = retracted(cfg, np.asarray(self.controller.read_joints(), dtype=float))
+            q = np.asarray(q, dtype=float)
+            if self._last_q is not None and np.allclose(q, self._last_q, atol=1e-9, rtol=0):
+                return None
+            check_joints(cfg, q, msg.why)
+            t0 = time.perf_counter()
+            status = self.controller.move_joints(q, speed=cfg.plan.speed)
+            status.wait(timeout=cfg.devices.motion_timeout_s)
+            self.timing["motion"] += time.perf_counter() - t0
+            self._last_q = q
+            return None
+        if isinstance(msg, MoveCartesian):
+            check_joints(cfg, msg.expected_q, msg.why)
+            t0 = time.perf_counter()
+            status = self.controller.move_cartesian(msg.pose, elbow=msg.elbow, speed=cfg.plan.speed)
+            status.wait(timeout=cfg.devices.motion_timeout_s)
+            self.timing["motion"] += time.perf_counter() - t0
+            self._last_q = None
+            return None
+        if isinstance(msg, Settle):
+            if msg.seconds > 0:
+                t0 = time.perf_counter()
+                self._sleep(msg.seconds)
+                self.timing["settle"] += time.perf_counter() - t0
+            return None
+        if isinstance(msg, ReadProbes):
+            t0 = time.perf_counter()
+            snap = self.probe.read_averaged(cfg.plan.samples, cfg.plan.max_spread_um * 1e-3)
+            self.timing["sampling"] += time.perf_counter() - t0
+            return snap
+        raise TypeError(f"unknown runner message {msg!r}")
+
+    def measure_steps(self, db, run_id: int, steps: list[dict], kind_filter: set[str],
+                      total: int, make_proc: Callable[[dict], Procedure]) -> int:
+        """Measure every step of ``steps`` not yet in the database; each is committed before the
+        next motion. Returns the number measured now."""
+        done = db.completed_steps(run_id)
+        n = 0
+        for st in steps:
+            if st["kind"] not in kind_filter or st["index"] in done:
+                continue
+            label = f"{st['point_id']} elbow {st['elbow']:+d}" + (f" cycle {st['cycle'] + 1}" if st.get("cycle") else "")
+            self.emit(StepStarted(st["index"], total, f"{st['kind']}: {label}"))
+            reading = self.execute(make_proc(st), st["index"])
+            db.record_measurement(
+                run_id, st["index"], kind=st["kind"], point_id=st["point_id"], label=label,
+                joints_commanded=reading.joints_commanded, joints_read=reading.joints_read,
+                raw_frames=reading.raw, readings_mm=reading.readings_mm,
+                channel_status=reading.status, pose=reading.pose,
+                pose_residual_um=reading.residual_um, ok=reading.ok, message=reading.message)
+            self.emit(MeasurementRecorded(st["index"], total, label, reading.ok,
+                                          float("nan") if reading.residual_um is None else float(reading.residual_um), reading.message))
+            if not reading.ok:
+                self.emit(Notice("warning", f"{label}: {reading.message}"))
+            n += 1
+        return n

@@ -1,0 +1,189 @@
+"""Which parameters a measurement set can identify, and a minimal set to identify (brief §3).
+
+Procedure (chapter §2.4/§3.3):
+
+1. Assemble the σ-normalised identification Jacobian at the measurement poses.
+2. Columns with no effect at all are recognised as zero **before** any column scaling; scaling
+   first would blow round-off up into fake rank.
+3. Scale the remaining columns to unit norm (mm and rad become comparable) and take the SVD:
+   the rank, singular values and condition number follow.
+4. Choose a minimal set greedily in preference order (the user's ``prefer`` list, then the
+   order of a column-pivoted QR), adding a parameter only if it raises the rank. ``fix`` and
+   ``exclude`` keep parameters out (held at their current values).
+5. Every parameter left out is named with the chosen parameters it merges with.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+
+from station.errors import ConfigError
+from station.core.measurements import MeasurementSet, residuals_and_jacobian
+from station.core.model import RobotModel
+
+# Relative size below which a singular value counts as zero. Structural dependencies give
+# ~1e-15; the weakest genuinely identifiable SR 800 parameter sits near 1e-4.
+RANK_RTOL = 1e-9
+ZERO_COLUMN_RTOL = 1e-10
+GS_RTOL = 1e-7
+
+
+@dataclass(frozen=True)
+class Dependency:
+    """A parameter left out and the chosen parameters its effect merges into."""
+
+    name: str
+    merges_with: tuple[tuple[str, float], ...]  # (chosen name, coefficient)
+
+    def describe(self) -> str:
+        if not self.merges_with:
+            return f"{self.name}: no effect on these measurements"
+        terms = " ".join(f"{c:+.4g}·{n}" for n, c in self.merges_with)
+        return f"{self.name} ≡ {terms}"
+
+
+@dataclass(frozen=True)
+class Identifiability:
+    """Result of :func:`analyze`. Singular values are of the scaled candidate columns."""
+
+    param_names: tuple[str, ...]
+    candidates: tuple[str, ...]
+    zero_effect: tuple[str, ...]
+    held: tuple[str, ...]
+    rank: int
+    singular_values: np.ndarray
+    condition: float
+    chosen: tuple[str, ...]
+    chosen_singular_values: np.ndarray
+    chosen_condition: float
+    dependencies: tuple[Dependency, ...]
+
+    def chosen_indices(self) -> np.ndarray:
+        return np.array([self.param_names.index(n) for n in self.chosen], dtype=int)
+
+    def to_dict(self) -> dict:
+        return {
+            "rank": self.rank,
+            "n_parameters": len(self.param_names),
+            "condition": self.condition,
+            "chosen": list(self.chosen),
+            "chosen_condition": self.chosen_condition,
+            "singular_values": self.singular_values.tolist(),
+            "zero_effect": list(self.zero_effect),
+            "held": list(self.held),
+            "dependencies": [d.describe() for d in self.dependencies],
+        }
+
+
+STRUCTURAL_SNAP_RAD = np.deg2rad(5.0)
+
+
+def structural_params(model: RobotModel, params) -> np.ndarray:
+    """The design geometry behind ``params``: every angle within 5° of a multiple of 90° snapped
+    onto it. Identifiability is structural: a small identified tilt turns an exact dependency
+    (e.g. R.z ≡ K.z) into a near one that would pass a rank test as round-off-sized rank, so
+    the choice of parameters is made at the design point and the fit then starts from ``params``."""
+    p = np.array(params, dtype=float)
+    ang = model.is_angle()
+    snapped = np.round(p[ang] / (np.pi / 2)) * (np.pi / 2)
+    near = np.abs(p[ang] - snapped) < STRUCTURAL_SNAP_RAD
+    p[np.nonzero(ang)[0][near]] = snapped[near]
+    return p
+
+
+def weighted_jacobian(model: RobotModel, data: MeasurementSet, params=None) -> np.ndarray:
+    """The σ-normalised identification Jacobian ``(n_rows, n_params)``."""
+    p = model.nominal if params is None else params
+    _, J = residuals_and_jacobian(model, data, p)
+    return J / data.sigma[:, None]
+
+
+def _rank(Js: np.ndarray) -> tuple[int, np.ndarray]:
+    if Js.shape[1] == 0:
+        return 0, np.zeros(0)
+    s = np.linalg.svd(Js, compute_uv=False)
+    return int(np.sum(s > RANK_RTOL * s[0])) if s[0] > 0 else 0, s
+
+
+def analyze(model: RobotModel, data: MeasurementSet, params=None, prefer=(), fix=(), exclude=(),
+            describe: bool = True) -> Identifiability:
+    """Identifiability of ``model``'s parameters from ``data`` at ``params`` (default nominal).
+
+    ``describe=False`` skips naming the dependencies (a least-squares fit per parameter left
+    out), which identification does not need.
+    """
+    names = model.param_names
+    for n in (*prefer, *fix, *exclude):
+        model.param_index(n)
+    J = weighted_jacobian(model, data, params)
+    # Everything below depends only on inner products of columns, which the triangular factor
+    # R of J = QR keeps: work on the (P, P) factor instead of the (rows, P) Jacobian.
+    if J.shape[0] > J.shape[1]:
+        J = np.linalg.qr(J, mode="r")
+    norms = np.linalg.norm(J, axis=0)
+    zero = norms <= ZERO_COLUMN_RTOL * norms.max()
+    held = set(fix) | set(exclude)
+    cand = [i for i in range(len(names)) if not zero[i] and names[i] not in held]
+    Js = J[:, cand] / norms[cand]
+    rank, s = _rank(Js)
+    # Preference order: user's list first, then column-pivoted QR order (strongest first).
+    _, _, piv = scipy.linalg.qr(Js, mode="economic", pivoting=True)
+    qr_order = [cand[k] for k in piv]
+    pref = [model.param_index(n) for n in prefer if model.param_index(n) in cand]
+    order = pref + [i for i in qr_order if i not in pref]
+    # Greedy selection by incremental (twice re-orthogonalised) Gram-Schmidt: a candidate is
+    # taken when the part of its unit column outside the span of those taken is not round-off.
+    chosen: list[int] = []
+    basis = np.zeros((J.shape[0], 0))
+    for i in order:
+        v = J[:, i] / norms[i]
+        for _ in range(2):
+            v = v - basis @ (basis.T @ v)
+        nv = np.linalg.norm(v)
+        if nv > GS_RTOL:
+            chosen.append(i)
+            basis = np.column_stack([basis, v / nv])
+        if len(chosen) == rank:
+            break
+    chosen.sort()
+    Jc = J[:, chosen] / norms[chosen]
+    sc = np.linalg.svd(Jc, compute_uv=False)
+    deps = []
+    for i in range(len(names) if describe else 0):
+        if i in chosen:
+            continue
+        if zero[i]:
+            deps.append(Dependency(names[i], ()))
+            continue
+        # Solve on unit columns (mm and rad comparable), report in physical units.
+        cs, *_ = np.linalg.lstsq(Jc, J[:, i] / norms[i], rcond=None)
+        resid = np.linalg.norm(Jc @ cs - J[:, i] / norms[i])
+        if resid > 1e-6:
+            continue  # held by the user but not a combination: identifiable, just not chosen
+        coef = cs * norms[i] / norms[chosen]
+        terms = tuple((names[c], float(v)) for c, v, w in zip(chosen, coef, cs) if abs(w) > 1e-6)
+        deps.append(Dependency(names[i], terms))
+    cond = float(s[0] / s[rank - 1]) if rank else float("inf")
+    return Identifiability(
+        param_names=names,
+        candidates=tuple(names[i] for i in cand),
+        zero_effect=tuple(names[i] for i in np.nonzero(zero)[0]),
+        held=tuple(n for n in names if n in held),
+        rank=rank,
+        singular_values=s,
+        condition=cond,
+        chosen=tuple(names[i] for i in chosen),
+        chosen_singular_values=sc,
+        chosen_condition=float(sc[0] / sc[-1]) if len(sc) else float("inf"),
+        dependencies=tuple(deps),
+    )
+
+
+def require_parameters(model: RobotModel, names) -> list[int]:
+    """Indices of explicitly chosen parameters, with a clear error for unknown names."""
+    if not names:
+        raise ConfigError("an empty parameter set cannot be identified")
+    return model.param_indices(names)

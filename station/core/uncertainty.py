@@ -1,0 +1,166 @@
+"""Uncertainty of identified parameters and of the poses they predict (brief §6, chapter 7.4).
+
+* :func:`linear_uncertainty` — linear propagation by SVD of the σ-normalised Jacobian
+  (eq. 7.9–7.13): C' = U S Vᵀ, Σ_p = V S⁻² Vᵀ. Covers measurement noise only.
+* :func:`monte_carlo` — many synthetic data sets drawn from the input distributions (measurement
+  noise, robot repeatability in the joints, calibration-body geometry per measuring point), each
+  identified by Gauss–Newton; all data sets are solved together as one batched computation.
+* :func:`pose_accuracy` — Σ_pose = J_pose Σ_p J_poseᵀ at any joint configurations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from station.core.kinematics import forward, forward_with_jacobian
+from station.core.measurements import MeasurementSet, add_noise, model_outputs, residuals_and_jacobian
+from station.core.model import RobotModel
+from station.core.transforms import rotation_exp
+
+
+def _ro(a):
+    a = np.array(a, dtype=float)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True)
+class LinearUncertainty:
+    """``covariance``: ``(p, p)`` in [mm, rad]²; ``sigma``: ``(p,)``; ``correlation``: ``(p, p)``."""
+
+    names: tuple[str, ...]
+    sigma: np.ndarray
+    covariance: np.ndarray
+    correlation: np.ndarray
+    singular_values: np.ndarray
+    rank: int
+
+    def max_abs_correlation(self) -> float:
+        c = np.abs(self.correlation - np.eye(len(self.names)))
+        return float(c.max()) if c.size else 0.0
+
+
+def linear_uncertainty(Jw: np.ndarray, names: tuple[str, ...], rtol: float = 1e-12) -> LinearUncertainty:
+    """Parameter covariance from the σ-normalised Jacobian ``Jw`` ``(n_rows, p)``."""
+    U, s, Vt = np.linalg.svd(Jw, full_matrices=False)
+    rank = int(np.sum(s > rtol * s[0])) if s.size and s[0] > 0 else 0
+    with np.errstate(divide="ignore"):
+        inv_s2 = np.where(s > rtol * (s[0] if s.size else 1.0), 1.0 / s**2, np.inf)
+    cov = (Vt.T * inv_s2) @ Vt if rank == len(s) else np.full((len(s), len(s)), np.inf)
+    sig = np.sqrt(np.diag(cov))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(sig, sig)
+    return LinearUncertainty(tuple(names), _ro(sig), _ro(cov), _ro(corr), _ro(s), rank)
+
+
+@dataclass(frozen=True)
+class PoseAccuracy:
+    """Predicted σ of the tool pose: ``sigma`` ``(n, 6)`` [mm, rad] per axis x, y, z, rx, ry, rz,
+    ``covariance`` ``(n, 6, 6)`` with the correlations."""
+
+    joints: np.ndarray
+    sigma: np.ndarray
+    covariance: np.ndarray
+
+
+def pose_accuracy(model: RobotModel, params, chosen_index, covariance, joints, setup: bool = False) -> PoseAccuracy:
+    """Propagate the parameter covariance to the tool pose at ``joints`` ``(n, g)``.
+
+    ``setup=False`` (default) leaves out the set-up transform R: what a later user of the robot
+    gets in the robot base frame.
+    """
+    q = model.check_joints(joints)
+    res = forward_with_jacobian(model, q, params, setup=setup)
+    Jp = res.J[..., np.asarray(chosen_index)]
+    cov = Jp @ np.asarray(covariance) @ np.swapaxes(Jp, -1, -2)
+    return PoseAccuracy(_ro(q), _ro(np.sqrt(np.einsum("nii->ni", cov))), _ro(cov))
+
+
+@dataclass(frozen=True)
+class MonteCarloResult:
+    """``estimates``: ``(n_sets, p)`` identified values of the chosen parameters;
+    ``sigma``: ``(p,)`` their sample standard deviation; ``bias``: mean − truth."""
+
+    names: tuple[str, ...]
+    estimates: np.ndarray
+    sigma: np.ndarray
+    bias: np.ndarray
+    correlation: np.ndarray
+    iterations: int
+    n_failed: int
+
+
+def monte_carlo(model: RobotModel, data: MeasurementSet, true_params, chosen_index, n_sets: int,
+                rng: np.random.Generator, start=None, sigma_joints=None, point_ids=None,
+                sigma_point=None, max_iter: int = 12, tol: float = 1e-11) -> MonteCarloResult:
+    """Identify ``n_sets`` synthetic data sets like ``data`` drawn around ``true_params``.
+
+    Inputs drawn per data set: measurement noise of ``data.sigma``; robot repeatability as
+    Gaussian joint noise ``sigma_joints`` ``(g,)`` (the robot reports the commanded joints but
+    stands slightly elsewhere); calibration-body geometry as one pose error of σ
+    ``sigma_point`` ``(6,)`` per measuring point ``point_ids`` ``(n,)`` shared by all
+    measurements at that point (pose and position data). Every set is solved by Gauss–Newton
+    from ``start`` (default nominal), all sets at once.
+    """
+    idx = np.asarray(chosen_index, dtype=int)
+    p_true = np.asarray(true_params, dtype=float)
+    if sigma_joints is None:
+        exact = np.broadcast_to(model_outputs(model, data, p_true), (n_sets,) + data.measured.shape)
+    else:
+        q_act = data.joints + rng.standard_normal((n_sets,) + data.joints.shape) * np.asarray(sigma_joints)
+        exact = _outputs_at(model, data, p_true, q_act)
+    measured = add_noise(data, exact, rng)
+    if point_ids is not None and sigma_point is not None and data.kind in ("pose", "position"):
+        measured = _perturb_points(data.kind, measured, np.asarray(point_ids), np.asarray(sigma_point), rng)
+    p0 = np.array(model.nominal if start is None else start, dtype=float)
+    P = np.broadcast_to(p0, (n_sets, p0.size)).copy()
+    w = 1.0 / data.sigma
+    it = 0
+    for it in range(1, max_iter + 1):
+        r, J = residuals_and_jacobian(model, data, P, joints=data.joints, measured=measured)
+        J = J[..., idx] * w[:, None]
+        r = r * w
+        scale = np.linalg.norm(J, axis=-2, keepdims=True)
+        Js = J / scale
+        JT = np.swapaxes(Js, -1, -2)
+        dx = -np.linalg.solve(JT @ Js, (JT @ r[..., None]))[..., 0] / scale[..., 0, :]
+        P[:, idx] += dx
+        if np.max(np.abs(dx)) < tol:
+            break
+    est = P[:, idx]
+    ok = np.all(np.isfinite(est), axis=1)
+    est_ok = est[ok]
+    sig = est_ok.std(axis=0, ddof=1)
+    corr = np.corrcoef(est_ok, rowvar=False) if est_ok.shape[0] > 2 else np.eye(len(idx))
+    return MonteCarloResult(
+        names=tuple(model.param_names[i] for i in idx), estimates=_ro(est), sigma=_ro(sig),
+        bias=_ro(est_ok.mean(axis=0) - p_true[idx]), correlation=_ro(np.atleast_2d(corr)),
+        iterations=it, n_failed=int((~ok).sum()),
+    )
+
+
+def _outputs_at(model, data, p_true, q_act):
+    """Exact outputs of the robot ``p_true`` at the actual joints ``(n_sets, n, g)``."""
+    T = forward(model, q_act, p_true, setup=data.uses_setup)
+    if data.kind == "pose":
+        return T
+    p = T[..., :3, 3]
+    if data.kind == "position":
+        return p
+    return np.linalg.norm(p[..., data.pairs[:, 0], :] - p[..., data.pairs[:, 1], :], axis=-1)
+
+
+def _perturb_points(kind, measured, point_ids, sigma_point, rng):
+    n_sets = measured.shape[0]
+    ids, inv = np.unique(point_ids, return_inverse=True)
+    e = rng.standard_normal((n_sets, len(ids), 6)) * sigma_point
+    e = e[:, inv]
+    out = np.array(measured)
+    if kind == "pose":
+        out[..., :3, 3] += e[..., :3]
+        out[..., :3, :3] = rotation_exp(e[..., 3:]) @ out[..., :3, :3]
+    else:
+        out += e[..., :3]
+    return out
