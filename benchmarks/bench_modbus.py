@@ -10,7 +10,8 @@ import time
 
 import numpy as np
 
-from drivers.controller import CorrectionTableData, ModbusController, TableAxis
+from drivers.controller import ModbusController
+from drivers.correction_table import CorrectionTableData, TableAxis
 from simulators.controller_server import SimulatedController
 
 

@@ -19,11 +19,11 @@ from contextlib import ExitStack
 from pathlib import Path
 
 from simulators import start_simulated_cell
-from station.cell.pipeline import full_plan, _proc_for
-from station.ui.commands_cell import open_devices, simulated_config_text
 from station.cell.config import parse_text
+from station.cell.pipeline import _proc_for, full_plan
 from station.cell.rundb import RunDB
 from station.cell.runner import Runner
+from station.ui.commands_cell import open_devices, simulated_config_text
 
 
 def one_run(n_steps: int, settle: float) -> dict:

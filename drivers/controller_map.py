@@ -224,7 +224,7 @@ TABLE_HEADER_LAST = REG["table_crc"].end  # one past
 
 def _check_map() -> None:
     spans = sorted((r.address, r.end, r.name) for r in REGISTERS)
-    for (a0, e0, n0), (a1, _e1, n1) in zip(spans, spans[1:]):
+    for (_a0, e0, n0), (a1, _e1, n1) in zip(spans, spans[1:]):
         if a1 < e0:
             raise AssertionError(f"register map overlap: {n0} and {n1}")
     if spans[-1][1] > 65536:

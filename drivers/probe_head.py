@@ -98,7 +98,7 @@ class ProbeSnapshot:
 
     def require_ok(self) -> None:
         """Raise :class:`ProbeOutOfRange` naming every channel that is not OK."""
-        bad = {i: s for i, s in enumerate(self.status) if s is not ChannelStatus.OK}
+        bad: dict[int, ChannelStatus] = {i: s for i, s in enumerate(self.status) if s is not ChannelStatus.OK}
         if bad:
             raise ProbeOutOfRange(bad)
 
@@ -228,7 +228,7 @@ class ProbeHead:
     def read_channel(self, channel: int) -> tuple[float, ChannelStatus]:
         """One channel (0-based) -> ``(value_mm, status)``, NaN unless OK."""
         self._check_channel(channel)
-        (value, status), _, _ = self._transact("MS", lambda l: parse_ms(l, channel), channel)
+        (value, status), _, _ = self._transact("MS", lambda line: parse_ms(line, channel), channel)
         return value, status
 
     def read_averaged(self, n: int, max_spread_mm: float) -> ProbeSnapshot:
@@ -260,17 +260,17 @@ class ProbeHead:
     def zero(self, channel: int) -> None:
         """Make the channel's present reading 0.000 0 mm (never retried)."""
         self._check_channel(channel)
-        self._transact("ZS", lambda l: parse_ack(l, "ZS", channel), channel)
+        self._transact("ZS", lambda line: parse_ack(line, "ZS", channel), channel)
 
     def preset(self, channel: int, value_mm: float) -> None:
         """Make the channel's present reading ``value_mm`` (never retried)."""
         self._check_channel(channel)
-        self._transact("PS", lambda l: parse_ack(l, "PS", channel), channel, value_mm)
+        self._transact("PS", lambda line: parse_ack(line, "PS", channel), channel, value_mm)
 
     def clear_zero(self, channel: int) -> None:
         """Remove a zero or preset: the channel reads its raw value again (never retried)."""
         self._check_channel(channel)
-        self._transact("ZC", lambda l: parse_ack(l, "ZC", channel), channel)
+        self._transact("ZC", lambda line: parse_ack(line, "ZC", channel), channel)
 
     def _check_channel(self, channel: int) -> None:
         limit = self._channels

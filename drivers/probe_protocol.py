@@ -1,7 +1,7 @@
 """Probe-head serial protocol: the single source of truth for driver and simulator.
 
 The protocol is modelled on the Keyence DL-RS1A family (brief §9); the full frame-by-frame
-description is ``docs/protocol-probe-head.md``. In short:
+description is ``docs/protocols.md``, section "Probe-head serial protocol". In short:
 
 * ASCII. A request ends with CR (``\\r``) or CR LF; a reply always ends with CR LF.
 * Fields are separated by commas; the first field of a reply echoes the command name.
@@ -219,7 +219,7 @@ ERROR_CODES: dict[int, ErrorCode] = {
                   f"the unit accepts {', '.join(COMMANDS)}; check the driver and unit model",
                   False),
         ErrorCode(ERR_BAD_PARAMETER, "wrong number or format of parameters",
-                  "check the request frame against docs/protocol-probe-head.md", False),
+                  "check the request frame against docs/protocols.md (probe-head commands)", False),
         ErrorCode(ERR_OUT_OF_RANGE, "parameter out of range",
                   "preset values must be numbers within +-999.9999 mm", False),
         ErrorCode(ERR_NO_CHANNEL, "channel not present",
@@ -371,7 +371,7 @@ def parse_request(line: bytes) -> Request:
     params = parts[1:]
     if len(params) != len(spec.params):
         raise ProbeDeviceError(echo, ERR_BAD_PARAMETER)
-    args = []
+    args: list[int | float] = []
     for kind, field in zip(spec.params, params):
         if kind is Field.CHANNEL:
             if _CHANNEL_RE.fullmatch(field) is None:

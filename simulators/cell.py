@@ -24,14 +24,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from station.core.kinematics import forward
-from station.core.model import RobotModel, load_robot
+from station.core.model import RobotModel
 from station.core.transforms import invert, matrix_to_pose, pose_to_matrix, rotation_log
+from station.core.units import ARCMIN, ARCSEC
+from station.io.robot_files import load_robot
 
 __all__ = ["CellTruth", "CubeSpec", "CalibrationBody", "SimulatedCell", "DEFAULT_SETUP",
            "ARCMIN", "ARCSEC"]
 
-ARCMIN = np.pi / (180 * 60)
-ARCSEC = ARCMIN / 60
 #: Nominal pose of the robot base in the calibration-body frame: the robot stands 450 mm in -x
 #: (every corner well inside the 800 mm reach, away from the stretched-arm singularity)
 #: of the body origin and 170 mm below the plate surface, so every cube corner, with 20 mm of
@@ -176,13 +176,14 @@ class CalibrationBody:
                  corners: tuple[int, ...] = (0, 1, 2, 3), seed: int = 0,
                  position_sigma_mm: float = 0.002, angle_sigma_rad: float = 3 * ARCSEC) -> "CalibrationBody":
         rng = np.random.default_rng(seed + 7919)
-        nominal, labels = [], []
+        corner_list: list[np.ndarray] = []
+        labels: list[tuple[int, int]] = []
         for i, cube in enumerate(cubes):
             frames = cls.corner_frames(cube, cube_edge_mm)
             for k in corners:
-                nominal.append(frames[k])
+                corner_list.append(frames[k])
                 labels.append((i, k))
-        nominal = np.stack(nominal)
+        nominal = np.stack(corner_list)
         dev = np.concatenate([rng.normal(0, position_sigma_mm, (len(labels), 3)),
                               rng.normal(0, angle_sigma_rad, (len(labels), 3))], axis=1)
         true = nominal @ pose_to_matrix(dev)
@@ -283,15 +284,15 @@ class SimulatedCell:
         ``M_true`` (pose of MPKS in MKKS), or ``(None, None)``."""
         T_head = np.asarray(T_head, dtype=float)
         expected = T_head @ self._M_nominal  # where the head expects MPKS (world)
-        I = self.body.true
-        d = np.linalg.norm(I[:, :3, 3] - expected[:3, 3], axis=1)
+        frames = self.body.true
+        d = np.linalg.norm(frames[:, :3, 3] - expected[:3, 3], axis=1)
         j = int(np.argmin(d))
         if d[j] > self.capture_mm:
             return None, None
-        rel = expected[:3, :3].T @ I[j, :3, :3]
+        rel = expected[:3, :3].T @ frames[j, :3, :3]
         if np.linalg.norm(rotation_log(rel)) > self.capture_angle_rad:
             return None, None
-        return j, invert(T_head) @ I[j]
+        return j, invert(T_head) @ frames[j]
 
     def contact(self) -> tuple[int | None, np.ndarray | None]:
         return self.contact_for_head_pose(self.head_pose())
@@ -306,8 +307,8 @@ class SimulatedCell:
 
     def nominal_head_target(self, point: int, nominal_body: bool = True) -> np.ndarray:
         """World<-MKKS that puts the head at mid-stroke on measuring point ``point``."""
-        I = self.body.nominal if nominal_body else self.body.true
-        return I[point] @ invert(self._M_nominal)
+        frames = self.body.nominal if nominal_body else self.body.true
+        return frames[point] @ invert(self._M_nominal)
 
     def describe(self) -> dict:
         """Summary of the truth for reports (parameters as names -> error)."""

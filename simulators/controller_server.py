@@ -6,7 +6,8 @@ validates (soft limits, reachability, correction-table range), moves with a simp
 motion-time model scaled by ``time_scale`` (0 = instant), and reports done or error with the
 same sequence number. Cartesian moves use the controller's NOMINAL kinematics in the robot base
 frame (``station.core.kinematics.scara_ik``) plus the multilinear table correction
-(:meth:`drivers.controller.CorrectionTableData.interpolate`) when a table is active.
+(:meth:`drivers.correction_table.CorrectionTableData.interpolate`) when a table is active; the
+table area itself is :class:`simulators.controller_tables.TableSlots`.
 
 Faults are injected at run time through methods of :class:`SimulatedController` (thread-safe).
 
@@ -20,16 +21,14 @@ import contextlib
 import logging
 import threading
 import time
-import zlib
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 from pymodbus.constants import ExcCodes
 from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
-from drivers.controller import CorrectionTableData, TableError, TableRangeError
 from drivers.controller_map import (
     MAP_VERSION,
     MAX_JOINTS,
@@ -46,10 +45,13 @@ from drivers.controller_map import (
     encode_f32_array,
     register_span,
 )
-from station.errors import UnreachableError
+from drivers.correction_table import CorrectionTableData, TableRangeError
+from simulators.controller_tables import TableSlots
 from station.core.kinematics import forward, scara_ik
-from station.core.model import RobotModel, load_robot
+from station.core.model import RobotModel
 from station.core.transforms import matrix_to_pose, pose_to_matrix
+from station.errors import UnreachableError
+from station.io.robot_files import load_robot
 
 if TYPE_CHECKING:
     from simulators.cell import SimulatedCell
@@ -59,7 +61,6 @@ __all__ = ["SimulatedController", "ModbusFault"]
 log = logging.getLogger(__name__)
 
 _CMD_FIRST, _CMD_COUNT = register_span("cmd_code", "cmd_pose")
-_HDR_FIRST, _HDR_COUNT = register_span("table_format", "table_crc")
 _LATCHING = (ErrorCode.ESTOP, ErrorCode.DRIVE_FAULT, ErrorCode.WATCHDOG_TIMEOUT)
 
 
@@ -112,9 +113,7 @@ class SimulatedController:
         self._bits = StatusBit.READY | StatusBit.IN_POSITION
         self._last_seq = 0
         self._latched: ErrorCode | None = None
-        self._staged: CorrectionTableData | None = None
-        self._active: CorrectionTableData | None = None
-        self._previous: CorrectionTableData | None = None
+        self._tables = TableSlots()
         self._move_task: asyncio.Task | None = None
         self._stop_request = False
         self._hb_robot = 0
@@ -167,15 +166,10 @@ class SimulatedController:
         self._set("act_joints", q)
         T = forward(self.model, self._q[None], setup=False)[0]
         self._set("act_pose", matrix_to_pose(T))
-        bits = self._bits
-        bits = bits | StatusBit.TABLE_ACTIVE if self._active is not None else bits & ~StatusBit.TABLE_ACTIVE
-        bits = bits | StatusBit.TABLE_STAGED if self._staged is not None else bits & ~StatusBit.TABLE_STAGED
-        bits = (bits | StatusBit.TABLE_PREVIOUS if self._previous is not None
-                else bits & ~StatusBit.TABLE_PREVIOUS)
-        self._bits = StatusBit(bits)
+        self._bits = self._tables.status_bits(self._bits)
         self._set("status", int(self._bits))
-        for k, t in (("staged", self._staged), ("active", self._active), ("previous", self._previous)):
-            self._set(f"table_{k}_crc", 0 if t is None else t.crc32())
+        for k, crc in self._tables.crcs().items():
+            self._set(f"table_{k}_crc", crc)
 
     def _build_device(self) -> SimDevice:
         blocks = [SimData(r.address, count=r.n_registers, values=0, datatype=DataType.REGISTERS,
@@ -242,7 +236,9 @@ class SimulatedController:
         self._stop_event = asyncio.Event()
         self._server = ModbusTcpServer(self._build_device(), address=(self.host, self._port_req))
         await self._server.serve_forever(background=True)
-        self.port = int(self._server.transport.sockets[0].getsockname()[1])
+        # pymodbus annotates the transport as BaseTransport; a TCP listener's is the asyncio.Server
+        listener = cast(asyncio.Server, self._server.transport)
+        self.port = int(listener.sockets[0].getsockname()[1])
         program = asyncio.create_task(self._program())
         self._ready.set()
         await self._stop_event.wait()
@@ -327,7 +323,7 @@ class SimulatedController:
 
     @property
     def active_table(self) -> CorrectionTableData | None:
-        return self._active
+        return self._tables.active
 
     def register(self, name: str):
         with self._lock:
@@ -427,15 +423,10 @@ class SimulatedController:
             raise _Abort(ErrorCode.UNREACHABLE) from exc
         if not np.all(np.isfinite(q)):
             raise _Abort(ErrorCode.UNREACHABLE)
-        table = self._active
-        if table is not None:
-            cfg = 0 if (elbow == 1 or table.n_configs == 1) else 1
-            point = np.array([pose[0], pose[1], pose[2], pose[5]])[:len(table.axes)]
-            try:
-                q = q + table.interpolate(point, cfg)
-            except TableRangeError as exc:
-                raise _Abort(ErrorCode.TARGET_OUTSIDE_TABLE) from exc
-        return q
+        try:
+            return self._tables.correct(q, pose, elbow)
+        except TableRangeError as exc:
+            raise _Abort(ErrorCode.TARGET_OUTSIDE_TABLE) from exc
 
     def _error(self, seq: int, code: ErrorCode, joint: int = 0, bound: int = 0) -> None:
         with self._lock:
@@ -504,47 +495,11 @@ class SimulatedController:
             self._stop_request = False
 
     def _table_command(self, seq: int, cmd: Command) -> None:
-        if cmd is Command.TABLE_STAGE:
-            with self._lock:
-                header = self._regs[_HDR_FIRST:_HDR_FIRST + _HDR_COUNT]
-                try:
-                    h = CorrectionTableData.decode_header(header, self.word_order)
-                except TableError:
-                    code = ErrorCode.TABLE_SHAPE_INVALID
-                else:
-                    data = self._regs[TABLE_DATA_ADDRESS:TABLE_DATA_ADDRESS + 2 * h["n_values"]]
-                    vals = decode_f32_array(data, self.word_order)
-                    if h["n_joints"] != self.g or not np.all(np.isfinite(vals)):
-                        code = ErrorCode.TABLE_SHAPE_INVALID
-                    elif zlib.crc32(vals.astype(">f4").tobytes()) & 0xFFFFFFFF != h["crc"]:
-                        code = ErrorCode.TABLE_CRC_MISMATCH
-                    else:
-                        shape = (h["n_configs"], *[a.count for a in h["axes"]], h["n_joints"])
-                        self._staged = CorrectionTableData(h["axes"], vals.reshape(shape))
-                        self._publish_state()
-                        code = ErrorCode.NONE
-            if code is not ErrorCode.NONE:
-                return self._error(seq, code)
-            return self._done(seq)
         with self._lock:
-            if cmd is Command.TABLE_ACTIVATE:
-                if self._staged is None:
-                    code = ErrorCode.TABLE_NOT_STAGED
-                else:
-                    self._previous, self._active, self._staged = self._active, self._staged, None
-                    code = ErrorCode.NONE
-            elif cmd is Command.TABLE_DEACTIVATE:
-                if self._active is not None:
-                    self._previous, self._active = self._active, None
-                code = ErrorCode.NONE
-            elif cmd is Command.TABLE_ROLLBACK:
-                if self._previous is None:
-                    code = ErrorCode.NO_PREVIOUS_TABLE
-                else:
-                    self._previous, self._active = self._active, self._previous
-                    code = ErrorCode.NONE
+            if cmd is Command.TABLE_STAGE:
+                code = self._tables.stage(self._regs, self.word_order, self.g)
             else:
-                code = ErrorCode.BAD_COMMAND
+                code = self._tables.switch(cmd)
             self._publish_state()
         if code is not ErrorCode.NONE:
             return self._error(seq, code)

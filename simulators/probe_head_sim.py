@@ -401,7 +401,8 @@ class ProbeHeadTcpServer(ProbeHeadServer):
     def _wait_client(self) -> bool:
         if self._conn is not None:
             return True
-        ready, _, _ = select.select([self._listener, self._wake_r], [], [], 1.0)
+        watched: list[socket.socket | int] = [self._listener, self._wake_r]
+        ready, _, _ = select.select(watched, [], [], 1.0)
         if self._listener in ready:
             conn, _ = self._listener.accept()
             conn.setblocking(False)

@@ -14,12 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
-from station.errors import ConfigError
-from station.core.model import RobotModel, load_robot
+from station.core.model import RobotModel
 from station.core.transforms import pose_to_matrix
-
-DEG = math.pi / 180
-ARCSEC = DEG / 3600
+from station.core.units import ARCSEC, DEG
+from station.errors import ConfigError
+from station.io.robot_files import load_robot
 
 
 @dataclass(frozen=True)
@@ -79,7 +78,7 @@ class CorrectionConfig:
     max_interpolation_um: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # identity: it holds arrays, and caches key on it
 class CellConfig:
     """A validated cell configuration. ``body_points``: ``(n, 4, 4)`` KKS←MPKS nominal
     (CMM) poses, ``point_ids`` their names. ``model``: robot with the configured nominal set-up."""

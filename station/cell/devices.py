@@ -1,29 +1,42 @@
 """What the station needs from its devices: small structural interfaces (consumer-owned).
 
-Drivers and simulators satisfy these without inheriting from them (``typing.Protocol``), so a
-real cell swaps in for the simulated one without code changes.
+Drivers satisfy these without inheriting from them (``typing.Protocol``), so a real cell swaps
+in for the simulated one without code changes. Every device method the pipeline, the runner,
+``station check`` and the verified upload call is declared here; mypy checks the drivers
+against them where :mod:`station.cell.session` builds the devices, and a test checks them at run
+time against drivers connected to the simulators.
 """
 
 from __future__ import annotations
 
-from typing import Protocol, Sequence, runtime_checkable
+from collections.abc import Sequence
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
+
+from drivers.correction_table import CorrectionTableData
 
 
 @runtime_checkable
 class Snapshot(Protocol):
     """One (averaged) reading of every probe channel."""
 
-    values_mm: np.ndarray  # (n_channels,) mm, NaN where a channel is not valid
-    raw: bytes  # the frame(s) as received, kept in the run database
+    @property
+    def values_mm(self) -> np.ndarray: ...  # (n_channels,) mm, NaN where a channel is not valid
 
     @property
-    def status(self) -> Sequence: ...
+    def raw(self) -> bytes: ...  # the frame(s) as received, kept in the run database
+
+    @property
+    def status(self) -> Sequence[Any]: ...  # per channel: OK, out of range, …
 
 
 @runtime_checkable
 class ProbeHead(Protocol):
+    def identify(self) -> object: ...  # the interface unit's identification, for the record
+
+    def read_all(self) -> Snapshot: ...
+
     def read_averaged(self, n: int, max_spread_mm: float) -> Snapshot: ...
 
     def close(self) -> None: ...
@@ -40,32 +53,55 @@ class MotionStatus(Protocol):
 
 
 @runtime_checkable
-class RobotController(Protocol):
-    def move_joints(self, q: np.ndarray, speed: float = ...) -> MotionStatus: ...
+class ControllerState(Protocol):
+    """The controller's status word, as far as the station reads it."""
 
-    def move_cartesian(self, pose: np.ndarray, elbow: int = ..., speed: float = ...) -> MotionStatus: ...
+    @property
+    def table_active(self) -> bool: ...
+
+    @property
+    def table_staged(self) -> bool: ...
+
+
+@runtime_checkable
+class RobotController(Protocol):
+    def status(self) -> ControllerState: ...
+
+    def move_joints(self, q: Sequence[float] | np.ndarray, speed: float = ...) -> MotionStatus: ...
+
+    def move_cartesian(self, pose6: Sequence[float] | np.ndarray, elbow: int = ...,
+                       speed: float = ...) -> MotionStatus: ...
 
     def read_joints(self) -> np.ndarray: ...
 
     def soft_limits(self) -> np.ndarray: ...
 
-    def stop(self) -> None: ...
+    def stop(self, timeout: float | None = ...) -> None: ...
 
     def close(self) -> None: ...
 
 
 @runtime_checkable
 class TableController(Protocol):
-    """The correction-table side of a controller (verified upload, activate, roll back)."""
+    """The correction-table side of a controller: the verified upload and its roll back."""
 
-    def upload_table(self, table) -> None: ...
+    def status(self) -> ControllerState: ...
 
-    def read_table(self): ...
+    def upload_table(self, table: CorrectionTableData) -> None: ...
 
-    def stage_table(self) -> None: ...
+    def verify_table(self) -> CorrectionTableData: ...  # read back and compare; raises when it differs
 
-    def activate_table(self) -> None: ...
+    def stage_table(self, timeout: float | None = ...) -> None: ...
 
-    def deactivate_table(self) -> None: ...
+    def activate_table(self, timeout: float | None = ...) -> None: ...
 
-    def rollback_table(self) -> None: ...
+    def deactivate_table(self, timeout: float | None = ...) -> None: ...
+
+    def rollback_table(self, timeout: float | None = ...) -> None: ...
+
+    def table_crcs(self) -> dict[str, int]: ...
+
+
+@runtime_checkable
+class CellController(RobotController, TableController, Protocol):
+    """A controller that moves the robot and takes a correction table (what ``calibrate`` needs)."""

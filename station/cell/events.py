@@ -1,9 +1,11 @@
-"""Typed progress events of a calibration run, consumed alike by the CLI and the terminal UI."""
+"""Typed progress events of a run, consumed alike by the CLI and the terminal UI."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Literal
+
+from station.cell.summary import RunSummary
 
 Phase = Literal["connect", "plan", "measure", "identify", "correct", "upload", "verify", "done"]
 
@@ -61,12 +63,15 @@ class Resumed(Event):
 
 @dataclass(frozen=True)
 class RunFinished(Event):
-    outcome: str  # one of station.cell.pipeline.Outcome names
-    summary: dict = field(default_factory=dict)
+    """The pipeline ran to its end; ``summary.outcome`` says how well (success, target missed,
+    upload skipped)."""
+
+    summary: RunSummary
 
 
 @dataclass(frozen=True)
 class RunFailed(Event):
-    error_type: str
-    message: str
-    hint: str = ""
+    """An error stopped the run; ``summary.failure`` says what and what to do, everything
+    measured so far is in the run database."""
+
+    summary: RunSummary

@@ -12,14 +12,16 @@ Jacobian of the minimal parameter set).
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
 
 from station.cell.config import CellConfig
-from station.errors import ConfigError, UnreachableError
+from station.cell.steps import PlannedStep, StepKind
 from station.core.kinematics import scara_ik
 from station.core.transforms import invert
+from station.errors import ConfigError, UnreachableError
 
 
 @dataclass(frozen=True)
@@ -38,32 +40,31 @@ class Target:
         return f"{self.point_id} elbow {'+' if self.elbow > 0 else '-'}"
 
 
-@dataclass(frozen=True)
-class Step:
-    """A planned measurement. ``kind``: identification | reversal (approached from the other
-    side) | verification_before | verification_after | oracle. ``direction``: +1 normal approach."""
-
-    index: int
-    kind: str
-    target: Target
-    direction: int = 1
-    cycle: int = 0
-
-    def to_dict(self) -> dict:
-        return {"index": self.index, "kind": self.kind, "point": self.target.point,
-                "point_id": self.target.point_id, "elbow": self.target.elbow,
-                "direction": self.direction, "cycle": self.cycle,
-                "joints": self.target.joints.tolist()}
+def _step(index: int, kind: StepKind, t: Target, direction: int = 1, cycle: int = 0) -> PlannedStep:
+    return PlannedStep(index, kind, t.point, t.point_id, t.elbow, direction, cycle,
+                       tuple(float(v) for v in t.joints))
 
 
 @dataclass(frozen=True)
 class Plan:
-    identification: tuple[Step, ...]
-    verification: tuple[Target, ...]
-    rejected: tuple[tuple[str, int, str], ...]  # (point id, elbow, reason)
+    """``identification``: the identification (and reversal) steps, ordered for short travel;
+    ``verification``: the held-out targets; ``rejected``: (point id, elbow, reason) of every
+    candidate that cannot be measured within the limits."""
 
-    def to_list(self) -> list[dict]:
-        return [s.to_dict() for s in self.identification]
+    identification: tuple[PlannedStep, ...]
+    verification: tuple[Target, ...]
+    rejected: tuple[tuple[str, int, str], ...]
+
+    def run_steps(self, cycles: int, with_oracle: bool) -> tuple[PlannedStep, ...]:
+        """Every step of a run: identification, then verification before / after (/ with the
+        oracle's table) × ``cycles`` × held-out targets."""
+        steps = list(self.identification)
+        kinds = [StepKind.VERIFY_BEFORE, StepKind.VERIFY_AFTER] + ([StepKind.ORACLE] if with_oracle else [])
+        for kind in kinds:
+            for cycle in range(cycles):
+                for t in self.verification:
+                    steps.append(_step(len(steps), kind, t, 1, cycle))
+        return tuple(steps)
 
 
 def nominal_contact(cfg: CellConfig) -> np.ndarray:
@@ -91,16 +92,17 @@ def retract_offset(cfg: CellConfig) -> np.ndarray:
     return np.array([cfg.plan.clearance_mm if k == "prismatic" else 0.0 for k in cfg.model.joint_types])
 
 
-_TRAVEL: dict[int, tuple[CellConfig, np.ndarray]] = {}
+# Computed once per configuration object; weak keys, so a configuration's entry goes with it.
+_TRAVEL: weakref.WeakKeyDictionary[CellConfig, np.ndarray] = weakref.WeakKeyDictionary()
 
 
 def travel_joints(cfg: CellConfig) -> np.ndarray:
     """Per joint, the travel position of the prismatic joints (NaN for the others): the clearance
     above the highest measuring point, capped by the soft limit. Lateral moves happen only at
     this height, so the head never sweeps through a cube, wherever a crash left the robot."""
-    hit = _TRAVEL.get(id(cfg))
-    if hit is not None and hit[0] is cfg:  # the config is kept in the entry, so ids stay unique
-        return hit[1]
+    hit = _TRAVEL.get(cfg)
+    if hit is not None:
+        return hit
     heads = head_targets_world(cfg)
     q = joints_for(cfg, heads, cfg.plan.elbows[0])
     out = np.full(cfg.model.n_joints, np.nan)
@@ -108,7 +110,7 @@ def travel_joints(cfg: CellConfig) -> np.ndarray:
         if kind == "prismatic":
             out[j] = min(cfg.soft_limits[j, 1], float(q[:, j].max()) + cfg.plan.clearance_mm)
     out.setflags(write=False)
-    _TRAVEL[id(cfg)] = (cfg, out)
+    _TRAVEL[cfg] = out
     return out
 
 
@@ -177,12 +179,12 @@ def build_plan(cfg: CellConfig) -> Plan:
     if cfg.plan.select and cfg.plan.select < len(ident):
         ident = select_d_optimal(cfg, ident, cfg.plan.select)
     ident = order_by_travel(ident)
-    steps = []
+    steps: list[PlannedStep] = []
     for rep in range(cfg.plan.repeats):
         for t in (ident if rep % 2 == 0 else ident[::-1]):
-            steps.append(Step(len(steps), "identification", t, 1, cycle=rep))
+            steps.append(_step(len(steps), StepKind.IDENTIFICATION, t, 1, rep))
             if cfg.plan.both_directions:
-                steps.append(Step(len(steps), "reversal", t, -1, cycle=rep))
+                steps.append(_step(len(steps), StepKind.REVERSAL, t, -1, rep))
     return Plan(tuple(steps), verification, tuple(rejected))
 
 
@@ -225,6 +227,8 @@ def select_d_optimal(cfg: CellConfig, targets: list[Target], n: int) -> list[Tar
             sign, val = np.linalg.slogdet(info + J[i].T @ J[i])
             if sign > 0 and val > best_val:
                 best, best_val = i, val
+        if best is None:  # no candidate adds information: the rest cannot help either
+            break
         chosen.append(best)
         info = info + J[best].T @ J[best]
     return [targets[i] for i in sorted(chosen)]

@@ -11,16 +11,10 @@ from __future__ import annotations
 import threading
 from typing import Callable
 
-from station.errors import StationError
 from station.cell.events import Event, Paused, Resumed
+from station.errors import RunAborted
 
 __all__ = ["RunAborted", "RunControl"]
-
-
-class RunAborted(StationError):
-    """The operator aborted the run; the robot was stopped at a safe point. Re-run to continue."""
-
-    exit_code = 6
 
 
 class RunControl:

@@ -24,109 +24,45 @@ time; every public method holds an internal lock.
 
 from __future__ import annotations
 
-import csv
-import dataclasses
 import json
 import math
 import sqlite3
 import threading
 import tomllib
-from dataclasses import dataclass
-from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-from station.errors import StationError
+from station.cell.run_records import (  # re-exported: the database's records and errors
+    DuplicateMeasurementError,
+    EventRecord,
+    MeasurementRecord,
+    RunDatabaseError,
+    RunNotFoundError,
+    RunRecord,
+    SchemaVersionError,
+    _array_from_json,
+    _dumps,
+    _float_list,
+    _loads,
+    _required_array,
+    _station_version,
+    utc_now,
+)
+from station.cell.steps import MEASUREMENT_KINDS
+
+__all__ = ["RunDB", "RunRecord", "MeasurementRecord", "EventRecord", "RunDatabaseError", "SchemaVersionError",
+           "RunNotFoundError", "DuplicateMeasurementError", "RUN_STATUSES", "EVENT_LEVELS", "SCHEMA_VERSION",
+           "utc_now"]
 
 SCHEMA_VERSION = 1
 
 RUN_STATUSES = ("created", "measuring", "measured", "identified", "uploaded", "verified",
                 "failed", "aborted")
-MEASUREMENT_KINDS = ("identification", "verification_before", "verification_after", "reversal")
 EVENT_LEVELS = ("debug", "info", "warning", "error")
 
 _MISSING = object()
-
-
-# --------------------------------------------------------------------------------------- errors
-
-class RunDatabaseError(StationError):
-    """The run database cannot be opened or the requested operation is not consistent with it."""
-
-    exit_code = 5
-
-
-class SchemaVersionError(RunDatabaseError):
-    """The database file was written with a schema this station does not know."""
-
-
-class RunNotFoundError(RunDatabaseError, KeyError):
-    """No run with the requested id."""
-
-    def __str__(self) -> str:  # KeyError would repr() the message
-        return str(self.args[0]) if self.args else ""
-
-
-class DuplicateMeasurementError(RunDatabaseError):
-    """A measurement for this (run, step) is already stored."""
-
-
-# -------------------------------------------------------------------------------------- records
-
-@dataclass(frozen=True)
-class RunRecord:
-    """One run. ``plan`` is the measurement plan as stored (a tuple of step dicts)."""
-
-    id: int
-    created_utc: str
-    station_version: str
-    status: str
-    config_toml: str
-    plan: tuple
-    seed: int | None
-    note: str
-
-    @property
-    def n_steps(self) -> int:
-        return len(self.plan)
-
-
-@dataclass(frozen=True, eq=False)
-class MeasurementRecord:
-    """One stored measurement. Arrays are read-only float64 arrays; NaN marks a missing value.
-
-    ``eq=False``: records hold numpy arrays, so they compare by identity; compare fields instead.
-    The field names equal the keyword arguments of :meth:`RunDB.record_measurement`, so a record
-    can be written again with ``db.record_measurement(**dataclasses.asdict(rec))``.
-    """
-
-    run_id: int
-    step_index: int
-    kind: str
-    point_id: str
-    label: str
-    joints_commanded: np.ndarray          # (g,) rad | mm
-    joints_read: np.ndarray | None        # (g,) rad | mm, None when the controller gave none
-    raw_frames: bytes                     # probe frames exactly as received
-    readings_mm: np.ndarray | None        # (n_channels,) mm, NaN where a channel gave no value
-    channel_status: tuple | None          # one entry per channel, as the driver reported it
-    pose: np.ndarray | None               # (4, 4) measured pose of MPKS in MKKS, mm
-    pose_residual_um: float | None
-    ok: bool
-    message: str
-    t_utc: str
-
-
-@dataclass(frozen=True)
-class EventRecord:
-    """One entry of a run's audit trail."""
-
-    run_id: int
-    t_utc: str
-    level: str
-    message: str
 
 
 # --------------------------------------------------------------------------------------- schema
@@ -181,120 +117,6 @@ CREATE INDEX events_run ON events(run_id, id);
 """.format(statuses=", ".join(f"'{s}'" for s in RUN_STATUSES))
 
 _TABLES = {"schema_version", "runs", "measurements", "results", "events"}
-
-
-# ------------------------------------------------------------------------------------- helpers
-
-def utc_now() -> str:
-    """Current UTC time as ``YYYY-MM-DDTHH:MM:SS.ffffffZ``."""
-    return datetime.now(timezone.utc).strftime("%Y-%m-%dT%H:%M:%S.%fZ")
-
-
-def _station_version() -> str:
-    from importlib import metadata
-    try:
-        return metadata.version("calibration-station")
-    except metadata.PackageNotFoundError:
-        return "unknown"
-
-
-def _float_list(values: Any, what: str, ndim: int = 1) -> list | None:
-    """Array-like of numbers -> nested list of floats with NaN/±inf as None (JSON null)."""
-    if values is None:
-        return None
-    try:
-        a = np.asarray(values, dtype=float)
-    except (TypeError, ValueError) as e:
-        raise RunDatabaseError(f"{what}: not an array of numbers ({e}); pass a list or numpy "
-                               f"array of floats") from e
-    if a.ndim != ndim:
-        raise RunDatabaseError(f"{what}: expected a {ndim}-D array, got shape {a.shape}")
-    return _nan_to_none(a)
-
-
-def _nan_to_none(a: np.ndarray) -> list:
-    if a.ndim == 1:
-        return [float(v) if math.isfinite(v) else None for v in a.tolist()]
-    return [_nan_to_none(row) for row in a]
-
-
-def _array_from_json(text: str | None, ndim: int = 1) -> np.ndarray | None:
-    if text is None:
-        return None
-    data = json.loads(text)
-    if ndim == 1:
-        a = np.array([np.nan if v is None else v for v in data], dtype=float)
-    else:
-        a = np.array([[np.nan if v is None else v for v in row] for row in data], dtype=float)
-    a.setflags(write=False)
-    return a
-
-
-_FLOAT_TAG = "__float__"
-_NONFINITE = {"nan": math.nan, "inf": math.inf, "-inf": -math.inf}
-
-
-def _to_json_value(obj: Any, where: str = "value") -> Any:
-    """Python/numpy object -> JSON-able object; non-finite floats become ``{"__float__": "nan"}``."""
-    if obj is None or isinstance(obj, (bool, str)):
-        return obj
-    if isinstance(obj, (np.bool_,)):
-        return bool(obj)
-    if isinstance(obj, (int, np.integer)):
-        return int(obj)
-    if isinstance(obj, (float, np.floating)):
-        f = float(obj)
-        if math.isfinite(f):
-            return f
-        return {_FLOAT_TAG: "nan" if math.isnan(f) else ("inf" if f > 0 else "-inf")}
-    if isinstance(obj, np.ndarray):
-        if obj.dtype.kind not in "biuf":
-            raise RunDatabaseError(f"{where}: numpy array of dtype {obj.dtype} cannot be stored; "
-                                   f"convert it to numbers or a list of strings")
-        return _to_json_value(obj.tolist(), where)
-    if isinstance(obj, dict):
-        out = {}
-        for k, v in obj.items():
-            if not isinstance(k, str):
-                raise RunDatabaseError(f"{where}: dict key {k!r} is not a string; JSON objects "
-                                       f"need string keys, convert it with str()")
-            if k == _FLOAT_TAG:
-                raise RunDatabaseError(f"{where}: the key {_FLOAT_TAG!r} is reserved for "
-                                       f"non-finite floats; rename it")
-            out[k] = _to_json_value(v, f"{where}[{k!r}]")
-        return out
-    if isinstance(obj, (list, tuple)):
-        return [_to_json_value(v, f"{where}[{i}]") for i, v in enumerate(obj)]
-    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        return _to_json_value({f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)},
-                              where)
-    raise RunDatabaseError(f"{where}: a {type(obj).__name__} cannot be stored as JSON; convert it "
-                           f"to dicts, lists, numbers, strings or numpy arrays first")
-
-
-def _from_json_value(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        if len(obj) == 1 and _FLOAT_TAG in obj:
-            return _NONFINITE[obj[_FLOAT_TAG]]
-        return {k: _from_json_value(v) for k, v in obj.items()}
-    if isinstance(obj, list):
-        return [_from_json_value(v) for v in obj]
-    return obj
-
-
-def _dumps(obj: Any, where: str) -> str:
-    return json.dumps(_to_json_value(obj, where), allow_nan=False, separators=(",", ":"))
-
-
-def _loads(text: str) -> Any:
-    return _from_json_value(json.loads(text))
-
-
-def _num(v: float | None) -> str:
-    """CSV cell: shortest repr that round-trips; '' for missing, 'nan'/'inf' for non-finite."""
-    if v is None:
-        return ""
-    return repr(float(v))
 
 
 # --------------------------------------------------------------------------------------- the DB
@@ -451,14 +273,16 @@ class RunDB:
                                    f"the file may be damaged, keep it and restore a backup") from e
         return curs
 
-    def _require_run(self, run_id: int) -> sqlite3.Row | tuple:
+    def _require_run(self, run_id: int) -> tuple[Any, ...]:
         row = self._c().execute(
             "SELECT id, created_utc, station_version, status, config_toml, plan_json, seed, note "
             "FROM runs WHERE id = ?", (int(run_id),)).fetchone()
         if row is None:
-            raise RunNotFoundError(f"{self.path}: no run {run_id}; list the runs with "
-                                   f"'station runs' (RunDB.runs())")
-        return row
+            latest = self._c().execute("SELECT MAX(id) FROM runs").fetchone()[0]
+            have = f"its runs are 1..{latest}" if latest else "it holds no runs yet"
+            raise RunNotFoundError(f"{self.path}: no run {run_id} ({have}); check the run number "
+                                   f"and the --db file")
+        return tuple(row)
 
     @staticmethod
     def _run_from_row(row: tuple) -> RunRecord:
@@ -483,22 +307,25 @@ class RunDB:
         if isinstance(plan, (str, bytes)) or not all(isinstance(s, dict) for s in plan):
             raise RunDatabaseError("plan must be a list of step dicts (one per measurement)")
         plan_json = _dumps(list(plan), "plan")
+        seed_text = None
         if seed is not None:
             if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
                 raise RunDatabaseError(f"seed must be an integer or None, not {seed!r}")
-            seed = str(int(seed))
+            seed_text = str(int(seed))  # as text: SQLite integers stop at 2**63
         version = _station_version() if station_version is None else str(station_version)
         now = utc_now()
         with self._lock:
             cur, _ = self._write([
                 ("INSERT INTO runs(created_utc, station_version, status, config_toml, plan_json, "
                  "seed, note) VALUES (?, ?, 'created', ?, ?, ?, ?)",
-                 (now, version, config_toml, plan_json, seed, str(note))),
+                 (now, version, config_toml, plan_json, seed_text, str(note))),
                 ("INSERT INTO events(run_id, t_utc, level, message) VALUES "
                  "(last_insert_rowid(), ?, 'info', ?)",
                  (now, f"run created: {len(plan)} planned steps, station {version}")),
             ])
-            return int(cur.lastrowid)
+            rowid = cur.lastrowid
+            assert rowid is not None  # an INSERT always sets it
+            return int(rowid)
 
     def run(self, run_id: int) -> RunRecord:
         with self._lock:
@@ -593,7 +420,7 @@ class RunDB:
                       "joints_commanded, joints_read, raw_frames, readings_mm, channel_status, "
                       "pose, pose_residual_um, ok, message, t_utc) "
                       "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)", row)
-            stmts = [insert]
+            stmts: list[tuple[str, tuple[Any, ...]]] = [insert]
             if replace:  # delete, log only if something was deleted, insert: one transaction
                 stmts = [("DELETE FROM measurements WHERE run_id = ? AND step_index = ?",
                           (int(run_id), step_index)),
@@ -618,7 +445,7 @@ class RunDB:
         (run_id, step, kind, point_id, label, jc, jr, raw, rd, cs, pose, res, ok, msg, t) = r
         return MeasurementRecord(
             run_id=run_id, step_index=step, kind=kind, point_id=point_id, label=label,
-            joints_commanded=_array_from_json(jc), joints_read=_array_from_json(jr),
+            joints_commanded=_required_array(jc), joints_read=_array_from_json(jr),
             raw_frames=bytes(raw), readings_mm=_array_from_json(rd),
             channel_status=None if cs is None else tuple(_loads(cs)),
             pose=_array_from_json(pose, ndim=2),
@@ -714,74 +541,8 @@ class RunDB:
 
     # -- export --------------------------------------------------------------------------------
 
-    def export_csv(self, run_id: int, path: str | Path,
-                   joint_units: Sequence[str] | None = None) -> Path:
-        """Write one CSV row per measurement (docs/run-database.md, "Export").
+    def export_csv(self, run_id: int, path: str | Path, joint_units: Sequence[str] | None = None) -> Path:
+        """Write one CSV row per measurement (:func:`station.cell.run_export.export_csv`)."""
+        from station.cell.run_export import export_csv
 
-        ``joint_units`` ('rad' or 'mm' per joint) labels the joint columns; by default it is
-        taken from the joint types in the run's configuration snapshot (``joint = "revolute" |
-        "prismatic"`` entries), and joints of unknown type are labelled ``rad|mm``.
-        """
-        from station.core.transforms import matrix_to_pose
-
-        run = self.run(run_id)
-        ms = self.measurements(run_id)
-        n_q = max((len(m.joints_commanded) for m in ms), default=0)
-        n_q = max([n_q] + [len(m.joints_read) for m in ms if m.joints_read is not None])
-        n_p = max((len(m.readings_mm) for m in ms if m.readings_mm is not None), default=0)
-        units = list(joint_units) if joint_units is not None else _joint_units(run.config_toml)
-        units = (units + ["rad|mm"] * n_q)[:n_q]
-        header = (["step", "kind", "point_id", "label", "t_utc"]
-                  + [f"q{i + 1} [{u}]" for i, u in enumerate(units)]
-                  + [f"q{i + 1}_cmd [{u}]" for i, u in enumerate(units)]
-                  + ["x [mm]", "y [mm]", "z [mm]", "roll [rad]", "pitch [rad]", "yaw [rad]",
-                     "residual [um]"]
-                  + [f"p{i + 1} [mm]" for i in range(n_p)]
-                  + ["status", "ok", "message"])
-
-        def cells(a: np.ndarray | None, n: int) -> list[str]:
-            vals = [] if a is None else [_num(v) for v in a]
-            return (vals + [""] * n)[:n]
-
-        out = Path(path)
-        try:
-            with open(out, "w", newline="", encoding="utf-8") as f:
-                w = csv.writer(f)
-                w.writerow(header)
-                for m in ms:
-                    pose = None if m.pose is None else matrix_to_pose(m.pose)
-                    status = "" if m.channel_status is None else ";".join(
-                        str(s) for s in m.channel_status)
-                    w.writerow([m.step_index, m.kind, m.point_id, m.label, m.t_utc]
-                               + cells(m.joints_read, n_q) + cells(m.joints_commanded, n_q)
-                               + cells(pose, 6) + [_num(m.pose_residual_um)]
-                               + cells(m.readings_mm, n_p)
-                               + [status, int(m.ok), m.message])
-        except OSError as e:
-            raise RunDatabaseError(f"{out}: cannot write the CSV export ({e}); check the folder "
-                                   f"and its permissions") from e
-        return out
-
-
-def _joint_units(config_toml: str) -> list[str]:
-    """'rad'/'mm' per joint from ``joint = "revolute"|"prismatic"`` tables in the config."""
-    try:
-        cfg = tomllib.loads(config_toml)
-    except tomllib.TOMLDecodeError:
-        return []
-    found: list[list[str]] = []
-
-    def walk(obj: Any) -> None:
-        if isinstance(obj, dict):
-            for v in obj.values():
-                walk(v)
-        elif isinstance(obj, list):
-            types = [t.get("joint") for t in obj if isinstance(t, dict)]
-            joints = [t for t in types if t in ("revolute", "prismatic")]
-            if joints:
-                found.append(["rad" if t == "revolute" else "mm" for t in joints])
-            for v in obj:
-                walk(v)
-
-    walk(cfg)
-    return found[0] if len(found) == 1 else []
+        return export_csv(self, run_id, path, joint_units)

@@ -12,19 +12,21 @@ Every finished measurement is committed to the run database before the next moti
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Collection, Generator, Sequence
 from dataclasses import dataclass
-from typing import Any, Callable, Generator
+from typing import Any
 
 import numpy as np
 
 from station.cell.config import CellConfig
+from station.cell.devices import CellController, ProbeHead
 from station.cell.events import Event, MeasurementRecorded, Notice, StepStarted
 from station.cell.plan import approach_pose, check_joints, retract_offset, retracted
-from station.cell.devices import ProbeHead, RobotController
 from station.cell.runcontrol import RunControl
+from station.cell.rundb import RunDB
+from station.cell.steps import PlannedStep, StepKind
 from station.core.kinematics import scara_ik
 from station.core.transforms import invert, matrix_to_pose, pose_to_matrix
-
 
 # --- messages -------------------------------------------------------------------------------
 
@@ -35,7 +37,7 @@ class Checkpoint:
 
 @dataclass(frozen=True)
 class MoveJoints:
-    q: np.ndarray
+    q: np.ndarray | None  # None: retract to travel height from where the robot stands
     why: str
 
 
@@ -105,7 +107,7 @@ def approach_and_read(cfg: CellConfig, q_target: np.ndarray, direction: int = 1,
         yield Checkpoint()
         yield MoveJoints(None, "retract to travel height")
         yield MoveJoints(approach_pose(cfg, q, direction, cycle), "approach")
-        if pose_cmd is None:
+        if pose_cmd is None or cartesian is None:
             yield MoveJoints(q + r, "above the point")
             yield MoveJoints(q, "touch")
         else:
@@ -143,6 +145,7 @@ def approach_and_read(cfg: CellConfig, q_target: np.ndarray, direction: int = 1,
         if pose_cmd is not None:
             pose_cmd = matrix_to_pose(T_new)
     yield MoveJoints(None, "retract after reading")  # None: retract from where we stand
+    assert last is not None  # the loop runs at least once and sets it on every path
     return last
 
 
@@ -157,7 +160,7 @@ def _fk_base(cfg: CellConfig, q) -> np.ndarray:
 class Runner:
     """Executes procedures on real (or simulated) devices."""
 
-    def __init__(self, cfg: CellConfig, probe: ProbeHead, controller: RobotController,
+    def __init__(self, cfg: CellConfig, probe: ProbeHead, controller: CellController,
                  emit: Callable[[Event], None], control: RunControl | None = None,
                  sleep: Callable[[float], None] = time.sleep):
         self.cfg = cfg
@@ -191,10 +194,10 @@ class Runner:
             self._last_q = q
             return q
         if isinstance(msg, MoveJoints):
-            q = msg.q
-            if q is None:  # retract: lift the quill to travel height from where the robot stands
+            if msg.q is None:  # retract: lift the quill to travel height from where the robot stands
                 q = retracted(cfg, np.asarray(self.controller.read_joints(), dtype=float))
-            q = np.asarray(q, dtype=float)
+            else:
+                q = np.asarray(msg.q, dtype=float)
             if self._last_q is not None and np.allclose(q, self._last_q, atol=1e-9, rtol=0):
                 return None
             check_joints(cfg, q, msg.why)
@@ -225,26 +228,26 @@ class Runner:
             return snap
         raise TypeError(f"unknown runner message {msg!r}")
 
-    def measure_steps(self, db, run_id: int, steps: list[dict], kind_filter: set[str],
-                      total: int, make_proc: Callable[[dict], Procedure]) -> int:
-        """Measure every step of ``steps`` not yet in the database; each is committed before the
-        next motion. Returns the number measured now."""
+    def measure_steps(self, db: RunDB, run_id: int, steps: Sequence[PlannedStep], kinds: Collection[StepKind],
+                      total: int, make_proc: Callable[[PlannedStep], Procedure]) -> int:
+        """Measure every step of ``steps`` of the given kinds that is not yet in the database;
+        each is committed before the next motion. Returns the number measured now."""
         done = db.completed_steps(run_id)
         n = 0
         for st in steps:
-            if st["kind"] not in kind_filter or st["index"] in done:
+            if st.kind not in kinds or st.index in done:
                 continue
-            label = f"{st['point_id']} elbow {st['elbow']:+d}" + (f" cycle {st['cycle'] + 1}" if st.get("cycle") else "")
-            self.emit(StepStarted(st["index"], total, f"{st['kind']}: {label}"))
-            reading = self.execute(make_proc(st), st["index"])
+            label = st.label
+            self.emit(StepStarted(st.index, total, f"{st.kind.caption}: {label}"))
+            reading = self.execute(make_proc(st), st.index)
             db.record_measurement(
-                run_id, st["index"], kind=st["kind"], point_id=st["point_id"], label=label,
+                run_id, st.index, kind=st.kind.value, point_id=st.point_id, label=label,
                 joints_commanded=reading.joints_commanded, joints_read=reading.joints_read,
                 raw_frames=reading.raw, readings_mm=reading.readings_mm,
                 channel_status=reading.status, pose=reading.pose,
                 pose_residual_um=reading.residual_um, ok=reading.ok, message=reading.message)
-            self.emit(MeasurementRecorded(st["index"], total, label, reading.ok,
-                                          float("nan") if reading.residual_um is None else float(reading.residual_um), reading.message))
+            residual = float("nan") if reading.residual_um is None else float(reading.residual_um)
+            self.emit(MeasurementRecorded(st.index, total, label, reading.ok, residual, reading.message))
             if not reading.ok:
                 self.emit(Notice("warning", f"{label}: {reading.message}"))
             n += 1

@@ -20,9 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from station.errors import ConfigError
 from station.core.measurements import MeasurementSet, residuals_and_jacobian
 from station.core.model import RobotModel
+from station.errors import ConfigError
 
 # Relative size below which a singular value counts as zero. Structural dependencies give
 # ~1e-15; the weakest genuinely identifiable SR 800 parameter sits near 1e-4.
@@ -122,7 +122,7 @@ def analyze(model: RobotModel, data: MeasurementSet, params=None, prefer=(), fix
     # Everything below depends only on inner products of columns, which the triangular factor
     # R of J = QR keeps: work on the (P, P) factor instead of the (rows, P) Jacobian.
     if J.shape[0] > J.shape[1]:
-        J = np.linalg.qr(J, mode="r")
+        J = np.linalg.qr(J, mode="r")  # type: ignore[assignment]  # numpy stubs: mode="r" returns R alone, not QRResult
     norms = np.linalg.norm(J, axis=0)
     zero = norms <= ZERO_COLUMN_RTOL * norms.max()
     held = set(fix) | set(exclude)

@@ -16,11 +16,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from station.errors import IdentificationError
 from station.core.identifiability import Identifiability, analyze, structural_params
 from station.core.measurements import MeasurementSet, residuals_and_jacobian
 from station.core.model import RobotModel
 from station.core.uncertainty import LinearUncertainty, linear_uncertainty
+from station.errors import IdentificationError
 
 OUTLIER_SIGMAS = 4.0
 

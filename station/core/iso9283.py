@@ -1,5 +1,4 @@
-"""Verification figures (brief §8): ISO 9283 pose accuracy and repeatability, before/after
-summaries, and formatting of µm and arc seconds. Pure functions; inputs in mm and rad.
+"""ISO 9283 pose accuracy and repeatability (brief §8). Pure functions; inputs in mm and rad.
 
 ISO 9283 (pose characteristics), for one commanded pose visited ``n`` times:
 
@@ -14,22 +13,15 @@ ISO 9283 (pose characteristics), for one commanded pose visited ``n`` times:
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from station.core.units import ARCSEC, wrap_angle
 from station.errors import ConfigError
 
-__all__ = ["PoseStats", "iso9283_pose", "verification_summary", "format_um", "format_arcsec",
-           "ARCSEC"]
+__all__ = ["PoseStats", "iso9283_pose"]
 
-ARCSEC = math.pi / (180.0 * 3600.0)
-
-
-def _wrap(a: np.ndarray) -> np.ndarray:
-    w = np.mod(a + math.pi, 2 * math.pi) - math.pi
-    return np.where(w <= -math.pi, w + 2 * math.pi, w)
 
 
 @dataclass(frozen=True)
@@ -84,9 +76,9 @@ def iso9283_pose(commanded, attained, commanded_orientation=None,
         raise ConfigError("positions contain NaN or infinity")
     bary = X.mean(axis=0)
     ap = bary - c
-    l = np.linalg.norm(X - bary, axis=1)
-    l_mean = float(l.mean())
-    s_l = float(np.std(l, ddof=1))
+    dist = np.linalg.norm(X - bary, axis=1)
+    l_mean = float(dist.mean())
+    s_l = float(np.std(dist, ddof=1))
     ori: dict = {}
     if (commanded_orientation is None) != (attained_orientations is None):
         raise ConfigError("give both the commanded and the attained orientations, or neither")
@@ -95,7 +87,7 @@ def iso9283_pose(commanded, attained, commanded_orientation=None,
         A = np.asarray(attained_orientations, dtype=float)
         if co.shape != (3,) or A.shape != (n, 3):
             raise ConfigError(f"orientations must have shapes (3,) and ({n}, 3), got {co.shape}, {A.shape}")
-        d = _wrap(A - co)
+        d = wrap_angle(A - co)
         mean = d.mean(axis=0)
         s = np.std(d, axis=0, ddof=1)
         ori = dict(APa=float(mean[0]), APb=float(mean[1]), APc=float(mean[2]),
@@ -103,39 +95,3 @@ def iso9283_pose(commanded, attained, commanded_orientation=None,
     bary.setflags(write=False)
     return PoseStats(n, bary, float(np.linalg.norm(ap)), float(ap[0]), float(ap[1]), float(ap[2]),
                      l_mean + 3 * s_l, l_mean, s_l, **ori)
-
-
-def verification_summary(errors_before, errors_after) -> dict:
-    """Position errors ``(n, 3)`` [mm] (attained − commanded) of the verification poses before and
-    after the correction -> RMS, max and mean of |error| [µm] and the improvement ratios
-    (before / after; ``inf`` when after is zero)."""
-    out: dict = {}
-    for name, e in (("before", errors_before), ("after", errors_after)):
-        E = np.asarray(e, dtype=float)
-        if E.ndim != 2 or E.shape[1] != 3 or E.shape[0] == 0:
-            raise ConfigError(f"errors_{name} must have shape (n, 3) with n ≥ 1, got {E.shape}")
-        if not np.all(np.isfinite(E)):
-            raise ConfigError(f"errors_{name} contain NaN or infinity")
-        d = np.linalg.norm(E, axis=1) * 1e3
-        out[f"n_{name}"] = int(d.size)
-        out[f"rms_{name}_um"] = float(np.sqrt(np.mean(d**2)))
-        out[f"max_{name}_um"] = float(d.max())
-        out[f"mean_{name}_um"] = float(d.mean())
-        out[f"rms_xyz_{name}_um"] = [float(v) for v in np.sqrt(np.mean((E * 1e3) ** 2, axis=0))]
-
-    def ratio(a: float, b: float) -> float:
-        return math.inf if b == 0 else a / b
-
-    out["improvement_rms"] = ratio(out["rms_before_um"], out["rms_after_um"])
-    out["improvement_max"] = ratio(out["max_before_um"], out["max_after_um"])
-    return out
-
-
-def format_um(mm: float, digits: int = 1) -> str:
-    """A length given in mm as µm text, e.g. ``format_um(0.0123) == '12.3 µm'``."""
-    return f"{mm * 1e3:.{digits}f} µm"
-
-
-def format_arcsec(rad: float, digits: int = 1) -> str:
-    """An angle given in rad as arc seconds, e.g. ``'4.2″'``."""
-    return f"{rad / ARCSEC:.{digits}f}″"

@@ -15,9 +15,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from station.errors import UnreachableError
 from station.core.model import RobotModel
 from station.core.transforms import invert, matrix_to_pose, pose_error, pose_to_matrix, rot_y, rot_z
+from station.core.units import wrap_angle
+from station.errors import UnreachableError
 
 __all__ = [
     "forward",
@@ -140,14 +141,6 @@ def joint_jacobian(model: RobotModel, joints, params=None, setup: bool = True) -
 
 # --- inverse kinematics -------------------------------------------------------------------
 
-def _is_scara(model: RobotModel) -> bool:
-    return model.joint_types == ("revolute", "revolute", "prismatic", "revolute")
-
-
-def _wrap(a: np.ndarray) -> np.ndarray:
-    return (a + np.pi) % (2 * np.pi) - np.pi
-
-
 def scara_ik(model: RobotModel, T_target, elbow: int = 1, params=None, setup: bool = False,
              tol: float = 1e-10, max_iter: int = 20, check_limits: bool = True) -> np.ndarray:
     """Joint values ``(n, 4)`` that put the tool at ``T_target`` ``(n, 4, 4)`` (x, y, z, yaw).
@@ -158,7 +151,7 @@ def scara_ik(model: RobotModel, T_target, elbow: int = 1, params=None, setup: bo
     reachable by a SCARA and are ignored. Raises :class:`UnreachableError` for targets outside
     the reach or the joint limits.
     """
-    if not _is_scara(model):
+    if not model.is_scara:
         raise ValueError(f"robot {model.name!r} is not a SCARA (R R P R); use inverse_kinematics")
     if elbow not in (1, -1):
         raise ValueError("elbow must be +1 or -1")
@@ -188,9 +181,9 @@ def scara_ik(model: RobotModel, T_target, elbow: int = 1, params=None, setup: bo
         )
     beta = elbow * np.arccos(c_beta)
     alpha = np.arctan2(wy, wx) - np.arctan2(L2 * np.sin(beta), L1 + L2 * np.cos(beta))
-    q1 = _wrap(alpha - off1 - P[1, 5])
-    q2 = _wrap(beta - off2 + off1 - P[2, 5])
-    q4 = _wrap(psi - q1 - q2 - P[1:, 5].sum())
+    q1 = wrap_angle(alpha - off1 - P[1, 5])
+    q2 = wrap_angle(beta - off2 + off1 - P[2, 5])
+    q4 = wrap_angle(psi - q1 - q2 - P[1:, 5].sum())
     q3 = z - P[1:, 2].sum()
     q = np.stack([q1, q2, q3, q4], axis=-1)
     # Newton refinement on x, y, z, yaw with the full model.

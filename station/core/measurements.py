@@ -18,10 +18,10 @@ from typing import Literal
 
 import numpy as np
 
-from station.errors import ConfigError
 from station.core.kinematics import forward, forward_with_jacobian
 from station.core.model import RobotModel
 from station.core.transforms import pose_error
+from station.errors import ConfigError
 
 Kind = Literal["pose", "position", "distance"]
 KINDS: tuple[Kind, ...] = ("pose", "position", "distance")
@@ -101,6 +101,12 @@ class MeasurementSet:
     def uses_setup(self) -> bool:
         return self.kind != "distance"
 
+    def distance_pairs(self) -> np.ndarray:
+        """The ``(k, 2)`` index pairs of a distance set (always present: checked on creation)."""
+        if self.pairs is None:
+            raise ConfigError(f"{self.kind} data has no index pairs; only distance data has them")
+        return self.pairs
+
     def with_measured(self, measured: np.ndarray) -> "MeasurementSet":
         return MeasurementSet(self.kind, self.joints, measured, self.sigma, self.pairs)
 
@@ -109,7 +115,7 @@ class MeasurementSet:
         idx = np.asarray(items, dtype=int)
         sig = self.sigma.reshape(self.n_items, -1)[idx]
         if self.kind == "distance":
-            return MeasurementSet("distance", self.joints, self.measured[idx], sig, self.pairs[idx])
+            return MeasurementSet("distance", self.joints, self.measured[idx], sig, self.distance_pairs()[idx])
         return MeasurementSet(self.kind, self.joints[idx], self.measured[idx], sig)
 
 
@@ -121,7 +127,8 @@ def model_outputs(model: RobotModel, data: MeasurementSet, params) -> np.ndarray
     if data.kind == "position":
         return T[..., :3, 3]
     p = T[..., :3, 3]
-    return np.linalg.norm(p[..., data.pairs[:, 0], :] - p[..., data.pairs[:, 1], :], axis=-1)
+    pairs = data.distance_pairs()
+    return np.linalg.norm(p[..., pairs[:, 0], :] - p[..., pairs[:, 1], :], axis=-1)
 
 
 def residuals_and_jacobian(model: RobotModel, data: MeasurementSet, params, joints=None,
@@ -150,7 +157,8 @@ def residuals_and_jacobian(model: RobotModel, data: MeasurementSet, params, join
         if J is not None:
             J = J[..., :3, :].reshape(J.shape[:-3] + (-1, J.shape[-1]))
         return r, J
-    i, j = data.pairs[:, 0], data.pairs[:, 1]
+    pairs = data.distance_pairs()
+    i, j = pairs[:, 0], pairs[:, 1]
     diff = p[..., i, :] - p[..., j, :]
     d = np.linalg.norm(diff, axis=-1)
     r = d - meas

@@ -17,10 +17,7 @@ hold lengths in mm and angles in degrees or radians as their header says.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
-from importlib import resources
-from pathlib import Path
 from typing import Literal
 
 import numpy as np
@@ -97,7 +94,12 @@ class RobotModel:
 
     @property
     def joint_types(self) -> tuple[JointType, ...]:
-        return tuple(t.joint for t in self.transforms if t.joint is not None)  # type: ignore[misc]
+        return tuple(t.joint for t in self.transforms if t.joint is not None)
+
+    @property
+    def is_scara(self) -> bool:
+        """The joint sequence of a SCARA (R R P R): closed-form IK and an x, y, z, yaw table apply."""
+        return self.joint_types == ("revolute", "revolute", "prismatic", "revolute")
 
     @property
     def n_joints(self) -> int:
@@ -231,8 +233,8 @@ def robot_from_dict(data: dict, source: str = "<dict>") -> RobotModel:
             if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in lim):
                 raise ConfigError(
                     f"{source}: transform {e['name']!r}: limits must be two finite numbers [lower, upper]")
-            s = a_scale if joint == "revolute" else l_scale
-            limits.append([float(lim[0]) * s, float(lim[1]) * s])
+            scale = a_scale if joint == "revolute" else l_scale
+            limits.append([float(lim[0]) * scale, float(lim[1]) * scale])
         elif "limits" in e:
             raise ConfigError(f"{source}: transform {e['name']!r} has no joint, so no limits")
     prefer = tuple(head.get("prefer", ()))
@@ -273,40 +275,8 @@ def robot_to_toml(model: RobotModel, params: np.ndarray | None = None, angle_uni
             v = float(p[6 * t_i + i])
             e[s] = v * a_scale if i in _ANGLE else v
         if spec.joint:
-            s = a_scale if spec.joint == "revolute" else 1.0
-            e["limits"] = [float(model.joint_limits[li, 0]) * s, float(model.joint_limits[li, 1]) * s]
+            scale = a_scale if spec.joint == "revolute" else 1.0
+            e["limits"] = [float(model.joint_limits[li, 0]) * scale, float(model.joint_limits[li, 1]) * scale]
             li += 1
         doc["transform"].append(e)
     return tomli_w.dumps(doc)
-
-
-def builtin_robots() -> tuple[str, ...]:
-    return tuple(sorted(p.name[:-5] for p in resources.files("station.io.robots").iterdir()
-                        if p.name.endswith(".toml")))
-
-
-def load_robot(name_or_path: str | Path) -> RobotModel:
-    """A built-in robot by name (``sr800``) or a robot file (.toml, .dh.csv, .mdh.csv, .urdf)."""
-    s = str(name_or_path)
-    if s in builtin_robots():
-        text = resources.files("station.io.robots").joinpath(f"{s}.toml").read_text()
-        return robot_from_dict(tomllib.loads(text), source=f"built-in robot {s}")
-    path = Path(s)
-    if not path.exists():
-        raise ConfigError(
-            f"robot {s!r} is neither a built-in robot ({', '.join(builtin_robots())}) nor an "
-            f"existing file"
-        )
-    if path.suffix == ".urdf":
-        from station.io.robot_import import robot_from_urdf
-
-        return robot_from_urdf(path)
-    if path.name.endswith((".dh.csv", ".mdh.csv")):
-        from station.io.robot_import import robot_from_dh_file
-
-        return robot_from_dh_file(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML ({exc}); fix the syntax at that line") from None
-    return robot_from_dict(data, source=str(path))

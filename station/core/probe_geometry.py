@@ -134,6 +134,8 @@ class ProbeHeadGeometry:
 
     def nominal_contact_pose(self) -> np.ndarray:
         """(4,4) pose of MPKS in MKKS at which every probe reads 0 (mid-stroke)."""
+        if self.nominal_pose is None:  # not after __post_init__, which stores the identity for None
+            return np.eye(4)
         return self.nominal_pose.copy()
 
 
@@ -250,7 +252,7 @@ def solve_pose(geom: ProbeHeadGeometry, readings: np.ndarray, M0: np.ndarray | N
     tol_step = 1e-13 * max(1.0, geom.cube_edge_mm)
     converged = False
     iterations = 0
-    for iterations in range(1, max_iterations + 1):
+    for iterations in range(1, max_iterations + 1):  # noqa: B007 - the count is reported after the loop
         f, J, _ = _residuals_and_jacobian(geom, M, s)
         step, *_ = np.linalg.lstsq(J, -f, rcond=None)
         if not np.all(np.isfinite(step)):

@@ -16,9 +16,7 @@ from station.core.measurements import random_pairs, synthetic_set
 from station.core.model import RobotModel
 from station.core.poses import spread_joints
 from station.core.uncertainty import monte_carlo, pose_accuracy
-
-ARCSEC = np.pi / 180 / 3600
-UM = 1e-3
+from station.core.units import ARCSEC, UM
 
 
 @dataclass(frozen=True)

@@ -118,7 +118,7 @@ def monte_carlo(model: RobotModel, data: MeasurementSet, true_params, chosen_ind
     P = np.broadcast_to(p0, (n_sets, p0.size)).copy()
     w = 1.0 / data.sigma
     it = 0
-    for it in range(1, max_iter + 1):
+    for it in range(1, max_iter + 1):  # noqa: B007 - the count is reported after the loop
         r, J = residuals_and_jacobian(model, data, P, joints=data.joints, measured=measured)
         J = J[..., idx] * w[:, None]
         r = r * w
@@ -141,15 +141,17 @@ def monte_carlo(model: RobotModel, data: MeasurementSet, true_params, chosen_ind
     )
 
 
-def _outputs_at(model, data, p_true, q_act):
-    """Exact outputs of the robot ``p_true`` at the actual joints ``(n_sets, n, g)``."""
+def _outputs_at(model: RobotModel, data: MeasurementSet, p_true: np.ndarray, q_act: np.ndarray) -> np.ndarray:
+    """Exact outputs of the robot ``p_true`` ``(P,)`` at the actual joints ``(n_sets, n, g)``:
+    poses ``(n_sets, n, 4, 4)``, positions ``(n_sets, n, 3)`` or distances ``(n_sets, k)``."""
     T = forward(model, q_act, p_true, setup=data.uses_setup)
     if data.kind == "pose":
         return T
     p = T[..., :3, 3]
     if data.kind == "position":
         return p
-    return np.linalg.norm(p[..., data.pairs[:, 0], :] - p[..., data.pairs[:, 1], :], axis=-1)
+    pairs = data.distance_pairs()
+    return np.linalg.norm(p[..., pairs[:, 0], :] - p[..., pairs[:, 1], :], axis=-1)
 
 
 def _perturb_points(kind, measured, point_ids, sigma_point, rng):

@@ -22,9 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
-from station.errors import ConfigError
 from station.core.model import RobotModel
 from station.core.transforms import pose_to_matrix
+from station.errors import ConfigError
 
 _SCALE = {"mm": 1.0, "m": 1000.0, "um": 1e-3, "µm": 1e-3, "deg": math.pi / 180, "rad": 1.0,
           "arcsec": math.pi / 180 / 3600}

@@ -21,17 +21,19 @@ from __future__ import annotations
 import csv
 import math
 import xml.etree.ElementTree as ET
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-from station.errors import ConfigError
 from station.core.model import RobotModel, TransformSpec
-from station.core.transforms import (invert, matrix_to_pose, pose_to_matrix, rot_x, rot_z,
-                                rotation_exp)
+from station.core.transforms import invert, matrix_to_pose, pose_to_matrix, rot_x, rot_z, rotation_exp
+from station.errors import ConfigError
 
 
-def _T(R=None, t=(0.0, 0.0, 0.0)) -> np.ndarray:
+def _T(R: np.ndarray | None = None, t: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
+    """Homogeneous ``(4, 4)`` transform from a rotation ``(3, 3)`` (default identity) and a
+    translation ``(3,)``."""
     T = np.eye(4)
     if R is not None:
         T[:3, :3] = R
@@ -47,28 +49,33 @@ def robot_from_dh(rows, convention: str = "dh", name: str = "imported", tool=Non
     """
     if convention not in ("dh", "mdh"):
         raise ConfigError("convention must be 'dh' or 'mdh'")
-    consts, specs, limits = [], [TransformSpec("R")], []
+    # dh: per link (Rz(θ)·Tz(d), Tx(a)·Rx(α)), the parts before and after the joint; mdh: the
+    # whole (4, 4) constant transform of each link
+    dh_parts: list[tuple[np.ndarray, np.ndarray]] = []
+    mdh_links: list[np.ndarray] = []
+    specs = [TransformSpec("R")]
+    limits = []
     for i, (kind, theta, d, a, alpha, lo, hi) in enumerate(rows, start=1):
         if kind not in ("revolute", "prismatic"):
             raise ConfigError(f"DH row {i}: type must be revolute or prismatic, got {kind!r}")
         specs.append(TransformSpec(f"A{i}", kind))
         limits.append((lo, hi))
         if convention == "dh":
-            consts.append((_T(rot_z(theta), (0, 0, 0)) @ _T(t=(0, 0, d)), _T(t=(a, 0, 0)) @ _T(rot_x(alpha))))
+            dh_parts.append((_T(rot_z(theta), (0, 0, 0)) @ _T(t=(0, 0, d)), _T(t=(a, 0, 0)) @ _T(rot_x(alpha))))
         else:
-            consts.append(_T(rot_x(alpha)) @ _T(t=(a, 0, 0)) @ _T(rot_z(theta)) @ _T(t=(0, 0, d)))
+            mdh_links.append(_T(rot_x(alpha)) @ _T(t=(a, 0, 0)) @ _T(rot_z(theta)) @ _T(t=(0, 0, d)))
     specs.append(TransformSpec("K"))
     poses = [np.zeros(6)]
     if convention == "dh":
         # θ and d commute with the joint motion about/along z, so Rz(θ)Tz(d) stays with joint i
         # and Tx(a)Rx(α) moves to the front of transform i+1.
         carry = np.eye(4)
-        for pre_joint, post_joint in consts:
+        for pre_joint, post_joint in dh_parts:
             poses.append(matrix_to_pose(carry @ pre_joint))
             carry = post_joint
         tail = carry
     else:
-        poses.extend(matrix_to_pose(C) for C in consts)
+        poses.extend(matrix_to_pose(C) for C in mdh_links)
         tail = np.eye(4)
     if tool is not None:
         tail = tail @ np.asarray(tool, dtype=float)
@@ -126,14 +133,55 @@ def _axis_to_z(axis: np.ndarray) -> np.ndarray:
     return rotation_exp(c / s * math.atan2(s, cos))
 
 
+def _joint_name(j: ET.Element) -> str:
+    return j.get("name", "<unnamed>")
+
+
+def _urdf_link(path: Path, j: ET.Element, tag: str) -> str:
+    """The ``link`` attribute of joint ``j``'s ``<parent>`` or ``<child>`` (both required)."""
+    el = j.find(tag)
+    if el is None:
+        raise ConfigError(f"{path}: joint {_joint_name(j)!r} has no <{tag}> element; "
+                          f"add <{tag} link=\"...\"/>")
+    link = el.get("link")
+    if link is None:
+        raise ConfigError(f"{path}: joint {_joint_name(j)!r}: <{tag}> has no 'link' attribute")
+    return link
+
+
+def _urdf_numbers(path: Path, j: ET.Element, tag: str, attr: str, text: str, n: int) -> list[float]:
+    """``n`` numbers from the attribute ``attr`` (value ``text``) of joint ``j``'s ``<tag>``."""
+    try:
+        vals = [float(v) for v in text.split()]
+    except ValueError:
+        vals = []
+    if len(vals) != n:
+        raise ConfigError(f"{path}: joint {_joint_name(j)!r}: <{tag} {attr}> must be {n} numbers, got {text!r}")
+    return vals
+
+
+def _urdf_limit(path: Path, j: ET.Element, lim: ET.Element, attr: str) -> float:
+    """The ``lower`` or ``upper`` attribute of joint ``j``'s ``<limit>`` element."""
+    text = lim.get(attr)
+    if text is None:
+        raise ConfigError(f"{path}: joint {_joint_name(j)!r}: <limit> has no '{attr}' attribute; "
+                          f"give lower and upper, or make the joint continuous")
+    return _urdf_numbers(path, j, "limit", attr, text, 1)[0]
+
+
 def robot_from_urdf(path: Path) -> RobotModel:
-    """Model of the serial chain in a URDF file (the first chain from the root link)."""
+    """Model of the serial chain in a URDF file (the first chain from the root link).
+
+    Every joint needs ``<parent link>`` and ``<child link>``; ``<origin>`` (xyz, rpy) and
+    ``<axis>`` are optional with the URDF defaults (identity, x axis). A revolute or prismatic
+    joint without ``<limit>`` gets ±2π rad / ±1000 mm.
+    """
     try:
         root = ET.parse(path).getroot()
     except ET.ParseError as exc:
         raise ConfigError(f"{path}: not valid XML ({exc})") from None
-    joints = {j.find("parent").get("link"): j for j in root.findall("joint")}
-    children = {j.find("child").get("link") for j in root.findall("joint")}
+    joints = {_urdf_link(path, j, "parent"): j for j in root.findall("joint")}
+    children = {_urdf_link(path, j, "child") for j in root.findall("joint")}
     roots = [link.get("name") for link in root.findall("link") if link.get("name") not in children]
     if len(roots) != 1:
         raise ConfigError(f"{path}: expected one root link, found {roots}")
@@ -142,15 +190,23 @@ def robot_from_urdf(path: Path) -> RobotModel:
     while link in joints:
         j = joints[link]
         origin = j.find("origin")
-        xyz = [float(v) * 1000.0 for v in (origin.get("xyz", "0 0 0").split() if origin is not None else [0, 0, 0])]
-        rpy = [float(v) for v in (origin.get("rpy", "0 0 0").split() if origin is not None else [0, 0, 0])]
+        xyz, rpy = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
+        if origin is not None:
+            xyz = [v * 1000.0 for v in _urdf_numbers(path, j, "origin", "xyz", origin.get("xyz", "0 0 0"), 3)]
+            rpy = _urdf_numbers(path, j, "origin", "rpy", origin.get("rpy", "0 0 0"), 3)
         T = carry @ pose_to_matrix(np.array(xyz + rpy))
         kind = j.get("type")
         if kind == "fixed":
             carry = T
         elif kind in ("revolute", "continuous", "prismatic"):
             ax = j.find("axis")
-            axis = np.array([float(v) for v in (ax.get("xyz").split() if ax is not None else "1 0 0".split())])
+            axis_text = "1 0 0"
+            if ax is not None:
+                ax_xyz = ax.get("xyz")
+                if ax_xyz is None:
+                    raise ConfigError(f"{path}: joint {_joint_name(j)!r}: <axis> has no 'xyz' attribute")
+                axis_text = ax_xyz
+            axis = np.array(_urdf_numbers(path, j, "axis", "xyz", axis_text, 3))
             A = _T(_axis_to_z(axis))
             specs.append(TransformSpec(f"A{len(specs)}", "prismatic" if kind == "prismatic" else "revolute"))
             poses.append(matrix_to_pose(T @ A))
@@ -159,11 +215,11 @@ def robot_from_urdf(path: Path) -> RobotModel:
             if kind == "continuous" or lim is None:
                 limits.append((-2 * math.pi, 2 * math.pi) if kind != "prismatic" else (-1e3, 1e3))
             else:
-                limits.append((float(lim.get("lower")) * s, float(lim.get("upper")) * s))
+                limits.append((_urdf_limit(path, j, lim, "lower") * s, _urdf_limit(path, j, lim, "upper") * s))
             carry = invert(A)
         else:
             raise ConfigError(f"{path}: joint {j.get('name')!r} of type {kind!r} is not supported")
-        link = j.find("child").get("link")
+        link = _urdf_link(path, j, "child")
     if len(specs) == 1:
         raise ConfigError(f"{path}: no moving joints found")
     specs.append(TransformSpec("K"))

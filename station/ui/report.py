@@ -12,19 +12,18 @@ or in a worker thread of the UI.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from station.cell.summary import RunSummary
+from station.core.units import ARCSEC, DEG, UM
 from station.errors import ConfigError
 
-__all__ = ["ReportData", "write_report", "summary_figures", "MM_TO_UM", "RAD_TO_ARCSEC"]
+__all__ = ["ReportData", "write_report"]
 
-MM_TO_UM = 1000.0
-RAD_TO_ARCSEC = 180.0 / math.pi * 3600.0
-RAD_TO_DEG = 180.0 / math.pi
 
 _PLOT_FILES = {
     "residuals": "residuals.png",
@@ -59,7 +58,7 @@ class ReportData:
     * ``errors_before_um`` / ``errors_after_um`` (k,) position error per verification pose,
       ``oracle_after_um`` (k,) or None: the error after correction as the simulator's ground
       truth sees it (simulated runs only).
-    * ``summary``: free key → value pairs shown at the top (e.g. outcome, rms_before_um, exit_code).
+    * ``summary``: the run's :class:`~station.cell.summary.RunSummary` (figures shown at the top).
     """
 
     robot_name: str
@@ -75,7 +74,7 @@ class ReportData:
     errors_before_um: np.ndarray
     errors_after_um: np.ndarray
     oracle_after_um: np.ndarray | None = None
-    summary: Mapping[str, Any] = field(default_factory=dict)
+    summary: RunSummary | None = None
     pose_labels: Sequence[str] | None = None  # (n,) labels of the identification poses
     verify_labels: Sequence[str] | None = None  # (k,) labels of the verification poses
     created: str = ""  # timestamp text, set by the caller (kept out for reproducible files)
@@ -111,7 +110,7 @@ class ReportData:
 
         before = _arr(self.errors_before_um, 1, "errors_before_um")
         after = _arr(self.errors_after_um, 1, "errors_after_um")
-        if before.shape != after.shape:
+        if after.size and before.shape != after.shape:  # no 'after' when the upload was skipped
             raise ConfigError(f"report: errors_before_um {before.shape} and errors_after_um {after.shape} differ")
         object.__setattr__(self, "errors_before_um", before)
         object.__setattr__(self, "errors_after_um", after)
@@ -120,7 +119,6 @@ class ReportData:
             if oracle.shape != after.shape:
                 raise ConfigError(f"report: oracle_after_um {oracle.shape} and errors_after_um {after.shape} differ")
             object.__setattr__(self, "oracle_after_um", oracle)
-        object.__setattr__(self, "summary", dict(self.summary))
         for attr, n in (("pose_labels", res.shape[0]), ("verify_labels", before.shape[0])):
             labels = getattr(self, attr)
             if labels is not None:
@@ -134,12 +132,12 @@ class ReportData:
     def position_residuals_um(self) -> np.ndarray:
         """(n, c) position residual components [µm] (c = 3, or 1 for distances)."""
         r = self.residuals
-        return r[:, :3] * MM_TO_UM if r.shape[1] >= 3 else r * MM_TO_UM
+        return r[:, :3] * (1 / UM) if r.shape[1] >= 3 else r * (1 / UM)
 
     @property
     def orientation_residuals_arcsec(self) -> np.ndarray | None:
         r = self.residuals
-        return r[:, 3:6] * RAD_TO_ARCSEC if r.shape[1] == 6 else None
+        return r[:, 3:6] * (1 / ARCSEC) if r.shape[1] == 6 else None
 
 
 def _rms(a: np.ndarray) -> float:
@@ -164,9 +162,9 @@ def _param_rows(d: ReportData) -> list[tuple[str, str, str, str, str, str]]:
         d.param_names, d.param_nominal, d.param_identified, d.param_sigma, d.param_is_angle
     ):
         if ang:
-            unit, scale_val, scale_small, digits_val = "° / ″", RAD_TO_DEG, RAD_TO_ARCSEC, 5
+            unit, scale_val, scale_small, digits_val = "° / ″", (1 / DEG), (1 / ARCSEC), 5
         else:
-            unit, scale_val, scale_small, digits_val = "mm / µm", 1.0, MM_TO_UM, 4
+            unit, scale_val, scale_small, digits_val = "mm / µm", 1.0, (1 / UM), 4
         delta = (ide - nom) * scale_small
         sigma = "held" if not math.isfinite(sig) else _fmt(sig * scale_small, 1)
         rows.append(
@@ -227,7 +225,7 @@ def _plot_residuals(d: ReportData, path: Path) -> None:
 
 def _plot_parameters(d: ReportData, path: Path) -> None:
     ang = d.param_is_angle
-    groups = [(~ang, MM_TO_UM, "µm", "length parameters"), (ang, RAD_TO_ARCSEC, "″", "angle parameters")]
+    groups = [(~ang, (1 / UM), "µm", "length parameters"), (ang, (1 / ARCSEC), "″", "angle parameters")]
     groups = [g for g in groups if g[0].any()]
     fig = _new_figure(9, 3.2 * len(groups) + 0.6)
     axes = fig.subplots(len(groups), 1, squeeze=False)[:, 0]
@@ -256,7 +254,7 @@ def _plot_accuracy(d: ReportData, path: Path) -> None:
     fig = _new_figure(7, 6)
     ax = fig.subplots()
     xy = d.accuracy_xy_mm
-    sig = d.accuracy_sigma_mm * MM_TO_UM
+    sig = d.accuracy_sigma_mm * (1 / UM)
     if xy.shape[0]:
         sc = ax.scatter(xy[:, 0], xy[:, 1], c=sig, cmap="viridis", s=60, edgecolors="k", linewidths=0.3)
         cb = fig.colorbar(sc, ax=ax)
@@ -311,40 +309,6 @@ def _plot_verification(d: ReportData, path: Path) -> None:
 
 
 # ----------------------------------------------------------------------------- markdown
-def _sub(summary: Mapping[str, Any], key: str, sub: str) -> Any:
-    v = summary.get(key)
-    return v.get(sub) if isinstance(v, Mapping) else None
-
-
-def summary_figures(summary: Mapping[str, Any]) -> list[tuple[str, float, str, int]]:
-    """(label, value, unit, digits) of the figures a run summary carries, in display order.
-
-    Accepts flat keys (``rms_before_um``, ``rms_after_um``, ``ratio``, ``oracle_rms_after_um``)
-    and the pipeline's nested form (``before.rms_um``, ``after.rms_um``, ``gain``,
-    ``oracle.rms_um``, ``after_vs_oracle``, ``after.ap_max_um`` / ``rp_max_um``,
-    ``identification.n_parameters`` / ``rms_residual_um``).  Used by the UI and the report.
-    """
-
-    def first(*cands):
-        for c in cands:
-            if isinstance(c, (int, float, np.integer, np.floating)) and not isinstance(c, (bool, np.bool_)):
-                return c
-        return None
-
-    spec = [
-        ("RMS before", first(summary.get("rms_before_um"), _sub(summary, "before", "rms_um")), "µm", 1),
-        ("RMS after", first(summary.get("rms_after_um"), _sub(summary, "after", "rms_um")), "µm", 1),
-        ("improvement ratio", first(summary.get("ratio"), summary.get("gain")), "×", 1),
-        ("oracle RMS after", first(summary.get("oracle_rms_after_um"), _sub(summary, "oracle", "rms_um")), "µm", 1),
-        ("after / oracle", first(summary.get("after_vs_oracle")), "×", 2),
-        ("AP max after (ISO 9283)", first(_sub(summary, "after", "ap_max_um")), "µm", 1),
-        ("RP max after (ISO 9283)", first(_sub(summary, "after", "rp_max_um")), "µm", 1),
-        ("identified parameters", first(_sub(summary, "identification", "n_parameters")), "", 0),
-        ("identification residual RMS", first(_sub(summary, "identification", "rms_residual_um")), "µm", 1),
-    ]
-    return [(label, value, unit, digits) for label, value, unit, digits in spec if value is not None]
-
-
 def _flat_scalars(summary: Mapping[str, Any]) -> list[tuple[str, Any]]:
     """Scalar leaves of the summary, one nesting level deep, as dotted keys (lists skipped)."""
     out = []
@@ -375,22 +339,21 @@ def _markdown(d: ReportData, files: Mapping[str, str]) -> str:
     L.append("")
     L.append("| quantity | value |")
     L.append("|---|---|")
-    summary = dict(d.summary)
-    for key in ("outcome", "robot", "cell"):
-        if key in summary and not isinstance(summary[key], (Mapping, list, tuple)):
-            L.append(f"| {key} | {_fmt(summary[key])} |")
-    for label, value, unit, digits in summary_figures(summary):
-        L.append(f"| {label} | {_fmt(value, digits)}{(' ' + unit) if unit else ''} |")
-    if "exit_code" in summary:
-        L.append(f"| exit code | {_fmt(summary['exit_code'])} |")
+    s = d.summary
+    if s is not None:
+        L.append(f"| outcome | {_fmt(s.outcome.name)} |")
+        L.append(f"| robot | {_fmt(s.robot)} |")
+        L.append(f"| cell | {_fmt(s.cell)} |")
+        for label, value, unit, digits in s.figures():
+            L.append(f"| {label} | {_fmt(value, digits)}{(' ' + unit) if unit else ''} |")
+        if s.upload_skipped:
+            L.append("| upload | skipped (--no-upload): no correction active |")
+        L.append(f"| exit code | {s.exit_code} |")
     before, after = d.errors_before_um, d.errors_after_um
     if before.size:
         L.append(f"| verification poses | {before.size} |")
-        L.append(f"| RMS before / after (this report) | {_rms(before):.1f} µm / {_rms(after):.1f} µm |")
-        if d.oracle_after_um is not None:
-            L.append(f"| RMS after, oracle (this report) | {_rms(d.oracle_after_um):.1f} µm |")
     L.append("")
-    details = _flat_scalars(d.summary)
+    details = _flat_scalars(s.to_json()) if s is not None else []
     if details:
         L.append("<details><summary>All summary values</summary>")
         L.append("")
@@ -436,7 +399,7 @@ def _markdown(d: ReportData, files: Mapping[str, str]) -> str:
     L.append("")
 
     # accuracy
-    sig = d.accuracy_sigma_mm * MM_TO_UM
+    sig = d.accuracy_sigma_mm * (1 / UM)
     L.append("## Attainable pose accuracy over the workspace")
     L.append("")
     if sig.size:
@@ -457,15 +420,15 @@ def _markdown(d: ReportData, files: Mapping[str, str]) -> str:
     L.append("|---|---:|---:|" + ("---:|" if oracle is not None else ""))
     labels = d.verify_labels or tuple(str(i + 1) for i in range(before.size))
     for i in range(before.size):
-        row = f"| {_fmt(labels[i])} | {before[i]:.1f} | {after[i]:.1f} |"
+        line = f"| {_fmt(labels[i])} | {before[i]:.1f} | {f'{after[i]:.1f}' if after.size else '—'} |"
         if oracle is not None:
-            row += f" {oracle[i]:.1f} |"
-        L.append(row)
+            line += f" {oracle[i]:.1f} |"
+        L.append(line)
     if before.size:
-        row = f"| **RMS** | **{_rms(before):.1f}** | **{_rms(after):.1f}** |"
+        line = f"| **RMS** | **{_rms(before):.1f}** | **{f'{_rms(after):.1f}' if after.size else '—'}** |"
         if oracle is not None:
-            row += f" **{_rms(oracle):.1f}** |"
-        L.append(row)
+            line += f" **{_rms(oracle):.1f}** |"
+        L.append(line)
     L.append("")
     L.append(f"![verification errors]({files['verification']})")
     L.append("")

@@ -1,11 +1,16 @@
 """Operator terminal UI of the calibration station (Textual).
 
 The UI is a *client of the runner*: it never imports drivers and never talks to a device.  It is
-given a ``start_run(emit, control) -> dict`` callable (dependency injection); on Start it calls it
-in a thread worker, receives the runner's typed :mod:`station.cell.events` through ``emit`` (forwarded
-thread-safely into the app as :class:`EventMessage`), and steers the run only through the shared
-:class:`~station.cell.runcontrol.RunControl` (pause / resume / abort at safe points).  Every widget is
-updated from messages on the UI thread; nothing blocks it.
+given a ``start_run(emit, control) -> RunSummary`` callable (dependency injection); on Start it
+calls it in a thread worker, receives the runner's typed :mod:`station.cell.events` through
+``emit`` (forwarded thread-safely into the app as :class:`EventMessage`), and steers the run only
+through the shared :class:`~station.cell.runcontrol.RunControl` (pause / resume / abort at safe
+points).  Every widget is updated from messages on the UI thread; nothing blocks it.
+
+How a run ended is the :class:`~station.cell.summary.RunSummary` alone: the exit code shown and
+returned is ``summary.exit_code``.  An exception that escapes ``start_run`` (the session never
+lets one) is classified by type like the session does; an internal error writes its traceback
+to a log file the UI names.
 
     app = StationApp(start_run, title="SR 800 calibration")
     app.run()
@@ -14,21 +19,18 @@ updated from messages on the UI thread; nothing blocks it.
 
 from __future__ import annotations
 
-import math
-from typing import Any, Callable
+from collections.abc import Callable
+from pathlib import Path
 
 from rich.text import Text
 from textual import on
 from textual.app import App, ComposeResult
 from textual.binding import Binding
-from textual.containers import Horizontal, Vertical
-from textual.markup import escape as _markup_escape
+from textual.containers import Horizontal
 from textual.message import Message
-from textual.screen import ModalScreen
-from textual.widgets import Button, DataTable, Footer, Header, Label, ProgressBar, RichLog, Static
+from textual.widgets import Button, DataTable, Footer, Header, ProgressBar, RichLog, Static
 from textual.worker import Worker, WorkerState
 
-from station import errors as _errors
 from station.cell.events import (
     Event,
     MeasurementRecorded,
@@ -41,75 +43,32 @@ from station.cell.events import (
     RunStarted,
     StepStarted,
 )
-from station.ui.report import summary_figures
-from station.cell.runcontrol import RunAborted, RunControl
+from station.cell.outcomes import classify, failure_summary
+from station.cell.runcontrol import RunControl
+from station.cell.summary import Failure, RunSummary
+from station.errors import Outcome
+from station.ui.tui_widgets import (
+    ABORTED,
+    ABORTING,
+    ACTIVE_STATES,
+    FAILED,
+    FINISHED,
+    IDLE,
+    PAUSED,
+    PAUSING,
+    PHASES,
+    RUNNING,
+    STATE_TEXT,
+    ConfirmScreen,
+    esc,
+    fmt_num,
+    phase_markup,
+    summary_markup,
+)
 
-__all__ = [
-    "StationApp", "EventMessage", "ConfirmScreen", "StartRun", "PHASES", "OUTCOME_EXIT_CODES",
-    "exit_code_for", "summary_figures",
-]
+__all__ = ["StationApp", "EventMessage", "ConfirmScreen", "StartRun", "PHASES"]
 
-StartRun = Callable[[Callable[[Event], None], RunControl], dict]
-
-PHASES: tuple[str, ...] = ("connect", "plan", "measure", "identify", "correct", "upload", "verify", "done")
-
-# Run states shown in the status line (and readable as StationApp.state).
-IDLE, RUNNING, PAUSING, PAUSED, ABORTING = "idle", "running", "pausing", "paused", "aborting"
-FINISHED, FAILED, ABORTED = "finished", "failed", "aborted"
-ACTIVE_STATES = (RUNNING, PAUSING, PAUSED, ABORTING)
-
-_STATE_TEXT = {
-    IDLE: "[b]idle[/] — press [b]s[/] to start",
-    RUNNING: "[b $success]running[/]",
-    PAUSING: "[b $warning]pause requested[/] — the robot stops at the next safe point",
-    PAUSED: "[b $warning]PAUSED[/] at a safe point — press [b]p[/] to resume",
-    ABORTING: "[b $error]aborting[/] — the robot stops at the next safe point",
-    FINISHED: "[b $success]finished[/]",
-    FAILED: "[b $error]FAILED[/]",
-    ABORTED: "[b $error]ABORTED[/] by the operator",
-}
-
-
-def _all_subclasses(cls: type) -> list[type]:
-    out = []
-    for sub in cls.__subclasses__():
-        out.append(sub)
-        out.extend(_all_subclasses(sub))
-    return out
-
-
-def exit_code_for(error_type: str) -> int:
-    """Exit code for an error type name: a StationError subclass's own code, otherwise 1."""
-    if error_type == "RunAborted":
-        return RunAborted.exit_code
-    for cls in [_errors.StationError, *_all_subclasses(_errors.StationError)]:
-        if cls.__name__ == error_type:
-            return int(getattr(cls, "exit_code", 2))
-    return 1
-
-
-def _fmt_num(value: Any, unit: str = "", digits: int = 1) -> str:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        return f"{value}{(' ' + unit) if unit else ''}"
-    if not math.isfinite(value):
-        return "—"
-    if isinstance(value, int):
-        return f"{value}{(' ' + unit) if unit else ''}"
-    return f"{value:.{digits}f}{(' ' + unit) if unit else ''}"
-
-
-def _esc(text: Any) -> str:
-    """Escape runner text for Textual markup (Static widgets)."""
-    return _markup_escape(str(text))
-
-
-# Mirror of station.cell.pipeline.Outcome (name -> exit code) for a RunFinished without "exit_code"
-# in its summary; the UI does not import the pipeline (tests check the two agree).
-OUTCOME_EXIT_CODES: dict[str, int] = {
-    "SUCCESS": 0, "CONFIG_ERROR": 2, "IDENTIFICATION_FAILED": 3, "UNREACHABLE": 4,
-    "DATABASE_ERROR": 5, "ABORTED": 6, "DEVICE_FAULT": 7, "SAFETY_STOP": 8,
-    "UPLOAD_FAILED": 9, "TARGET_MISSED": 10,
-}
+StartRun = Callable[[Callable[[Event], None], RunControl], RunSummary]
 
 
 class EventMessage(Message):
@@ -120,58 +79,16 @@ class EventMessage(Message):
         self.event = event
 
 
-class ConfirmScreen(ModalScreen[bool]):
-    """Yes / no question; dismisses with True (y, Yes) or False (n, Escape, No)."""
-
-    BINDINGS = [
-        Binding("y", "answer(True)", "Yes"),
-        Binding("n", "answer(False)", "No"),
-        Binding("escape", "answer(False)", "No", show=False),
-    ]
-
-    DEFAULT_CSS = """
-    ConfirmScreen { align: center middle; }
-    ConfirmScreen > Vertical {
-        width: 64; height: auto; padding: 1 2;
-        border: thick $error; background: $surface;
-    }
-    ConfirmScreen Label { width: 100%; margin-bottom: 1; }
-    ConfirmScreen Horizontal { height: auto; align: center middle; }
-    ConfirmScreen Button { margin: 0 2; }
-    """
-
-    def __init__(self, question: str) -> None:
-        super().__init__()
-        self.question = question
-
-    def compose(self) -> ComposeResult:
-        with Vertical():
-            yield Label(self.question, id="question")
-            with Horizontal():
-                yield Button("Yes (y)", variant="error", id="yes")
-                yield Button("No (n)", variant="primary", id="no")
-
-    def on_mount(self) -> None:
-        self.query_one("#no", Button).focus()
-
-    def action_answer(self, answer: bool) -> None:
-        self.dismiss(answer)
-
-    @on(Button.Pressed)
-    def _pressed(self, event: Button.Pressed) -> None:
-        event.stop()
-        self.dismiss(event.button.id == "yes")
-
-
-class StationApp(App[dict]):
+class StationApp(App[RunSummary | None]):
     """Operator UI for one calibration run at a time.
 
     ``start_run(emit, control)`` runs the whole calibration (blocking, in a worker thread); it
-    reports through ``emit`` and calls ``control.checkpoint()`` at every safe point.  Its return
-    value (a dict) fills in the summary where no ``RunFinished`` event did.
+    reports through ``emit``, calls ``control.checkpoint()`` at every safe point and returns the
+    run's :class:`RunSummary`.  ``log_dir`` receives the traceback of an exception that escapes
+    it.
 
     After the app ends, ``app.return_code`` is the run's exit code (0 when no run was started) and
-    the app's result (``app.run()``'s return) is the summary dict.
+    the app's result (``app.run()``'s return) is the summary (None when no run was started).
     """
 
     CSS = """
@@ -186,7 +103,7 @@ class StationApp(App[dict]):
     #middle { height: 1fr; }
     #measurements { width: 3fr; height: 100%; border: round $primary; }
     #notices { width: 2fr; height: 100%; border: round $secondary; }
-    #summary { height: auto; max-height: 16; padding: 0 1; border: round $accent; display: none; }
+    #summary { height: auto; max-height: 24; padding: 0 1; border: round $accent; display: none; }
     #summary.-shown { display: block; }
     #summary.-ok { border: round $success; }
     #summary.-failed { border: thick $error; }
@@ -208,32 +125,48 @@ class StationApp(App[dict]):
         title: str = "Calibration station",
         *,
         autostart: bool = False,
+        log_dir: str | Path = ".",
     ) -> None:
         super().__init__()
         self._start_run = start_run
         self.title = title
         self._autostart = autostart
+        self.log_dir = Path(log_dir)
         self.control: RunControl | None = None
-        self.worker: Worker | None = None
+        self.worker: Worker[RunSummary] | None = None
         self.state: str = IDLE
         self.run_id: int | None = None
         self.phase: str | None = None
-        self.outcome: str | None = None
-        self.summary: dict = {}
-        self.failure: RunFailed | None = None
-        self.exit_code: int | None = None
+        self.summary: RunSummary | None = None
         self.step_index: int | None = None
         self._quit_when_done = False
-        self._got_terminal_event = False
+        self._settled = False  # the worker has ended; its return value is final
         self._visited: set[str] = set()
+
+    # Derived from the summary only, so no second notion of how the run ended can drift.
+    @property
+    def outcome(self) -> str | None:
+        return self.summary.outcome.name if self.summary is not None else None
+
+    @property
+    def exit_code(self) -> int | None:
+        return self.summary.exit_code if self.summary is not None else None
+
+    @property
+    def failure(self) -> Failure | None:
+        return self.summary.failure if self.summary is not None else None
+
+    @property
+    def running(self) -> bool:
+        return self.state in ACTIVE_STATES
 
     # ------------------------------------------------------------------ layout
     def compose(self) -> ComposeResult:
         yield Header()
         with Horizontal(id="status-bar"):
             yield Static("run —", id="run-id")
-            yield Static(_STATE_TEXT[IDLE], id="state")
-        yield Static(self._phase_markup(None), id="phases")
+            yield Static(STATE_TEXT[IDLE], id="state")
+        yield Static(phase_markup(None, set()), id="phases")
         yield Static("", id="phase-detail")
         yield Static("step —", id="step")
         yield ProgressBar(total=None, show_eta=True, id="progress")
@@ -266,34 +199,18 @@ class StationApp(App[dict]):
             self.call_after_refresh(self.action_start)
 
     # ------------------------------------------------------------------ helpers
-    @property
-    def running(self) -> bool:
-        return self.state in ACTIVE_STATES
-
-    def _phase_markup(self, current: str | None) -> str:
-        """connect › plan › …: visited phases ticked, the current one highlighted."""
-        parts = []
-        for name in PHASES:
-            if name == current:
-                parts.append(f"[b reverse $accent] {name} [/]")
-            elif name in self._visited:
-                parts.append(f"[$success]✓ {name}[/]")
-            else:
-                parts.append(f"[dim]{name}[/]")
-        return " › ".join(parts)
-
     def _set_state(self, state: str) -> None:
         self.state = state
-        self.query_one("#state", Static).update(_STATE_TEXT[state])
-        active = state in ACTIVE_STATES
-        self.query_one("#start", Button).disabled = active
+        self.query_one("#state", Static).update(STATE_TEXT[state])
+        self.query_one("#start", Button).disabled = state in ACTIVE_STATES
+        steerable = state in (RUNNING, PAUSING, PAUSED)
         pause_btn = self.query_one("#pause", Button)
-        pause_btn.disabled = state not in (RUNNING, PAUSING, PAUSED)
+        pause_btn.disabled = not steerable
         pause_btn.label = "Resume (p)" if state in (PAUSING, PAUSED) else "Pause (p)"
-        self.query_one("#abort", Button).disabled = state not in (RUNNING, PAUSING, PAUSED)
+        self.query_one("#abort", Button).disabled = not steerable
         self.sub_title = f"run {self.run_id} — {state}" if self.run_id is not None else state
 
-    def _log(self, *parts: str | tuple[str, str]) -> None:
+    def _note(self, *parts: str | tuple[str, str]) -> None:
         """Append a line to the notices log; parts are plain text or (text, rich style)."""
         self.query_one("#notices", RichLog).write(Text.assemble(*parts))
 
@@ -305,27 +222,27 @@ class StationApp(App[dict]):
         # A runner that does not announce Paused still shows up as standing in checkpoint().
         if self.state == PAUSING and self.control is not None and self.control.waiting:
             self._set_state(PAUSED)
-            self._log(("Paused", "yellow"), " — the robot stands at a safe point")
+            self._note(("Paused", "yellow"), " — the robot stands at a safe point")
+
+    def _show_phases(self, current: str | None) -> None:
+        self.query_one("#phases", Static).update(phase_markup(current, self._visited))
 
     def _reset_view(self) -> None:
         self.run_id = None
         self.phase = None
-        self.outcome = None
-        self.summary = {}
-        self.failure = None
-        self.exit_code = None
+        self.summary = None
         self.step_index = None
-        self._got_terminal_event = False
+        self._settled = False
         self._visited = set()
         self.query_one("#measurements", DataTable).clear()
         self.query_one("#progress", ProgressBar).update(total=None, progress=0)
         self.query_one("#run-id", Static).update("run —")
-        self.query_one("#phases", Static).update(self._phase_markup(None))
+        self._show_phases(None)
         self.query_one("#phase-detail", Static).update("")
         self.query_one("#step", Static).update("step —")
-        summary = self.query_one("#summary", Static)
-        summary.update("")
-        summary.remove_class("-shown", "-ok", "-failed")
+        panel = self.query_one("#summary", Static)
+        panel.update("")
+        panel.remove_class("-shown", "-ok", "-failed")
 
     # ------------------------------------------------------------------ actions
     def action_start(self) -> None:
@@ -336,14 +253,13 @@ class StationApp(App[dict]):
         self.control = RunControl()
         control = self.control
         self._set_state(RUNNING)
-        self._log(("Start", "bold"), " pressed — run starting")
+        self._note(("Start", "bold"), " pressed — run starting")
 
-        def work() -> dict:
+        def work() -> RunSummary:
             return self._start_run(self._emit, control)
 
-        self.worker = self.run_worker(
-            work, name="calibration-run", group="run", thread=True, exit_on_error=False
-        )
+        self.worker = self.run_worker(work, name="calibration-run", group="run", thread=True,
+                                      exit_on_error=False)
 
     def action_pause(self) -> None:
         if self.control is None or self.state not in (RUNNING, PAUSING, PAUSED):
@@ -351,47 +267,40 @@ class StationApp(App[dict]):
         if self.state == RUNNING:
             self.control.pause()
             self._set_state(PAUSED if self.control.waiting else PAUSING)
-            self._log(("Pause requested", "yellow"), " — stopping at the next safe point")
+            self._note(("Pause requested", "yellow"), " — stopping at the next safe point")
         else:
             self.control.resume()
             self._set_state(RUNNING)
-            self._log("Resume requested")
+            self._note("Resume requested")
+
+    def _confirm_abort(self, question: str, then_quit: bool) -> None:
+        def answered(yes: bool | None) -> None:
+            # The run may have ended while the dialog was open.
+            if yes and self.control is not None and self.running:
+                self._quit_when_done = then_quit
+                self.control.abort()
+                self._set_state(ABORTING)
+                what = "Quit confirmed" if then_quit else "Abort confirmed"
+                self._note((what, "bold red"), " — stopping at the next safe point")
+
+        self.push_screen(ConfirmScreen(question), answered)
 
     def action_abort(self) -> None:
         if self.control is None or self.state not in (RUNNING, PAUSING, PAUSED):
             return
-
-        def answered(yes: bool | None) -> None:
-            if yes and self.control is not None and self.running:
-                self.control.abort()
-                self._set_state(ABORTING)
-                self._log(("Abort confirmed", "bold red"), " — stopping at the next safe point")
-
-        self.push_screen(
-            ConfirmScreen("Abort the calibration run?\nThe robot stops at the next safe point."),
-            answered,
-        )
+        self._confirm_abort("Abort the calibration run?\nThe robot stops at the next safe point.", False)
 
     async def action_quit(self) -> None:
         if not self.running:
-            self.exit(self.summary, return_code=self.exit_code or 0)
-            return
-        if self.state == ABORTING:
+            self._exit_with_summary()
+        elif self.state == ABORTING:
             self._quit_when_done = True
             self.notify("Quitting once the run has stopped at a safe point.")
-            return
+        else:
+            self._confirm_abort("A run is in progress.\nAbort it at the next safe point and quit?", True)
 
-        def answered(yes: bool | None) -> None:
-            if yes and self.control is not None and self.running:
-                self._quit_when_done = True
-                self.control.abort()
-                self._set_state(ABORTING)
-                self._log(("Quit confirmed", "bold red"), " — aborting; the UI closes at the next safe point")
-
-        self.push_screen(
-            ConfirmScreen("A run is in progress.\nAbort it at the next safe point and quit?"),
-            answered,
-        )
+    def _exit_with_summary(self) -> None:
+        self.exit(self.summary, return_code=self.exit_code or 0)
 
     @on(Button.Pressed, "#start")
     def _start_pressed(self) -> None:
@@ -417,19 +326,17 @@ class StationApp(App[dict]):
             self.query_one("#run-id", Static).update(f"run #{ev.run_id}")
             self.query_one("#progress", ProgressBar).update(total=ev.n_steps, progress=ev.resumed_from)
             extra = f", resuming after {ev.resumed_from} steps on disk" if ev.resumed_from else ""
-            self._log("Run ", (f"#{ev.run_id}", "bold"), f" started: {ev.n_steps} steps{extra}")
+            self._note("Run ", (f"#{ev.run_id}", "bold"), f" started: {ev.n_steps} steps{extra}")
             self._set_state(self.state)
         elif isinstance(ev, PhaseChanged):
             self.phase = ev.phase
             self._visited.add(ev.phase)
-            self.query_one("#phases", Static).update(self._phase_markup(ev.phase))
-            self.query_one("#phase-detail", Static).update(_esc(ev.detail))
-            self._log("phase ", (ev.phase, "bold"), f": {ev.detail}" if ev.detail else "")
+            self._show_phases(ev.phase)
+            self.query_one("#phase-detail", Static).update(esc(ev.detail))
+            self._note("phase ", (ev.phase, "bold"), f": {ev.detail}" if ev.detail else "")
         elif isinstance(ev, StepStarted):
             self.step_index = ev.index
-            self.query_one("#step", Static).update(
-                f"step [b]{ev.index + 1}[/]/{ev.total}: {_esc(ev.label)}"
-            )
+            self.query_one("#step", Static).update(f"step [b]{ev.index + 1}[/]/{ev.total}: {esc(ev.label)}")
             bar = self.query_one("#progress", ProgressBar)
             if bar.total != ev.total:
                 bar.update(total=ev.total)
@@ -439,41 +346,36 @@ class StationApp(App[dict]):
             bar.update(total=ev.total, progress=max(bar.progress, ev.index + 1))
         elif isinstance(ev, Notice):
             if ev.level == "warning":
-                self._log(("WARNING ", "bold yellow"), (ev.message, "yellow"))
-            else:
-                self._log(("info ", "bold"), ev.message)
-            if ev.level == "warning":
+                self._note(("WARNING ", "bold yellow"), (ev.message, "yellow"))
                 self.notify(ev.message, severity="warning")
+            else:
+                self._note(("info ", "bold"), ev.message)
         elif isinstance(ev, Paused):
             if self.state in (RUNNING, PAUSING):
                 self._set_state(PAUSED)
-            self._log(("Paused", "yellow"), f" at a safe point before step {ev.index + 1}")
+            self._note(("Paused", "yellow"), f" at a safe point before step {ev.index + 1}")
         elif isinstance(ev, Resumed):
             if self.state in (PAUSED, PAUSING):
                 self._set_state(RUNNING)
-            self._log(f"Resumed at step {ev.index + 1}")
-        elif isinstance(ev, RunFinished):
-            self._got_terminal_event = True
-            self._show_finished(ev.outcome, dict(ev.summary))
-        elif isinstance(ev, RunFailed):
-            self._got_terminal_event = True
-            self._show_failed(ev)
+            self._note(f"Resumed at step {ev.index + 1}")
+        elif isinstance(ev, (RunFinished, RunFailed)) and not self._settled:
+            self._show_summary(ev.summary)
 
     def _add_measurement(self, ev: MeasurementRecorded) -> None:
         table = self.query_one("#measurements", DataTable)
         key = str(ev.index)
         ok = Text("✓", style="bold green") if ev.ok else Text("✗", style="bold red")
-        residual = Text(_fmt_num(ev.residual_um, digits=2), justify="right")
+        residual = Text(fmt_num(ev.residual_um, digits=2), justify="right")
         cells = (Text(str(ev.index + 1)), Text(ev.label), ok, residual, Text(ev.message))
         if key in table.rows:  # a repeated measurement of the same step replaces the row
             for col, value in zip(("index", "label", "ok", "residual", "note"), cells):
                 table.update_cell(key, col, value)
         else:
             table.add_row(*cells, key=key)
-        # Follow the newest row; after the refresh, so the table's size already includes it.
+        # After the refresh, so the table's size already includes the new row.
         self.call_after_refresh(self._follow_row, key)
         if not ev.ok:
-            self._log((f"measurement {ev.index + 1} not valid", "yellow"), f": {ev.message}")
+            self._note((f"measurement {ev.index + 1} not valid", "yellow"), f": {ev.message}")
 
     def _follow_row(self, key: str) -> None:
         table = self.query_one("#measurements", DataTable)
@@ -481,105 +383,56 @@ class StationApp(App[dict]):
             table.move_cursor(row=table.get_row_index(key), animate=False)
 
     # ------------------------------------------------------------------ end of run
-    def _summary_markup(self, outcome: str, summary: dict) -> str:
-        """Result panel text; understands flat keys and the pipeline's nested summary."""
-        rows: list[tuple[str, str]] = [("outcome", f"[b]{_esc(outcome)}[/]")]
-        for key in ("robot", "cell"):
-            if isinstance(summary.get(key), (str, int)):
-                rows.append((key, _esc(summary[key])))
-        for label, value, unit, digits in summary_figures(summary):
-            rows.append((label, _fmt_num(value, unit, digits)))
-        exit_code = summary.get("exit_code", self.exit_code)
-        rows.append(("exit code", f"[b]{exit_code}[/]"))
-        width = max(len(label) for label, _ in rows)
-        return "\n".join(f"{label:<{width}}  {value}" for label, value in rows)
-
-    def _show_finished(self, outcome: str, summary: dict) -> None:
-        self.outcome = outcome
-        self.summary = {"outcome": outcome, **summary}
-        if "exit_code" in summary:
-            self.exit_code = int(summary["exit_code"])
-        else:
-            self.exit_code = OUTCOME_EXIT_CODES.get(outcome, 0)
+    def _show_summary(self, summary: RunSummary) -> None:
+        """Show how the run ended; called again with the worker's return value, which wins
+        over the event's copy (the session completes it, e.g. with the database path)."""
+        if summary == self.summary:
+            return
+        first = self.summary is None
+        self.summary = summary
         panel = self.query_one("#summary", Static)
-        panel.update(self._summary_markup(outcome, summary))
-        ok = self.exit_code == 0
-        panel.set_class(ok, "-ok")
-        panel.set_class(not ok, "-failed")
+        panel.update(summary_markup(summary, self.step_index))
+        panel.set_class(summary.ok, "-ok")
+        panel.set_class(not summary.ok, "-failed")
         panel.add_class("-shown")
-        self._visited.add("done")
-        self.query_one("#phases", Static).update(self._phase_markup("done"))
-        self._log(("Run finished", "bold green" if ok else "bold yellow"), f": {outcome}")
-        self._set_state(FINISHED)
+        if summary.failure is None:
+            self._visited.add("done")
+            self._show_phases("done")
+            self._set_state(FINISHED)
+        else:
+            self._set_state(ABORTED if summary.outcome is Outcome.ABORTED else FAILED)
+        if first:
+            self._announce(summary)
 
-    def _show_failed(self, ev: RunFailed, exit_code: int | None = None) -> None:
-        self.failure = ev
-        aborted = ev.error_type == "RunAborted"
-        self.outcome = "aborted" if aborted else "failed"
-        self.exit_code = exit_code_for(ev.error_type) if exit_code is None else exit_code
-        self.summary = {
-            "outcome": self.outcome,
-            "error_type": ev.error_type,
-            "message": ev.message,
-            "hint": ev.hint,
-            "exit_code": self.exit_code,
-        }
-        where = f" at step {self.step_index + 1}" if self.step_index is not None else ""
-        head_plain = "ABORTED by the operator" if aborted else f"FAILED — {ev.error_type}"
-        head = _esc(head_plain)
-        text = f"[b $error]{head}[/]{where}\n{_esc(ev.message)}"
-        if ev.hint:
-            text += f"\n[b]What to do:[/] {_esc(ev.hint)}"
-        text += f"\nexit code [b]{self.exit_code}[/]"
-        panel = self.query_one("#summary", Static)
-        panel.update(text)
-        panel.remove_class("-ok")
-        panel.add_class("-shown", "-failed")
-        if self.state not in (FAILED, ABORTED):
-            self._log((head_plain, "bold red"), f": {ev.message}")
-        self._set_state(ABORTED if aborted else FAILED)
+    def _announce(self, summary: RunSummary) -> None:
+        name = summary.outcome.name
+        if summary.failure is None:
+            self._note(("Run finished", "bold green" if summary.ok else "bold yellow"), f": {name}")
+        else:
+            self._note((f"{name} (exit code {summary.exit_code})", "bold red"), f": {summary.failure.message}")
+        for note in summary.notes:
+            self._note(("note ", "bold"), note)
 
     def on_worker_state_changed(self, event: Worker.StateChanged) -> None:
         if event.worker is not self.worker:
             return
         worker = event.worker
+        if event.state in (WorkerState.SUCCESS, WorkerState.ERROR):
+            # Events still queued behind this message must not replace the final summary.
+            self._settled = True
         if event.state == WorkerState.SUCCESS:
-            result = worker.result if isinstance(worker.result, dict) else {}
-            if not self._got_terminal_event:
-                outcome = str(result.get("outcome", "done"))
-                self._show_finished(outcome, {k: v for k, v in result.items() if k != "outcome"})
-            elif self.state in (FAILED, ABORTED) and "exit_code" in result:
-                # The runner reported the failure as an event and returned its exit code.
-                code = int(result["exit_code"])
-                if code != self.exit_code and self.failure is not None:
-                    self._show_failed(self.failure, exit_code=code)
-            elif self.state == FINISHED and result:
-                # Fill in what the RunFinished summary left out (e.g. exit_code) from the return value.
-                merged = {**result, **self.summary}
-                if merged != self.summary:
-                    self._show_finished(self.outcome or "done", {k: v for k, v in merged.items() if k != "outcome"})
-            elif self.running:
-                self._set_state(FINISHED)
-        elif event.state in (WorkerState.ERROR, WorkerState.CANCELLED):
+            result = worker.result
+            if isinstance(result, RunSummary):
+                self._show_summary(result)
+            elif self.summary is None:
+                bug = TypeError(f"start_run returned {type(result).__name__}, not a RunSummary")
+                self._show_summary(failure_summary(bug, run_id=self.run_id, log_dir=self.log_dir))
+        elif event.state == WorkerState.ERROR and worker.error is not None:
             error = worker.error
-            if isinstance(error, RunAborted):
-                if self.state != ABORTED:
-                    self._show_failed(RunFailed(
-                        "RunAborted", str(error), "the measurements so far are on disk; the run can be resumed"))
-            elif not self._got_terminal_event:
-                hint = ""
-                if isinstance(error, _errors.StationError) and type(error).__doc__:
-                    hint = type(error).__doc__.strip().splitlines()[0]
-                code = getattr(error, "exit_code", None)
-                if not isinstance(code, int) or isinstance(code, bool):
-                    code = None
-                self._show_failed(
-                    RunFailed(type(error).__name__ if error else "Cancelled", str(error or "run cancelled"), hint),
-                    exit_code=code,
-                )
-            elif self.running:
-                self._set_state(FAILED)
+            # An escaping RunAborted after the session's own ABORTED summary says nothing new.
+            if self.summary is None or self.summary.outcome is not classify(error):
+                self._show_summary(failure_summary(error, run_id=self.run_id, log_dir=self.log_dir))
         else:
             return
         if self._quit_when_done:
-            self.exit(self.summary, return_code=self.exit_code or 0)
+            self._exit_with_summary()

@@ -2,18 +2,22 @@
 
 from __future__ import annotations
 
-import numpy as np
+from contextlib import ExitStack
+
 import pytest
 
 from drivers.controller import EmergencyStop, HandshakeTimeout, TableVerifyError
 from drivers.probe_protocol import ProbeDisconnected
 from simulators import start_simulated_cell
-from station.cell.pipeline import Options, Outcome, run_calibration
-from station.ui.commands_cell import open_devices, outcome_for, simulated_config_text
+from simulators.reference_cell import cell_config_text
 from station.cell.config import parse_text
-from station.cell.events import MeasurementRecorded, RunFinished
+from station.cell.events import MeasurementRecorded, Notice, PhaseChanged, RunFinished
+from station.cell.outcomes import classify
+from station.cell.pipeline import Options, run_calibration
 from station.cell.rundb import RunDB
-from contextlib import ExitStack
+from station.cell.session import open_cell
+from station.cell.steps import StepKind
+from station.errors import Outcome
 
 
 class Cell:
@@ -23,12 +27,13 @@ class Cell:
         self.stack = ExitStack()
         self.srv = start_simulated_cell(seed=seed)
         self.stack.callback(self.srv.stop)
-        text = simulated_config_text(self.srv, seed)
+        text = cell_config_text(self.srv, seed)
         for old, new in cfg_overrides.items():
             text = text.replace(old, new)
         self.cfg = parse_text(text)
         self.db = self.stack.enter_context(RunDB(tmp_path / "runs.sqlite"))
-        self.probe, self.ctrl = open_devices(self.cfg, self.stack)
+        devices = open_cell(self.cfg, self.stack)
+        self.probe, self.ctrl = devices.probe, devices.controller
         self.events = []
 
     def run(self, **kw):
@@ -47,26 +52,35 @@ def cell(tmp_path):
 
 def test_simulated_calibration_meets_the_targets(cell):
     summary = cell.run(options=Options(oracle_truth=cell.srv.cell.truth))
-    assert summary["outcome"] == "SUCCESS"
-    assert summary["identification"]["n_parameters"] == 20
+    assert summary.outcome is Outcome.SUCCESS and summary.exit_code == 0
+    assert summary.identification.n_parameters == 20
     # ≥ 20× smaller RMS error than before correction, within 1.2× of the oracle's
-    assert summary["gain"] >= 20.0
-    assert summary["after_vs_oracle"] <= 1.2
-    assert summary["after"]["rms_um"] < 20.0 and summary["before"]["rms_um"] > 200.0
+    assert summary.gain >= 20.0
+    assert summary.after_vs_oracle <= 1.2
+    assert summary.after.rms_um < 20.0 and summary.before.rms_um > 200.0
+    # the verified upload took real time and told the operator each step
+    assert summary.upload is not None and summary.upload.seconds > 0
+    notices = [e.message for e in cell.events if isinstance(e, Notice)]
+    assert any("read back" in m and "identical" in m for m in notices)
+    assert any(m.startswith("correction table active") for m in notices)
+    assert any(isinstance(e, PhaseChanged) and e.phase == "upload" for e in cell.events)
+    # the stored summary is the returned one
+    assert cell.db.load_result(summary.run_id, "summary") == summary.to_json()
     # the station's own table is the one left active, read back and checked
     st = cell.ctrl.status()
     assert st.table_active
-    assert cell.srv.controller_server.active_table.crc32() == int(summary["correction"]["crc32"], 16)
-    assert isinstance(cell.events[-1], RunFinished)
-    run = cell.db.run(summary["run_id"])
+    assert cell.srv.controller_server.active_table.crc32() == int(summary.correction.crc32, 16)
+    assert isinstance(cell.events[-1], RunFinished) and cell.events[-1].summary == summary
+    run = cell.db.run(summary.run_id)
     assert run.status == "verified" and len(cell.db.completed_steps(run.id)) == run.n_steps
 
 
 def test_no_upload_leaves_the_controller_untouched(cell):
     summary = cell.run(options=Options(upload=False))
-    assert summary["upload"].startswith("skipped")
+    assert summary.upload_skipped and summary.upload is None
     assert cell.srv.controller_server.active_table is None
-    assert "after" not in summary and summary["before"]["n"] > 0
+    assert summary.after is None and summary.before.n > 0
+    assert "after" not in summary.to_json() and summary.to_json()["upload_skipped"] is True
 
 
 def _after_n_measurements(cell, n, action):
@@ -81,7 +95,7 @@ def test_emergency_stop_ends_cleanly_and_the_run_resumes(cell):
     emit = _after_n_measurements(cell, 5, cell.srv.controller_server.estop_during_next_move)
     with pytest.raises(EmergencyStop) as exc:
         run_calibration(cell.cfg, cell.probe, cell.ctrl, cell.db, emit)
-    assert outcome_for(exc.value) == Outcome.SAFETY_STOP
+    assert classify(exc.value) == Outcome.SAFETY_STOP
     run = cell.db.latest_run()
     assert run.status == "failed"
     assert cell.db.completed_steps(run.id) == set(range(5))  # everything measured is on disk
@@ -90,7 +104,7 @@ def test_emergency_stop_ends_cleanly_and_the_run_resumes(cell):
     assert cell.ctrl.status().estop or cell.ctrl.status().error
     cell.ctrl.reset_error()
     summary = run_calibration(cell.cfg, cell.probe, cell.ctrl, cell.db, cell.events.append, resume_run=run.id)
-    assert summary["outcome"] == "SUCCESS"
+    assert summary.outcome is Outcome.SUCCESS
     assert len(cell.db.measurements(run.id)) == run.n_steps
 
 
@@ -103,7 +117,7 @@ def test_lost_acknowledge_is_not_resent(cell):
     writes = list(sim.command_writes)
     last_seq = writes[-1][1]
     assert sum(1 for _, s in writes if s == last_seq) == 1  # the motion command was written once
-    assert outcome_for(exc.value) == Outcome.DEVICE_FAULT
+    assert classify(exc.value) == Outcome.DEVICE_FAULT
     assert cell.db.completed_steps(cell.db.latest_run().id) == set(range(3))
 
 
@@ -111,7 +125,7 @@ def test_probe_disconnect_is_a_device_fault_with_data_kept(cell):
     emit = _after_n_measurements(cell, 4, cell.srv.probe_server.disconnect)
     with pytest.raises(ProbeDisconnected) as exc:
         run_calibration(cell.cfg, cell.probe, cell.ctrl, cell.db, emit)
-    assert outcome_for(exc.value) == Outcome.DEVICE_FAULT
+    assert classify(exc.value) == Outcome.DEVICE_FAULT
     assert cell.db.completed_steps(cell.db.latest_run().id) == set(range(4))
 
 
@@ -121,9 +135,9 @@ class _CorruptingController:
     def __init__(self, ctrl, sim):
         self._c, self._sim = ctrl, sim
 
-    def read_table(self):
+    def verify_table(self):
         self._sim.corrupt_staging_value(7)
-        return self._c.read_table()
+        return self._c.verify_table()
 
     def __getattr__(self, name):
         return getattr(self._c, name)
@@ -133,7 +147,7 @@ def test_table_that_does_not_read_back_is_never_activated(cell):
     ctrl = _CorruptingController(cell.ctrl, cell.srv.controller_server)
     with pytest.raises(TableVerifyError) as exc:
         run_calibration(cell.cfg, cell.probe, ctrl, cell.db, cell.events.append)
-    assert outcome_for(exc.value) == Outcome.UPLOAD_FAILED
+    assert classify(exc.value) == Outcome.UPLOAD_FAILED
     assert not cell.ctrl.status().table_active
     assert cell.srv.controller_server.active_table is None
 
@@ -142,17 +156,16 @@ def test_a_motion_outside_the_soft_limits_is_refused_before_the_plan_runs(tmp_pa
     # joint 2 limited so that every elbow -1 pose is out: the plan drops them, nothing moves there
     c = Cell(tmp_path, **{"[-140.0, 140.0]": "[0.0, 140.0]"})
     try:
-        from station.cell.plan import build_plan
-
-        from station.cell.plan import all_motion_poses, check_joints
+        from station.cell.plan import all_motion_poses, build_plan, check_joints
 
         plan = build_plan(c.cfg)
         n_points = len(c.cfg.point_ids)
         assert sum(e == -1 for _, e, _ in plan.rejected) == n_points  # every elbow -1 pose
         assert all("soft limits" in why for *_, why in plan.rejected)
-        assert all(s.target.elbow == 1 for s in plan.identification)
+        assert all(s.elbow == 1 for s in plan.identification)
+        assert {s.kind for s in plan.identification} == {StepKind.IDENTIFICATION}
         for s in plan.identification:  # and every motion of what is planned is inside them
-            for q in all_motion_poses(c.cfg, s.target.joints):
+            for q in all_motion_poses(c.cfg, s.q):
                 check_joints(c.cfg, q, "planned")
     finally:
         c.close()
@@ -165,12 +178,12 @@ def test_operator_abort_stops_at_a_safe_point_and_the_run_resumes(cell):
     emit = _after_n_measurements(cell, 6, control.abort)
     with pytest.raises(RunAborted) as exc:
         run_calibration(cell.cfg, cell.probe, cell.ctrl, cell.db, emit, control)
-    assert outcome_for(exc.value) == Outcome.ABORTED == 6
+    assert classify(exc.value) == Outcome.ABORTED == 6
     run = cell.db.latest_run()
     assert run.status == "aborted" and cell.db.completed_steps(run.id) == set(range(6))
     assert cell.ctrl.status().ready and not cell.ctrl.status().moving  # stopped between motions
     summary = run_calibration(cell.cfg, cell.probe, cell.ctrl, cell.db, cell.events.append, resume_run=run.id)
-    assert summary["outcome"] == "SUCCESS"
+    assert summary.outcome is Outcome.SUCCESS
 
 
 def test_drive_fault_is_a_safety_stop(cell):
@@ -179,5 +192,5 @@ def test_drive_fault_is_a_safety_stop(cell):
     emit = _after_n_measurements(cell, 2, lambda: cell.srv.controller_server.drive_fault_during_next_move(2))
     with pytest.raises(DriveFault) as exc:
         run_calibration(cell.cfg, cell.probe, cell.ctrl, cell.db, emit)
-    assert outcome_for(exc.value) == Outcome.SAFETY_STOP
+    assert classify(exc.value) == Outcome.SAFETY_STOP
     assert cell.db.completed_steps(cell.db.latest_run().id) == {0, 1}

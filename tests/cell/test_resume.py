@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from simulators.cell import SimulatedCell
-from station.ui.commands_cell import simulated_config_text
+from simulators.reference_cell import cell_config_text as simulated_config_text
 from station.cell.rundb import RunDB
 
 ROOT = Path(__file__).resolve().parents[2]

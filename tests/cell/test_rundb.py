@@ -18,7 +18,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from station.errors import StationError
 from station.cell.rundb import (
     SCHEMA_VERSION,
     DuplicateMeasurementError,
@@ -30,6 +29,7 @@ from station.cell.rundb import (
     SchemaVersionError,
 )
 from station.core.transforms import matrix_to_pose, pose_to_matrix
+from station.errors import StationError
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -1,4 +1,5 @@
-"""Correction tables, compensated targets and the verified upload (station.core.correction_table)."""
+"""Correction tables (station.core.correction_table, table_grid) and compensated targets
+(station.core.compensation)."""
 
 from __future__ import annotations
 
@@ -7,23 +8,16 @@ import math
 import numpy as np
 import pytest
 
-from drivers.controller import CorrectionTableData, TableAxis, TableError, TableVerifyError
-from drivers.controller_map import MAX_TABLE_VALUES
-from station.core.correction_table import (
-    ARCSEC,
-    GridSpec,
-    build_correction_table,
-    compensated_targets,
-    interpolate_table,
-    interpolation_error,
-    upload_verified,
-    wrap_angle,
-)
-from station.errors import ConfigError
-from station.cell.events import Event
+from drivers.correction_table import MAX_TABLE_VALUES
+from station.core.compensation import compensated_targets
+from station.core.correction_table import build_correction_table, interpolation_error
 from station.core.kinematics import forward, scara_ik
-from station.core.model import RobotModel, TransformSpec, load_robot
+from station.core.model import RobotModel, TransformSpec
+from station.core.table_grid import GridSpec, interpolate_table
 from station.core.transforms import pose_to_matrix, rotation_log
+from station.core.units import ARCSEC, wrap_angle
+from station.errors import ConfigError
+from station.io.robot_files import load_robot
 
 ARCMIN = math.pi / (180 * 60)
 
@@ -303,131 +297,3 @@ def test_compensated_targets_six_axes():
     np.testing.assert_allclose(res.commands, forward(six, res.joints, six.nominal, setup=False))
     # a controller without correction would miss by the model error
     assert np.max(np.linalg.norm(res.commands[:, :3, 3] - T[:, :3, 3], axis=1)) > 0.05
-
-
-# --- verified upload --------------------------------------------------------------------------
-
-def small_table(v=0.001):
-    axes = (TableAxis(0.0, 10.0, 3), TableAxis(-math.pi, math.pi / 2, 4, periodic=True))
-    vals = np.full((2, 3, 4, 4), v, dtype=np.float32)
-    vals[1] *= -1
-    return CorrectionTableData(axes, vals)
-
-
-class FakeController:
-    """Records calls; keeps staged/active/previous like the controller program."""
-
-    def __init__(self, corrupt=False, activate_error=None, activate_takes_effect=True,
-                 with_crcs=True, stage_crc_wrong=False):
-        self.calls, self.corrupt, self.activate_error = [], corrupt, activate_error
-        self.activate_takes_effect = activate_takes_effect
-        self.stage_crc_wrong = stage_crc_wrong
-        self.uploaded = self.staged = self.previous = None
-        self.active = small_table(0.5)  # an older table is active
-        if not with_crcs:
-            self.table_crcs = None  # attribute present but unusable -> treated as unknown
-
-    def upload_table(self, t):
-        self.calls.append("upload")
-        self.uploaded = t
-
-    def read_table(self):
-        self.calls.append("read")
-        t = self.uploaded
-        if self.corrupt:
-            v = t.values.copy()
-            v.ravel()[17] = np.nextafter(v.ravel()[17], np.float32(1))
-            t = CorrectionTableData(t.axes, v)
-        return t
-
-    def stage_table(self):
-        self.calls.append("stage")
-        self.staged = small_table(0.7) if self.stage_crc_wrong else self.uploaded
-
-    def activate_table(self):
-        self.calls.append("activate")
-        if self.activate_takes_effect:
-            self.previous, self.active, self.staged = self.active, self.staged, None
-        if self.activate_error is not None:
-            raise self.activate_error
-
-    def rollback_table(self):
-        self.calls.append("rollback")
-        self.previous, self.active = self.active, self.previous
-
-    def table_crcs(self):
-        return {k: 0 if getattr(self, k) is None else getattr(self, k).crc32()
-                for k in ("staged", "active", "previous")}
-
-
-def test_upload_verified_happy_path():
-    ctl, events = FakeController(), []
-    t = small_table()
-    rep = upload_verified(ctl, t, on_event=events.append)
-    assert ctl.calls == ["upload", "read", "stage", "activate"]
-    assert rep.crc32 == t.crc32() == rep.active_crc32 == rep.staged_crc32
-    assert rep.previous_crc32 == small_table(0.5).crc32()
-    assert rep.n_values == t.n_values
-    assert rep.total_s >= rep.upload_s >= 0
-    assert events and all(isinstance(e, Event) for e in events)
-
-
-def test_upload_verified_refuses_a_changed_value():
-    ctl = FakeController(corrupt=True)
-    with pytest.raises(TableVerifyError, match="first at flat index 17.*NOT activated"):
-        upload_verified(ctl, small_table())
-    assert "activate" not in ctl.calls and "stage" not in ctl.calls
-    assert ctl.active.same_as(small_table(0.5))
-
-
-def test_upload_verified_refuses_a_wrong_staged_crc():
-    ctl = FakeController(stage_crc_wrong=True)
-    with pytest.raises(TableVerifyError, match="staged"):
-        upload_verified(ctl, small_table())
-    assert "activate" not in ctl.calls
-
-
-def test_activation_failure_rolls_back():
-    ctl = FakeController(activate_error=TableError("no done within timeout"))
-    with pytest.raises(TableError, match="no done") as ei:
-        upload_verified(ctl, small_table())
-    assert ctl.calls == ["upload", "read", "stage", "activate", "rollback"]
-    assert ctl.active.same_as(small_table(0.5))  # the previous table is active again
-    assert any("rolled back" in n for n in getattr(ei.value, "__notes__", []))
-
-
-def test_activation_failure_without_crc_readout_rolls_back():
-    ctl = FakeController(activate_error=RuntimeError("link lost"), with_crcs=False)
-    with pytest.raises(RuntimeError):
-        upload_verified(ctl, small_table())
-    assert ctl.calls[-1] == "rollback"
-
-
-def test_refused_activation_leaves_the_previous_table_alone():
-    # the controller refused: its active table did not change, so a roll back would wrongly
-    # activate the table before it
-    ctl = FakeController(activate_error=TableError("refused"), activate_takes_effect=False)
-    with pytest.raises(TableError):
-        upload_verified(ctl, small_table())
-    assert "rollback" not in ctl.calls
-    assert ctl.active.same_as(small_table(0.5))
-
-
-def test_upload_verified_against_the_simulated_controller(robot, identified):
-    pytest.importorskip("pymodbus")
-    from drivers.controller import ModbusController
-    from simulators.controller_server import SimulatedController
-
-    t = build_correction_table(robot, identified, GridSpec(), n_check=100)
-    sim = SimulatedController(time_scale=0.0).start()
-    try:
-        ctl = ModbusController("127.0.0.1", sim.port, heartbeat_period=0.05)
-        ctl.connect()
-        try:
-            rep = upload_verified(ctl, t.data)
-            assert ctl.table_crcs()["active"] == t.data.crc32() == rep.crc32
-            assert ctl.read_table().same_as(t.data)
-        finally:
-            ctl.close()
-    finally:
-        sim.stop()

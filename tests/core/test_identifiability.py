@@ -8,8 +8,8 @@ import pytest
 
 from station.core.identifiability import analyze
 from station.core.measurements import random_pairs, synthetic_set
-from station.core.model import load_robot
 from station.core.poses import spread_joints
+from station.io.robot_files import load_robot
 
 SR800 = load_robot("sr800")
 

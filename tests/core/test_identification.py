@@ -6,13 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from station.errors import IdentificationError
 from station.core.identifiability import analyze
 from station.core.identification import identify
 from station.core.measurements import MeasurementSet, random_pairs, residuals_and_jacobian, synthetic_set
-from station.core.model import load_robot
 from station.core.poses import spread_joints
 from station.core.transforms import pose_error, pose_to_matrix
+from station.errors import IdentificationError
+from station.io.robot_files import load_robot
 
 SR800 = load_robot("sr800")
 DEG = np.pi / 180

@@ -7,8 +7,9 @@ import math
 import numpy as np
 import pytest
 
+from station.core.iso9283 import iso9283_pose
+from station.core.units import ARCSEC
 from station.errors import ConfigError
-from station.core.iso9283 import ARCSEC, format_arcsec, format_um, iso9283_pose, verification_summary
 
 
 def test_ap_and_rp_two_cycles():
@@ -61,26 +62,3 @@ def test_iso9283_input_errors(cmd, att, msg):
 def test_orientation_needs_both():
     with pytest.raises(ConfigError, match="both"):
         iso9283_pose([0, 0, 0], [[0, 0, 0], [0, 0, 0]], commanded_orientation=[0, 0, 0])
-
-
-def test_verification_summary():
-    before = [[3.0, 4.0, 0.0], [0.0, 0.0, 0.0]]  # |e| = 5 mm and 0
-    after = [[0.3, 0.4, 0.0], [0.0, 0.0, 0.0]]
-    s = verification_summary(before, after)
-    assert s["rms_before_um"] == pytest.approx(math.sqrt(5000.0**2 / 2))
-    assert s["max_before_um"] == pytest.approx(5000.0)
-    assert s["mean_before_um"] == pytest.approx(2500.0)
-    assert s["rms_after_um"] == pytest.approx(math.sqrt(500.0**2 / 2))
-    assert s["improvement_rms"] == pytest.approx(10.0)
-    assert s["improvement_max"] == pytest.approx(10.0)
-    assert s["rms_xyz_before_um"] == pytest.approx([3000 / math.sqrt(2), 4000 / math.sqrt(2), 0.0])
-    assert s["n_before"] == s["n_after"] == 2
-    assert verification_summary(before, np.zeros((2, 3)))["improvement_rms"] == math.inf
-    with pytest.raises(ConfigError):
-        verification_summary(np.zeros((0, 3)), after)
-
-
-def test_formatting():
-    assert format_um(0.0123) == "12.3 µm"
-    assert format_arcsec(4.2 * ARCSEC) == "4.2″"
-    assert format_um(0.001, digits=2) == "1.00 µm"

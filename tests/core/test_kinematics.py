@@ -7,12 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from station.errors import UnreachableError
-from station.core.kinematics import (forward, forward_with_jacobian, inverse_kinematics,
-                                joint_jacobian, scara_ik)
-from station.core.model import load_robot
-from station.io.robot_import import robot_from_dh
+from station.core.kinematics import forward, forward_with_jacobian, inverse_kinematics, joint_jacobian, scara_ik
 from station.core.transforms import pose_error, pose_to_matrix
+from station.errors import UnreachableError
+from station.io.robot_files import load_robot
+from station.io.robot_import import robot_from_dh
 
 SR800 = load_robot("sr800")
 DEG = math.pi / 180

@@ -7,16 +7,16 @@ station's converter.
 
 from __future__ import annotations
 
-import copy
 import math
 import tomllib
 
 import numpy as np
 import pytest
 
-from station.errors import ConfigError
 from station.core.kinematics import forward
-from station.core.model import load_robot, robot_from_dict, robot_to_toml
+from station.core.model import robot_from_dict, robot_to_toml
+from station.errors import ConfigError
+from station.io.robot_files import load_robot
 from station.io.robot_import import robot_from_dh, robot_from_urdf
 
 DEG = math.pi / 180
@@ -410,3 +410,36 @@ def test_urdf_errors(tmp_path):
                  "<joint name='j' type='fixed'><parent link='a'/><child link='b'/></joint></robot>")
     with pytest.raises(ConfigError, match="no moving joints"):
         robot_from_urdf(f)
+
+
+_TWO_LINKS = "<robot name='x'><link name='a'/><link name='b'/>{}</robot>"
+
+
+@pytest.mark.parametrize("joint, pattern", [
+    ("<joint name='j1' type='revolute'><child link='b'/></joint>", r"joint 'j1' has no <parent> element"),
+    ("<joint name='j1' type='revolute'><parent link='a'/></joint>", r"joint 'j1' has no <child> element"),
+    ("<joint name='j1' type='revolute'><parent/><child link='b'/></joint>", r"joint 'j1': <parent> has no 'link'"),
+    ("<joint name='j1' type='revolute'><parent link='a'/><child link='b'/><origin xyz='0 0'/></joint>",
+     r"joint 'j1': <origin xyz> must be 3 numbers, got '0 0'"),
+    ("<joint name='j1' type='revolute'><parent link='a'/><child link='b'/><origin rpy='0 x 0'/></joint>",
+     r"joint 'j1': <origin rpy> must be 3 numbers"),
+    ("<joint name='j1' type='revolute'><parent link='a'/><child link='b'/><axis/></joint>",
+     r"joint 'j1': <axis> has no 'xyz' attribute"),
+    ("<joint name='j1' type='revolute'><parent link='a'/><child link='b'/><limit upper='1'/></joint>",
+     r"joint 'j1': <limit> has no 'lower' attribute"),
+])
+def test_urdf_missing_elements_name_the_joint(tmp_path, joint, pattern):
+    f = tmp_path / "bad.urdf"
+    f.write_text(_TWO_LINKS.format(joint))
+    with pytest.raises(ConfigError, match=pattern):
+        robot_from_urdf(f)
+
+
+def test_urdf_origin_and_axis_default(tmp_path):
+    # URDF: <origin> and its xyz / rpy default to zero, <axis> to x, a joint without <limit> to ±2π
+    f = tmp_path / "min.urdf"
+    f.write_text(_TWO_LINKS.format(
+        "<joint name='j1' type='revolute'><parent link='a'/><child link='b'/><origin rpy='0 0 0.5'/></joint>"))
+    m = robot_from_urdf(f)
+    np.testing.assert_allclose(m.joint_limits, [[-2 * math.pi, 2 * math.pi]])
+    np.testing.assert_allclose(forward(m, [[0.3]]), [Rz(0.5) @ Rx(0.3)], atol=1e-12)

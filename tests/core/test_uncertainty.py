@@ -8,11 +8,11 @@ import pytest
 from station.core.identification import identify
 from station.core.kinematics import forward
 from station.core.measurements import synthetic_set
-from station.core.model import load_robot
 from station.core.poses import spread_joints
 from station.core.study import StudyInputs, perturbed
 from station.core.transforms import pose_error
 from station.core.uncertainty import linear_uncertainty, monte_carlo, pose_accuracy
+from station.io.robot_files import load_robot
 
 SR800 = load_robot("sr800")
 INPUTS = StudyInputs()

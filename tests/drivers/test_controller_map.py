@@ -1,15 +1,26 @@
 """Register map: encoding, word orders, decoders that fail only with the driver's errors."""
 
 import contextlib
+
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from drivers.controller import ControllerStatus, CorrectionTableData, TableAxis
+from drivers.controller import ControllerStatus
 from drivers.controller_map import (
-    REG, REGISTERS, ControllerError, RegisterDecodeError, WordOrder, decode, decode_f32_array,
-    encode, encode_f32_array, register_span,
+    REG,
+    REGISTERS,
+    ControllerError,
+    RegisterDecodeError,
+    WordOrder,
+    decode,
+    decode_f32_array,
+    encode,
+    encode_f32_array,
+    register_span,
 )
+from drivers.correction_table import CorrectionTableData, TableAxis
 
 WORDS = st.integers(min_value=0, max_value=0xFFFF)
 
@@ -136,6 +147,6 @@ def test_interpolation_rule():
     # periodic wrap: between node 3 (value 3) and node 0 (value 0)
     assert t.interpolate([0.0, 3.5 * np.pi / 2])[0] == pytest.approx(1.5)
     assert t.interpolate([0.0, -np.pi / 4])[0] == pytest.approx(1.5)
-    from drivers.controller import TableRangeError
+    from drivers.correction_table import TableRangeError
     with pytest.raises(TableRangeError, match="outside"):
         t.interpolate([25.0, 0.0])

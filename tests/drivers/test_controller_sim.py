@@ -6,11 +6,18 @@ import numpy as np
 import pytest
 
 from drivers.controller import (
-    ControllerConnectionError, ControllerLinkLost, CorrectionTableData, DriveFault, EmergencyStop,
-    HandshakeTimeout, ModbusController, ModbusExceptionError, MotionAborted, MotionRejected,
-    TableAxis, TableError, TableVerifyError,
+    ControllerConnectionError,
+    ControllerLinkLost,
+    DriveFault,
+    EmergencyStop,
+    HandshakeTimeout,
+    ModbusController,
+    ModbusExceptionError,
+    MotionAborted,
+    MotionRejected,
 )
 from drivers.controller_map import REG, Command, WordOrder
+from drivers.correction_table import CorrectionTableData, TableAxis, TableError, TableVerifyError
 from simulators.controller_server import SimulatedController
 from station.core.kinematics import forward, scara_ik
 from station.core.transforms import matrix_to_pose, pose_to_matrix

@@ -3,11 +3,9 @@
 import numpy as np
 import pytest
 
-from drivers.controller import (
-    CorrectionTableData, HandshakeTimeout, ModbusController, ModbusExceptionError, TableAxis,
-    TableVerifyError,
-)
+from drivers.controller import HandshakeTimeout, ModbusController, ModbusExceptionError
 from drivers.controller_map import REG, WordOrder, encode, encode_f32_array
+from drivers.correction_table import CorrectionTableData, TableAxis, TableVerifyError
 
 
 class _Resp:

@@ -27,7 +27,6 @@ from simulators.probe_head_sim import (
 from station.core.probe_geometry import readings_from_pose, solve_pose
 from station.core.transforms import pose_to_matrix
 
-
 # Long enough that a loaded CI machine does not time out a healthy 17 ms transaction, short
 # enough that the tests which provoke timeouts stay quick.
 TIMEOUT = 0.3

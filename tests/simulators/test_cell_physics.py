@@ -12,7 +12,6 @@ import pytest
 
 from simulators.cell import ARCMIN, CalibrationBody, CellTruth, SimulatedCell
 from station.core.kinematics import forward, scara_ik
-from station.core.transforms import invert, matrix_to_pose
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -10,13 +10,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from station.ui.cli import main
-from station.io.datafile import write_csv
 from station.core.kinematics import forward
 from station.core.measurements import synthetic_set
-from station.core.model import load_robot
 from station.core.poses import spread_joints
 from station.core.transforms import matrix_to_pose
+from station.io.datafile import write_csv
+from station.io.robot_files import load_robot
+from station.ui.cli import main
 
 SR800 = load_robot("sr800")
 ROOT = Path(__file__).resolve().parents[2]
@@ -200,11 +200,11 @@ def test_exit_codes_by_error_type(capsys, pose_file, tmp_path):
 
     f, _, _, _ = pose_file
     rc, _, _ = run(capsys, "identify", tmp_path / "missing.csv")
-    assert rc == ConfigError.exit_code == 2
+    assert rc == ConfigError.outcome == 2
     g = _write(tmp_path, "g.csv", ",".join(POSE_HEADER) + "\n" + "\n".join(
         f"{i},{2 * i},-{i},{i},{(-1) ** i * 1000},{i * 37 % 500},{i},{i * 10},{-i},{i * 7}" for i in range(1, 31)) + "\n")
     rc, _, _ = run(capsys, "identify", g)
-    assert rc == IdentificationError.exit_code == 3
+    assert rc == IdentificationError.outcome == 3
 
 
 def test_argparse_errors_exit_2(capsys):

@@ -2,17 +2,25 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import struct
 
 import numpy as np
 import pytest
 
-from station.errors import ConfigError
-from station.ui.report import RAD_TO_ARCSEC, ReportData, write_report
+from station.cell.summary import (
+    ErrorStats,
+    IdentificationSummary,
+    ParameterEstimate,
+    RunSummary,
+    UploadSummary,
+)
+from station.core.units import ARCSEC
+from station.errors import ConfigError, Outcome
+from station.ui.report import ReportData, write_report
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-ARCSEC = math.pi / 180 / 3600  # rad
 
 
 def make_data(*, oracle: bool = True, residual_cols: int = 6, seed: int = 1) -> ReportData:
@@ -48,8 +56,10 @@ def make_data(*, oracle: bool = True, residual_cols: int = 6, seed: int = 1) -> 
         errors_before_um=before,
         errors_after_um=after,
         oracle_after_um=(after * 0.9) if oracle else None,
-        summary={"outcome": "calibrated", "rms_before_um": 812.44, "rms_after_um": 23.61,
-                 "ratio": 34.41, "oracle_rms_after_um": 21.9, "exit_code": 0},
+        summary=RunSummary(outcome=Outcome.SUCCESS, run_id=1, robot="SR 800", cell="sim",
+                           before=ErrorStats(k, 812.44, 900.0, 850.0, 20.0),
+                           after=ErrorStats(k, 23.61, 30.0, 25.0, 10.0),
+                           oracle=ErrorStats(k, 21.9, 28.0, 22.0, 9.0)),
         verify_labels=[f"V{i + 1}" for i in range(k)],
     )
 
@@ -90,7 +100,7 @@ def test_parameter_table_in_people_units(tmp_path):
 def test_summary_and_verification_tables(tmp_path):
     d = make_data()
     text = write_report(tmp_path, d).read_text(encoding="utf-8")
-    assert "| outcome | calibrated |" in text
+    assert "| outcome | SUCCESS |" in text
     assert "| RMS before | 812.4 µm |" in text
     assert "| RMS after | 23.6 µm |" in text
     assert "| improvement ratio | 34.4 × |" in text
@@ -103,7 +113,7 @@ def test_summary_and_verification_tables(tmp_path):
     assert f"**{rms_b:.1f}**" in text
     # residual statistics in µm and arc seconds
     pos = np.linalg.norm(d.residuals[:, :3], axis=1) * 1000
-    ori = np.linalg.norm(d.residuals[:, 3:], axis=1) * RAD_TO_ARCSEC
+    ori = np.linalg.norm(d.residuals[:, 3:], axis=1) * (1 / ARCSEC)
     assert f"RMS position residual {math.sqrt(np.mean(pos**2)):.1f} µm" in text
     assert f"RMS orientation residual {math.sqrt(np.mean(ori**2)):.1f} ″" in text
     acc = d.accuracy_sigma_mm * 1000
@@ -143,28 +153,28 @@ def test_shape_errors_are_config_errors():
 
 def test_report_data_is_frozen():
     d = make_data()
-    with pytest.raises(Exception):
+    with pytest.raises(dataclasses.FrozenInstanceError):
         d.run_id = 3  # type: ignore[misc]
     with pytest.raises(ValueError):
         d.param_nominal[0] = 1.0
 
 
 def test_pipeline_summary_layout(tmp_path):
-    """station.cell.pipeline's summary: nested stats and ``gain``."""
-    summary = {
-        "run_id": 7, "cell": "sim", "robot": "SR 800", "outcome": "SUCCESS", "exit_code": 0,
-        "identification": {"n_parameters": 20, "rms_residual_um": 9.87, "parameters": {"A2.x": {"value": 1.0}}},
-        "before": {"n": 12, "rms_um": 1012.34, "ap_max_um": 1400.0, "errors_um": [1.0, 2.0]},
-        "after": {"n": 12, "rms_um": 24.61, "ap_max_um": 35.5, "rp_max_um": 30.2},
-        "oracle": {"n": 12, "rms_um": 20.1}, "gain": 41.15, "after_vs_oracle": 1.224,
-        "upload": {"crc32": "deadbeef", "verified": True},
-    }
+    """The run summary as the pipeline stores it (JSON) reads back into the report's table."""
+    summary = RunSummary(
+        outcome=Outcome.SUCCESS, run_id=7, cell="sim", robot="SR 800",
+        identification=IdentificationSummary("pose", 120, 20, 0.9, 9.87, (), (ParameterEstimate("A2.x", 1.0, 1e-3),)),
+        before=ErrorStats(12, 1012.34, 1500.0, 1400.0, 40.0, (1.0, 2.0)),
+        after=ErrorStats(12, 24.61, 40.0, 35.5, 30.2), oracle=ErrorStats(12, 20.1, 30.0, 28.0, 25.0),
+        upload=UploadSummary("deadbeef", 0.42))
+    summary = RunSummary.from_json(summary.to_json())
     d = make_data()
     d = ReportData(**{**d.__dict__, "summary": summary})
     text = write_report(tmp_path, d).read_text(encoding="utf-8")
     for row in ("| outcome | SUCCESS |", "| robot | SR 800 |", "| RMS before | 1012.3 µm |",
                 "| RMS after | 24.6 µm |", "| improvement ratio | 41.1 × |", "| oracle RMS after | 20.1 µm |",
                 "| after / oracle | 1.22 × |", "| AP max after (ISO 9283) | 35.5 µm |",
-                "| identified parameters | 20 |", "| upload.crc32 | deadbeef |", "| exit code | 0 |"):
+                "| identified parameters | 20 |", "| upload.crc32 | deadbeef |", "| exit code | 0 |",
+                "| upload (read back, activated) | 0.42 s |"):
         assert row in text, row
     assert "errors_um" not in text

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 
 from simulators import start_simulated_cell
-from station.ui.cli import main
-from station.ui.commands_cell import simulated_config_text
+from simulators.reference_cell import cell_config_text as simulated_config_text
 from station.cell.config import TEMPLATE, parse_text
-from station.errors import ConfigError
 from station.cell.plan import build_plan
+from station.errors import ConfigError
+from station.ui.cli import main
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -104,12 +104,12 @@ def test_d_optimal_selection_keeps_the_most_informative_steps(sim):
     full = build_plan(parse_text(text))
     sel = build_plan(parse_text(text.replace("repeats = 4", "repeats = 1\nselect = 12")))
     assert len(sel.identification) == 12
+    from station.core.identifiability import analyze
     from station.core.identification import identify  # noqa: F401  (the core is what ranks them)
     from station.core.measurements import synthetic_set
-    from station.core.identifiability import analyze
 
     cfg = parse_text(text)
-    q = np.array([s.target.joints for s in sel.identification])
+    q = np.array([s.q for s in sel.identification])
     a = analyze(cfg.model, synthetic_set(cfg.model, "pose", q, cfg.model.nominal))
     assert a.rank == 20  # 12 chosen poses still identify the complete model
     assert len(full.identification) > len(sel.identification)

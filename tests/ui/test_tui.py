@@ -1,11 +1,21 @@
-"""Operator UI driven headless with Textual's Pilot against a scripted fake runner."""
+"""Operator UI driven headless with Textual's Pilot against a scripted fake runner.
+
+The fake plays the session's contract: typed events through ``emit``, ``RunFinished`` /
+``RunFailed`` carrying the frozen :class:`RunSummary`, and that summary returned.  The exit code
+the UI shows and returns is ``summary.exit_code`` and nothing else.
+"""
 
 from __future__ import annotations
 
+import ast
+import re
 import threading
 import time
+from pathlib import Path
 
 import pytest
+from textual.content import Content
+from textual.widgets import DataTable, ProgressBar, Static
 
 from station.cell.events import (
     MeasurementRecorded,
@@ -16,39 +26,52 @@ from station.cell.events import (
     RunStarted,
     StepStarted,
 )
+from station.cell.outcomes import hint_for
 from station.cell.runcontrol import RunAborted, RunControl
-from station.ui.tui import ConfirmScreen, StationApp, exit_code_for
-
-from textual.content import Content
-from textual.widgets import DataTable, ProgressBar, Static
+from station.cell.summary import (
+    ErrorStats,
+    Failure,
+    IdentificationSummary,
+    RunSummary,
+    UploadSummary,
+)
+from station.errors import ConfigError, Outcome
+from station.ui.tui import ConfirmScreen, StationApp
 
 N = 5
 LABELS = [f"point C{i}.a, elbow +1" for i in range(N)]
 RESIDUALS = [1.25, 2.5, 0.75, 3.0, 1.5]
-SUMMARY = {
-    "rms_before_um": 812.4,
-    "rms_after_um": 23.6,
-    "ratio": 34.42,
-    "oracle_rms_after_um": 21.9,
-    "exit_code": 0,
-}
+
+
+def stats(rms: float, ap: float = 0.0, rp: float = 0.0) -> ErrorStats:
+    return ErrorStats(n=12, rms_um=rms, max_um=rms * 1.5, ap_max_um=ap, rp_max_um=rp)
+
+
+SUMMARY = RunSummary(
+    outcome=Outcome.SUCCESS, run_id=42, cell="sim", robot="SR 800",
+    identification=IdentificationSummary(objective="pose", n_measurements=60, n_parameters=20,
+                                         rms_normalized=1.02, rms_residual_um=9.87, outliers=(),
+                                         parameters=()),
+    before=stats(812.4, 1400.0, 31.0), after=stats(23.6, 35.5, 30.2), oracle=stats(21.9),
+    upload=UploadSummary(crc32="deadbeef", seconds=1.23),
+)
 
 
 class FakeRunner:
-    """Scripted stand-in for station.cell.pipeline.run_calibration.
+    """Scripted stand-in for ``run_calibration_session``.
 
-    With ``gate`` set, it waits on the gate before each step so a test can place key presses
-    between steps deterministically; it calls ``control.checkpoint()`` at each safe point and
-    records what happened.
+    With ``gated`` it waits on a gate before each step so a test can place key presses between
+    steps deterministically; it calls ``control.checkpoint()`` at each safe point and records
+    what happened.  An abort either escapes as ``RunAborted`` (``on_abort="raise"``) or ends
+    like the session ends it (``"session"``: ``RunFailed`` with an ABORTED summary, returned).
     """
 
-    def __init__(self, *, fail: RunFailed | None = None, gated: bool = False, raise_exc: Exception | None = None,
-                 summary: dict | None = None, returns: dict | None = None, outcome: str = "calibrated"):
-        self.fail = fail
-        self.summary = dict(SUMMARY) if summary is None else summary
-        self.returns = returns
-        self.outcome = outcome
+    def __init__(self, *, summary: RunSummary = SUMMARY, gated: bool = False,
+                 raise_exc: BaseException | None = None, returns: object = None, on_abort: str = "raise"):
+        self.summary = summary
+        self.returns = summary if returns is None else returns
         self.raise_exc = raise_exc
+        self.on_abort = on_abort
         self.gate = threading.Semaphore(0) if gated else None
         self.checkpoints_passed = 0
         self.in_checkpoint = threading.Event()
@@ -56,7 +79,7 @@ class FakeRunner:
         self.finished = False
         self.thread_name: str | None = None
 
-    def __call__(self, emit, control: RunControl) -> dict:
+    def __call__(self, emit, control: RunControl):
         self.thread_name = threading.current_thread().name
         try:
             emit(RunStarted(run_id=42, n_steps=N))
@@ -70,27 +93,29 @@ class FakeRunner:
                 self.in_checkpoint.clear()
                 self.checkpoints_passed += 1
                 emit(StepStarted(index=i, total=N, label=LABELS[i]))
-                emit(
-                    MeasurementRecorded(
-                        index=i, total=N, label=LABELS[i], ok=(i != 3), residual_um=RESIDUALS[i],
-                        message="" if i != 3 else "probe 4 out of range",
-                    )
-                )
+                emit(MeasurementRecorded(index=i, total=N, label=LABELS[i], ok=(i != 3),
+                                         residual_um=RESIDUALS[i],
+                                         message="" if i != 3 else "probe 4 out of range"))
             if self.raise_exc is not None:
                 raise self.raise_exc
-            if self.fail is not None:
-                emit(self.fail)
-                return dict(self.returns) if self.returns is not None else {}
+            if self.summary.failure is not None:
+                emit(RunFailed(self.summary))
+                return self.returns
             emit(Notice("warning", "backlash 0.1 mm dominates the attainable accuracy"))
             emit(PhaseChanged("identify", "20 parameters"))
             emit(PhaseChanged("verify"))
-            emit(RunFinished(outcome=self.outcome, summary=dict(self.summary)))
+            emit(RunFinished(self.summary))
             self.finished = True
-            return dict(self.returns) if self.returns is not None else dict(self.summary)
-        except RunAborted:
+            return self.returns
+        except RunAborted as exc:
             self.aborted = True
             self.in_checkpoint.clear()
-            raise
+            if self.on_abort == "raise":
+                raise
+            summary = RunSummary(outcome=Outcome.ABORTED, run_id=42,
+                                 failure=Failure("RunAborted", str(exc), hint_for(exc, 42)))
+            emit(RunFailed(summary))
+            return summary
 
 
 def plain(widget: Static) -> str:
@@ -98,6 +123,17 @@ def plain(widget: Static) -> str:
     if isinstance(content, str):
         return Content.from_markup(content).plain
     return str(content)
+
+
+def panel(app: StationApp) -> str:
+    return plain(app.query_one("#summary", Static))
+
+
+def row(text: str, label: str) -> str:
+    """Value of an aligned ``label  value`` row of the result panel."""
+    m = re.search(rf"^{re.escape(label)}\s+(.*)$", text, re.MULTILINE)
+    assert m, (label, text)
+    return m.group(1).strip()
 
 
 async def wait_until(pilot, cond, what: str, rounds: int = 400) -> None:
@@ -110,6 +146,7 @@ async def wait_until(pilot, cond, what: str, rounds: int = 400) -> None:
 
 
 def open_gate(runner: FakeRunner, n: int = 1) -> None:
+    assert runner.gate is not None
     for _ in range(n):
         runner.gate.release()
 
@@ -117,8 +154,8 @@ def open_gate(runner: FakeRunner, n: int = 1) -> None:
 async def test_full_run_progress_table_and_summary():
     runner = FakeRunner()
     app = StationApp(runner, title="SR 800 test")
-    async with app.run_test(size=(120, 40)) as pilot:
-        assert app.state == "idle"
+    async with app.run_test(size=(120, 45)) as pilot:
+        assert app.state == "idle" and app.summary is None and app.exit_code is None
         await pilot.press("s")
         await wait_until(pilot, lambda: app.state == "finished", "run finished")
 
@@ -132,7 +169,7 @@ async def test_full_run_progress_table_and_summary():
         table = app.query_one("#measurements", DataTable)
         assert table.row_count == N
         for i in range(N):
-            idx, label, ok, residual, note = (str(c) for c in table.get_row_at(i))
+            idx, label, ok, residual, _note = (str(c) for c in table.get_row_at(i))
             assert idx == str(i + 1)
             assert label == LABELS[i]
             assert ("✗" in ok) if i == 3 else ("✓" in ok)
@@ -141,17 +178,23 @@ async def test_full_run_progress_table_and_summary():
 
         assert app.run_id == 42
         assert "run #42" in plain(app.query_one("#run-id", Static))
-        summary = plain(app.query_one("#summary", Static))
+        text = panel(app)
         assert app.query_one("#summary").display
-        for needle in ("calibrated", "812.4 µm", "23.6 µm", "34.4 ×", "21.9 µm", "exit code"):
-            assert needle in summary, (needle, summary)
-        assert app.outcome == "calibrated" and app.exit_code == 0
+        assert row(text, "outcome").startswith("SUCCESS")
+        assert row(text, "robot") == "SR 800"
+        # every headline figure of the summary, formatted as the summary says
+        for label, value, unit, digits in SUMMARY.figures():
+            assert row(text, label) == f"{value:.{digits}f}{' ' + unit if unit else ''}"
+        assert row(text, "RMS before") == "812.4 µm" and row(text, "improvement ratio") == "34.4 ×"
+        assert row(text, "exit code") == "0"
+        assert app.summary is SUMMARY and app.outcome == "SUCCESS" and app.exit_code == 0
+        assert "-ok" in app.query_one("#summary").classes
         assert "done" in plain(app.query_one("#phases", Static))
 
         await pilot.press("q")  # not running any more: quits at once
         await wait_until(pilot, lambda: not app.is_running, "app exit")
     assert app.return_code == 0
-    assert app.return_value["rms_after_um"] == pytest.approx(23.6)
+    assert app.return_value is SUMMARY
 
 
 async def test_start_button_starts_the_run():
@@ -172,14 +215,13 @@ async def test_pause_blocks_runner_at_checkpoint_and_resume_releases():
         await wait_until(pilot, lambda: app.query_one("#measurements", DataTable).row_count == 2, "2 rows")
 
         await pilot.press("p")
-        assert app.control.paused
+        assert app.control is not None and app.control.paused
         assert app.state in ("pausing", "paused")
         open_gate(runner)  # runner reaches its next checkpoint and must block there
         await wait_until(pilot, lambda: app.control.waiting, "runner blocked in checkpoint")
         await wait_until(pilot, lambda: app.state == "paused", "UI shows paused")
         assert runner.checkpoints_passed == 2
-        # it stays blocked while paused
-        for _ in range(10):
+        for _ in range(10):  # it stays blocked while paused
             await pilot.pause(0.01)
         assert runner.checkpoints_passed == 2 and runner.in_checkpoint.is_set()
         assert "PAUSED" in plain(app.query_one("#state", Static))
@@ -192,8 +234,11 @@ async def test_pause_blocks_runner_at_checkpoint_and_resume_releases():
         assert app.query_one("#progress", ProgressBar).progress == N
 
 
-async def test_abort_with_confirmation_raises_in_runner_and_shows_aborted():
-    runner = FakeRunner(gated=True)
+@pytest.mark.parametrize("on_abort", ["raise", "session"])
+async def test_abort_with_confirmation_is_outcome_aborted(on_abort):
+    # "raise": RunAborted escapes start_run and is classified by type; "session": the run ends
+    # as run_calibration_session ends it, with an ABORTED summary.  Both are exit code 6.
+    runner = FakeRunner(gated=True, on_abort=on_abort)
     app = StationApp(runner)
     async with app.run_test(size=(120, 40)) as pilot:
         await pilot.press("s")
@@ -205,7 +250,7 @@ async def test_abort_with_confirmation_raises_in_runner_and_shows_aborted():
         await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), "confirm dialog")
         await pilot.press("n")
         await wait_until(pilot, lambda: not isinstance(app.screen, ConfirmScreen), "dialog closed")
-        assert not app.control.aborted and app.state == "running"
+        assert app.control is not None and not app.control.aborted and app.state == "running"
 
         await pilot.press("a")
         await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), "confirm dialog")
@@ -213,11 +258,18 @@ async def test_abort_with_confirmation_raises_in_runner_and_shows_aborted():
         await wait_until(pilot, lambda: app.control.aborted, "abort flag")
         open_gate(runner, 1)  # next safe point
         await wait_until(pilot, lambda: app.state == "aborted", "UI shows aborted")
+        await wait_until(pilot, lambda: app.worker is not None and app.worker.is_finished, "worker done")
+        await pilot.pause()
         assert runner.aborted and not runner.finished
         assert runner.checkpoints_passed == 1
-        assert app.exit_code == RunAborted.exit_code == 6
-        summary = plain(app.query_one("#summary", Static))
-        assert "ABORTED" in summary and "exit code 6" in summary
+        assert app.summary is not None and app.summary.outcome is Outcome.ABORTED
+        assert app.exit_code == Outcome.ABORTED == 6
+        text = panel(app)
+        assert "ABORTED" in text and row(text, "exit code") == "6"
+        assert "--resume 42" in text  # the hint names the run to resume
+        await pilot.press("q")
+        await wait_until(pilot, lambda: not app.is_running, "app exit")
+    assert app.return_code == 6
 
 
 async def test_abort_while_paused_releases_the_runner():
@@ -233,40 +285,88 @@ async def test_abort_while_paused_releases_the_runner():
         await pilot.press("y")
         await wait_until(pilot, lambda: app.state == "aborted", "aborted")
         assert runner.aborted and runner.checkpoints_passed == 0
+        assert app.exit_code == 6
 
 
 async def test_run_failed_shows_message_and_hint():
-    fail = RunFailed(
-        error_type="IdentificationError",
-        message="rank 17 < 20: the poses do not excite axis 2",
-        hint="plan poses over the whole workspace (station plan --spread 3d)",
-    )
-    runner = FakeRunner(fail=fail)
+    failure = Failure("IdentificationError", "rank 17 < 20: the poses do not excite axis 2",
+                      "plan poses over the whole workspace (station plan --spread 3d)")
+    runner = FakeRunner(summary=RunSummary(Outcome.IDENTIFICATION_FAILED, run_id=42, failure=failure))
     app = StationApp(runner)
     async with app.run_test(size=(120, 40)) as pilot:
         await pilot.press("s")
         await wait_until(pilot, lambda: app.state == "failed", "failed")
-        text = plain(app.query_one("#summary", Static))
+        text = panel(app)
         assert "IdentificationError" in text
-        assert fail.message in text
-        assert fail.hint in text
-        assert app.exit_code == 3
+        assert failure.message in text and failure.hint in text
+        assert row(text, "outcome").startswith("IDENTIFICATION_FAILED")
+        assert app.exit_code == 3 and app.failure == failure
+        assert "-failed" in app.query_one("#summary").classes
         await pilot.press("q")
         await wait_until(pilot, lambda: not app.is_running, "app exit")
     assert app.return_code == 3
 
 
-async def test_runner_exception_without_event_is_shown():
-    from station.errors import ConfigError
-
-    runner = FakeRunner(raise_exc=ConfigError("cell.toml: probe 7 has no direction"))
+async def test_exit_code_comes_from_the_outcome_not_the_error_name():
+    # An error type *named* like the abort must not make the run "aborted": only the outcome counts.
+    failure = Failure("RunAborted", "controller heartbeat lost", "check the fieldbus cable")
+    runner = FakeRunner(summary=RunSummary(Outcome.DEVICE_FAULT, run_id=42, failure=failure))
     app = StationApp(runner)
     async with app.run_test(size=(120, 40)) as pilot:
         await pilot.press("s")
+        await wait_until(pilot, lambda: app.summary is not None, "run ended")
+        assert app.state == "failed" and app.exit_code == 7
+        text = panel(app)
+        assert "check the fieldbus cable" in text and row(text, "exit code") == "7"
+
+
+async def test_station_error_escaping_start_run_is_classified_by_type(tmp_path):
+    runner = FakeRunner(raise_exc=ConfigError("cell.toml: probe 7 has no direction"))
+    app = StationApp(runner, log_dir=tmp_path)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await pilot.press("s")
         await wait_until(pilot, lambda: app.state == "failed", "failed")
-        text = plain(app.query_one("#summary", Static))
+        text = panel(app)
         assert "ConfigError" in text and "probe 7 has no direction" in text
-        assert app.exit_code == 2
+        assert app.exit_code == Outcome.CONFIG_ERROR == 2
+    assert not list(tmp_path.iterdir())  # not a bug: no traceback file
+
+
+def _buggy_helper():
+    return {}["missing key"]
+
+
+async def test_exception_in_start_run_writes_its_traceback_and_is_internal_error(tmp_path):
+    def start_run(emit, control):
+        emit(RunStarted(run_id=9, n_steps=3))
+        _buggy_helper()
+
+    app = StationApp(start_run, log_dir=tmp_path)
+    async with app.run_test(size=(160, 40)) as pilot:
+        await pilot.press("s")
+        await wait_until(pilot, lambda: app.state == "failed", "failed")
+        assert app.summary is not None and app.summary.outcome is Outcome.INTERNAL_ERROR
+        assert app.exit_code == 1
+        logs = list(tmp_path.glob("station-error-*.log"))
+        assert len(logs) == 1
+        trace = logs[0].read_text(encoding="utf-8")
+        assert "Traceback" in trace and "_buggy_helper" in trace and "KeyError" in trace
+        assert app.failure is not None and app.failure.log_file == str(logs[0])
+        text = panel(app)
+        assert str(logs[0]) in text and "KeyError" in text
+        assert row(text, "exit code") == "1"
+        await pilot.press("q")
+        await wait_until(pilot, lambda: not app.is_running, "app exit")
+    assert app.return_code == 1
+
+
+async def test_start_run_that_returns_no_summary_is_internal_error(tmp_path):
+    app = StationApp(lambda emit, control: {"outcome": "SUCCESS", "exit_code": 0}, log_dir=tmp_path)
+    async with app.run_test(size=(160, 40)) as pilot:
+        await pilot.press("s")
+        await wait_until(pilot, lambda: app.state == "failed", "failed")
+        assert app.exit_code == 1
+        assert "not a RunSummary" in panel(app)
 
 
 async def test_quit_while_running_asks_then_aborts_and_exits():
@@ -288,6 +388,7 @@ async def test_quit_while_running_asks_then_aborts_and_exits():
         await wait_until(pilot, lambda: not app.is_running, "app exit after abort")
     assert runner.aborted
     assert app.return_code == 6
+    assert app.return_value is not None and app.return_value.outcome is Outcome.ABORTED
 
 
 async def test_start_is_refused_while_running():
@@ -307,6 +408,35 @@ async def test_start_is_refused_while_running():
         assert len(calls) == 1
         open_gate(runner, N)
         await wait_until(pilot, lambda: app.state == "finished", "finished")
+
+
+async def test_target_missed_is_finished_with_exit_code_10_and_a_red_frame():
+    summary = SUMMARY.replace(outcome=Outcome.TARGET_MISSED, after=stats(400.0, 410.0, 30.2))
+    app = StationApp(FakeRunner(summary=summary))
+    async with app.run_test(size=(120, 45)) as pilot:
+        await pilot.press("s")
+        await wait_until(pilot, lambda: app.summary is not None and app.worker.is_finished, "ended")
+        await pilot.pause()
+        assert app.state == "finished" and app.exit_code == 10
+        text = panel(app)
+        assert row(text, "outcome").startswith("TARGET_MISSED")
+        assert row(text, "RMS after") == "400.0 µm" and row(text, "improvement ratio") == "2.0 ×"
+        assert row(text, "exit code") == "10"
+        assert "-failed" in app.query_one("#summary").classes
+        await pilot.press("q")
+        await wait_until(pilot, lambda: not app.is_running, "exit")
+    assert app.return_code == 10
+
+
+async def test_returned_summary_completes_the_events_one():
+    # The session returns the event's summary completed (database path, report); that one is shown.
+    returned = SUMMARY.replace(db="runs.sqlite", report="run-42.html")
+    app = StationApp(FakeRunner(summary=SUMMARY, returns=returned))
+    async with app.run_test(size=(120, 45)) as pilot:
+        await pilot.press("s")
+        await wait_until(pilot, lambda: app.summary == returned, "returned summary shown")
+        assert row(panel(app), "report") == "run-42.html"
+        assert app.exit_code == 0
 
 
 def test_runcontrol_checkpoint_semantics():
@@ -338,77 +468,21 @@ def test_runcontrol_checkpoint_semantics():
     assert events[0].index == 3
 
     c.abort()
-    with pytest.raises(RunAborted):
+    with pytest.raises(RunAborted) as info:
         c.checkpoint()
     c.pause()  # no effect after abort
     assert not c.paused and c.aborted
-    assert RunAborted.exit_code == 6
+    assert info.value.outcome is Outcome.ABORTED and info.value.exit_code == 6
 
 
-def test_exit_code_mapping():
-    assert exit_code_for("IdentificationError") == 3
-    assert exit_code_for("UnreachableError") == 4
-    assert exit_code_for("RunAborted") == 6
-    assert exit_code_for("ZeroDivisionError") == 1
+UI = Path(__file__).resolve().parents[2] / "station" / "ui"
+FORBIDDEN = ("drivers", "pymodbus", "serial", "sqlite3", "station.cell.pipeline")
 
 
-# The pipeline's own summary layout (station.cell.pipeline): nested stats, "gain", exit code only in
-# the return value (added by the launcher), outcome names of station.cell.pipeline.Outcome.
-PIPELINE_SUMMARY = {
-    "run_id": 7, "cell": "sim", "robot": "SR 800",
-    "identification": {"n_parameters": 20, "rms_residual_um": 9.87, "parameters": {"A2.x": {"value": 445.0}}},
-    "before": {"n": 12, "rms_um": 1012.3, "max_um": 1500.0, "ap_max_um": 1400.0, "rp_max_um": 31.0,
-               "errors_um": [1.0, 2.0]},
-    "after": {"n": 12, "rms_um": 24.6, "max_um": 40.0, "ap_max_um": 35.5, "rp_max_um": 30.2, "errors_um": []},
-    "oracle": {"n": 12, "rms_um": 20.1},
-    "gain": 41.15, "after_vs_oracle": 1.224, "upload": {"crc32": "deadbeef", "verified": True},
-    "outcome": "TARGET_MISSED",
-}
-
-
-async def test_pipeline_summary_layout_and_exit_code_from_return_value():
-    runner = FakeRunner(summary=PIPELINE_SUMMARY, outcome="TARGET_MISSED",
-                        returns={**PIPELINE_SUMMARY, "exit_code": 10})
-    app = StationApp(runner)
-    async with app.run_test(size=(120, 45)) as pilot:
-        await pilot.press("s")
-        await wait_until(pilot, lambda: app.state == "finished" and app.exit_code == 10, "finished, code 10")
-        text = plain(app.query_one("#summary", Static))
-        for needle in ("TARGET_MISSED", "SR 800", "RMS before         1012.3 µm", "24.6 µm", "41.1 ×",
-                       "20.1 µm", "1.22 ×", "35.5 µm", "30.2 µm", "identified parameters", "exit code          10"):
-            assert needle.split("  ")[-1].strip() in text, (needle, text)
-        assert "-failed" in app.query_one("#summary").classes  # non-zero code: red frame
-        await pilot.press("q")
-        await wait_until(pilot, lambda: not app.is_running, "exit")
-    assert app.return_code == 10
-
-
-async def test_outcome_name_gives_exit_code_without_explicit_one():
-    summary = {k: v for k, v in PIPELINE_SUMMARY.items()}
-    runner = FakeRunner(summary=summary, outcome="SUCCESS", returns={})
-    app = StationApp(runner)
-    async with app.run_test(size=(120, 45)) as pilot:
-        await pilot.press("s")
-        await wait_until(pilot, lambda: app.state == "finished", "finished")
-        assert app.exit_code == 0
-        assert "-ok" in app.query_one("#summary").classes
-
-
-async def test_run_failed_then_returned_exit_code_wins():
-    # The launcher emits RunFailed for a driver's own error type and returns its exit code.
-    fail = RunFailed("DeviceFault", "controller heartbeat lost", "check the fieldbus cable")
-    runner = FakeRunner(fail=fail, returns={"outcome": "DeviceFault", "exit_code": 7})
-    app = StationApp(runner)
-    async with app.run_test(size=(120, 40)) as pilot:
-        await pilot.press("s")
-        await wait_until(pilot, lambda: app.exit_code == 7, "exit code 7")
-        text = plain(app.query_one("#summary", Static))
-        assert "DeviceFault" in text and "check the fieldbus cable" in text and "exit code 7" in text
-        assert app.state == "failed"
-
-
-def test_outcome_mirror_matches_pipeline():
-    calibrate = pytest.importorskip("station.cell.pipeline")
-    from station.ui.tui import OUTCOME_EXIT_CODES
-
-    assert OUTCOME_EXIT_CODES == {o.name: int(o) for o in calibrate.Outcome}
+@pytest.mark.parametrize("name", ["tui.py", "tui_widgets.py", "tui_launch.py"])
+def test_the_tui_reaches_devices_only_through_the_session(name):
+    tree = ast.parse((UI / name).read_text(encoding="utf-8"))
+    imported = [a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names]
+    imported += [n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)]
+    bad = [m for m in imported if any(m == f or m.startswith(f + ".") for f in FORBIDDEN)]
+    assert not bad, bad

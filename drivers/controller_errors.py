@@ -1,0 +1,152 @@
+"""Errors of the robot-controller driver, and how a reported error code becomes one.
+
+The error codes and their messages are part of the register map (:mod:`drivers.controller_map`,
+``docs/protocols.md``); the table errors live with the table data in
+:mod:`drivers.correction_table`. :mod:`drivers.controller` re-exports all of them.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from .controller_map import (
+    ERROR_MESSAGES,
+    MODBUS_EXCEPTION_MEANINGS,
+    Command,
+    ControllerError,
+    ErrorCode,
+)
+from .correction_table import TableError
+
+if TYPE_CHECKING:
+    from .controller_status import ControllerStatus
+
+__all__ = [
+    "ModbusExceptionError",
+    "ControllerConnectionError",
+    "ControllerLinkLost",
+    "CommandRejected",
+    "MotionRejected",
+    "MotionAborted",
+    "EmergencyStop",
+    "DriveFault",
+    "SequenceError",
+    "HandshakeTimeout",
+    "MotionTimeout",
+    "error_message",
+    "error_for",
+]
+
+
+class ModbusExceptionError(ControllerError):
+    """The controller answered a request with a Modbus exception response."""
+
+    def __init__(self, code: int, function_code: int, address: int, count: int):
+        self.code = int(code)
+        self.function_code = int(function_code)
+        self.address = int(address)
+        self.count = int(count)
+        self.meaning = MODBUS_EXCEPTION_MEANINGS.get(self.code, "unknown exception code")
+        super().__init__(
+            f"Modbus exception {self.code} ({self.meaning}) for function {self.function_code} at "
+            f"register {self.address} (count {self.count}): check the register map version and "
+            f"word order configured for this controller; the request may be repeated once the "
+            f"cause is fixed"
+        )
+
+
+class ControllerConnectionError(ControllerError):
+    """No TCP connection, or no response to a request within the timeout."""
+
+
+class ControllerLinkLost(ControllerError):
+    """The heartbeat stopped (either side). Reconnect with connect() after checking the robot."""
+
+
+class CommandRejected(ControllerError):
+    """The controller refused a command (error reported with the command's sequence number)."""
+
+    def __init__(self, message: str, code: int = 0, seq: int = 0):
+        self.code = int(code)
+        self.seq = int(seq)
+        super().__init__(message)
+
+
+class MotionRejected(CommandRejected):
+    """A motion target was refused: soft limit, unreachable, outside the table, or not ready."""
+
+
+class MotionAborted(CommandRejected):
+    """The motion was aborted by a STOP command."""
+
+
+class EmergencyStop(CommandRejected):
+    """Emergency stop during (or before) the motion."""
+
+
+class DriveFault(CommandRejected):
+    """A drive reported a fault during the motion."""
+
+
+class SequenceError(CommandRejected):
+    """The controller did not accept the sequence number (not previous+1)."""
+
+
+class HandshakeTimeout(ControllerError):
+    """The controller did not acknowledge a command in time. The command was NOT re-sent."""
+
+
+class MotionTimeout(ControllerError):
+    """A motion did not complete within the caller's timeout (it may still be running)."""
+
+
+def error_message(code: int) -> str:
+    try:
+        return ERROR_MESSAGES[ErrorCode(code)]
+    except ValueError:
+        return f"unknown error code {code}: check the controller program's map version"
+
+
+def error_for(st: ControllerStatus, seq: int, command: Command, target: Any,
+              soft_limits: np.ndarray | None) -> ControllerError:
+    """The typed error for command ``seq`` that the controller reported failed in ``st``.
+
+    ``soft_limits`` (as read at connect, or None) and the command's ``target`` only enrich the
+    message of a soft-limit violation.
+    """
+    code = st.error_code
+    msg = f"{command.name} seq {seq}: {error_message(code)}"
+    try:
+        ec = ErrorCode(code)
+    except ValueError:
+        return CommandRejected(msg, code, seq)
+    if ec is ErrorCode.SOFT_LIMIT:
+        j = st.error_joint
+        side = {-1: "lower", 1: "upper"}.get(st.error_bound, "a")
+        detail = f"joint {j} violates its {side} soft limit"
+        if soft_limits is not None and 1 <= j <= len(soft_limits) and st.error_bound in (-1, 1):
+            lim = soft_limits[j - 1, 0 if st.error_bound < 0 else 1]
+            detail += f" {lim:.6g}"
+            if command is Command.MOVE_JOINTS and target is not None and j <= len(target):
+                detail += f" (target {float(target[j - 1]):.6g})"
+        return MotionRejected(f"{command.name} seq {seq}: {detail}: choose a target inside the limits",
+                              code, seq)
+    if ec in (ErrorCode.UNREACHABLE, ErrorCode.TARGET_OUTSIDE_TABLE, ErrorCode.NOT_READY,
+              ErrorCode.BAD_COMMAND):
+        return MotionRejected(msg, code, seq)
+    if ec is ErrorCode.ESTOP:
+        return EmergencyStop(msg, code, seq)
+    if ec is ErrorCode.DRIVE_FAULT:
+        return DriveFault(f"{msg} (axis {st.error_joint})", code, seq)
+    if ec is ErrorCode.MOTION_ABORTED:
+        return MotionAborted(msg, code, seq)
+    if ec is ErrorCode.SEQUENCE_ERROR:
+        return SequenceError(msg + "; reconnect (connect()) to resynchronise", code, seq)
+    if ec is ErrorCode.WATCHDOG_TIMEOUT:
+        return ControllerLinkLost(msg)
+    if ec in (ErrorCode.TABLE_CRC_MISMATCH, ErrorCode.TABLE_NOT_STAGED, ErrorCode.TABLE_SHAPE_INVALID,
+              ErrorCode.NO_PREVIOUS_TABLE):
+        return TableError(msg)
+    return CommandRejected(msg, code, seq)

@@ -1,0 +1,71 @@
+"""The cell configuration (TOML) of the built-in simulated reference cell.
+
+The simulators know the cell they simulate: the calibration body's nominal points (its CMM
+report), the nominal set-up of the robot and the endpoints the servers listen on. The station
+reads the text like any other cell configuration (``docs/station.md``, "Cell configuration").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from simulators import SimulatedCellServers
+from simulators.cell import DEFAULT_SETUP
+from station.core.transforms import matrix_to_pose
+
+__all__ = ["cell_config_text"]
+
+
+def cell_config_text(servers: SimulatedCellServers, seed: int, word_order: str = "big") -> str:
+    """A cell configuration for the built-in simulated cell (its CMM body report, endpoints).
+
+    ``word_order`` must be the one the controller simulator was started with (``"big"`` or
+    ``"little"``); only a little word order is written out, big being the configuration's default.
+    """
+    if word_order not in ("big", "little"):
+        raise ValueError(f'word_order must be "big" or "little", got {word_order!r}')
+    cell = servers.cell
+    lines = []
+    for (cube, corner), T in zip(cell.body.labels, cell.body.nominal):
+        p = matrix_to_pose(T)
+        vals = [*p[:3], *np.degrees(p[3:])]
+        lines.append(f'  {{ id = "C{cube + 1}.{"abcd"[corner]}", pose = [{", ".join(repr(float(v)) for v in vals)}] }},')
+    setup = [*DEFAULT_SETUP[:3], *np.degrees(DEFAULT_SETUP[3:])]
+    word_order_line = "" if word_order == "big" else f'word_order = "{word_order}"\n'
+    return f"""# Built-in simulated reference cell (seed {seed}).
+[cell]
+name = "simulated reference cell"
+
+[robot]
+model = "sr800"
+setup = [{", ".join(repr(float(v)) for v in setup)}]
+
+[limits]
+joints = [[-125.0, 125.0], [-140.0, 140.0], [-195.0, -5.0], [-355.0, 355.0]]
+
+[body]
+cube_edge_mm = {cell.body.cube_edge_mm!r}
+points = [
+{chr(10).join(lines)}
+]
+
+[devices]
+probe_head = "{servers.probe_port}"
+baudrate = 38400
+controller = "{servers.controller_host}:{servers.controller_port}"
+{word_order_line}motion_timeout_s = 30.0
+
+[plan]
+settle_s = 0.0
+repeats = 4
+verification_cycles = 5
+
+[identification]
+# The simulated head: 0.5 µm probe noise over ~25 mm probe spacing (≈ 4″) on top of the robot's
+# ≈ 5 µm repeatability; weights follow the measurement, not the data sheet.
+sigma_position_um = 6.0
+sigma_angle_arcsec = 6.0
+
+[simulation]
+seed = {seed}
+"""

@@ -1,0 +1,89 @@
+"""CSV export of a run's measurements (docs/run-database.md, "Export"): one row per
+measurement, units in the header."""
+
+from __future__ import annotations
+
+import csv
+import tomllib
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from station.cell.run_records import RunDatabaseError, _num
+from station.core.transforms import matrix_to_pose
+
+if TYPE_CHECKING:
+    from station.cell.rundb import RunDB
+
+
+def export_csv(db: RunDB, run_id: int, path: str | Path,
+               joint_units: Sequence[str] | None = None) -> Path:
+    """Write one CSV row per measurement (docs/run-database.md, "Export").
+
+    ``joint_units`` ('rad' or 'mm' per joint) labels the joint columns; by default it is
+    taken from the joint types in the run's configuration snapshot (``joint = "revolute" |
+    "prismatic"`` entries), and joints of unknown type are labelled ``rad|mm``.
+    """
+    run = db.run(run_id)
+    ms = db.measurements(run_id)
+    n_q = max((len(m.joints_commanded) for m in ms), default=0)
+    n_q = max([n_q] + [len(m.joints_read) for m in ms if m.joints_read is not None])
+    n_p = max((len(m.readings_mm) for m in ms if m.readings_mm is not None), default=0)
+    units = list(joint_units) if joint_units is not None else _joint_units(run.config_toml)
+    units = (units + ["rad|mm"] * n_q)[:n_q]
+    header = (["step", "kind", "point_id", "label", "t_utc"]
+              + [f"q{i + 1} [{u}]" for i, u in enumerate(units)]
+              + [f"q{i + 1}_cmd [{u}]" for i, u in enumerate(units)]
+              + ["x [mm]", "y [mm]", "z [mm]", "roll [rad]", "pitch [rad]", "yaw [rad]",
+                 "residual [um]"]
+              + [f"p{i + 1} [mm]" for i in range(n_p)]
+              + ["status", "ok", "message"])
+
+    def cells(a: np.ndarray | None, n: int) -> list[str]:
+        vals = [] if a is None else [_num(v) for v in a]
+        return (vals + [""] * n)[:n]
+
+    out = Path(path)
+    try:
+        with open(out, "w", newline="", encoding="utf-8") as f:
+            w = csv.writer(f)
+            w.writerow(header)
+            for m in ms:
+                pose = None if m.pose is None else matrix_to_pose(m.pose)
+                status = "" if m.channel_status is None else ";".join(
+                    str(s) for s in m.channel_status)
+                w.writerow([m.step_index, m.kind, m.point_id, m.label, m.t_utc]
+                           + cells(m.joints_read, n_q) + cells(m.joints_commanded, n_q)
+                           + cells(pose, 6) + [_num(m.pose_residual_um)]
+                           + cells(m.readings_mm, n_p)
+                           + [status, int(m.ok), m.message])
+    except OSError as e:
+        raise RunDatabaseError(f"{out}: cannot write the CSV export ({e}); check the folder "
+                               f"and its permissions") from e
+    return out
+
+
+def _joint_units(config_toml: str) -> list[str]:
+    """'rad'/'mm' per joint from ``joint = "revolute"|"prismatic"`` tables in the config."""
+    try:
+        cfg = tomllib.loads(config_toml)
+    except tomllib.TOMLDecodeError:
+        return []
+    found: list[list[str]] = []
+
+    def walk(obj: Any) -> None:
+        if isinstance(obj, dict):
+            for v in obj.values():
+                walk(v)
+        elif isinstance(obj, list):
+            types = [t.get("joint") for t in obj if isinstance(t, dict)]
+            joints = [t for t in types if t in ("revolute", "prismatic")]
+            if joints:
+                found.append(["rad" if t == "revolute" else "mm" for t in joints])
+            for v in obj:
+                walk(v)
+
+    walk(cfg)
+    return found[0] if len(found) == 1 else []

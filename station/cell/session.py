@@ -1,0 +1,189 @@
+"""Opening a cell and running a session on it: the one place that builds devices from a
+configuration, for ``calibrate``, ``tui``, ``check`` and the tests.
+
+:func:`open_cell` connects the probe head and the controller the configuration names (word
+order, device id, timeouts included). :func:`load_cell` reads the configuration, or starts the
+built-in simulated cell whose configuration the simulators write. :func:`run_calibration_session`
+is what the CLI and the TUI call: it never raises for a run that ends badly; it returns the
+:class:`~station.cell.summary.RunSummary` of whatever ended it, and emits ``RunFailed``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from contextlib import ExitStack
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from drivers.controller import ModbusController
+from drivers.controller_map import WordOrder
+from drivers.probe_head import ProbeHead as SerialProbeHead
+from station.cell.config import CellConfig, load_config, parse_text
+from station.cell.devices import CellController, ProbeHead
+from station.cell.events import Event, PhaseChanged, RunFailed, RunStarted
+from station.cell.outcomes import classify, failure_summary, hint_for
+from station.cell.pipeline import Options, run_calibration
+from station.cell.runcontrol import RunControl
+from station.cell.rundb import RunDB
+from station.cell.summary import RunSummary
+from station.errors import ConfigError, Outcome
+
+__all__ = ["CellRequest", "Devices", "LoadedCell", "open_cell", "open_probe", "open_controller", "load_cell", "check_cell", "CheckReport",
+           "run_calibration_session"]
+
+
+@dataclass(frozen=True)
+class CellRequest:
+    """Which cell a command works on and how (the CLI's and the TUI's common arguments)."""
+
+    config: str | None = None
+    simulated: bool = False
+    seed: int = 1
+    time_scale: float = 0.0
+    db: str = "runs.sqlite"
+    resume: int | None = None
+    upload: bool = True
+
+
+@dataclass(frozen=True)
+class Devices:
+    probe: ProbeHead
+    controller: CellController
+
+
+@dataclass(frozen=True)
+class LoadedCell:
+    """A validated configuration; in simulation also the simulator's truth (the oracle)."""
+
+    cfg: CellConfig
+    truth: Any = None
+    endpoints: dict[str, Any] = field(default_factory=dict)
+
+
+def open_probe(cfg: CellConfig, stack: ExitStack) -> ProbeHead:
+    """The probe head interface named in ``cfg`` (closed when ``stack`` closes)."""
+    d = cfg.devices
+    probe: ProbeHead = stack.enter_context(SerialProbeHead(d.probe_head, baudrate=d.baudrate,
+                                                           timeout=d.probe_timeout_s))
+    return probe
+
+
+def open_controller(cfg: CellConfig, stack: ExitStack) -> CellController:
+    """The controller named in ``cfg``, connected with its word order and device id (closed
+    when ``stack`` closes)."""
+    d = cfg.devices
+    driver = ModbusController(d.controller_host, d.controller_port, device_id=d.device_id,
+                              word_order=WordOrder.BIG if d.word_order == "big" else WordOrder.LITTLE,
+                              timeout=d.controller_timeout_s)
+    driver.connect()
+    stack.callback(driver.close)
+    controller: CellController = driver
+    return controller
+
+
+def open_cell(cfg: CellConfig, stack: ExitStack) -> Devices:
+    """Connect the probe head and the controller named in ``cfg``; both are closed when
+    ``stack`` closes."""
+    return Devices(open_probe(cfg, stack), open_controller(cfg, stack))
+
+
+def load_cell(request: CellRequest, stack: ExitStack) -> LoadedCell:
+    """The request's configuration; with ``simulated`` the built-in simulated cell is started
+    (stopped when ``stack`` closes) and its configuration comes from the simulators."""
+    if request.simulated:
+        from simulators import start_simulated_cell
+        from simulators.reference_cell import cell_config_text
+
+        servers = start_simulated_cell(seed=request.seed, time_scale=request.time_scale)
+        stack.callback(servers.stop)
+        cfg = parse_text(cell_config_text(servers, request.seed), "<simulated cell>")
+        return LoadedCell(cfg, servers.cell.truth, servers.endpoints())
+    if not request.config:
+        raise ConfigError("give a configuration file, or --simulated for the built-in simulated cell")
+    return LoadedCell(load_config(request.config))
+
+
+def run_calibration_session(request: CellRequest, emit: Callable[[Event], None],
+                            control: RunControl | None = None) -> RunSummary:
+    """Load the cell, open its devices and run (or resume) a calibration.
+
+    Returns the run's summary whatever happened; a failure is classified by type
+    (:func:`station.cell.outcomes.classify`), emitted as ``RunFailed`` and returned with its
+    hint. An internal error (a bug) writes its traceback to a log file the message names.
+    """
+    run_id: int | None = None
+    cell_name = robot = ""
+
+    def tracking_emit(event: Event) -> None:
+        nonlocal run_id
+        if isinstance(event, RunStarted):
+            run_id = event.run_id
+        emit(event)
+
+    try:
+        with ExitStack() as stack:
+            loaded = load_cell(request, stack)
+            cfg = loaded.cfg
+            cell_name, robot = cfg.name, cfg.model.name
+            db = stack.enter_context(RunDB(request.db))
+            emit(PhaseChanged("connect", "connecting the probe head and the controller"))
+            devices = open_cell(cfg, stack)
+            seed = request.seed if request.simulated else None
+            summary = run_calibration(cfg, devices.probe, devices.controller, db, tracking_emit, control,
+                                      Options(upload=request.upload, oracle_truth=loaded.truth),
+                                      resume_run=request.resume, seed=seed)
+            return summary.replace(db=request.db)
+    except Exception as exc:  # every failure becomes an outcome; nothing escapes as a traceback
+        summary = failure_summary(exc, run_id=run_id, log_dir=Path(request.db).resolve().parent,
+                                  cell=cell_name, robot=robot, db=request.db)
+        emit(RunFailed(summary))
+        return summary
+
+
+@dataclass(frozen=True)
+class CheckReport:
+    """``station check``: one line per device, and the outcome (7 when a device failed)."""
+
+    lines: tuple[str, ...]
+    outcome: Outcome
+
+
+def check_cell(cfg: CellConfig) -> CheckReport:
+    """Connect to every device of ``cfg``, read its identification and state, and compare the
+    controller's soft limits with the configured ones. Every device is tried; the first
+    failure decides the outcome."""
+    lines: list[str] = []
+    outcome = Outcome.SUCCESS
+    d = cfg.devices
+    with ExitStack() as stack:
+        try:
+            probe = open_probe(cfg, stack)
+            info = probe.identify()
+            snap = probe.read_all()
+            lines.append(f"probe head {d.probe_head}: {info}; channels {[str(s) for s in snap.status]}")
+        except Exception as exc:  # report every device, then fail
+            outcome = classify(exc) if outcome is Outcome.SUCCESS else outcome
+            lines.append(f"probe head {d.probe_head}: FAILED: {type(exc).__name__}: {exc}")
+            if hint := hint_for(exc):
+                lines.append(f"  what to do: {hint}")
+    with ExitStack() as stack:
+        where = f"{d.controller_host}:{d.controller_port}"
+        try:
+            controller = open_controller(cfg, stack)
+            st = controller.status()
+            q = controller.read_joints()
+            lim = controller.soft_limits()
+            lines.append(f"controller {where}: {st}; joints {np.round(q, 5).tolist()}")
+            wide = (cfg.soft_limits[:, 0] < lim[:, 0]) | (cfg.soft_limits[:, 1] > lim[:, 1])
+            if np.any(wide):
+                lines.append(f"  warning: [limits] are wider than the controller's soft limits for joints "
+                             f"{list(np.nonzero(wide)[0] + 1)}")
+        except Exception as exc:
+            outcome = classify(exc) if outcome is Outcome.SUCCESS else outcome
+            lines.append(f"controller {where}: FAILED: {type(exc).__name__}: {exc}")
+            if hint := hint_for(exc):
+                lines.append(f"  what to do: {hint}")
+    return CheckReport(tuple(lines), outcome)

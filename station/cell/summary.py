@@ -1,0 +1,236 @@
+"""The run summary: the one record of how a run ended, read alike by the CLI, ``--json``, the
+terminal UI and the report.
+
+It is frozen; the pipeline builds it once per outcome, stores its JSON form in the run database
+(``summary`` result) and returns it. :meth:`RunSummary.to_json` is the ``--json`` output;
+:meth:`RunSummary.from_json` reads a stored one back. Units are in the key names (``_um``,
+``_s``); ``units`` in the JSON says so once more for a reader without this module.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from station.core.iso9283 import iso9283_pose
+from station.errors import Outcome
+
+
+@dataclass(frozen=True)
+class ErrorStats:
+    """Position errors of held-out poses [µm]: RMS and max over all cycles, and the largest
+    ISO 9283 pose accuracy AP and repeatability RP over the poses."""
+
+    n: int
+    rms_um: float
+    max_um: float
+    ap_max_um: float
+    rp_max_um: float
+    errors_um: tuple[float, ...] = ()
+
+    @classmethod
+    def from_errors(cls, errors_by_pose: Mapping[Any, np.ndarray]) -> ErrorStats | None:
+        """``errors_by_pose``: per pose, the ``(n_cycles, 3)`` position errors [mm] of its
+        cycles. None when nothing was measured."""
+        if not errors_by_pose:
+            return None
+        all_e = np.concatenate([np.asarray(e, dtype=float).reshape(-1, 3) for e in errors_by_pose.values()])
+        norms = np.linalg.norm(all_e, axis=1) * 1e3
+        stats = [iso9283_pose(np.zeros(3), np.asarray(e, dtype=float).reshape(-1, 3))
+                 for e in errors_by_pose.values()]
+        return cls(n=int(norms.size), rms_um=float(np.sqrt(np.mean(norms**2))), max_um=float(norms.max()),
+                   ap_max_um=float(max(s.AP for s in stats) * 1e3), rp_max_um=float(max(s.RP for s in stats) * 1e3),
+                   errors_um=tuple(float(v) for v in norms))
+
+
+@dataclass(frozen=True)
+class ParameterEstimate:
+    """An identified parameter: value and σ in the model's units [mm | rad]."""
+
+    name: str
+    value: float
+    sigma: float
+
+
+@dataclass(frozen=True)
+class IdentificationSummary:
+    objective: str
+    n_measurements: int
+    n_parameters: int
+    rms_normalized: float
+    rms_residual_um: float
+    outliers: tuple[int, ...]
+    parameters: tuple[ParameterEstimate, ...]
+
+
+@dataclass(frozen=True)
+class CorrectionSummary:
+    n_values: int
+    interpolation_bound_um: float
+    crc32: str
+
+
+@dataclass(frozen=True)
+class UploadSummary:
+    """A verified upload: the table was read back identical, staged, activated and its active
+    CRC-32 checked; ``seconds`` is the whole sequence."""
+
+    crc32: str
+    seconds: float
+    verified: bool = True
+
+
+@dataclass(frozen=True)
+class ReversalSummary:
+    """Position difference between approaching each pose from either side [µm]."""
+
+    n: int
+    rms_um: float
+    max_um: float
+
+
+@dataclass(frozen=True)
+class Failure:
+    """Why a run stopped early: the error's type and message and what to do."""
+
+    error_type: str
+    message: str
+    hint: str = ""
+    log_file: str | None = None  # traceback of an internal error
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """How a run ended. ``run_id`` is None when it failed before a run was created."""
+
+    outcome: Outcome
+    run_id: int | None = None
+    cell: str = ""
+    robot: str = ""
+    db: str | None = None
+    identification: IdentificationSummary | None = None
+    correction: CorrectionSummary | None = None
+    before: ErrorStats | None = None
+    after: ErrorStats | None = None
+    oracle: ErrorStats | None = None
+    upload: UploadSummary | None = None
+    upload_skipped: bool = False
+    reversal: ReversalSummary | None = None
+    failure: Failure | None = None
+    report: str | None = None
+    notes: tuple[str, ...] = field(default=())
+
+    @property
+    def exit_code(self) -> int:
+        return int(self.outcome)
+
+    @property
+    def ok(self) -> bool:
+        return self.outcome is Outcome.SUCCESS
+
+    @property
+    def gain(self) -> float | None:
+        """RMS before / RMS after correction."""
+        if self.before is None or self.after is None:
+            return None
+        return self.before.rms_um / max(self.after.rms_um, 1e-9)
+
+    @property
+    def after_vs_oracle(self) -> float | None:
+        """RMS after the station's correction / RMS after the true correction (simulation)."""
+        if self.after is None or self.oracle is None or not self.oracle.n:
+            return None
+        return self.after.rms_um / max(self.oracle.rms_um, 1e-9)
+
+    def replace(self, **changes: Any) -> RunSummary:
+        return dataclasses.replace(self, **changes)
+
+    def figures(self) -> list[tuple[str, float, str, int]]:
+        """(label, value, unit, digits) of the headline figures, in display order; the UI and
+        the report show these."""
+        spec: list[tuple[str, float | None, str, int]] = [
+            ("RMS before", self.before.rms_um if self.before else None, "µm", 1),
+            ("RMS after", self.after.rms_um if self.after else None, "µm", 1),
+            ("improvement ratio", self.gain, "×", 1),
+            ("oracle RMS after", self.oracle.rms_um if self.oracle else None, "µm", 1),
+            ("after / oracle", self.after_vs_oracle, "×", 2),
+            ("AP max after (ISO 9283)", self.after.ap_max_um if self.after else None, "µm", 1),
+            ("RP max after (ISO 9283)", self.after.rp_max_um if self.after else None, "µm", 1),
+            ("identified parameters", self.identification.n_parameters if self.identification else None, "", 0),
+            ("identification residual RMS",
+             self.identification.rms_residual_um if self.identification else None, "µm", 1),
+            ("upload (read back, activated)", self.upload.seconds if self.upload else None, "s", 2),
+        ]
+        return [(label, float(v), unit, d) for label, v, unit, d in spec if v is not None]
+
+    # -- JSON ------------------------------------------------------------------------------
+    def to_json(self) -> dict[str, Any]:
+        """The ``--json`` object: plain JSON types, units in the key names."""
+        out: dict[str, Any] = {"outcome": self.outcome.name, "exit_code": self.exit_code,
+                               "run_id": self.run_id, "cell": self.cell, "robot": self.robot}
+        if self.db is not None:
+            out["db"] = self.db
+        for key in ("identification", "correction", "before", "after", "oracle", "upload",
+                    "reversal", "failure"):
+            value = getattr(self, key)
+            if value is not None:
+                out[key] = _plain(dataclasses.asdict(value))
+        if self.upload_skipped:
+            out["upload_skipped"] = True
+        if self.gain is not None:
+            out["gain"] = self.gain
+        if self.after_vs_oracle is not None:
+            out["after_vs_oracle"] = self.after_vs_oracle
+        if self.report is not None:
+            out["report"] = self.report
+        if self.notes:
+            out["notes"] = list(self.notes)
+        out["units"] = {"lengths": "µm (keys *_um)", "times": "s (keys *_s, seconds)",
+                        "parameters": "mm and rad (identification.parameters)"}
+        return out
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> RunSummary:
+        """Read a stored :meth:`to_json` object back."""
+        def sub(key: str, typ: type) -> Any:
+            v = d.get(key)
+            return None if v is None else _build(typ, v)
+
+        return cls(
+            outcome=Outcome[d["outcome"]], run_id=d.get("run_id"), cell=d.get("cell", ""),
+            robot=d.get("robot", ""), db=d.get("db"),
+            identification=sub("identification", IdentificationSummary),
+            correction=sub("correction", CorrectionSummary), before=sub("before", ErrorStats),
+            after=sub("after", ErrorStats), oracle=sub("oracle", ErrorStats),
+            upload=sub("upload", UploadSummary), upload_skipped=bool(d.get("upload_skipped", False)),
+            reversal=sub("reversal", ReversalSummary), failure=sub("failure", Failure),
+            report=d.get("report"), notes=tuple(d.get("notes", ())))
+
+
+def _plain(obj: Any) -> Any:
+    if isinstance(obj, Mapping):
+        return {k: _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, (np.floating, np.integer)):
+        return obj.item()
+    return obj
+
+
+def _build(typ: type, value: Any) -> Any:
+    """A summary dataclass from its JSON dict (tuples and nested parameters restored)."""
+    kwargs = {}
+    for f in dataclasses.fields(typ):
+        if f.name not in value:
+            continue
+        v = value[f.name]
+        if f.name == "parameters":
+            v = tuple(ParameterEstimate(**p) for p in v)
+        elif isinstance(v, Sequence) and not isinstance(v, str):
+            v = tuple(v)
+        kwargs[f.name] = v
+    return typ(**kwargs)

@@ -1,0 +1,106 @@
+"""The verified upload of a correction table: the one owner of the sequence and its events.
+
+Upload → read back and compare → stage → activate → active CRC-32 checked, with a roll back
+when activation fails. The comparisons themselves are the driver's (``verify_table`` compares
+value by value and the CRC-32; ``activate_table`` refuses a table that was not read back
+identical or whose staged CRC differs, and checks the active CRC): the station never activates
+a table on its own judgement, and the driver's interlock holds for any other caller too. This
+module decides the order, the roll back policy, and what the operator is told (every step is an
+event).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from drivers.correction_table import CorrectionTableData, TableVerifyError
+from station.cell.devices import TableController
+from station.cell.events import Event, Notice, PhaseChanged
+
+__all__ = ["UploadReport", "verified_upload"]
+
+
+@dataclass(frozen=True)
+class UploadReport:
+    """A verified upload (times in seconds; CRC-32 values as reported by the controller)."""
+
+    crc32: int
+    n_values: int
+    upload_s: float
+    readback_s: float
+    stage_s: float
+    activate_s: float
+    total_s: float
+    staged_crc32: int | None = None
+    active_crc32: int | None = None
+    previous_crc32: int | None = None
+
+
+def _crcs(controller: TableController) -> dict[str, int] | None:
+    try:
+        return {k: int(v) for k, v in controller.table_crcs().items()}
+    except Exception:  # noqa: BLE001 - a state read must not mask the error being handled
+        return None
+
+
+def verified_upload(controller: TableController, table: CorrectionTableData,
+                    emit: Callable[[Event], None]) -> UploadReport:
+    """Upload ``table`` and activate it only once the controller holds it identically.
+
+    Raises :class:`TableVerifyError` (nothing activated) when the read-back or a CRC differs.
+    If activation fails, the previous table is made active again with ``rollback_table``
+    unless the controller reports that its active table did not change; the original error is
+    re-raised with a note saying which.
+    """
+    crc = table.crc32()
+    t_start = time.perf_counter()
+    emit(PhaseChanged("upload", f"{table.n_values} values, CRC-32 {crc:#010x}"))
+
+    t0 = time.perf_counter()
+    controller.upload_table(table)
+    t_up = time.perf_counter() - t0
+    emit(Notice("info", f"table uploaded ({table.n_values} values) in {t_up:.2f} s; reading back"))
+
+    t0 = time.perf_counter()
+    try:
+        controller.verify_table()
+    except TableVerifyError as exc:
+        emit(Notice("warning", f"read-back differs, the table was NOT activated: {exc}"))
+        raise
+    t_rb = time.perf_counter() - t0
+    emit(Notice("info", f"read back {table.n_values} values identical, CRC-32 {crc:#010x}"))
+
+    t0 = time.perf_counter()
+    controller.stage_table()
+    t_st = time.perf_counter() - t0
+    before = _crcs(controller)
+
+    t0 = time.perf_counter()
+    try:
+        controller.activate_table()
+    except BaseException as exc:
+        now = _crcs(controller)
+        unchanged = (before is not None and now is not None
+                     and now.get("active") == before.get("active") and now.get("active") != crc)
+        if unchanged:
+            note = "activation failed; the controller's previous table is still active (no roll back needed)"
+            emit(Notice("warning", f"{note}: {exc}"))
+        else:
+            emit(Notice("warning", f"activation failed ({exc}); rolling back to the previous table"))
+            try:
+                controller.rollback_table()
+                note = "rolled back to the previous table"
+            except Exception as rb_exc:  # noqa: BLE001 - reported, the original error is raised
+                note = f"roll back failed too ({rb_exc}); deactivate the table on the controller before moving"
+            emit(Notice("warning", note))
+        exc.add_note(note)
+        raise
+    t_act = time.perf_counter() - t0
+    final = _crcs(controller) or {}
+    total = time.perf_counter() - t_start
+    emit(Notice("info", f"correction table active, CRC-32 {crc:#010x} ({total:.2f} s)"))
+    return UploadReport(crc, table.n_values, t_up, t_rb, t_st, t_act, total,
+                        staged_crc32=None if before is None else before.get("staged"),
+                        active_crc32=final.get("active"), previous_crc32=final.get("previous"))
