@@ -34,14 +34,14 @@ class Outcome(enum.IntEnum):
 
 
 _DESCRIPTIONS = {
-    Outcome.SUCCESS: "success: corrected, verified, gain ≥ the required gain",
-    Outcome.INTERNAL_ERROR: "internal error (a bug): the traceback is in the log file the message names",
+    Outcome.SUCCESS: "corrected, verified, gain ≥ 20× (with --no-upload: identified, verified before correction)",
+    Outcome.INTERNAL_ERROR: "a bug: the message names a log file with the traceback",
     Outcome.CONFIG_ERROR: "configuration or usage error (the message names the key and the fix)",
     Outcome.IDENTIFICATION_FAILED: "identification failed (rank deficiency, divergence, too few valid measurements)",
     Outcome.UNREACHABLE: "a motion would leave the soft limits or the reach — it was not commanded",
     Outcome.DATABASE_ERROR: "run database error",
     Outcome.ABORTED: "aborted by the operator at a safe point",
-    Outcome.DEVICE_FAULT: "device fault (probe head or controller: timeout, link lost, Modbus exception)",
+    Outcome.DEVICE_FAULT: "device fault (probe head or controller: missing, timeout, link lost, Modbus exception)",
     Outcome.SAFETY_STOP: "safety stop (emergency stop, drive fault)",
     Outcome.UPLOAD_FAILED: "correction table upload failed verification — it was not activated",
     Outcome.TARGET_MISSED: "verification showed less than the required gain",

@@ -82,10 +82,7 @@ def hint_for(exc: BaseException, run_id: int | None = None) -> str:
         if isinstance(exc, row.types):
             text = row.hint
             break
-    else:
-        if isinstance(exc, StationError):
-            doc = (type(exc).__doc__ or "").strip()
-            text = doc.splitlines()[0] if doc else ""
+    # A station error's own message already says what to do: no second hint.
     if run_id is not None:
         return text.replace("RUN", str(run_id))
     # nothing was measured yet: there is no run to resume

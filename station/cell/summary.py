@@ -29,21 +29,28 @@ class ErrorStats:
     rms_um: float
     max_um: float
     ap_max_um: float
-    rp_max_um: float
+    rp_max_um: float | None  # None: no pose was measured twice
     errors_um: tuple[float, ...] = ()
 
     @classmethod
     def from_errors(cls, errors_by_pose: Mapping[Any, np.ndarray]) -> ErrorStats | None:
         """``errors_by_pose``: per pose, the ``(n_cycles, 3)`` position errors [mm] of its
-        cycles. None when nothing was measured."""
+        cycles. None when nothing was measured. RP needs two cycles of a pose; with one cycle
+        per pose (``verification_cycles = 1``) it is None and AP is the error itself."""
         if not errors_by_pose:
             return None
-        all_e = np.concatenate([np.asarray(e, dtype=float).reshape(-1, 3) for e in errors_by_pose.values()])
-        norms = np.linalg.norm(all_e, axis=1) * 1e3
-        stats = [iso9283_pose(np.zeros(3), np.asarray(e, dtype=float).reshape(-1, 3))
-                 for e in errors_by_pose.values()]
+        cycles = [np.asarray(e, dtype=float).reshape(-1, 3) for e in errors_by_pose.values()]
+        norms = np.linalg.norm(np.concatenate(cycles), axis=1) * 1e3
+        ap, rp = [], []
+        for e in cycles:
+            if len(e) >= 2:
+                st = iso9283_pose(np.zeros(3), e)
+                ap.append(st.AP * 1e3)
+                rp.append(st.RP * 1e3)
+            else:
+                ap.append(float(np.linalg.norm(e.mean(axis=0))) * 1e3)
         return cls(n=int(norms.size), rms_um=float(np.sqrt(np.mean(norms**2))), max_um=float(norms.max()),
-                   ap_max_um=float(max(s.AP for s in stats) * 1e3), rp_max_um=float(max(s.RP for s in stats) * 1e3),
+                   ap_max_um=float(max(ap)), rp_max_um=float(max(rp)) if rp else None,
                    errors_um=tuple(float(v) for v in norms))
 
 

@@ -13,8 +13,18 @@ from collections.abc import Sequence
 
 from station.cell.outcomes import write_traceback
 from station.errors import Outcome, StationError
-from station.ui.commands_cell import add_cell_commands
-from station.ui.commands_core import _add_prefs, _add_robot, cmd_analyze, cmd_identify, cmd_predict, cmd_study
+from station.ui.commands_cell import cmd_calibrate, cmd_check, cmd_export, cmd_init, cmd_tui
+from station.ui.commands_core import cmd_analyze, cmd_identify, cmd_predict, cmd_study
+
+
+def _add_robot(p):
+    p.add_argument("--robot", default="sr800", help="built-in robot name or robot file (default sr800)")
+
+
+def _add_prefs(p):
+    p.add_argument("--prefer", default="", help="comma-separated parameters to prefer in the minimal set")
+    p.add_argument("--fix", default="", help="comma-separated parameters held at their values")
+    p.add_argument("--exclude", default="", help="comma-separated parameters left out of the model")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -58,7 +68,40 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_study)
 
-    add_cell_commands(sub)
+
+    p = sub.add_parser("init", help="write a commented cell configuration template")
+    p.add_argument("path")
+    p.add_argument("--force", action="store_true")
+    p.set_defaults(func=cmd_init)
+
+    p = sub.add_parser("check", help="validate a configuration and connect to every device")
+    p.add_argument("config")
+    p.set_defaults(func=cmd_check)
+
+    p = sub.add_parser("calibrate", help="measure, identify, correct, upload, verify")
+    p.add_argument("config", nargs="?")
+    p.add_argument("--simulated", action="store_true", help="run against the built-in simulated cell")
+    p.add_argument("--seed", type=int, default=1, help="simulated cell seed (default 1)")
+    p.add_argument("--time-scale", type=float, default=0.0, help="simulated motion time scale (0 = instant)")
+    p.add_argument("--db", default="runs.sqlite", help="run database (default runs.sqlite)")
+    p.add_argument("--resume", type=int, metavar="RUN", help="continue an interrupted run")
+    p.add_argument("--no-upload", action="store_true", help="identify and verify 'before' only")
+    p.add_argument("--report", metavar="DIR", help="write a report (Markdown + plots) here")
+    p.add_argument("--json", action="store_true", help="JSON summary on stdout")
+    p.set_defaults(func=cmd_calibrate)
+
+    p = sub.add_parser("export", help="export a run's measurements to CSV")
+    p.add_argument("--db", default="runs.sqlite")
+    p.add_argument("--run", type=int)
+    p.add_argument("output")
+    p.set_defaults(func=cmd_export)
+
+    p = sub.add_parser("tui", help="terminal UI for the operator")
+    p.add_argument("config", nargs="?")
+    p.add_argument("--simulated", action="store_true")
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--db", default="runs.sqlite")
+    p.set_defaults(func=cmd_tui)
     return ap
 
 

@@ -2,7 +2,7 @@
 
 ``station calibrate`` prints progress on stderr and (with ``--json``) one JSON summary on
 stdout; its exit code is the run's :class:`~station.errors.Outcome`. Devices are opened by
-:mod:`station.cell.session`, never here; the parser is in :mod:`station.ui.cli`.
+:mod:`station.cell.session`, never here; the parser is :mod:`station.ui.cli`.
 """
 
 from __future__ import annotations
@@ -64,8 +64,9 @@ def print_summary(s: RunSummary, stream: TextIO) -> None:
     for key in ("before", "after", "oracle"):
         v = getattr(s, key)
         if v is not None and v.n:
+            rp = "—" if v.rp_max_um is None else f"{v.rp_max_um:.1f}"
             print(f"  {key:7s} RMS {v.rms_um:8.1f} µm  max {v.max_um:8.1f} µm  AP≤{v.ap_max_um:.1f} µm  "
-                  f"RP≤{v.rp_max_um:.1f} µm", file=stream)
+                  f"RP≤{rp} µm", file=stream)
     if s.upload_skipped:
         print("  upload skipped (--no-upload): no correction is active", file=stream)
     if s.upload is not None:
@@ -127,40 +128,4 @@ def cmd_tui(args: argparse.Namespace) -> int:
     return launch(request_from(args))
 
 
-def add_cell_commands(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("init", help="write a commented cell configuration template")
-    p.add_argument("path")
-    p.add_argument("--force", action="store_true")
-    p.set_defaults(func=cmd_init)
-
-    p = sub.add_parser("check", help="validate a configuration and connect to every device")
-    p.add_argument("config")
-    p.set_defaults(func=cmd_check)
-
-    p = sub.add_parser("calibrate", help="measure, identify, correct, upload, verify")
-    p.add_argument("config", nargs="?")
-    p.add_argument("--simulated", action="store_true", help="run against the built-in simulated cell")
-    p.add_argument("--seed", type=int, default=1, help="simulated cell seed (default 1)")
-    p.add_argument("--time-scale", type=float, default=0.0, help="simulated motion time scale (0 = instant)")
-    p.add_argument("--db", default="runs.sqlite", help="run database (default runs.sqlite)")
-    p.add_argument("--resume", type=int, metavar="RUN", help="continue an interrupted run")
-    p.add_argument("--no-upload", action="store_true", help="identify and verify 'before' only")
-    p.add_argument("--report", metavar="DIR", help="write a report (Markdown + plots) here")
-    p.add_argument("--json", action="store_true", help="JSON summary on stdout")
-    p.set_defaults(func=cmd_calibrate)
-
-    p = sub.add_parser("export", help="export a run's measurements to CSV")
-    p.add_argument("--db", default="runs.sqlite")
-    p.add_argument("--run", type=int)
-    p.add_argument("output")
-    p.set_defaults(func=cmd_export)
-
-    p = sub.add_parser("tui", help="terminal UI for the operator")
-    p.add_argument("config", nargs="?")
-    p.add_argument("--simulated", action="store_true")
-    p.add_argument("--seed", type=int, default=1)
-    p.add_argument("--db", default="runs.sqlite")
-    p.set_defaults(func=cmd_tui)
-
-
-__all__ = ["add_cell_commands", "cmd_calibrate", "print_summary", "progress_printer", "request_from"]
+__all__ = ["cmd_calibrate", "print_summary", "progress_printer", "request_from"]

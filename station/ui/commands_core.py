@@ -14,16 +14,6 @@ from station.core.units import ARCSEC
 from station.errors import ConfigError
 
 
-def _add_robot(p):
-    p.add_argument("--robot", default="sr800", help="built-in robot name or robot file (default sr800)")
-
-
-def _add_prefs(p):
-    p.add_argument("--prefer", default="", help="comma-separated parameters to prefer in the minimal set")
-    p.add_argument("--fix", default="", help="comma-separated parameters held at their values")
-    p.add_argument("--exclude", default="", help="comma-separated parameters left out of the model")
-
-
 def _names(s: str) -> tuple[str, ...]:
     return tuple(n.strip() for n in s.split(",") if n.strip())
 

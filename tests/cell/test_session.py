@@ -18,6 +18,9 @@ from station.cell.events import RunFailed
 from station.cell.session import CellRequest, check_cell, open_cell, run_calibration_session
 from station.errors import Outcome
 
+# the template's example controller is on a private network: tests never reach out to it
+LOOPBACK_CONTROLLER = '"127.0.0.1:9"'
+
 
 @pytest.fixture(scope="module")
 def little_sim():
@@ -54,7 +57,7 @@ def test_the_drivers_satisfy_the_station_protocols_at_run_time(little_sim):
 
 def _template_with_probe(tmp_path: Path, port: str) -> Path:
     path = tmp_path / "cell.toml"
-    path.write_text(TEMPLATE.replace('probe_head = "/dev/ttyUSB0"', f'probe_head = "{port}"'))
+    path.write_text(TEMPLATE.replace('"192.168.0.10:502"', LOOPBACK_CONTROLLER).replace('probe_head = "/dev/ttyUSB0"', f'probe_head = "{port}"'))
     return path
 
 

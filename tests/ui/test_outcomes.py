@@ -25,13 +25,16 @@ from station.cell.rundb import RunDatabaseError
 from station.errors import ConfigError, IdentificationError, Outcome, RunAborted, UnreachableError
 from station.ui.cli import main
 
+# the template's example controller is on a private network: tests never reach out to it
+LOOPBACK_CONTROLLER = '"127.0.0.1:9"'
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_readme_exit_code_table_is_the_outcome_enum():
     text = (ROOT / "README.md").read_text(encoding="utf-8")
-    rows = re.findall(r"^\| (\d+) \| `([A-Z_]+)` \|", text, flags=re.M)
-    assert {(int(c), n) for c, n in rows} == {(int(o), o.name) for o in Outcome}
+    rows = re.findall(r"^\| (\d+) \| `([A-Z_]+)` \| (.*) \|$", text, flags=re.M)
+    assert {(int(c), n, d) for c, n, d in rows} == {(int(o), o.name, o.description) for o in Outcome}
 
 
 @pytest.mark.parametrize("exc, outcome", [
@@ -73,7 +76,7 @@ def _run_json(capsys, argv):
 
 
 def _template(tmp_path, **replace):
-    text = TEMPLATE
+    text = TEMPLATE.replace('"192.168.0.10:502"', LOOPBACK_CONTROLLER)
     for old, new in replace.items():
         text = text.replace(old, new)
     path = tmp_path / "cell.toml"

@@ -16,6 +16,9 @@ from station.errors import Outcome
 from station.ui import tui_launch
 from station.ui.tui import ConfirmScreen, StationApp
 
+# the template's example controller is on a private network: tests never reach out to it
+LOOPBACK_CONTROLLER = '"127.0.0.1:9"'
+
 
 def panel(app: StationApp) -> str:
     content = app.query_one("#summary", Static).content
@@ -40,7 +43,7 @@ async def wait_until(pilot, cond, what: str, rounds: int = 3000) -> None:
 def missing_probe_request(tmp_path: Path) -> CellRequest:
     """A valid cell configuration whose probe head is a serial device that does not exist."""
     tty = tmp_path / "no-such-tty"
-    text = TEMPLATE.replace('probe_head = "/dev/ttyUSB0"', f'probe_head = "{tty.as_posix()}"')
+    text = TEMPLATE.replace('"192.168.0.10:502"', LOOPBACK_CONTROLLER).replace('probe_head = "/dev/ttyUSB0"', f'probe_head = "{tty.as_posix()}"')
     assert str(tty) in text
     config = tmp_path / "cell.toml"
     config.write_text(text, encoding="utf-8")
