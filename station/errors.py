@@ -80,3 +80,10 @@ class RunAborted(StationError):
     """The operator aborted the run; the robot was stopped at a safe point. Resume to continue."""
 
     outcome = Outcome.ABORTED
+
+
+class MeasurementFault(StationError):
+    """Readings failed repeatedly with the same cause (one probe out of range, a stuck channel):
+    the run stopped at a safe point rather than measure garbage. The message names the probe."""
+
+    outcome = Outcome.DEVICE_FAULT

@@ -60,6 +60,18 @@ class ControllerState(Protocol):
     def table_active(self) -> bool: ...
 
     @property
+    def ready(self) -> bool: ...
+
+    @property
+    def error(self) -> bool: ...  # an error is latched (e-stop, drive fault, watchdog)
+
+    @property
+    def estop(self) -> bool: ...
+
+    @property
+    def error_message(self) -> str: ...
+
+    @property
     def table_staged(self) -> bool: ...
 
 
@@ -77,6 +89,8 @@ class RobotController(Protocol):
     def soft_limits(self) -> np.ndarray: ...
 
     def stop(self, timeout: float | None = ...) -> None: ...
+
+    def reset_error(self, timeout: float | None = ...) -> None: ...  # clear a latched e-stop/fault
 
     def close(self) -> None: ...
 

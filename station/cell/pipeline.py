@@ -13,15 +13,17 @@ simulator's true parameters (the oracle), each over several cycles for ISO 9283 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from station.cell.config import CellConfig
+from station.cell.config import CellConfig, parse_text
 from station.cell.devices import CellController, ProbeHead
 from station.cell.events import Event, Notice, PhaseChanged, RunFinished, RunStarted
+from station.cell.fingerprint import check_same_cell, fingerprint
 from station.cell.plan import build_plan, head_targets_world, joints_for
 from station.cell.runcontrol import RunControl
 from station.cell.rundb import MeasurementRecord, RunDatabaseError, RunDB
@@ -43,6 +45,36 @@ from station.core.measurements import MeasurementSet
 from station.core.table_grid import GridSpec
 from station.core.transforms import invert, matrix_to_pose, pose_to_matrix
 from station.errors import IdentificationError, Outcome, RunAborted
+
+#: share of the planned identification poses that must be valid before anything is identified
+MIN_VALID_FRACTION = 0.8
+#: a fit whose normalised residual RMS exceeds this does not describe the data (σ settings, a
+#: bad touch, a wrong robot file): it is refused, never turned into a correction
+MAX_RMS_NORMALIZED = 3.0
+#: share of residual rows flagged as outliers above which the data is not trusted
+MAX_OUTLIER_FRACTION = 0.1
+
+
+def min_valid_identification(n_planned: int) -> int:
+    """Valid identification poses a run needs (the plan preview states it)."""
+    return max(5, math.ceil(MIN_VALID_FRACTION * n_planned))
+
+
+def check_identification(res: IdentificationResult) -> None:
+    """Refuse an identification that must not become a correction (a model that fits garbage)."""
+    if not res.converged:
+        raise IdentificationError(f"the identification did not converge ({res.message}); no correction "
+                                  f"was made. Check the robot file and the measurements' warnings")
+    if not np.isfinite(res.rms_normalized) or res.rms_normalized > MAX_RMS_NORMALIZED:
+        raise IdentificationError(
+            f"the identified model leaves residuals {res.rms_normalized:.1f}× the expected measurement "
+            f"noise (at most {MAX_RMS_NORMALIZED:g}× is accepted); the model does not describe the data. "
+            f"Check [identification] sigma_*, the robot file, and the probes, then resume or re-run")
+    n_rows = max(int(res.residuals.shape[0]), 1)
+    if len(res.outliers) > MAX_OUTLIER_FRACTION * n_rows:
+        raise IdentificationError(
+            f"{len(res.outliers)} of {n_rows} measurements are outliers (more than {MAX_OUTLIER_FRACTION:.0%}); "
+            f"the data is not trusted. Check the probe head and the body for debris, then re-run")
 
 
 @dataclass(frozen=True)
@@ -180,11 +212,16 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
         emit(PhaseChanged("plan"))
         steps = build_plan(cfg).run_steps(cfg.plan.verification_cycles, with_oracle)
         run_id = db.create_run(cfg.source_text, [st.to_record() for st in steps], seed=seed)
+        db.save_result(run_id, "fingerprint", fingerprint(cfg))
         resumed = 0
     else:
         run_id = resume_run
+        stored_fp = db.load_result(run_id, "fingerprint", default=None)
+        if stored_fp is None:  # a run from before fingerprints: compare with its snapshot
+            stored_fp = fingerprint(parse_text(db.run(run_id).config_toml, f"run {run_id}"))
+        check_same_cell(stored_fp, fingerprint(cfg), run_id)
         steps = stored_plan(db, run_id)
-        resumed = len(db.completed_steps(run_id))
+        resumed = len(db.completed_steps(run_id, ok_only=True))
     emit(RunStarted(run_id, len(steps), resumed))
     db.log(run_id, "info", f"run {'resumed' if resume_run else 'started'}: {len(steps)} steps, {resumed} on disk")
     summary = RunSummary(outcome=Outcome.SUCCESS, run_id=run_id, cell=cfg.name, robot=cfg.model.name)
@@ -231,7 +268,16 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
         emit(Notice("info", f"reversal error (both approach directions): RMS {reversal.rms_um:.1f} µm, "
                             f"max {reversal.max_um:.1f} µm over {reversal.n} poses"))
     emit(PhaseChanged("identify"))
+    n_planned = sum(1 for st in steps if st.kind is StepKind.IDENTIFICATION)
+    n_valid = sum(1 for r in records if r.ok and r.pose is not None)
+    needed = min_valid_identification(n_planned)
+    if n_valid < needed:
+        raise IdentificationError(
+            f"only {n_valid} of {n_planned} identification poses are valid, {needed} are needed "
+            f"({MIN_VALID_FRACTION:.0%}); no correction was identified. Fix what the warnings name, then resume: "
+            f"the invalid poses are measured again")
     res = identify_run(cfg, records)
+    check_identification(res)
     db.save_result(run_id, "identification", {
         "params": res.params, "chosen": list(res.chosen), "sigma": res.uncertainty.sigma,
         "rms_normalized": res.rms_normalized, "outliers": list(res.outliers),
@@ -257,6 +303,7 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
     controller = runner.controller
     if controller.status().table_active:
         controller.deactivate_table()
+    runner.guard.table = None
     measure({StepKind.VERIFY_BEFORE}, R_id)
     summary = summary.replace(before=stats(StepKind.VERIFY_BEFORE))
 
@@ -264,6 +311,7 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
         return summary.replace(upload_skipped=True)
 
     upload = verified_upload(controller, table.data, emit)
+    runner.guard.table = table.data  # Cartesian moves are now corrected by this table
     db.set_status(run_id, "uploaded")
     summary = summary.replace(upload=UploadSummary(crc32=f"{upload.crc32:08x}", seconds=upload.total_s))
     emit(PhaseChanged("verify", "after correction"))
@@ -272,10 +320,13 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
     if with_oracle:
         emit(PhaseChanged("verify", "oracle (true parameters)"))
         p_true = oracle_params(cfg, options.oracle_truth)
-        verified_upload(controller, build_table_for(cfg, p_true).data, emit)
+        oracle_table = build_table_for(cfg, p_true).data
+        verified_upload(controller, oracle_table, emit)
+        runner.guard.table = oracle_table
         measure({StepKind.ORACLE}, p_true[:6])
         summary = summary.replace(oracle=stats(StepKind.ORACLE))
         controller.rollback_table()  # the station's own table is the one left active
+        runner.guard.table = table.data
         emit(Notice("info", "rolled back to the station's table after the oracle check"))
     gain = summary.gain
     outcome = Outcome.SUCCESS if gain is not None and gain >= options.min_gain else Outcome.TARGET_MISSED

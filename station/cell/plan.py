@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from station.cell.config import CellConfig
+from station.cell.safety import MotionGuard
 from station.cell.steps import PlannedStep, StepKind
 from station.core.kinematics import scara_ik
 from station.core.transforms import invert
@@ -121,16 +122,9 @@ def retracted(cfg: CellConfig, q: np.ndarray) -> np.ndarray:
 
 
 def check_joints(cfg: CellConfig, q: np.ndarray, what: str) -> None:
-    """Refuse (UnreachableError) any joint vector outside the configured soft limits."""
-    q = np.asarray(q, dtype=float)
-    lo, hi = cfg.soft_limits[:, 0], cfg.soft_limits[:, 1]
-    bad = np.nonzero((q < lo) | (q > hi) | ~np.isfinite(q))[0]
-    if bad.size:
-        j = int(bad[0])
-        raise UnreachableError(
-            f"{what}: joint {j + 1} = {q[j]:.5g} is outside the soft limits "
-            f"[{lo[j]:.5g}, {hi[j]:.5g}]; the motion was not commanded. Move the point or widen "
-            f"[limits] if the robot allows it")
+    """Refuse (UnreachableError) any joint vector outside the configured soft limits (the
+    runner's :class:`~station.cell.safety.MotionGuard`, applied to the plan before any motion)."""
+    MotionGuard(cfg.soft_limits).check_joints(q, what)
 
 
 def joints_for(cfg: CellConfig, head_world: np.ndarray, elbow: int, setup_world_base=None) -> np.ndarray:

@@ -21,12 +21,14 @@ import numpy as np
 from station.cell.config import CellConfig
 from station.cell.devices import CellController, ProbeHead
 from station.cell.events import Event, MeasurementRecorded, Notice, StepStarted
-from station.cell.plan import approach_pose, check_joints, retract_offset, retracted
+from station.cell.plan import approach_pose, retract_offset, retracted
 from station.cell.runcontrol import RunControl
 from station.cell.rundb import RunDB
+from station.cell.safety import MotionGuard
 from station.cell.steps import PlannedStep, StepKind
 from station.core.kinematics import scara_ik
 from station.core.transforms import invert, matrix_to_pose, pose_to_matrix
+from station.errors import MeasurementFault
 
 # --- messages -------------------------------------------------------------------------------
 
@@ -45,7 +47,7 @@ class MoveJoints:
 class MoveCartesian:
     pose: np.ndarray  # (6,) base frame [mm, rad]
     elbow: int
-    expected_q: np.ndarray  # nominal IK, checked against the soft limits before the move
+    expected_q: np.ndarray  # nominal IK; the guard adds the active table's correction and checks it
     why: str
 
 
@@ -119,7 +121,8 @@ def approach_and_read(cfg: CellConfig, q_target: np.ndarray, direction: int = 1,
         q_read = yield ReadJoints()
         raw += snap.raw
         values = np.asarray(snap.values_mm, dtype=float)
-        status = tuple(str(s) for s in snap.status)
+        # the status's value ('ok', 'over_range', …): what the run database and an operator read
+        status = tuple(str(getattr(s, 'value', s)) for s in snap.status)
         try:
             sol = solve_pose(geom, values, noise_mm=cfg.plan.max_residual_um * 1e-3 / 3)
         except PoseSolveError as exc:
@@ -170,6 +173,8 @@ class Runner:
         self.control = control or RunControl()
         self._sleep = sleep
         self._last_q: np.ndarray | None = None
+        # Every motion passes this guard; the pipeline tells it which table the controller applies.
+        self.guard = MotionGuard(cfg.soft_limits, elbows=cfg.plan.elbows)
         # Where the wall time goes: waiting for motions, settling, sampling the probes, and the
         # rest (the station's own computation and bookkeeping). benchmarks/ reads this.
         self.timing = {"motion": 0.0, "settle": 0.0, "sampling": 0.0}
@@ -200,7 +205,7 @@ class Runner:
                 q = np.asarray(msg.q, dtype=float)
             if self._last_q is not None and np.allclose(q, self._last_q, atol=1e-9, rtol=0):
                 return None
-            check_joints(cfg, q, msg.why)
+            q = self.guard.check_joints(q, msg.why)
             t0 = time.perf_counter()
             status = self.controller.move_joints(q, speed=cfg.plan.speed)
             status.wait(timeout=cfg.devices.motion_timeout_s)
@@ -208,7 +213,7 @@ class Runner:
             self._last_q = q
             return None
         if isinstance(msg, MoveCartesian):
-            check_joints(cfg, msg.expected_q, msg.why)
+            self.guard.check_cartesian(msg.pose, msg.elbow, msg.expected_q, msg.why)
             t0 = time.perf_counter()
             status = self.controller.move_cartesian(msg.pose, elbow=msg.elbow, speed=cfg.plan.speed)
             status.wait(timeout=cfg.devices.motion_timeout_s)
@@ -230,12 +235,17 @@ class Runner:
 
     def measure_steps(self, db: RunDB, run_id: int, steps: Sequence[PlannedStep], kinds: Collection[StepKind],
                       total: int, make_proc: Callable[[PlannedStep], Procedure]) -> int:
-        """Measure every step of ``steps`` of the given kinds that is not yet in the database;
-        each is committed before the next motion. Returns the number measured now."""
-        done = db.completed_steps(run_id)
+        """Measure every step of ``steps`` of the given kinds that has no valid measurement in the
+        database yet; each is committed before the next motion. A step stored as invalid (from
+        an earlier attempt) is measured again and replaces it, so a resumed run repairs what a
+        fixed fault spoiled. Raises :class:`MeasurementFault` when readings fail with the same
+        cause :data:`MAX_REPEATED_FAILURES` times in a row. Returns the number measured now."""
+        valid = db.completed_steps(run_id, ok_only=True)
+        stored = db.completed_steps(run_id)
+        failures: list[tuple[str, str]] = []  # (cause, label) of the consecutive failed steps
         n = 0
         for st in steps:
-            if st.kind not in kinds or st.index in done:
+            if st.kind not in kinds or st.index in valid:
                 continue
             label = st.label
             self.emit(StepStarted(st.index, total, f"{st.kind.caption}: {label}"))
@@ -245,10 +255,38 @@ class Runner:
                 joints_commanded=reading.joints_commanded, joints_read=reading.joints_read,
                 raw_frames=reading.raw, readings_mm=reading.readings_mm,
                 channel_status=reading.status, pose=reading.pose,
-                pose_residual_um=reading.residual_um, ok=reading.ok, message=reading.message)
+                pose_residual_um=reading.residual_um, ok=reading.ok, message=reading.message,
+                replace=st.index in stored)
             residual = float("nan") if reading.residual_um is None else float(reading.residual_um)
             self.emit(MeasurementRecorded(st.index, total, label, reading.ok, residual, reading.message))
-            if not reading.ok:
-                self.emit(Notice("warning", f"{label}: {reading.message}"))
             n += 1
+            if reading.ok:
+                failures.clear()
+                continue
+            cause = failure_cause(reading)
+            self.emit(Notice("warning", f"{label}: {cause}: {reading.message}"))
+            if failures and failures[-1][0] != cause:
+                failures.clear()
+            failures.append((cause, label))
+            if len(failures) >= MAX_REPEATED_FAILURES:
+                raise MeasurementFault(
+                    f"{cause} on {len(failures)} steps in a row ({', '.join(lb for _, lb in failures)}); the run "
+                    f"stopped at a safe point instead of measuring more invalid data. Check that probe "
+                    f"(cable, stroke, debris, a stuck tip) with 'station check', then resume: the invalid "
+                    f"steps are measured again")
         return n
+
+
+#: consecutive failed readings with the same cause that stop a run
+MAX_REPEATED_FAILURES = 3
+
+
+def failure_cause(reading: Reading) -> str:
+    """What made a reading invalid, as an operator names it: the probes whose channel did not
+    read (numbered from 1, as on the head's drawing), else the kind of failure."""
+    if reading.status is not None:
+        bad = [f"probe {i + 1} {s.replace('_', ' ')}" for i, s in enumerate(reading.status)
+               if s != "ok"]
+        if bad:
+            return ", ".join(bad)
+    return reading.message.split(":")[0] or "invalid reading"

@@ -29,10 +29,10 @@ from station.cell.pipeline import Options, run_calibration
 from station.cell.runcontrol import RunControl
 from station.cell.rundb import RunDB
 from station.cell.summary import RunSummary
-from station.errors import ConfigError, Outcome
+from station.errors import ConfigError, Outcome, RunAborted
 
 __all__ = ["CellRequest", "Devices", "LoadedCell", "open_cell", "open_probe", "open_controller", "load_cell", "check_cell", "CheckReport",
-           "run_calibration_session"]
+           "run_calibration_session", "reset_controller"]
 
 
 @dataclass(frozen=True)
@@ -141,6 +141,31 @@ def run_calibration_session(request: CellRequest, emit: Callable[[Event], None],
                                   cell=cell_name, robot=robot, db=request.db)
         emit(RunFailed(summary))
         return summary
+
+
+def reset_controller(cfg: CellConfig, confirm: Callable[[str], bool]) -> tuple[str, ...]:
+    """The documented recovery after an e-stop or a drive fault: show the controller's latched
+    error, ask ``confirm(question)`` (the operator must have checked the cell), and only then
+    send RESET. Motion commands are never retried by this; the run is continued with
+    ``--resume``. Returns the lines to show."""
+    with ExitStack() as stack:
+        controller = open_controller(cfg, stack)
+        st = controller.status()
+        if not (st.error or st.estop):
+            return (f"controller {cfg.devices.controller_host}:{cfg.devices.controller_port}: no latched error; "
+                    f"nothing to reset",)
+        what = "emergency stop" if st.estop else st.error_message
+        question = (f"The controller reports: {what}. Is the e-stop released and the cell clear, and shall the "
+                    f"controller's error be reset?")
+        if not confirm(question):
+            raise RunAborted("reset declined by the operator; nothing was sent to the controller")
+        controller.reset_error()
+        after = controller.status()
+        if after.error or after.estop:
+            raise ConfigError(f"the controller still reports {'an emergency stop' if after.estop else after.error_message} "
+                              f"after RESET: release the e-stop or clear the fault at the controller first")
+        return (f"reset sent; the controller reports ready={after.ready}", "continue with 'station calibrate CONFIG "
+                "--resume RUN'")
 
 
 @dataclass(frozen=True)

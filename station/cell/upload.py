@@ -38,11 +38,18 @@ class UploadReport:
     previous_crc32: int | None = None
 
 
+#: attempts at reading the controller's table CRCs (a read changes nothing, so it may be repeated)
+CRC_READ_ATTEMPTS = 3
+
+
 def _crcs(controller: TableController) -> dict[str, int] | None:
-    try:
-        return {k: int(v) for k, v in controller.table_crcs().items()}
-    except Exception:  # noqa: BLE001 - a state read must not mask the error being handled
-        return None
+    """The controller's staged/active/previous CRC-32, or None when it cannot be read."""
+    for _ in range(CRC_READ_ATTEMPTS):
+        try:
+            return {k: int(v) for k, v in controller.table_crcs().items()}
+        except Exception:  # noqa: BLE001 - a state read must not mask the error being handled
+            continue
+    return None
 
 
 def verified_upload(controller: TableController, table: CorrectionTableData,
@@ -76,6 +83,13 @@ def verified_upload(controller: TableController, table: CorrectionTableData,
     controller.stage_table()
     t_st = time.perf_counter() - t0
     before = _crcs(controller)
+    if before is None:
+        # Without the active CRC before activation, a failed activation could not be told from one
+        # that took effect, and a roll back might activate an older table: do not activate.
+        msg = (f"the controller's table CRCs could not be read ({CRC_READ_ATTEMPTS} attempts): the table was "
+               f"staged but NOT activated; check the link, then resume to upload again")
+        emit(Notice("warning", msg))
+        raise TableVerifyError(msg)
 
     t0 = time.perf_counter()
     try:

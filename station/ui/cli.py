@@ -8,12 +8,13 @@ traceback to a log file the message names and exits 1.
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from collections.abc import Sequence
 
-from station.cell.outcomes import write_traceback
+from station.cell.outcomes import failure_summary
 from station.errors import Outcome, StationError
-from station.ui.commands_cell import cmd_calibrate, cmd_check, cmd_export, cmd_init, cmd_tui
+from station.ui.commands_cell import cmd_calibrate, cmd_check, cmd_export, cmd_init, cmd_reset, cmd_tui
 from station.ui.commands_core import cmd_analyze, cmd_identify, cmd_predict, cmd_study
 
 
@@ -90,6 +91,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="JSON summary on stdout")
     p.set_defaults(func=cmd_calibrate)
 
+    p = sub.add_parser("reset", help="clear the controller's latched e-stop or fault (asks for confirmation)")
+    p.add_argument("config")
+    p.add_argument("--yes", action="store_true", help="confirm without asking: the e-stop is released, the cell clear")
+    p.set_defaults(func=cmd_reset)
+
     p = sub.add_parser("export", help="export a run's measurements to CSV")
     p.add_argument("--db", default="runs.sqlite")
     p.add_argument("--run", type=int)
@@ -112,24 +118,28 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except StationError as exc:
         print(f"station: error: {exc}", file=sys.stderr)
+        if getattr(args, "json", False):  # a script still gets one JSON object with the reason
+            print(json.dumps(failure_summary(exc, run_id=None, log_dir=".").to_json()))
         return exc.exit_code
     except OSError as exc:
         if exc.filename is not None:
             # A file the user named cannot be read or written: a usage error, not a bug.
             print(f"station: error: {exc.strerror or exc}: {exc.filename}; check the path", file=sys.stderr)
             return int(Outcome.CONFIG_ERROR)
-        return _internal_error(exc)
+        return _internal_error(exc, args)
     except KeyboardInterrupt:
         print("station: interrupted", file=sys.stderr)
         return 130
     except Exception as exc:  # a bug: keep the traceback for the report, not on the screen
-        return _internal_error(exc)
+        return _internal_error(exc, args)
 
 
-def _internal_error(exc: Exception) -> int:
-    log = write_traceback(exc)
-    print(f"station: internal error {type(exc).__name__}: {exc}\n  the traceback is in {log}; "
-          f"please report it with that file", file=sys.stderr)
+def _internal_error(exc: Exception, args: argparse.Namespace) -> int:
+    summary = failure_summary(exc, run_id=None, log_dir=".")
+    print(f"station: internal error {type(exc).__name__}: {exc}\n  the traceback is in "
+          f"{summary.failure.log_file if summary.failure else '?'}; please report it with that file", file=sys.stderr)
+    if getattr(args, "json", False):
+        print(json.dumps(summary.to_json()))
     return int(Outcome.INTERNAL_ERROR)
 
 

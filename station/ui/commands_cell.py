@@ -17,8 +17,9 @@ from typing import TextIO
 
 from station.cell import events as ev
 from station.cell.config import TEMPLATE, load_config
+from station.cell.outcomes import write_traceback
 from station.cell.rundb import RunDB
-from station.cell.session import CellRequest, check_cell, run_calibration_session
+from station.cell.session import CellRequest, check_cell, reset_controller, run_calibration_session
 from station.cell.summary import RunSummary
 from station.errors import ConfigError
 
@@ -76,6 +77,8 @@ def print_summary(s: RunSummary, stream: TextIO) -> None:
         print(f"  improvement ×{s.gain:.1f}{extra}", file=stream)
     if s.report:
         print(f"  report: {s.report}", file=stream)
+    for note in s.notes:
+        print(f"  note: {note}", file=stream)
 
 
 def cmd_init(args: argparse.Namespace) -> int:
@@ -100,16 +103,53 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     request = request_from(args)
     if not request.simulated and not request.config:
         raise ConfigError("give a configuration file, or --simulated for the built-in simulated cell")
+    if args.report:  # checked before the first motion, not after an hour of measuring
+        _check_report_dir(Path(args.report))
     summary = run_calibration_session(request, progress_printer(sys.stderr))
     if args.report and summary.run_id is not None and summary.failure is None:
         from station.ui.report_data import report_for_run
 
-        path = report_for_run(args.db, summary.run_id, Path(args.report))
-        summary = summary.replace(report=str(path))
+        try:
+            path = report_for_run(args.db, summary.run_id, Path(args.report))
+            summary = summary.replace(report=str(path))
+        except Exception as exc:  # noqa: BLE001 - the run's result stands; say why the report is missing
+            log = write_traceback(exc, Path(args.report))
+            summary = summary.replace(notes=(*summary.notes, f"the report could not be written ({exc}); "
+                                                              f"traceback in {log}; rebuild it later from the run database"))
     print_summary(summary, sys.stderr)
     if args.json:
         print(json.dumps(summary.to_json()))
     return summary.exit_code
+
+
+def cmd_reset(args: argparse.Namespace) -> int:
+    """Clear the controller's latched e-stop or fault after the operator confirmed the cell is safe."""
+    cfg = load_config(args.config)
+
+    def confirm(question: str) -> bool:
+        if args.yes:
+            print(f"{question} yes (--yes)")
+            return True
+        if not sys.stdin.isatty():
+            raise ConfigError("the reset needs the operator's confirmation: run it at a terminal, or pass --yes "
+                              "once the e-stop is released and the cell is clear")
+        return input(f"{question} [y/N] ").strip().lower() in ("y", "yes")
+
+    for line in reset_controller(cfg, confirm):
+        print(line)
+    return 0
+
+
+def _check_report_dir(path: Path) -> None:
+    if path.exists() and not path.is_dir():
+        raise ConfigError(f"--report {path}: that is a file; give a folder for the report (it is created if missing)")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / ".station-write-test"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as exc:
+        raise ConfigError(f"--report {path}: cannot write there ({exc.strerror or exc}); choose another folder") from None
 
 
 def cmd_export(args: argparse.Namespace) -> int:

@@ -285,9 +285,11 @@ def _plot_verification(d: ReportData, path: Path) -> None:
     w = 0.38 if d.oracle_after_um is None else 0.28
     ax.bar(x - w / 2 if d.oracle_after_um is None else x - w, clip(d.errors_before_um), w,
            color="tab:orange", label="before correction")
-    ax.bar(x + w / 2 if d.oracle_after_um is None else x, clip(d.errors_after_um), w,
-           color="tab:green", label="after correction (measured)")
-    lines = [(d.errors_before_um, "tab:orange", "RMS before"), (d.errors_after_um, "tab:green", "RMS after")]
+    lines = [(d.errors_before_um, "tab:orange", "RMS before")]
+    if d.errors_after_um.size:  # none when the upload was skipped
+        ax.bar(x + w / 2 if d.oracle_after_um is None else x, clip(d.errors_after_um), w,
+               color="tab:green", label="after correction (measured)")
+        lines.append((d.errors_after_um, "tab:green", "RMS after"))
     if d.oracle_after_um is not None:
         ax.bar(x + w, clip(d.oracle_after_um), w, color="tab:purple", label="after correction (oracle)")
         lines.append((d.oracle_after_um, "tab:purple", "RMS oracle"))

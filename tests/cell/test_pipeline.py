@@ -91,7 +91,7 @@ def _after_n_measurements(cell, n, action):
     return emit
 
 
-def test_emergency_stop_ends_cleanly_and_the_run_resumes(cell):
+def test_emergency_stop_ends_cleanly_and_the_run_resumes(cell, tmp_path, capsys):
     emit = _after_n_measurements(cell, 5, cell.srv.controller_server.estop_during_next_move)
     with pytest.raises(EmergencyStop) as exc:
         run_calibration(cell.cfg, cell.probe, cell.ctrl, cell.db, emit)
@@ -102,7 +102,19 @@ def test_emergency_stop_ends_cleanly_and_the_run_resumes(cell):
     assert any("EmergencyStop" in e.message for e in cell.db.events(run.id))
     # the station never resets an e-stop by itself: moves stay refused until the operator does
     assert cell.ctrl.status().estop or cell.ctrl.status().error
-    cell.ctrl.reset_error()
+    # the documented, confirmed reset path: 'station reset CONFIG' (here confirmed with --yes)
+    from station.ui.cli import main
+
+    cfg_file = tmp_path / "cell.toml"
+    cfg_file.write_text(cell.cfg.source_text)
+    assert main(["reset", str(cfg_file)]) == 2  # no terminal to confirm at, no --yes: nothing sent
+    assert "confirmation" in capsys.readouterr().err
+    assert cell.ctrl.status().error or cell.ctrl.status().estop
+    assert main(["reset", str(cfg_file), "--yes"]) == 0
+    assert "reset sent" in capsys.readouterr().out
+    assert not cell.ctrl.status().error
+    assert main(["reset", str(cfg_file), "--yes"]) == 0  # nothing latched any more: nothing sent
+    assert "nothing to reset" in capsys.readouterr().out
     summary = run_calibration(cell.cfg, cell.probe, cell.ctrl, cell.db, cell.events.append, resume_run=run.id)
     assert summary.outcome is Outcome.SUCCESS
     assert len(cell.db.measurements(run.id)) == run.n_steps
@@ -194,3 +206,81 @@ def test_drive_fault_is_a_safety_stop(cell):
         run_calibration(cell.cfg, cell.probe, cell.ctrl, cell.db, emit)
     assert classify(exc.value) == Outcome.SAFETY_STOP
     assert cell.db.completed_steps(cell.db.latest_run().id) == {0, 1}
+
+
+# --- stop instead of measuring garbage; resume belongs to its run -----------------------------
+
+def test_a_probe_that_dies_stops_the_run_names_it_and_uploads_nothing(cell):
+    from drivers.probe_protocol import ChannelStatus
+    from station.errors import MeasurementFault
+
+    faults = cell.srv.probe_server.faults
+    emit = _after_n_measurements(cell, 20, lambda: faults.force_status(2, ChannelStatus.OVER_RANGE))
+    with pytest.raises(MeasurementFault, match="probe 3 over range") as exc:
+        run_calibration(cell.cfg, cell.probe, cell.ctrl, cell.db, emit)
+    assert classify(exc.value) is Outcome.DEVICE_FAULT
+    run = cell.db.latest_run()
+    stored = cell.db.measurements(run.id)
+    invalid = [m for m in stored if not m.ok]
+    assert len(stored) <= 20 + 3 and len(invalid) == 3  # stopped within a bounded number of steps
+    assert all(m.channel_status[2] == "over_range" for m in invalid)
+    assert cell.srv.controller_server.active_table is None  # nothing identified, nothing uploaded
+    assert run.status == "failed"
+    # the probe is fixed: the resume measures the invalid steps again and completes
+    faults.force_status(2, None)
+    summary = run_calibration(cell.cfg, cell.probe, cell.ctrl, cell.db, cell.events.append, resume_run=run.id)
+    assert summary.outcome is Outcome.SUCCESS
+    assert all(m.ok for m in cell.db.measurements(run.id, kind="identification"))
+
+
+def test_too_few_valid_identification_poses_are_refused_before_identifying(cell, monkeypatch):
+    import station.cell.pipeline as pipeline
+    from station.errors import IdentificationError
+
+    monkeypatch.setattr(pipeline, "MIN_VALID_FRACTION", 1.01)  # one more than the plan holds
+    with pytest.raises(IdentificationError, match="identification poses are valid") as exc:
+        run_calibration(cell.cfg, cell.probe, cell.ctrl, cell.db, cell.events.append)
+    assert classify(exc.value) is Outcome.IDENTIFICATION_FAILED
+    assert cell.srv.controller_server.active_table is None
+
+
+def test_a_model_that_fits_garbage_is_refused(cell, monkeypatch):
+    import station.cell.pipeline as pipeline
+    from station.errors import IdentificationError
+
+    monkeypatch.setattr(pipeline, "MAX_RMS_NORMALIZED", 0.1)  # the real fit (≈ 0.85) now counts as garbage
+    with pytest.raises(IdentificationError, match="does not describe the data"):
+        run_calibration(cell.cfg, cell.probe, cell.ctrl, cell.db, cell.events.append)
+    assert cell.srv.controller_server.active_table is None
+
+
+@pytest.mark.parametrize("change, what", [
+    ("seed", "[simulation]"),
+    ("point", "[body]"),
+    ("limits", "[limits]"),
+])
+def test_resume_refuses_another_cell_and_names_what_changed(tmp_path, change, what):
+    from station.errors import ConfigError
+
+    first = Cell(tmp_path)
+    emit = _after_n_measurements(first, 3, lambda: (_ for _ in ()).throw(KeyboardInterrupt()))
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            run_calibration(first.cfg, first.probe, first.ctrl, first.db, emit)
+        run_id = first.db.latest_run().id
+        text = first.cfg.source_text
+    finally:
+        first.close()
+    if change == "seed":
+        other = Cell(tmp_path, seed=2)
+    elif change == "point":
+        other = Cell(tmp_path, **{'id = "C1.a"': 'id = "C1.x"'})
+    else:
+        other = Cell(tmp_path, **{"[-140.0, 140.0]": "[-139.0, 140.0]"})
+    try:
+        assert other.cfg.source_text != text
+        with pytest.raises(ConfigError, match=rf"run {run_id} was measured on a different cell: .*{what}"):
+            run_calibration(other.cfg, other.probe, other.ctrl, other.db, other.events.append, resume_run=run_id)
+        assert len(other.db.measurements(run_id)) == 3  # nothing was added to the old run
+    finally:
+        other.close()

@@ -109,3 +109,21 @@ def test_cli_exit_code_and_json_agree_on_success(tmp_path, capsys):
     assert code == summary["exit_code"] == 0 and summary["outcome"] == "SUCCESS"
     assert summary["upload"]["seconds"] > 0  # the verified upload's real duration
     assert summary["gain"] >= 20 and summary["units"]["lengths"].startswith("µm")
+
+
+def test_a_bad_report_path_is_refused_before_any_motion(tmp_path, capsys):
+    target = tmp_path / "report.md"
+    target.write_text("an existing file")
+    db = tmp_path / "r.sqlite"
+    code, summary = _run_json(capsys, ["calibrate", "--simulated", "--db", str(db), "--report", str(target)])
+    assert code == summary["exit_code"] == 2 and summary["outcome"] == "CONFIG_ERROR"
+    assert "that is a file" in summary["failure"]["message"]
+    assert not db.exists()  # refused before a run was created, so before anything moved
+
+
+def test_no_upload_with_report_writes_the_report(tmp_path, capsys):
+    code, summary = _run_json(capsys, ["calibrate", "--simulated", "--seed", "3", "--no-upload", "--db",
+                                       str(tmp_path / "r.sqlite"), "--report", str(tmp_path / "rep")])
+    assert code == 0 and summary["upload_skipped"] is True and "after" not in summary
+    text = (tmp_path / "rep" / "report.md").read_text(encoding="utf-8")
+    assert "skipped (--no-upload)" in text

@@ -1,0 +1,51 @@
+"""Which cell a run was measured on: a fingerprint stored with the run, so that a resume can
+refuse data from another cell (another body, set-up, robot file, head, limits or simulated seed).
+
+The fingerprint hashes every section of the configuration except ``[devices]`` (a port may be
+renamed between two attempts without changing the cell) plus the robot model as loaded (so an
+edited robot file counts even though the configuration names the same path).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import tomllib
+from typing import Any
+
+import numpy as np
+
+from station.cell.config import CellConfig
+from station.errors import ConfigError
+
+#: sections of the configuration that may change between attempts of one run
+_IGNORED = ("devices",)
+
+
+def _digest(obj: Any) -> str:
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def fingerprint(cfg: CellConfig) -> dict[str, str]:
+    """Section name → digest, plus ``robot model`` for the loaded robot."""
+    try:
+        data = tomllib.loads(cfg.source_text) if cfg.source_text else {}
+    except tomllib.TOMLDecodeError:  # pragma: no cover - a CellConfig was parsed from this text
+        data = {}
+    out = {f"[{k}]": _digest(v) for k, v in data.items() if k not in _IGNORED}
+    m = cfg.model
+    out["robot model"] = _digest({"name": m.name, "types": list(m.joint_types),
+                                  "nominal": np.round(np.asarray(m.nominal), 12).tolist(),
+                                  "limits": np.round(np.asarray(m.joint_limits), 12).tolist()})
+    return out
+
+
+def check_same_cell(stored: dict[str, str], current: dict[str, str], run_id: int) -> None:
+    """Refuse (:class:`ConfigError`) to resume ``run_id`` on a cell whose fingerprint differs,
+    naming what changed."""
+    changed = sorted(k for k in stored.keys() | current.keys() if stored.get(k) != current.get(k))
+    if changed:
+        raise ConfigError(
+            f"run {run_id} was measured on a different cell: {', '.join(changed)} changed since. Resuming would "
+            f"mix data of two cells, so it was refused. Restore the configuration the run started with "
+            f"(its snapshot is in the run database), or start a new run (leave out --resume)")
