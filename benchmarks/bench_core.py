@@ -21,10 +21,10 @@ import numpy as np  # noqa: E402
 from station.core.identification import identify  # noqa: E402
 from station.core.kinematics import forward_with_jacobian  # noqa: E402
 from station.core.measurements import synthetic_set  # noqa: E402
-from station.core.model import load_robot  # noqa: E402
 from station.core.poses import spread_joints  # noqa: E402
 from station.core.study import StudyInputs, perturbed  # noqa: E402
 from station.core.uncertainty import monte_carlo  # noqa: E402
+from station.io.robot_files import load_robot  # noqa: E402
 
 
 def median_time(fn, repeat: int) -> float:

@@ -27,6 +27,7 @@ class Outcome(enum.IntEnum):
     SAFETY_STOP = 8
     UPLOAD_FAILED = 9
     TARGET_MISSED = 10
+    NOT_UPLOADED = 11
 
     @property
     def description(self) -> str:
@@ -34,7 +35,7 @@ class Outcome(enum.IntEnum):
 
 
 _DESCRIPTIONS = {
-    Outcome.SUCCESS: "corrected, verified, gain ≥ 20× (with --no-upload: identified, verified before correction)",
+    Outcome.SUCCESS: "corrected, verified, gain ≥ 20×",
     Outcome.INTERNAL_ERROR: "a bug: the message names a log file with the traceback",
     Outcome.CONFIG_ERROR: "configuration or usage error (the message names the key and the fix)",
     Outcome.IDENTIFICATION_FAILED: "identification failed (rank deficiency, divergence, too few valid measurements)",
@@ -45,6 +46,7 @@ _DESCRIPTIONS = {
     Outcome.SAFETY_STOP: "safety stop (emergency stop, drive fault)",
     Outcome.UPLOAD_FAILED: "correction table upload failed verification — it was not activated",
     Outcome.TARGET_MISSED: "verification showed less than the required gain",
+    Outcome.NOT_UPLOADED: "identified and verified before correction, but no correction is active (--no-upload, or the operator declined or rolled it back)",
 }
 
 

@@ -46,6 +46,20 @@ class MeasurementRecorded(Event):
 
 
 @dataclass(frozen=True)
+class DeviceSnapshot(Event):
+    """What the devices reported at the last reading: every probe's value within its stroke,
+    the joints and the controller's state (for the operator's device panel)."""
+
+    probe_mm: tuple[float, ...]  # NaN where a channel did not read
+    probe_status: tuple[str, ...]  # 'ok', 'over_range', 'under_range', 'invalid'
+    stroke_mm: float  # each probe reads within ±stroke/2
+    joints: tuple[float, ...]  # [rad | mm]
+    joint_types: tuple[str, ...]
+    controller: str  # e.g. 'ready', 'moving', 'error: …'
+    heartbeat_age_s: float | None = None
+
+
+@dataclass(frozen=True)
 class Notice(Event):
     level: Literal["info", "warning"]
     message: str

@@ -25,6 +25,7 @@ from station.cell.devices import CellController, ProbeHead
 from station.cell.events import Event, Notice, PhaseChanged, RunFinished, RunStarted
 from station.cell.fingerprint import check_same_cell, fingerprint
 from station.cell.plan import build_plan, head_targets_world, joints_for
+from station.cell.questions import Confirm, KeepCorrection, UploadProposal
 from station.cell.runcontrol import RunControl
 from station.cell.rundb import MeasurementRecord, RunDatabaseError, RunDB
 from station.cell.runner import Procedure, Runner, approach_and_read
@@ -44,7 +45,7 @@ from station.core.identification import IdentificationResult, identify
 from station.core.measurements import MeasurementSet
 from station.core.table_grid import GridSpec
 from station.core.transforms import invert, matrix_to_pose, pose_to_matrix
-from station.errors import IdentificationError, Outcome, RunAborted
+from station.errors import ConfigError, IdentificationError, Outcome, RunAborted
 
 #: share of the planned identification poses that must be valid before anything is identified
 MIN_VALID_FRACTION = 0.8
@@ -81,6 +82,7 @@ def check_identification(res: IdentificationResult) -> None:
 class Options:
     upload: bool = True
     oracle_truth: Any = None  # simulators.cell.CellTruth in simulation
+    confirm: Confirm | None = None  # the operator's yes/no before the upload and to keep it
     min_gain: float = 20.0  # required RMS improvement (before / after)
 
 
@@ -202,7 +204,7 @@ def stored_plan(db: RunDB, run_id: int) -> tuple[PlannedStep, ...]:
 def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellController, db: RunDB,
                     emit: Callable[[Event], None], control: RunControl | None = None,
                     options: Options = Options(), resume_run: int | None = None,
-                    seed: int | None = None) -> RunSummary:
+                    seed: int | None = None, devices_info: dict[str, str] | None = None) -> RunSummary:
     """Measure → identify → correct → upload → verify. Returns the run's summary; raises the
     typed error of whatever stopped it (everything measured so far is on disk)."""
     control = control or RunControl()
@@ -210,7 +212,7 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
     with_oracle = options.oracle_truth is not None and options.upload
     if resume_run is None:
         emit(PhaseChanged("plan"))
-        steps = build_plan(cfg).run_steps(cfg.plan.verification_cycles, with_oracle)
+        steps = build_plan(cfg).run_steps(cfg.plan.verification_cycles, with_oracle, options.upload)
         run_id = db.create_run(cfg.source_text, [st.to_record() for st in steps], seed=seed)
         db.save_result(run_id, "fingerprint", fingerprint(cfg))
         resumed = 0
@@ -221,7 +223,14 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
             stored_fp = fingerprint(parse_text(db.run(run_id).config_toml, f"run {run_id}"))
         check_same_cell(stored_fp, fingerprint(cfg), run_id)
         steps = stored_plan(db, run_id)
+        planned_upload = any(st.kind is StepKind.VERIFY_AFTER for st in steps)
+        if planned_upload != options.upload:
+            raise ConfigError(f"run {run_id} was planned {'with' if planned_upload else 'without'} the upload; "
+                              f"resume it {'without' if planned_upload else 'with'} --no-upload as it started, "
+                              f"or start a new run")
         resumed = len(db.completed_steps(run_id, ok_only=True))
+    if devices_info:  # the devices of the latest attempt, for the report
+        db.save_result(run_id, "devices", devices_info)
     emit(RunStarted(run_id, len(steps), resumed))
     db.log(run_id, "info", f"run {'resumed' if resume_run else 'started'}: {len(steps)} steps, {resumed} on disk")
     summary = RunSummary(outcome=Outcome.SUCCESS, run_id=run_id, cell=cfg.name, robot=cfg.model.name)
@@ -301,14 +310,23 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
 
     emit(PhaseChanged("verify", "before correction"))
     controller = runner.controller
-    if controller.status().table_active:
+    had_table = controller.status().table_active
+    if had_table:
         controller.deactivate_table()
     runner.guard.table = None
     measure({StepKind.VERIFY_BEFORE}, R_id)
     summary = summary.replace(before=stats(StepKind.VERIFY_BEFORE))
 
     if not options.upload:
-        return summary.replace(upload_skipped=True)
+        return summary.replace(upload_skipped=True, outcome=Outcome.NOT_UPLOADED)
+    proposal = UploadProposal(
+        n_values=int(table.data.n_values), grid_shape=tuple(int(n) for n in table.data.grid_shape),
+        interpolation_bound_um=float(table.interpolation_bound_um), crc32=f"{table.data.crc32():08x}",
+        max_correction=tuple(float(v) for v in table.max_correction), joint_types=tuple(cfg.model.joint_types))
+    if options.confirm is not None and not options.confirm(proposal):
+        emit(Notice("info", "upload declined by the operator: the controller's table was not changed"))
+        return summary.replace(upload_skipped=True, outcome=Outcome.NOT_UPLOADED,
+                               notes=(*summary.notes, "upload declined by the operator"))
 
     upload = verified_upload(controller, table.data, emit)
     runner.guard.table = table.data  # Cartesian moves are now corrected by this table
@@ -331,4 +349,18 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
     gain = summary.gain
     outcome = Outcome.SUCCESS if gain is not None and gain >= options.min_gain else Outcome.TARGET_MISSED
     db.set_status(run_id, "verified")
+    if options.confirm is not None and summary.before is not None and summary.after is not None:
+        keep = KeepCorrection(summary.before.rms_um, summary.after.rms_um, float(gain or 0.0),
+                              f"{table.data.crc32():08x}")
+        if not options.confirm(keep):
+            if had_table and not with_oracle:  # the table that was active before this run comes back
+                controller.rollback_table()
+                what = "the controller's previous table is active again"
+            else:  # there was none (or the oracle's table sits in between): no correction at all
+                controller.deactivate_table()
+                what = "no correction table is active"
+            runner.guard.table = None
+            emit(Notice("warning", f"rolled back by the operator: {what}"))
+            return summary.replace(outcome=Outcome.NOT_UPLOADED,
+                                   notes=(*summary.notes, "the new table was rolled back by the operator"))
     return summary.replace(outcome=outcome)

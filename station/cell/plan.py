@@ -56,11 +56,13 @@ class Plan:
     verification: tuple[Target, ...]
     rejected: tuple[tuple[str, int, str], ...]
 
-    def run_steps(self, cycles: int, with_oracle: bool) -> tuple[PlannedStep, ...]:
+    def run_steps(self, cycles: int, with_oracle: bool, with_upload: bool = True) -> tuple[PlannedStep, ...]:
         """Every step of a run: identification, then verification before / after (/ with the
-        oracle's table) × ``cycles`` × held-out targets."""
+        oracle's table) × ``cycles`` × held-out targets; without the upload, before only."""
         steps = list(self.identification)
-        kinds = [StepKind.VERIFY_BEFORE, StepKind.VERIFY_AFTER] + ([StepKind.ORACLE] if with_oracle else [])
+        kinds = [StepKind.VERIFY_BEFORE]
+        if with_upload:
+            kinds += [StepKind.VERIFY_AFTER] + ([StepKind.ORACLE] if with_oracle else [])
         for kind in kinds:
             for cycle in range(cycles):
                 for t in self.verification:
@@ -167,9 +169,9 @@ def build_plan(cfg: CellConfig) -> Plan:
             cands.append(Target(j, pid, elbow, heads[j], q))
     if not cands:
         raise ConfigError("no measuring point is reachable within the soft limits; check [robot].setup and [limits]")
-    k = cfg.plan.verification_every
-    verification = tuple(c for i, c in enumerate(cands) if i % k == k - 1)
-    ident = [c for i, c in enumerate(cands) if i % k != k - 1]
+    held = hold_out(cands, cfg.plan.verification_every, cfg.plan.elbows)
+    verification = tuple(c for i, c in enumerate(cands) if i in held)
+    ident = [c for i, c in enumerate(cands) if i not in held]
     if cfg.plan.select and cfg.plan.select < len(ident):
         ident = select_d_optimal(cfg, ident, cfg.plan.select)
     ident = order_by_travel(ident)
@@ -180,6 +182,18 @@ def build_plan(cfg: CellConfig) -> Plan:
             if cfg.plan.both_directions:
                 steps.append(_step(len(steps), StepKind.REVERSAL, t, -1, rep))
     return Plan(tuple(steps), verification, tuple(rejected))
+
+
+def hold_out(cands: list[Target], every: int, elbows: tuple[int, ...]) -> set[int]:
+    """Indices of the candidates held out for verification: every ``every``-th of each elbow's
+    candidates (in point order, so they spread over the body), the elbows shifted against each
+    other so that they do not all fall on the same points."""
+    held: set[int] = set()
+    shift = max(1, every // max(len(elbows), 1))
+    for j, elbow in enumerate(elbows):
+        mine = [i for i, c in enumerate(cands) if c.elbow == elbow]
+        held.update(i for n, i in enumerate(mine) if (n + j * shift) % every == every - 1)
+    return held
 
 
 def order_by_travel(targets: list[Target]) -> list[Target]:

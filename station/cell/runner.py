@@ -19,14 +19,15 @@ from typing import Any
 import numpy as np
 
 from station.cell.config import CellConfig
-from station.cell.devices import CellController, ProbeHead
-from station.cell.events import Event, MeasurementRecorded, Notice, StepStarted
+from station.cell.devices import CellController, ProbeHead, Snapshot
+from station.cell.events import DeviceSnapshot, Event, MeasurementRecorded, Notice, StepStarted
 from station.cell.plan import approach_pose, retract_offset, retracted
 from station.cell.runcontrol import RunControl
 from station.cell.rundb import RunDB
 from station.cell.safety import MotionGuard
 from station.cell.steps import PlannedStep, StepKind
 from station.core.kinematics import scara_ik
+from station.core.probe_geometry import default_probe_head
 from station.core.transforms import invert, matrix_to_pose, pose_to_matrix
 from station.errors import MeasurementFault
 
@@ -175,6 +176,8 @@ class Runner:
         self._last_q: np.ndarray | None = None
         # Every motion passes this guard; the pipeline tells it which table the controller applies.
         self.guard = MotionGuard(cfg.soft_limits, elbows=cfg.plan.elbows)
+        self._last_snapshot: Snapshot | None = None
+        self._stroke_mm = float(default_probe_head(cube_edge_mm=cfg.cube_edge_mm).stroke_mm)
         # Where the wall time goes: waiting for motions, settling, sampling the probes, and the
         # rest (the station's own computation and bookkeeping). benchmarks/ reads this.
         self.timing = {"motion": 0.0, "settle": 0.0, "sampling": 0.0}
@@ -197,6 +200,7 @@ class Runner:
         if isinstance(msg, ReadJoints):
             q = np.asarray(self.controller.read_joints(), dtype=float)
             self._last_q = q
+            self._report_devices(q)
             return q
         if isinstance(msg, MoveJoints):
             if msg.q is None:  # retract: lift the quill to travel height from where the robot stands
@@ -230,8 +234,25 @@ class Runner:
             t0 = time.perf_counter()
             snap = self.probe.read_averaged(cfg.plan.samples, cfg.plan.max_spread_um * 1e-3)
             self.timing["sampling"] += time.perf_counter() - t0
+            self._last_snapshot = snap
             return snap
         raise TypeError(f"unknown runner message {msg!r}")
+
+    def _report_devices(self, q: np.ndarray) -> None:
+        """The device panel's view after a reading: probes, joints, controller state."""
+        snap = self._last_snapshot
+        if snap is None:
+            return
+        st = self.controller.status()
+        state = ("e-stop" if st.estop else f"error: {st.error_message}" if st.error
+                 else "moving" if getattr(st, "moving", False) else "ready" if st.ready else "not ready")
+        age = getattr(self.controller, "heartbeat_age_s", None)
+        self.emit(DeviceSnapshot(
+            probe_mm=tuple(float(v) for v in np.asarray(snap.values_mm, dtype=float)),
+            probe_status=tuple(str(getattr(s, "value", s)) for s in snap.status),
+            stroke_mm=self._stroke_mm, joints=tuple(float(v) for v in q),
+            joint_types=tuple(self.cfg.model.joint_types), controller=state,
+            heartbeat_age_s=None if age is None else float(age)))
 
     def measure_steps(self, db: RunDB, run_id: int, steps: Sequence[PlannedStep], kinds: Collection[StepKind],
                       total: int, make_proc: Callable[[PlannedStep], Procedure]) -> int:

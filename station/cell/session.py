@@ -26,6 +26,7 @@ from station.cell.devices import CellController, ProbeHead
 from station.cell.events import Event, PhaseChanged, RunFailed, RunStarted
 from station.cell.outcomes import classify, failure_summary, hint_for
 from station.cell.pipeline import Options, run_calibration
+from station.cell.questions import Confirm
 from station.cell.runcontrol import RunControl
 from station.cell.rundb import RunDB
 from station.cell.summary import RunSummary
@@ -90,6 +91,19 @@ def open_cell(cfg: CellConfig, stack: ExitStack) -> Devices:
     return Devices(open_probe(cfg, stack), open_controller(cfg, stack))
 
 
+def describe_devices(devices: Devices) -> dict[str, str]:
+    """What the report names as the devices: the probe interface's identification and the
+    controller's register-map version."""
+    info = {}
+    try:
+        info["probe_interface"] = str(devices.probe.identify())
+    except Exception as exc:  # noqa: BLE001 - a missing identification must not stop a run
+        info["probe_interface"] = f"not identified ({exc})"
+    version = getattr(devices.controller, "map_version", None)
+    info["controller_map_version"] = "unknown" if version is None else str(version)
+    return info
+
+
 def load_cell(request: CellRequest, stack: ExitStack) -> LoadedCell:
     """The request's configuration; with ``simulated`` the built-in simulated cell is started
     (stopped when ``stack`` closes) and its configuration comes from the simulators."""
@@ -107,7 +121,7 @@ def load_cell(request: CellRequest, stack: ExitStack) -> LoadedCell:
 
 
 def run_calibration_session(request: CellRequest, emit: Callable[[Event], None],
-                            control: RunControl | None = None) -> RunSummary:
+                            control: RunControl | None = None, confirm: Confirm | None = None) -> RunSummary:
     """Load the cell, open its devices and run (or resume) a calibration.
 
     Returns the run's summary whatever happened; a failure is classified by type
@@ -133,12 +147,19 @@ def run_calibration_session(request: CellRequest, emit: Callable[[Event], None],
             devices = open_cell(cfg, stack)
             seed = request.seed if request.simulated else None
             summary = run_calibration(cfg, devices.probe, devices.controller, db, tracking_emit, control,
-                                      Options(upload=request.upload, oracle_truth=loaded.truth),
-                                      resume_run=request.resume, seed=seed)
+                                      Options(upload=request.upload, oracle_truth=loaded.truth, confirm=confirm),
+                                      resume_run=request.resume, seed=seed,
+                                      devices_info=describe_devices(devices))
             return summary.replace(db=request.db)
     except Exception as exc:  # every failure becomes an outcome; nothing escapes as a traceback
         summary = failure_summary(exc, run_id=run_id, log_dir=Path(request.db).resolve().parent,
                                   cell=cell_name, robot=robot, db=request.db)
+        if run_id is not None:  # 'station runs' shows why it stopped
+            try:
+                with RunDB(request.db) as db:
+                    db.save_result(run_id, "summary", summary.to_json())
+            except Exception:  # noqa: BLE001 - the failure itself is what must reach the operator
+                pass
         emit(RunFailed(summary))
         return summary
 

@@ -4,9 +4,18 @@ Pose objective (eq. 7.3): Σ ((model − measured)/σ)² over x, y, z, rx, ry, r
 Position objective: the same on x, y, z only. Distance objective (7.6): plain sum of squares of
 distance residuals (one σ for all, so the weighting is only a scale).
 
+Before fitting, the data are checked and registered (:mod:`station.core.registration`): rows
+that repeat, too few distinct configurations and absurd values are refused; pose and position
+data are aligned to the nominal model by a similarity fit (a scale far from 1 is a unit mistake,
+refused with the likely unit) and a rigid fit, which starts the set-up R wherever the instrument
+stands (turned, flipped, metres away); the rank and condition are taken at the data.
+
 Solved by Levenberg–Marquardt (scipy ``least_squares``, MINPACK) on the minimal set chosen by
 :mod:`station.core.identifiability`, with the analytic Jacobian. Everything reported is recomputed at
-the returned parameters (MINPACK does not always evaluate last at its result).
+the returned parameters (MINPACK does not always evaluate last at its result). The parameter
+covariance is the linear propagation of the measurement covariance: diag(σ²) for pose and
+position rows, and for distances the covariance built from the measured points, whose shared
+points correlate the distances (:func:`station.core.uncertainty.distance_sandwich`).
 """
 
 from __future__ import annotations
@@ -16,13 +25,18 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
+from station.core.distance_pairs import shares_points
 from station.core.identifiability import Identifiability, analyze, structural_params
+from station.core.kinematics import forward
 from station.core.measurements import MeasurementSet, residuals_and_jacobian
 from station.core.model import RobotModel
-from station.core.uncertainty import LinearUncertainty, linear_uncertainty
-from station.errors import IdentificationError
+from station.core.registration import DataInformation, Registration, data_information, likely_unit, register
+from station.core.transforms import pose_to_matrix
+from station.core.uncertainty import LinearUncertainty, distance_sandwich, linear_uncertainty
+from station.errors import ConfigError, IdentificationError
 
 OUTLIER_SIGMAS = 4.0
+REGISTRATION_START_ANGLE = np.radians(45.0)
 
 
 @dataclass(frozen=True)
@@ -51,6 +65,10 @@ class IdentificationResult:
     message: str
     identifiability: Identifiability
     uncertainty: LinearUncertainty
+    registration: Registration | None = None
+    information: DataInformation | None = None
+    design_rank: int | None = None
+    notes: tuple[str, ...] = ()
 
     @property
     def estimates(self) -> np.ndarray:
@@ -66,20 +84,92 @@ class IdentificationResult:
         return float(np.sqrt(np.mean(np.sum(self.residuals[:, :3] ** 2, axis=1))))
 
 
+def _position_sigma(data: MeasurementSet) -> float:
+    s = data.sigma.reshape(data.n_items, data.rows_per_item)
+    return float(np.median(s[:, :3]))
+
+
+_DESIGN_RANKS: dict[tuple, int] = {}
+
+
+def design_rank(model: RobotModel, kind: str, n_poses: int = 60, seed: int = 12345) -> int:
+    """Rank of ``kind`` measurements at poses spread over the whole workspace (the design the
+    data are compared with). Cached per robot structure and nominal geometry."""
+    key = (model.transforms, model.nominal.tobytes(), model.joint_limits.tobytes(), kind, n_poses, seed)
+    if key not in _DESIGN_RANKS:
+        _DESIGN_RANKS[key] = _design_rank(model, kind, n_poses, seed)
+    return _DESIGN_RANKS[key]
+
+
+def _design_rank(model: RobotModel, kind: str, n_poses: int, seed: int) -> int:
+    from station.core.measurements import synthetic_set
+    from station.core.poses import spread_joints
+
+    rng = np.random.default_rng(seed)
+    q = spread_joints(model, n_poses, rng)
+    pairs = np.array(np.triu_indices(n_poses, 1)).T if kind == "distance" else None
+    return analyze(model, synthetic_set(model, kind, q, model.nominal, pairs=pairs),  # type: ignore[arg-type]
+                   structural_params(model, model.nominal), describe=False).rank
+
+
 def identify(model: RobotModel, data: MeasurementSet, start=None, prefer=None, fix=(), exclude=(),
-             chosen=None, max_nfev: int = 200, max_rms_normalized: float = 1e3) -> IdentificationResult:
+             chosen=None, max_nfev: int = 200, max_rms_normalized: float = 1e3,
+             register_frame: bool = True) -> IdentificationResult:
     """Identify ``model``'s parameters from ``data``.
 
-    ``start``: start parameters (default nominal). ``prefer`` / ``fix`` / ``exclude``: minimal
-    set preferences (default: the robot file's ``prefer`` list). ``chosen``: identify exactly
-    these parameters instead (must be identifiable). Raises :class:`IdentificationError` on
-    rank deficiency or divergence.
+    ``start``: start parameters (default nominal, with the set-up R from the registration).
+    ``prefer`` / ``fix`` / ``exclude``: minimal set preferences (default: the robot file's
+    ``prefer`` list). ``chosen``: identify exactly these parameters instead (must be
+    identifiable). ``register_frame``: register pose/position data to the model first (unit
+    check, start of R, residual check; the residual check is skipped when ``start`` is given).
+    Raises :class:`~station.errors.ConfigError` for data that cannot be used (units, repeated
+    rows, too few configurations) and :class:`IdentificationError` on a registration residual
+    far above an uncalibrated robot's, rank deficiency or divergence.
     """
     p0 = np.array(model.nominal if start is None else start, dtype=float)
     if p0.shape != (model.n_params,) or not np.all(np.isfinite(p0)):
         raise IdentificationError("start parameters must be a finite vector of the model's size")
+    notes: list[str] = []
+    info = data_information(model, data.joints, None if data.kind == "distance" else data.measured,
+                            rows_per_item=3 if data.kind == "distance" else data.rows_per_item)
+    reg = None
+    if data.kind == "distance":
+        pts = forward(model, data.joints, p0, setup=False)[:, :3, 3]
+        pr = data.distance_pairs()
+        d_nom = np.linalg.norm(pts[pr[:, 0]] - pts[pr[:, 1]], axis=1)
+        scale = float(np.sum(d_nom * data.measured) / max(np.sum(d_nom**2), 1e-300))
+        if not (abs(scale - 1.0) <= 0.02):
+            likely = likely_unit(scale) if np.isfinite(scale) and scale > 0 else None
+            raise ConfigError(
+                f"the measured distances are {scale:.4g}× the nominal model's"
+                + (f": they look like {likely[0]}, not mm. Label the columns with their unit or {likely[1]}"
+                   if likely else "; check the length unit of the data and of the robot file"))
+    elif register_frame:
+        pos = data.measured[:, :3, 3] if data.kind == "pose" else data.measured
+        try:
+            reg = register(model, data.joints, pos, _position_sigma(data), params=p0)
+        except IdentificationError:
+            if start is None:
+                raise
+            notes.append("registration residual above the limit; fitted from the given start anyway")
+        if reg is not None and start is None and not any(
+                model.param_names[i] in (*fix, *exclude) for i in range(6)):
+            # Keep the robot file's set-up where Levenberg–Marquardt converges from it (the
+            # translation enters linearly; a rotation within REGISTRATION_START_ANGLE does), so
+            # parameters that merge into R keep their file values; otherwise start from the
+            # registration (an instrument turned or flipped far from the file's R).
+            R_file = pose_to_matrix(p0[:6])[:3, :3]
+            angle = float(np.arccos(np.clip((np.trace(R_file.T @ reg.transform[:3, :3]) - 1) / 2, -1, 1)))
+            if angle > REGISTRATION_START_ANGLE:
+                p0[:6] = reg.setup_pose
+                notes.append(f"set-up R started from the registration (the robot file's R is turned "
+                             f"{np.degrees(angle):.0f}° from the instrument's frame)")
     ident = analyze(model, data, structural_params(model, p0), prefer=model.prefer if prefer is None else prefer,
-                    fix=fix, exclude=exclude, describe=False)
+                    fix=fix, exclude=exclude, describe=True)
+    d_rank = design_rank(model, data.kind)
+    if ident.rank < d_rank and not (fix or exclude or chosen is not None):
+        notes.append(f"the data determine {ident.rank} of the {d_rank} parameters that a workspace-wide "
+                     f"design determines (e.g. poses in one plane); the rest merge as listed")
     if chosen is not None:
         idx = np.array(model.param_indices(chosen), dtype=int)
         J = residuals_and_jacobian(model, data, p0)[1][:, idx] / data.sigma[:, None]
@@ -119,7 +209,18 @@ def identify(model: RobotModel, data: MeasurementSet, start=None, prefer=None, f
     p = full(sol.x)
     r, J = residuals_and_jacobian(model, data, p)  # recomputed at the result, on purpose
     Jw = J[:, idx] * w[:, None]
-    unc = linear_uncertainty(Jw, tuple(model.param_names[i] for i in idx))
+    names = tuple(model.param_names[i] for i in idx)
+    if data.kind == "distance":
+        pts = forward(model, data.joints, p, setup=False)[:, :3, 3]
+        pr = data.distance_pairs()
+        diff = pts[pr[:, 0]] - pts[pr[:, 1]]
+        unit = diff / np.linalg.norm(diff, axis=1)[:, None]
+        unc = distance_sandwich(Jw, names, pr, unit, data.sigma, data.points_sigma(), data.joints.shape[0])
+        if shares_points(pr):
+            notes.append(f"{len(pr)} distances share measured points; their correlation is in the σ "
+                         f"(sandwich from the points' covariance)")
+    else:
+        unc = linear_uncertainty(Jw, names)
     rn = (r * w).reshape(data.n_items, data.rows_per_item)
     per_item = np.sqrt(np.mean(rn**2, axis=1))
     rms = float(np.sqrt(np.mean(rn**2)))
@@ -145,4 +246,5 @@ def identify(model: RobotModel, data: MeasurementSet, start=None, prefer=None, f
         residuals=r.reshape(data.n_items, data.rows_per_item), normalized=per_item,
         rms_normalized=rms, outliers=outliers, iterations=int(sol.nfev), converged=converged,
         message=str(sol.message), identifiability=ident, uncertainty=unc,
+        registration=reg, information=info, design_rank=d_rank, notes=tuple(notes),
     )

@@ -46,6 +46,10 @@ class MeasurementSet:
     distance ``(k,)``. ``pairs``: ``(k, 2)`` indices into ``joints`` (distance only).
     ``sigma``: ``(n_rows,)`` standard deviation of every residual row, or a per-row pattern
     (6,) / (3,) / scalar that is repeated.
+    ``point_sigma`` (distance only): ``(n, 3)`` standard deviation [mm] of every coordinate of the
+    measured *points* the distances were computed from (or a scalar / (3,) pattern). Distances
+    that share a point are correlated through it; the uncertainty analysis builds their
+    covariance from this. Default: ``sigma / √2`` (each distance from two equal points).
     """
 
     kind: Kind
@@ -53,6 +57,7 @@ class MeasurementSet:
     measured: np.ndarray
     sigma: np.ndarray
     pairs: np.ndarray | None = None
+    point_sigma: np.ndarray | None = None
 
     def __post_init__(self):
         if self.kind not in KINDS:
@@ -87,6 +92,18 @@ class MeasurementSet:
         object.__setattr__(self, "joints", _ro(q))
         object.__setattr__(self, "measured", _ro(m))
         object.__setattr__(self, "sigma", _ro(s))
+        if self.kind == "distance":
+            ps = (np.sqrt(np.mean(s**2) / 2.0) if self.point_sigma is None
+                  else np.asarray(self.point_sigma, dtype=float))
+            try:
+                ps = np.broadcast_to(ps, (n, 3))
+            except ValueError:
+                raise ConfigError(f"point_sigma must be a scalar, (3,) or ({n}, 3)") from None
+            if np.any(~np.isfinite(ps)) or np.any(ps <= 0):
+                raise ConfigError("point_sigma must be positive finite standard deviations [mm]")
+            object.__setattr__(self, "point_sigma", _ro(ps))
+        elif self.point_sigma is not None:
+            raise ConfigError("point_sigma belongs to distance data only")
 
     @property
     def n_items(self) -> int:
@@ -108,14 +125,21 @@ class MeasurementSet:
         return self.pairs
 
     def with_measured(self, measured: np.ndarray) -> "MeasurementSet":
-        return MeasurementSet(self.kind, self.joints, measured, self.sigma, self.pairs)
+        return MeasurementSet(self.kind, self.joints, measured, self.sigma, self.pairs, self.point_sigma)
+
+    def points_sigma(self) -> np.ndarray:
+        """``(n, 3)`` σ [mm] of the measured points behind a distance set."""
+        if self.point_sigma is None:
+            raise ConfigError(f"{self.kind} data has no point σ; only distance data has them")
+        return self.point_sigma
 
     def subset(self, items: np.ndarray) -> "MeasurementSet":
         """The measurements (or distances) with the given indices."""
         idx = np.asarray(items, dtype=int)
         sig = self.sigma.reshape(self.n_items, -1)[idx]
         if self.kind == "distance":
-            return MeasurementSet("distance", self.joints, self.measured[idx], sig, self.distance_pairs()[idx])
+            return MeasurementSet("distance", self.joints, self.measured[idx], sig, self.distance_pairs()[idx],
+                                  self.point_sigma)
         return MeasurementSet(self.kind, self.joints[idx], self.measured[idx], sig)
 
 
@@ -170,10 +194,19 @@ def residuals_and_jacobian(model: RobotModel, data: MeasurementSet, params, join
 
 
 def synthetic_set(model: RobotModel, kind: Kind, joints, true_params, sigma=None, rng=None,
-                  pairs=None) -> MeasurementSet:
-    """Exact (or, with ``rng``, noisy) measurements that the robot ``true_params`` would give."""
+                  pairs=None, point_sigma=None) -> MeasurementSet:
+    """Exact (or, with ``rng``, noisy) measurements that the robot ``true_params`` would give.
+
+    Distance data are noisy the way they are measured: the noise is on the two points (σ
+    ``point_sigma``), and the distances are computed from the noisy points, so distances that
+    share a point are correlated."""
     sig = default_sigma(kind) if sigma is None else np.asarray(sigma, dtype=float)
-    proto = MeasurementSet(kind, joints, _placeholder(kind, joints, pairs), sig, pairs)
+    proto = MeasurementSet(kind, joints, _placeholder(kind, joints, pairs), sig, pairs, point_sigma)
+    if kind == "distance" and rng is not None:
+        pts = forward(model, proto.joints, true_params, setup=False)[..., :3, 3]
+        pts = pts + rng.standard_normal(pts.shape) * proto.points_sigma()
+        pr = proto.distance_pairs()
+        return proto.with_measured(np.linalg.norm(pts[pr[:, 0]] - pts[pr[:, 1]], axis=-1))
     meas = model_outputs(model, proto, true_params)
     if rng is not None:
         meas = add_noise(proto, meas, rng)

@@ -1,10 +1,19 @@
 """Uncertainty of identified parameters and of the poses they predict (brief §6, chapter 7.4).
 
 * :func:`linear_uncertainty` — linear propagation by SVD of the σ-normalised Jacobian
-  (eq. 7.9–7.13): C' = U S Vᵀ, Σ_p = V S⁻² Vᵀ. Covers measurement noise only.
-* :func:`monte_carlo` — many synthetic data sets drawn from the input distributions (measurement
-  noise, robot repeatability in the joints, calibration-body geometry per measuring point), each
-  identified by Gauss–Newton; all data sets are solved together as one batched computation.
+  (eq. 7.9–7.13): C' = U S Vᵀ, Σ_p = V S⁻² Vᵀ. Covers measurement noise only. Exact for
+  independent residual rows (pose and position data).
+* :func:`distance_sandwich` — the same for distances, which are *not* independent: d_ij and
+  d_ik share the noise of point i (brief §10). Their covariance is C = D Σ_points Dᵀ, with D the
+  derivative of the distances by the measured points (rows u_ijᵀ, −u_ijᵀ). The fit is the
+  plain (unweighted) least squares of eq. 7.6, so its covariance is the sandwich
+  (JᵀJ)⁻¹ Jᵀ C J (JᵀJ)⁻¹; Jᵀ C J = (DᵀJ)ᵀ Σ_points (DᵀJ) is formed point by point, never as a
+  (k, k) matrix, so it costs O(k·p) for k pairs.
+* :func:`monte_carlo` — many synthetic data sets drawn from the input distributions of what is
+  actually measured (the measured points or poses, the joints through the robot's
+  repeatability, the calibration-body geometry per measuring point; distances are then computed
+  from the perturbed points, never perturbed themselves), each identified by Gauss–Newton; all
+  data sets are solved together as one batched computation.
 * :func:`pose_accuracy` — Σ_pose = J_pose Σ_p J_poseᵀ at any joint configurations.
 """
 
@@ -44,7 +53,10 @@ class LinearUncertainty:
 
 def linear_uncertainty(Jw: np.ndarray, names: tuple[str, ...], rtol: float = 1e-12) -> LinearUncertainty:
     """Parameter covariance from the σ-normalised Jacobian ``Jw`` ``(n_rows, p)``."""
-    U, s, Vt = np.linalg.svd(Jw, full_matrices=False)
+    if Jw.shape[0] > 2 * Jw.shape[1]:
+        # Same singular values and V from the (p, p) triangular factor; U is never needed.
+        Jw = np.linalg.qr(Jw, mode="r")  # type: ignore[assignment]  # mode="r" returns R alone
+    _, s, Vt = np.linalg.svd(Jw, full_matrices=False)
     rank = int(np.sum(s > rtol * s[0])) if s.size and s[0] > 0 else 0
     with np.errstate(divide="ignore"):
         inv_s2 = np.where(s > rtol * (s[0] if s.size else 1.0), 1.0 / s**2, np.inf)
@@ -53,6 +65,34 @@ def linear_uncertainty(Jw: np.ndarray, names: tuple[str, ...], rtol: float = 1e-
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(sig, sig)
     return LinearUncertainty(tuple(names), _ro(sig), _ro(cov), _ro(corr), _ro(s), rank)
+
+
+def distance_sandwich(Jw: np.ndarray, names: tuple[str, ...], pairs: np.ndarray, unit: np.ndarray,
+                      row_sigma: np.ndarray, point_sigma: np.ndarray, n_points: int) -> LinearUncertainty:
+    """Parameter covariance of a distance fit whose distances share measured points.
+
+    ``Jw``: ``(k, p)`` Jacobian of the distances divided by ``row_sigma`` ``(k,)`` (the fit's
+    weights); ``unit``: ``(k, 3)`` unit vectors p_i − p_j of every pair; ``point_sigma``:
+    ``(n, 3)`` σ [mm] of the measured points' coordinates.
+    """
+    base = linear_uncertainty(Jw, names)
+    if base.rank < Jw.shape[1]:
+        return base
+    pr = np.asarray(pairs, dtype=int)
+    # G = Dᵀ W J: for every point and coordinate, the sum over its pairs of ±u·(weighted row).
+    contrib = unit[:, :, None] * (Jw / row_sigma[:, None])[:, None, :]  # (k, 3, p)
+    G = np.zeros((n_points, 3, Jw.shape[1]))
+    np.add.at(G, pr[:, 0], contrib)
+    np.add.at(G, pr[:, 1], -contrib)
+    Gs = (G * np.asarray(point_sigma)[:, :, None]).reshape(-1, Jw.shape[1])
+    meat = Gs.T @ Gs
+    bread = base.covariance
+    cov = bread @ meat @ bread
+    cov = 0.5 * (cov + cov.T)
+    sig = np.sqrt(np.diag(cov))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(sig, sig)
+    return LinearUncertainty(tuple(names), _ro(sig), _ro(cov), _ro(corr), base.singular_values, base.rank)
 
 
 @dataclass(frozen=True)
@@ -97,7 +137,8 @@ def monte_carlo(model: RobotModel, data: MeasurementSet, true_params, chosen_ind
                 sigma_point=None, max_iter: int = 12, tol: float = 1e-11) -> MonteCarloResult:
     """Identify ``n_sets`` synthetic data sets like ``data`` drawn around ``true_params``.
 
-    Inputs drawn per data set: measurement noise of ``data.sigma``; robot repeatability as
+    Inputs drawn per data set: measurement noise of ``data.sigma`` (distance data: of the
+    measured points, ``data.point_sigma``, with the distances computed from them); robot repeatability as
     Gaussian joint noise ``sigma_joints`` ``(g,)`` (the robot reports the commanded joints but
     stands slightly elsewhere); calibration-body geometry as one pose error of σ
     ``sigma_point`` ``(6,)`` per measuring point ``point_ids`` ``(n,)`` shared by all
@@ -106,14 +147,22 @@ def monte_carlo(model: RobotModel, data: MeasurementSet, true_params, chosen_ind
     """
     idx = np.asarray(chosen_index, dtype=int)
     p_true = np.asarray(true_params, dtype=float)
-    if sigma_joints is None:
-        exact = np.broadcast_to(model_outputs(model, data, p_true), (n_sets,) + data.measured.shape)
+    q_act = (np.broadcast_to(data.joints, (n_sets,) + data.joints.shape) if sigma_joints is None else
+             data.joints + rng.standard_normal((n_sets,) + data.joints.shape) * np.asarray(sigma_joints))
+    if data.kind == "distance":
+        # What is measured are points: perturb them (instrument, body geometry), then form the distances.
+        pts = forward(model, q_act, p_true, setup=False)[..., :3, 3]
+        pts = pts + rng.standard_normal(pts.shape) * data.points_sigma()
+        if point_ids is not None and sigma_point is not None:
+            pts = _perturb_points("position", pts, np.asarray(point_ids), np.asarray(sigma_point), rng)
+        pr = data.distance_pairs()
+        measured = np.linalg.norm(pts[..., pr[:, 0], :] - pts[..., pr[:, 1], :], axis=-1)
     else:
-        q_act = data.joints + rng.standard_normal((n_sets,) + data.joints.shape) * np.asarray(sigma_joints)
-        exact = _outputs_at(model, data, p_true, q_act)
-    measured = add_noise(data, exact, rng)
-    if point_ids is not None and sigma_point is not None and data.kind in ("pose", "position"):
-        measured = _perturb_points(data.kind, measured, np.asarray(point_ids), np.asarray(sigma_point), rng)
+        exact = (np.broadcast_to(model_outputs(model, data, p_true), (n_sets,) + data.measured.shape)
+                 if sigma_joints is None else _outputs_at(model, data, p_true, q_act))
+        measured = add_noise(data, exact, rng)
+        if point_ids is not None and sigma_point is not None:
+            measured = _perturb_points(data.kind, measured, np.asarray(point_ids), np.asarray(sigma_point), rng)
     p0 = np.array(model.nominal if start is None else start, dtype=float)
     P = np.broadcast_to(p0, (n_sets, p0.size)).copy()
     w = 1.0 / data.sigma

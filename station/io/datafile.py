@@ -29,6 +29,7 @@ from station.errors import ConfigError
 _SCALE = {"mm": 1.0, "m": 1000.0, "um": 1e-3, "µm": 1e-3, "deg": math.pi / 180, "rad": 1.0,
           "arcsec": math.pi / 180 / 3600}
 _LENGTH_UNITS = ("mm", "m", "um", "µm")
+MAX_FILE_BYTES = 256 * 2**20
 _ANGLE_UNITS = ("deg", "rad", "arcsec")
 
 
@@ -46,8 +47,18 @@ def read_table(path: str | Path) -> Table:
     p = Path(path)
     if not p.exists():
         raise ConfigError(f"{p}: no such file")
-    with open(p, newline="", encoding="utf-8") as f:
-        lines = [(i + 1, line) for i, line in enumerate(f) if line.strip() and not line.lstrip().startswith("#")]
+    if not p.is_file():
+        raise ConfigError(f"{p}: not a regular file; give the path of a CSV data file")
+    # utf-8-sig: a byte-order mark (Excel's "CSV UTF-8") is read as such, not as part of 'q1'
+    try:
+        with open(p, newline="", encoding="utf-8-sig") as f:
+            text = f.read(MAX_FILE_BYTES + 1)
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{p}: not UTF-8 text ({exc.reason} at byte {exc.start}); export the data as CSV UTF-8") from None
+    if len(text) > MAX_FILE_BYTES:
+        raise ConfigError(f"{p}: larger than {MAX_FILE_BYTES // 2**20} MB; split the measurements")
+    lines = [(i + 1, line) for i, line in enumerate(text.splitlines(keepends=True))
+             if line.strip() and not line.lstrip().startswith("#")]
     if not lines:
         raise ConfigError(f"{p}: empty; expected a header with units and one row per measurement")
     reader = list(csv.reader(line for _, line in lines))

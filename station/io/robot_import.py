@@ -14,6 +14,9 @@ DH table files are CSV (``*.dh.csv`` or ``*.mdh.csv``) with units in the header,
 
     type,theta [deg],d [mm],a [mm],alpha [deg],lower [deg|mm],upper [deg|mm]
     revolute,0,800,445,0,-130,130
+
+A row of type ``fixed`` (limits left empty) is a constant link without a joint: the exporter
+writes a set-up in front of axis 1 or a tool after the last axis that way.
 """
 
 from __future__ import annotations
@@ -49,34 +52,35 @@ def robot_from_dh(rows, convention: str = "dh", name: str = "imported", tool=Non
     """
     if convention not in ("dh", "mdh"):
         raise ConfigError("convention must be 'dh' or 'mdh'")
+    # A row of type "fixed" carries no joint (a set-up, tool or offset link written as DH).
     # dh: per link (Rz(θ)·Tz(d), Tx(a)·Rx(α)), the parts before and after the joint; mdh: the
-    # whole (4, 4) constant transform of each link
-    dh_parts: list[tuple[np.ndarray, np.ndarray]] = []
-    mdh_links: list[np.ndarray] = []
+    # whole (4, 4) constant transform of each link.
     specs = [TransformSpec("R")]
     limits = []
-    for i, (kind, theta, d, a, alpha, lo, hi) in enumerate(rows, start=1):
-        if kind not in ("revolute", "prismatic"):
-            raise ConfigError(f"DH row {i}: type must be revolute or prismatic, got {kind!r}")
-        specs.append(TransformSpec(f"A{i}", kind))
-        limits.append((lo, hi))
-        if convention == "dh":
-            dh_parts.append((_T(rot_z(theta), (0, 0, 0)) @ _T(t=(0, 0, d)), _T(t=(a, 0, 0)) @ _T(rot_x(alpha))))
-        else:
-            mdh_links.append(_T(rot_x(alpha)) @ _T(t=(a, 0, 0)) @ _T(rot_z(theta)) @ _T(t=(0, 0, d)))
-    specs.append(TransformSpec("K"))
     poses = [np.zeros(6)]
-    if convention == "dh":
-        # θ and d commute with the joint motion about/along z, so Rz(θ)Tz(d) stays with joint i
-        # and Tx(a)Rx(α) moves to the front of transform i+1.
-        carry = np.eye(4)
-        for pre_joint, post_joint in dh_parts:
-            poses.append(matrix_to_pose(carry @ pre_joint))
-            carry = post_joint
-        tail = carry
-    else:
-        poses.extend(matrix_to_pose(C) for C in mdh_links)
-        tail = np.eye(4)
+    carry = np.eye(4)  # constant transform not yet placed in front of a joint
+    n_joint = 0
+    for i, (kind, theta, d, a, alpha, lo, hi) in enumerate(rows, start=1):
+        if kind not in ("revolute", "prismatic", "fixed"):
+            raise ConfigError(f"DH row {i}: type must be revolute, prismatic or fixed, got {kind!r}")
+        if convention == "dh":
+            pre, post = _T(rot_z(theta)) @ _T(t=(0, 0, d)), _T(t=(a, 0, 0)) @ _T(rot_x(alpha))
+        else:
+            pre, post = _T(rot_x(alpha)) @ _T(t=(a, 0, 0)) @ _T(rot_z(theta)) @ _T(t=(0, 0, d)), np.eye(4)
+        if kind == "fixed":
+            carry = carry @ pre @ post
+            continue
+        # θ and d (dh) commute with the joint motion about/along z, so they stay with the joint
+        # and Tx(a)·Rx(α) moves to the front of the next transform.
+        n_joint += 1
+        specs.append(TransformSpec(f"A{n_joint}", kind))
+        limits.append((lo, hi))
+        poses.append(matrix_to_pose(carry @ pre))
+        carry = post
+    if n_joint == 0:
+        raise ConfigError("DH rows: no revolute or prismatic joint")
+    specs.append(TransformSpec("K"))
+    tail = carry
     if tool is not None:
         tail = tail @ np.asarray(tool, dtype=float)
     poses.append(matrix_to_pose(tail))
@@ -110,6 +114,9 @@ def robot_from_dh_file(path: Path) -> RobotModel:
         vals = {}
         for n in need[1:]:
             u = units[n]
+            if kind == "fixed" and n in ("lower", "upper"):
+                vals[n] = 0.0
+                continue
             if n in ("lower", "upper"):
                 u = u.split("|")[0 if kind == "revolute" else -1]
             if u not in scale:

@@ -14,8 +14,24 @@ from collections.abc import Sequence
 
 from station.cell.outcomes import failure_summary
 from station.errors import Outcome, StationError
-from station.ui.commands_cell import cmd_calibrate, cmd_check, cmd_export, cmd_init, cmd_reset, cmd_tui
-from station.ui.commands_core import cmd_analyze, cmd_identify, cmd_predict, cmd_study
+from station.ui.commands_cell import (
+    cmd_calibrate,
+    cmd_check,
+    cmd_export,
+    cmd_init,
+    cmd_report,
+    cmd_reset,
+    cmd_runs,
+    cmd_tui,
+)
+from station.ui.commands_core import (
+    cmd_analyze,
+    cmd_export_model,
+    cmd_identify,
+    cmd_predict,
+    cmd_study,
+    cmd_validate,
+)
 
 
 def _add_robot(p):
@@ -34,10 +50,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("analyze", help="identifiability of a robot's parameters")
     _add_robot(p)
-    p.add_argument("--kind", choices=["pose", "position", "distance"], default="pose")
+    p.add_argument("--objective", "--kind", dest="objective", choices=["pose", "position", "distance"],
+                   default="pose", help="what is measured (--kind: the former name)")
     p.add_argument("--planar", action="store_true", help="all poses in one plane normal to z")
     p.add_argument("--poses", type=int, default=30)
-    p.add_argument("--distances", type=int, default=200)
+    p.add_argument("--distances", "--max-pairs", dest="distances", type=int, default=200,
+                   help="distances (pairs) formed from the poses (default 200)")
     p.add_argument("--joints", help="joint file (CSV with units) instead of random poses")
     p.add_argument("--seed", type=int, default=0)
     _add_prefs(p)
@@ -48,12 +66,31 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("data", help="measurement CSV (docs/data-files.md)")
     _add_robot(p)
     p.add_argument("--objective", choices=["pose", "position", "distance"])
-    p.add_argument("--sigma-position", type=float, default=15.0, help="µm (default 15)")
+    p.add_argument("--sigma-position", type=float, default=15.0, help="µm per coordinate of a measured point (default 15)")
     p.add_argument("--sigma-angle", type=float, default=20.0, help="arc seconds (default 20)")
+    p.add_argument("--pairs", choices=["cap", "all", "independent"], default="cap",
+                   help="distance objective: which pairs of points (default cap)")
+    p.add_argument("--max-pairs", type=int, default=20_000, help="distance objective: the cap (default 20000)")
     p.add_argument("--output", "-o", help="write the identified robot file here")
     _add_prefs(p)
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_identify)
+
+    p = sub.add_parser("validate", help="held-out errors of a model on measurements it was not fitted on")
+    p.add_argument("model", help="identified robot file (or built-in robot)")
+    p.add_argument("data", help="measurement CSV (docs/data-files.md)")
+    p.add_argument("--robot", default=None, help="nominal robot shown beside (default: the model's name)")
+    p.add_argument("--sigma-position", type=float, default=15.0, help="µm (default 15), for the registration check")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_validate)
+
+    p = sub.add_parser("export-model", help="a model as MDH, DH, URDF or TOML")
+    p.add_argument("model", help="identified robot file (or built-in robot)")
+    p.add_argument("--format", choices=["mdh", "dh", "urdf", "toml"], required=True)
+    p.add_argument("--output", "-o", required=True, help="file to write")
+    p.add_argument("--base", action="store_true", help="robot base frame (leave out the set-up R)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_export_model)
 
     p = sub.add_parser("predict", help="poses of a model for given joint values")
     p.add_argument("model", help="built-in robot name or robot file")
@@ -66,6 +103,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_robot(p)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--sets", type=int, default=1000, help="Monte Carlo data sets for pose studies")
+    p.add_argument("--quick", action="store_true", help="fewer Monte Carlo sets and seeds (a smoke run)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_study)
 
@@ -95,6 +133,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("config")
     p.add_argument("--yes", action="store_true", help="confirm without asking: the e-stop is released, the cell clear")
     p.set_defaults(func=cmd_reset)
+
+    p = sub.add_parser("runs", help="list the runs of a run database (status, outcome, figures, resumable)")
+    p.add_argument("--db", default="runs.sqlite")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_runs)
+
+    p = sub.add_parser("report", help="rebuild a run's report from the run database")
+    p.add_argument("run", type=int)
+    p.add_argument("--db", default="runs.sqlite")
+    p.add_argument("--output", "-o", metavar="DIR", help="report folder (default report-run-RUN)")
+    p.set_defaults(func=cmd_report)
 
     p = sub.add_parser("export", help="export a run's measurements to CSV")
     p.add_argument("--db", default="runs.sqlite")

@@ -8,17 +8,22 @@ stdout; its exit code is the run's :class:`~station.errors.Outcome`. Devices are
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
+import signal
 import sys
-from collections.abc import Callable
+import threading
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TextIO
 
 from station.cell import events as ev
 from station.cell.config import TEMPLATE, load_config
 from station.cell.outcomes import write_traceback
+from station.cell.runcontrol import RunControl
 from station.cell.rundb import RunDB
+from station.cell.runs import list_runs
 from station.cell.session import CellRequest, check_cell, reset_controller, run_calibration_session
 from station.cell.summary import RunSummary
 from station.errors import ConfigError
@@ -32,18 +37,39 @@ def request_from(args: argparse.Namespace) -> CellRequest:
 
 
 def progress_printer(stream: TextIO) -> Callable[[ev.Event], None]:
-    """Plain progress lines for a log or a terminal."""
+    """Progress on ``stream``: a progress bar that redraws one line at a terminal, plain lines
+    otherwise (a log file, a scheduler's journal)."""
+    tty = stream.isatty()
+    bar_shown = False
+
+    def line(text: str) -> None:
+        nonlocal bar_shown
+        if bar_shown:  # finish the bar's line before a message of its own
+            print(file=stream)
+            bar_shown = False
+        print(text, file=stream, flush=True)
+
     def emit(e: ev.Event) -> None:
+        nonlocal bar_shown
         if isinstance(e, ev.PhaseChanged):
-            print(f"[{e.phase}] {e.detail}", file=stream, flush=True)
+            line(f"[{e.phase}] {e.detail}")
         elif isinstance(e, ev.RunStarted):
-            print(f"run {e.run_id}: {e.n_steps} steps ({e.resumed_from} already on disk)", file=stream, flush=True)
+            line(f"run {e.run_id}: {e.n_steps} steps ({e.resumed_from} already on disk)")
         elif isinstance(e, ev.MeasurementRecorded):
             res = "" if math.isnan(e.residual_um) else f" residual {e.residual_um:.2f} µm"
-            print(f"  {e.index + 1:4d}/{e.total} {e.label}: {'ok' if e.ok else 'NOT OK ' + e.message}{res}",
-                  file=stream, flush=True)
+            state = "ok" if e.ok else "NOT OK " + e.message
+            if tty and e.ok:
+                done = (e.index + 1) / max(e.total, 1)
+                filled = int(round(30 * done))
+                print(f"\r  [{'#' * filled}{'.' * (30 - filled)}] {e.index + 1:4d}/{e.total} {e.label[:32]:32s}",
+                      end="", file=stream, flush=True)
+                bar_shown = True
+            else:
+                line(f"  {e.index + 1:4d}/{e.total} {e.label}: {state}{res}")
         elif isinstance(e, ev.Notice):
-            print(f"  {e.level}: {e.message}", file=stream, flush=True)
+            line(f"  {e.level}: {e.message}")
+        elif isinstance(e, (ev.RunFinished, ev.RunFailed)) and bar_shown:
+            line("")
     return emit
 
 
@@ -105,7 +131,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         raise ConfigError("give a configuration file, or --simulated for the built-in simulated cell")
     if args.report:  # checked before the first motion, not after an hour of measuring
         _check_report_dir(Path(args.report))
-    summary = run_calibration_session(request, progress_printer(sys.stderr))
+    control = RunControl()
+    with safe_stop_on_signals(control):
+        summary = run_calibration_session(request, progress_printer(sys.stderr), control)
     if args.report and summary.run_id is not None and summary.failure is None:
         from station.ui.report_data import report_for_run
 
@@ -115,11 +143,38 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         except Exception as exc:  # noqa: BLE001 - the run's result stands; say why the report is missing
             log = write_traceback(exc, Path(args.report))
             summary = summary.replace(notes=(*summary.notes, f"the report could not be written ({exc}); "
-                                                              f"traceback in {log}; rebuild it later from the run database"))
+                                                              f"traceback in {log}; rebuild it with 'station report'"))
     print_summary(summary, sys.stderr)
     if args.json:
-        print(json.dumps(summary.to_json()))
+        print(json.dumps(summary.to_json()), flush=True)
     return summary.exit_code
+
+
+@contextlib.contextmanager
+def safe_stop_on_signals(control: RunControl) -> Iterator[None]:
+    """SIGTERM (a scheduler, systemd) and SIGINT (Ctrl-C) stop the run at the next safe point:
+    the runner raises RunAborted there, the summary is written and the exit code is 6. A second
+    signal stops at once (every measurement is already committed)."""
+    received: list[int] = []
+
+    def handler(signum: int, frame: object) -> None:
+        received.append(signum)
+        if len(received) == 1:
+            print(f"\nstation: {signal.Signals(signum).name}: stopping at the next safe point "
+                  f"(send it again to stop at once)", file=sys.stderr, flush=True)
+            control.abort()
+        else:
+            raise KeyboardInterrupt
+
+    if threading.current_thread() is not threading.main_thread():
+        yield  # signal handlers belong to the main thread (tests call main() from workers)
+        return
+    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGTERM, signal.SIGINT)}
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
 
 
 def cmd_reset(args: argparse.Namespace) -> int:
@@ -150,6 +205,41 @@ def _check_report_dir(path: Path) -> None:
         probe.unlink()
     except OSError as exc:
         raise ConfigError(f"--report {path}: cannot write there ({exc.strerror or exc}); choose another folder") from None
+
+
+def cmd_runs(args: argparse.Namespace) -> int:
+    """The runs of a run database: a table for people, one JSON object for scripts."""
+    if not Path(args.db).exists():
+        raise ConfigError(f"{args.db}: no run database here; give it with --db")
+    with RunDB(args.db) as db:
+        runs = list_runs(db)
+    if args.json:
+        print(json.dumps({"db": str(args.db), "runs": [r.to_json() for r in runs]}))
+        return 0
+    print(f"{'run':>4}  {'created (UTC)':20}  {'cell':24}  {'robot':8}  {'status':10}  {'steps':>9}  "
+          f"{'outcome':22}  {'before':>8}  {'after':>8}  resume?")
+    for r in runs:
+        def um(v: float | None) -> str:
+            return "—" if v is None else f"{v:.1f}"
+        print(f"{r.id:>4}  {r.created_utc[:19]:20}  {r.cell[:24]:24}  {r.robot[:8]:8}  {r.status:10}  "
+              f"{r.steps_done:>4}/{r.steps_total:<4}  {(r.outcome or 'unfinished'):22}  {um(r.rms_before_um):>8}  "
+              f"{um(r.rms_after_um):>8}  {'--resume ' + str(r.id) if r.resumable else ''}")
+    if not runs:
+        print("(no runs yet)")
+    return 0
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    """Rebuild a run's report from the run database."""
+    from station.ui.report_data import report_for_run
+
+    out = Path(args.output or f"report-run-{args.run}")
+    _check_report_dir(out)
+    with RunDB(args.db) as db:
+        db.run(args.run)  # a clear error for a run that is not there
+    path = report_for_run(args.db, args.run, out)
+    print(f"report of run {args.run}: {path}")
+    return 0
 
 
 def cmd_export(args: argparse.Namespace) -> int:

@@ -37,28 +37,30 @@ def _print_json(obj) -> None:
 # --- analyze --------------------------------------------------------------------------------
 
 def cmd_analyze(args) -> int:
+    from station.core.distance_pairs import make_pairs
     from station.core.identifiability import analyze
-    from station.core.measurements import random_pairs, synthetic_set
+    from station.core.measurements import synthetic_set
     from station.core.poses import spread_joints
     from station.io.datafile import joints_from_table, read_table
     from station.io.robot_files import load_robot
 
     model = load_robot(args.robot)
     rng = np.random.default_rng(args.seed)
+    objective = args.objective
     if args.joints:
         q = joints_from_table(read_table(args.joints), model)
     else:
         q = spread_joints(model, args.poses, rng, planar=args.planar)
-    pairs = random_pairs(len(q), args.distances, rng) if args.kind == "distance" else None
-    data = synthetic_set(model, args.kind, q, model.nominal, pairs=pairs)
+    pairs = (make_pairs(len(q), "cap", cap=args.distances, seed=args.seed) if objective == "distance" else None)
+    data = synthetic_set(model, objective, q, model.nominal, pairs=pairs)
     prefer = _names(args.prefer) or model.prefer
     a = analyze(model, data, prefer=prefer, fix=_names(args.fix), exclude=_names(args.exclude))
     if args.json:
-        _print_json({"robot": model.name, "kind": args.kind, "poses": len(q), **a.to_dict()})
+        _print_json({"robot": model.name, "objective": objective, "kind": objective, "poses": len(q), **a.to_dict()})
         return 0
     print(f"robot {model.name}: {model.n_params} parameters, complete minimal model "
           f"4R+2P+6 = {model.minimal_param_count}")
-    print(f"{args.kind} measurements at {len(q)} poses{' in one plane' if args.planar else ''}"
+    print(f"{objective} measurements at {len(q)} poses{' in one plane' if args.planar else ''}"
           f"{f', {len(pairs)} distances' if pairs is not None else ''}")
     print(f"identifiable parameters (rank): {a.rank}")
     print(f"condition (scaled columns):     {a.condition:.1f} (chosen set {a.chosen_condition:.1f})")
@@ -73,59 +75,250 @@ def cmd_analyze(args) -> int:
 
 # --- identify -------------------------------------------------------------------------------
 
+def _is_angle(name: str) -> bool:
+    return name.split(".")[1] in ("roll", "pitch", "yaw")
+
+
+def _param_json(name: str, value: float, sigma: float | None = None) -> dict:
+    if _is_angle(name):
+        d = {"value_rad": float(value), "value_deg": float(np.degrees(value))}
+        if sigma is not None:
+            d["sigma_arcsec"] = float(sigma / ARCSEC)
+        return d
+    d = {"value_mm": float(value)}
+    if sigma is not None:
+        d["sigma_um"] = float(sigma * 1e3)
+    return d
+
+
+def _measurement_set(args, model, kind, q, measured):
+    """The MeasurementSet of the chosen objective from a data file's rows."""
+    from station.core.distance_pairs import distances, make_pairs
+    from station.core.measurements import MeasurementSet
+
+    objective = args.objective or kind
+    sp, sa = args.sigma_position * 1e-3, args.sigma_angle * ARCSEC
+    if not (np.isfinite(sp) and sp > 0 and np.isfinite(sa) and sa > 0):
+        raise ConfigError("--sigma-position and --sigma-angle must be positive numbers (µm, arc seconds)")
+    if objective == "pose":
+        if kind != "pose":
+            raise ConfigError(f"{args.data} holds positions only; use --objective position or distance")
+        return objective, MeasurementSet("pose", q, measured, np.array([sp, sp, sp, sa, sa, sa]))
+    pos = measured[:, :3, 3] if kind == "pose" else measured
+    if objective == "position":
+        return objective, MeasurementSet("position", q, pos, np.array([sp, sp, sp]))
+    if objective == "distance":
+        pairs = make_pairs(len(q), args.pairs, cap=args.max_pairs)
+        return objective, MeasurementSet("distance", q, distances(pos, pairs), np.sqrt(2) * sp, pairs,
+                                         point_sigma=sp)
+    raise ConfigError(f"unknown objective {objective!r}; use pose, position or distance")
+
+
+def identify_report(model, res, data, objective: str, pairs_strategy: str | None) -> dict:
+    """Everything ``identify`` says about a fit, as JSON-ready numbers with units in the keys."""
+    ident = res.identifiability
+    out = {
+        "robot": model.name, "objective": objective, "n_measurements": data.n_items,
+        "units": {"lengths": "mm", "angles": "rad (value_deg beside)", "sigma": "µm / arc seconds",
+                  "residuals": "mm (pose rows: mm, mm, mm, rad, rad, rad)"},
+        "converged": res.converged, "evaluations": res.iterations,
+        "rms_normalized": res.rms_normalized,
+        "rms_position_residual_um": res.rms_position_mm() * 1e3,
+        "parameters": {n: _param_json(n, v, s) for n, v, s in
+                       zip(res.chosen, res.estimates, res.uncertainty.sigma)},
+        "fitted": len(res.chosen), "model_parameters": model.n_params,
+        "complete_minimal_model": model.minimal_param_count,
+        "rank_at_data": ident.rank, "rank_of_workspace_design": res.design_rank,
+        "left_out": [{"name": d.name, "merges_with": {n: c for n, c in d.merges_with},
+                      "held_at": _param_json(d.name, res.params[model.param_index(d.name)])}
+                     for d in ident.dependencies],
+        "held": list(ident.held),
+        "condition": ident.chosen_condition,
+        "max_abs_correlation": res.uncertainty.max_abs_correlation(),
+        "registration": res.registration.to_dict() if res.registration is not None else None,
+        "unit_check": (res.registration.unit_check if res.registration is not None
+                       else "distances compared with the nominal model's: consistent"),
+        "suspected_outlier_rows": [i + 1 for i in res.outliers],
+        "outliers": list(res.outliers),
+        "notes": list(res.notes),
+        "residuals": res.residuals.tolist(),
+    }
+    if objective == "distance":
+        out["pairs"] = {"strategy": pairs_strategy, "count": int(data.n_items),
+                        "points": int(data.joints.shape[0])}
+    return out
+
+
 def cmd_identify(args) -> int:
     from station.core.identification import identify
-    from station.core.measurements import MeasurementSet, random_pairs
     from station.core.model import robot_to_toml
     from station.io.datafile import read_measurements
     from station.io.robot_files import load_robot
 
     model = load_robot(args.robot)
     kind, q, measured = read_measurements(args.data, model)
-    objective = args.objective or kind
-    sp, sa = args.sigma_position * 1e-3, args.sigma_angle * ARCSEC
-    if objective == "pose":
-        if kind != "pose":
-            raise ConfigError(f"{args.data} holds positions only; use --objective position or distance")
-        data = MeasurementSet("pose", q, measured, np.array([sp, sp, sp, sa, sa, sa]))
-    else:
-        pos = measured[:, :3, 3] if kind == "pose" else measured
-        if objective == "position":
-            data = MeasurementSet("position", q, pos, np.array([sp, sp, sp]))
-        elif objective == "distance":
-            pairs = random_pairs(len(q), 10**9, np.random.default_rng(0))
-            d = np.linalg.norm(pos[pairs[:, 0]] - pos[pairs[:, 1]], axis=1)
-            data = MeasurementSet("distance", q, d, np.sqrt(2) * sp, pairs)
-        else:
-            raise ConfigError(f"unknown objective {objective!r}; use pose, position or distance")
+    objective, data = _measurement_set(args, model, kind, q, measured)
     res = identify(model, data, prefer=_names(args.prefer) or None, fix=_names(args.fix),
                    exclude=_names(args.exclude))
     if args.output:
-        Path(args.output).write_text(robot_to_toml(model, res.params))
+        Path(args.output).write_text(robot_to_toml(model, res.params, angle_unit="rad"))
     if args.json:
-        _print_json({
-            "robot": model.name, "objective": objective, "n_measurements": data.n_items,
-            "converged": res.converged, "evaluations": res.iterations,
-            "rms_normalized": res.rms_normalized, "outliers": list(res.outliers),
-            "parameters": {n: {"value": float(v), "sigma": float(s)} for n, v, s in
-                           zip(res.chosen, res.estimates, res.uncertainty.sigma)},
-            "max_abs_correlation": res.uncertainty.max_abs_correlation(),
-            "residuals": res.residuals.tolist(), "output": args.output,
-        })
+        rep = identify_report(model, res, data, objective, args.pairs if objective == "distance" else None)
+        rep["output"] = args.output
+        _print_json(rep)
         return 0
-    print(f"identified {len(res.chosen)} parameters of {model.name} from {data.n_items} "
-          f"{objective} measurements ({res.iterations} evaluations, "
-          f"{'converged' if res.converged else 'NOT converged: ' + res.message})")
+    ident = res.identifiability
+    print(f"identified {len(res.chosen)} of {model.n_params} parameters of {model.name} from {data.n_items} "
+          f"{objective} measurements{f' ({args.pairs} pairs of {len(q)} points)' if objective == 'distance' else ''} "
+          f"({res.iterations} evaluations, {'converged' if res.converged else 'NOT converged: ' + res.message})")
+    if res.registration is not None:
+        r = res.registration.to_dict()
+        print(f"registration: tracker frame turned {np.degrees(r['rotation_angle_rad']):.1f}°, "
+              f"{r['translation_mm'] / 1000:.3f} m from the robot base; nominal model misses by "
+              f"{r['rms_residual_mm']:.3f} mm RMS after alignment (limit {r['limit_mm']:.2f} mm)")
+        print(f"unit check: {res.registration.unit_check}")
+    print(f"rank at the data {ident.rank} (workspace-wide design {res.design_rank}); condition of the "
+          f"fitted set {ident.chosen_condition:.1f}; largest |correlation| {res.uncertainty.max_abs_correlation():.2f}")
     print(f"normalised RMS residual {res.rms_normalized:.3f}; RMS position residual "
           f"{res.rms_position_mm() * 1e3:.1f} µm")
     print(f"{'parameter':12s} {'nominal':>16s} {'identified':>16s} {'σ':>12s}")
     for n, i, v, s in zip(res.chosen, res.chosen_index, res.estimates, res.uncertainty.sigma):
         print(f"{n:12s} {_fmt_param(n, model.nominal[i]):>16s} {_fmt_param(n, v):>16s} {_fmt_sigma(n, s):>12s}")
-    print(f"largest |correlation|: {res.uncertainty.max_abs_correlation():.2f}")
+    if ident.dependencies:
+        print(f"left out ({len(ident.dependencies)}), held at their values; their effect merges into:")
+        for d in ident.dependencies:
+            print(f"  {d.describe()}")
+    for note in res.notes:
+        print(f"note: {note}")
     if res.outliers:
         print(f"suspected outliers (rows): {', '.join(str(i + 1) for i in res.outliers)}")
+    else:
+        print("suspected outliers: none")
     if args.output:
         print(f"identified model written to {args.output}")
+    return 0
+
+
+# --- validate -------------------------------------------------------------------------------
+
+def _errors(model, q, kind, measured, setup_pose=None):
+    """Per-row position errors [mm] (n,) and orientation errors [rad] (n,) or None."""
+    from station.core.kinematics import forward
+    from station.core.transforms import pose_error
+
+    params = None
+    if setup_pose is not None:
+        params = np.array(model.nominal)
+        params[:6] = setup_pose
+    T = forward(model, q, params)
+    if kind == "pose":
+        e = pose_error(T, measured)
+        return e[:, :3], e[:, 3:]
+    return T[:, :3, 3] - measured, None
+
+
+def _summary(e_pos, e_ang) -> dict:
+    d = np.linalg.norm(e_pos, axis=1)
+    out = {"rms_position_um": float(np.sqrt(np.mean(d**2)) * 1e3), "max_position_um": float(d.max() * 1e3),
+           "mean_position_um": float(d.mean() * 1e3)}
+    if e_ang is not None:
+        a = np.linalg.norm(e_ang, axis=1)
+        out.update({"rms_orientation_arcsec": float(np.sqrt(np.mean(a**2)) / ARCSEC),
+                    "max_orientation_arcsec": float(a.max() / ARCSEC)})
+    return out
+
+
+def _iso_repeats(q, e_pos, measured_pos) -> list[dict]:
+    """ISO 9283 AP and RP for poses measured more than once (rows with equal joints)."""
+    from station.core.iso9283 import iso9283_pose
+
+    _, inv, counts = np.unique(np.round(q, 9), axis=0, return_inverse=True, return_counts=True)
+    inv = np.asarray(inv).reshape(-1)
+    out = []
+    for g in np.nonzero(counts >= 2)[0]:
+        rows = np.nonzero(inv == g)[0]
+        attained = measured_pos[rows]
+        commanded = (measured_pos[rows] + e_pos[rows])[0]  # where the model puts the pose
+        r = iso9283_pose(commanded, attained)
+        out.append({"rows": [int(i) + 1 for i in rows], "AP_um": float(r.AP * 1e3), "RP_um": float(r.RP * 1e3)})
+    return out
+
+
+def cmd_validate(args) -> int:
+    from station.core.registration import register
+    from station.io.datafile import read_measurements
+    from station.io.robot_files import load_robot
+
+    model = load_robot(args.model)
+    kind, q, measured = read_measurements(args.data, model)
+    pos = measured[:, :3, 3] if kind == "pose" else measured
+    e_pos, e_ang = _errors(model, q, kind, measured)
+    result = {"model": model.name, "data": str(args.data), "kind": kind, "rows": len(q),
+              "units": {"position": "µm", "orientation": "arc seconds"},
+              "model_errors": _summary(e_pos, e_ang),
+              "per_row": [{"row": i + 1, "position_um": float(np.linalg.norm(e_pos[i]) * 1e3),
+                           **({"orientation_arcsec": float(np.linalg.norm(e_ang[i]) / ARCSEC)} if e_ang is not None else {})}
+                          for i in range(len(q))],
+              "iso9283_repeats": _iso_repeats(q, e_pos, pos)}
+    nominal_name = args.robot or model.name
+    nominal = None
+    try:
+        nominal = load_robot(nominal_name)
+    except ConfigError:
+        result["nominal"] = f"no nominal robot {nominal_name!r}; give --robot"
+    if nominal is not None:
+        if nominal.n_joints != model.n_joints:
+            raise ConfigError(f"--robot {nominal_name}: {nominal.n_joints} joints, the model has {model.n_joints}")
+        reg = register(nominal, q, pos, args.sigma_position * 1e-3)
+        n_pos, n_ang = _errors(nominal, q, kind, measured, setup_pose=reg.setup_pose)
+        result["nominal"] = nominal.name
+        result["nominal_errors"] = {**_summary(n_pos, n_ang), "registered": True}
+        result["improvement"] = result["nominal_errors"]["rms_position_um"] / max(result["model_errors"]["rms_position_um"], 1e-12)
+    if args.json:
+        _print_json(result)
+        return 0
+    m = result["model_errors"]
+    print(f"{model.name} on {len(q)} {kind} measurements of {args.data} (not used for its fit):")
+    print(f"  {'':28s} {'RMS':>10s} {'max':>10s}")
+    print(f"  {'model, position':28s} {m['rms_position_um']:8.1f}µm {m['max_position_um']:8.1f}µm")
+    if e_ang is not None:
+        print(f"  {'model, orientation':28s} {m['rms_orientation_arcsec']:9.1f}″ {m['max_orientation_arcsec']:9.1f}″")
+    if "nominal_errors" in result:
+        n = result["nominal_errors"]
+        print(f"  {'nominal (registered), pos.':28s} {n['rms_position_um']:8.1f}µm {n['max_position_um']:8.1f}µm")
+        if e_ang is not None:
+            print(f"  {'nominal, orientation':28s} {n['rms_orientation_arcsec']:9.1f}″ {n['max_orientation_arcsec']:9.1f}″")
+        print(f"  improvement (RMS position): {result['improvement']:.1f}×")
+    else:
+        print(f"  nominal: {result['nominal']}")
+    for r in result["iso9283_repeats"]:
+        print(f"  ISO 9283 pose at rows {r['rows']}: AP {r['AP_um']:.1f} µm, RP {r['RP_um']:.1f} µm")
+    worst = sorted(result["per_row"], key=lambda r: -r["position_um"])[:5]
+    print("  worst rows: " + ", ".join(f"{r['row']}: {r['position_um']:.1f} µm" for r in worst))
+    return 0
+
+
+# --- export-model ---------------------------------------------------------------------------
+
+def cmd_export_model(args) -> int:
+    from station.io.robot_export import export_model
+    from station.io.robot_files import load_robot
+
+    model = load_robot(args.model)
+    res = export_model(model, args.format, setup=not args.base)
+    Path(args.output).write_text(res.text)
+    if args.json:
+        _print_json({"model": model.name, "format": args.format, "output": args.output,
+                     "frame": "base" if args.base else "measurement", "exact": res.exact,
+                     "max_position_difference_um": res.max_position_um,
+                     "max_orientation_difference_arcsec": res.max_angle_arcsec, "notes": list(res.notes)})
+        return 0
+    print(f"{model.name} written to {args.output} as {args.format.upper()}"
+          f" ({'robot base frame, set-up R left out' if args.base else 'with the set-up R'})")
+    print(f"re-imported: forward kinematics differ by at most {res.max_position_um:.3g} µm and "
+          f"{res.max_angle_arcsec:.3g}″ over the workspace ({'exact' if res.exact else 'NOT exact'})")
+    for n in res.notes:
+        print(f"note: {n}")
     return 0
 
 
@@ -157,13 +350,29 @@ def cmd_study(args) -> int:
     from station.io.robot_files import load_robot
 
     model = load_robot(args.robot)
-    reports = chapter_studies(model, seed=args.seed, n_sets=args.sets)
+    n_sets = min(args.sets, 200) if getattr(args, "quick", False) else args.sets
+    if n_sets < 3:
+        raise ConfigError("--sets must be at least 3 Monte Carlo data sets")
+    reports = chapter_studies(model, seed=args.seed, n_sets=n_sets)
     if args.json:
-        _print_json([{"study": r.name, "rows": [vars(x) for x in r.rows]} for r in reports])
+        _print_json({"robot": model.name, "seed": args.seed, "monte_carlo_sets": n_sets,
+                     "studies": [{"study": r.name, "figures": r.numbers, "parameters": list(r.table),
+                                  "chapter": {x.quantity: x.chapter for x in r.rows},
+                                  "notes": list(r.notes)} for r in reports]})
         return 0
     for r in reports:
         print(f"\n== {r.name}")
         print(f"   {'quantity':44s} {'station':30s} chapter")
         for row in r.rows:
             print(f"   {row.quantity:44s} {row.station:30s} {row.chapter}")
+        if r.table:
+            print(f"   {'parameter':12s} {'σ linear':>12s} {'σ Monte Carlo':>14s} {'MC/linear':>10s}")
+            for t in r.table:
+                if "linear_sigma_um" in t:
+                    lin, mc = f"{t['linear_sigma_um']:.1f} µm", f"{t['monte_carlo_sigma_um']:.1f} µm"
+                else:
+                    lin, mc = f"{t['linear_sigma_arcsec']:.1f}″", f"{t['monte_carlo_sigma_arcsec']:.1f}″"
+                print(f"   {t['parameter']:12s} {lin:>12s} {mc:>14s} {t['ratio_mc_linear']:10.2f}")
+        for n in r.notes:
+            print(f"   note: {n}")
     return 0

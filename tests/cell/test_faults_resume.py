@@ -9,8 +9,8 @@ from drivers.probe_protocol import ChannelStatus
 from simulators import start_simulated_cell
 from simulators.reference_cell import cell_config_text
 from station.cell.events import MeasurementRecorded
-from station.cell.rundb import RunDB
 from station.cell.runcontrol import RunControl
+from station.cell.rundb import RunDB
 from station.cell.session import CellRequest, run_calibration_session
 from station.errors import Outcome
 

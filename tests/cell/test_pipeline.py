@@ -77,6 +77,7 @@ def test_simulated_calibration_meets_the_targets(cell):
 
 def test_no_upload_leaves_the_controller_untouched(cell):
     summary = cell.run(options=Options(upload=False))
+    assert summary.outcome is Outcome.NOT_UPLOADED and summary.exit_code == 11
     assert summary.upload_skipped and summary.upload is None
     assert cell.srv.controller_server.active_table is None
     assert summary.after is None and summary.before.n > 0
@@ -284,3 +285,36 @@ def test_resume_refuses_another_cell_and_names_what_changed(tmp_path, change, wh
         assert len(other.db.measurements(run_id)) == 3  # nothing was added to the old run
     finally:
         other.close()
+
+
+def test_the_operator_declines_the_upload(cell):
+    from station.cell.questions import UploadProposal
+
+    asked = []
+
+    def confirm(question):
+        asked.append(question)
+        return False
+
+    summary = cell.run(options=Options(confirm=confirm))
+    assert len(asked) == 1 and isinstance(asked[0], UploadProposal)
+    assert asked[0].interpolation_bound_um > 0 and asked[0].n_values > 1000
+    assert summary.outcome is Outcome.NOT_UPLOADED and summary.upload is None
+    assert cell.srv.controller_server.active_table is None  # nothing was written to the controller
+    assert "declined" in " ".join(summary.notes)
+
+
+def test_the_operator_rolls_the_new_table_back(cell):
+    from station.cell.questions import KeepCorrection, UploadProposal
+
+    asked = []
+
+    def confirm(question):
+        asked.append(question)
+        return isinstance(question, UploadProposal)  # upload yes, keep no
+
+    summary = cell.run(options=Options(confirm=confirm))
+    assert [type(q) for q in asked] == [UploadProposal, KeepCorrection]
+    assert asked[1].gain >= 20 and asked[1].rms_after_um < asked[1].rms_before_um
+    assert summary.outcome is Outcome.NOT_UPLOADED and summary.after is not None
+    assert cell.srv.controller_server.active_table is None  # the previous state (no table) again

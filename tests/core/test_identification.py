@@ -11,7 +11,7 @@ from station.core.identification import identify
 from station.core.measurements import MeasurementSet, random_pairs, residuals_and_jacobian, synthetic_set
 from station.core.poses import spread_joints
 from station.core.transforms import pose_error, pose_to_matrix
-from station.errors import IdentificationError
+from station.errors import ConfigError, IdentificationError
 from station.io.robot_files import load_robot
 
 SR800 = load_robot("sr800")
@@ -195,18 +195,23 @@ def test_rank_deficient_chosen_raises(q25):
 def test_too_few_rows_raise():
     q = spread_joints(SR800, 1, np.random.default_rng(1))
     data = synthetic_set(SR800, "pose", q, SR800.nominal)
-    with pytest.raises(IdentificationError, match="6 residual rows cannot determine 7 parameters"):
+    # refused before fitting, saying what to measure
+    with pytest.raises(ConfigError, match="only 1 distinct joint configuration.*spread over the workspace"):
         identify(SR800, data, chosen=["R.x", "R.y", "R.z", "R.roll", "R.pitch", "R.yaw", "K.x"])
-    # the automatic choice never asks for more than the data can give
-    assert len(identify(SR800, data).chosen) <= 6
+    with pytest.raises(ConfigError, match="only 1 distinct"):
+        identify(SR800, data)
+    q4 = spread_joints(SR800, 4, np.random.default_rng(1))
+    data4 = synthetic_set(SR800, "position", q4, SR800.nominal)
+    with pytest.raises((IdentificationError, ConfigError), match="only 4 distinct.*needs at least 7"):
+        identify(SR800, data4)
 
 
-def test_garbage_measurements_diverge(q25):
+def test_garbage_measurements_refused_before_fitting(q25):
     rng = np.random.default_rng(10)
     garbage = pose_to_matrix(np.column_stack([rng.uniform(-3000, 3000, (25, 3)),
                                               rng.uniform(-3, 3, (25, 3))]))
     data = MeasurementSet("pose", q25, garbage, np.array([0.015] * 3 + [1e-4] * 3))
-    with pytest.raises(IdentificationError, match="diverged.*Check units"):
+    with pytest.raises(IdentificationError, match="joint order and joint units"):
         identify(SR800, data)
 
 

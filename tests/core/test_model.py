@@ -265,7 +265,7 @@ def test_dh_import_with_tool():
 
 
 def test_dh_bad_type_and_convention():
-    with pytest.raises(ConfigError, match="type must be revolute or prismatic"):
+    with pytest.raises(ConfigError, match="type must be revolute, prismatic or fixed"):
         robot_from_dh([("spherical", 0, 0, 0, 0, -1, 1)])
     with pytest.raises(ConfigError, match="convention"):
         robot_from_dh(_rows(PUMA_DH), "craig")

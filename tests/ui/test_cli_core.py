@@ -107,7 +107,8 @@ def test_identify_writes_model_that_predict_reproduces(capsys, pose_file, tmp_pa
     # the file holds exactly the fitted parameters
     model = load_robot(out_file)
     for name, v in d["parameters"].items():
-        assert model.nominal[model.param_index(name)] == pytest.approx(v["value"], abs=1e-12)
+        value = v["value_rad"] if "value_rad" in v else v["value_mm"]
+        assert model.nominal[model.param_index(name)] == pytest.approx(value, abs=1e-12)
     # its poses agree with the measurements to the noise level
     T = forward(model, q)
     assert np.abs(T[:, :3, 3] - data.measured[:, :3, 3]).max() < 0.03
@@ -131,12 +132,81 @@ def test_identify_text_and_objectives(capsys, pose_file):
     f, _, _, _ = pose_file
     rc, out, _ = run(capsys, "identify", f, "--sigma-position", 5, "--sigma-angle", 5)
     assert rc == 0
-    assert "identified 20 parameters of sr800 from 30 pose measurements" in out and "converged" in out
+    assert "identified 20 of 36 parameters of sr800 from 30 pose measurements" in out and "converged" in out
+    # it says what was fitted: registration, unit check, condition, left-out parameters, outliers
+    for text in ("registration:", "unit check: consistent", "condition of the fitted set",
+                 "left out (16)", "A4.z ≡ +1·K.z", "suspected outliers: none"):
+        assert text in out, text
     rc, out, _ = run(capsys, "identify", f, "--objective", "position", "--json")
     assert rc == 0 and len(json.loads(out)["parameters"]) == 17
     rc, out, _ = run(capsys, "identify", f, "--objective", "distance", "--json")
     d = json.loads(out)
     assert rc == 0 and len(d["parameters"]) == 11 and d["n_measurements"] == 30 * 29 // 2
+    assert d["pairs"] == {"strategy": "cap", "count": 435, "points": 30}
+    rc, out, _ = run(capsys, "identify", f, "--objective", "distance", "--pairs", "independent", "--json")
+    assert rc == 0 and json.loads(out)["n_measurements"] == 15
+
+
+def test_identify_json_keys_carry_units(capsys, pose_file):
+    f, _, _, _ = pose_file
+    rc, out, _ = run(capsys, "identify", f, "--json")
+    d = json.loads(out)
+    assert rc == 0 and "units" in d
+    for v in d["parameters"].values():
+        assert set(v) in ({"value_mm", "sigma_um"}, {"value_rad", "value_deg", "sigma_arcsec"})
+    assert {x["name"] for x in d["left_out"]} | set(d["parameters"]) == set(load_robot("sr800").param_names)
+    assert d["registration"]["similarity_scale"] == pytest.approx(1.0, abs=0.01)
+    assert d["unit_check"].startswith("consistent") and d["condition"] > 1
+    assert d["suspected_outlier_rows"] == []
+
+
+@pytest.mark.parametrize("unit,factor", [("m", 1e-3), ("inch", 1 / 25.4), ("µm", 1e3)])
+def test_identify_refuses_wrong_length_unit(capsys, pose_file, tmp_path, unit, factor):
+    f, _, _, _ = pose_file
+    lines = f.read_text().splitlines()
+    out_lines = []
+    for line in lines:
+        if line.startswith("#") or line.startswith("q1"):
+            out_lines.append(line)
+            continue
+        v = line.split(",")
+        v[4:7] = [repr(float(x) * factor) for x in v[4:7]]
+        out_lines.append(",".join(v))
+    g = _write(tmp_path, "wrong_unit.csv", "\n".join(out_lines) + "\n")
+    rc, _, err = run(capsys, "identify", g)
+    assert rc == 2 and f"look like {unit}, not mm" in err, err
+
+
+def test_validate_and_export_model(capsys, pose_file, tmp_path):
+    f, joints, q, data = pose_file
+    model_file = tmp_path / "id.toml"
+    rc, _, err = run(capsys, "identify", f, "-o", model_file)
+    assert rc == 0, err
+    rc, out, err = run(capsys, "validate", model_file, f, "--json")
+    assert rc == 0, err
+    d = json.loads(out)
+    assert d["model_errors"]["rms_position_um"] < 30 and len(d["per_row"]) == 30
+    assert d["nominal_errors"]["rms_position_um"] > 5 * d["model_errors"]["rms_position_um"]
+    rc, out, _ = run(capsys, "validate", model_file, f)
+    assert rc == 0 and "improvement" in out and "worst rows" in out
+    for fmt, suffix in (("mdh", ".mdh.csv"), ("urdf", ".urdf"), ("dh", ".dh.csv"), ("toml", ".toml")):
+        target = tmp_path / f"exported{suffix}"
+        rc, out, err = run(capsys, "export-model", model_file, "--format", fmt, "-o", target, "--json")
+        assert rc == 0, err
+        e = json.loads(out)
+        assert e["max_position_difference_um"] >= 0 and target.exists()
+        if fmt in ("urdf", "toml"):
+            assert e["exact"] is True
+        else:  # tilted parallel axes: DH states what it loses
+            assert e["exact"] or any("cannot hold" in n for n in e["notes"])
+
+
+def test_bom_is_read(capsys, pose_file, tmp_path):
+    f, _, _, _ = pose_file
+    g = tmp_path / "bom.csv"
+    g.write_bytes(b"\xef\xbb\xbf" + f.read_bytes())
+    rc, out, err = run(capsys, "identify", g, "--json")
+    assert rc == 0, err
 
 
 def test_identify_flags_outlier(capsys, pose_file, tmp_path):
@@ -184,7 +254,7 @@ GOOD_ROW = "10,20,-50,5,800,300,400,0,0,30"
      "holds positions only"),
     ("garbage data", lambda f, t: ["identify", _write(t, "g.csv", ",".join(POSE_HEADER) + "\n" + "\n".join(
         f"{i},{2 * i},-{i},{i},{(-1) ** i * 1000},{i * 37 % 500},{i},{i * 10},{-i},{i * 7}" for i in range(1, 31)) + "\n")],
-     "diverged"),
+     "joint order"),
 ])
 def test_bad_inputs_exit_nonzero_without_traceback(capsys, pose_file, tmp_path, case, argv_fn, pattern):
     f, _, _, _ = pose_file
@@ -236,5 +306,5 @@ def test_reidentify_from_identified_file(capsys, pose_file, tmp_path):
     assert rc == 0, err
     second = json.loads(out)
     assert second["rms_normalized"] == pytest.approx(first["rms_normalized"], rel=1e-3)
-    worst = max(v["sigma"] for v in second["parameters"].values())
-    assert worst < 10 * max(v["sigma"] for v in first["parameters"].values())
+    worst = max(v.get("sigma_um", 0.0) for v in second["parameters"].values())
+    assert worst < 10 * max(v.get("sigma_um", 0.0) for v in first["parameters"].values())

@@ -124,6 +124,7 @@ def test_a_bad_report_path_is_refused_before_any_motion(tmp_path, capsys):
 def test_no_upload_with_report_writes_the_report(tmp_path, capsys):
     code, summary = _run_json(capsys, ["calibrate", "--simulated", "--seed", "3", "--no-upload", "--db",
                                        str(tmp_path / "r.sqlite"), "--report", str(tmp_path / "rep")])
-    assert code == 0 and summary["upload_skipped"] is True and "after" not in summary
+    assert code == 11 and summary["outcome"] == "NOT_UPLOADED"
+    assert summary["upload_skipped"] is True and "after" not in summary
     text = (tmp_path / "rep" / "report.md").read_text(encoding="utf-8")
     assert "skipped (--no-upload)" in text

@@ -1,0 +1,69 @@
+"""The runs a run database holds, as the operator and a nightly script read them: id, cell,
+robot, status, outcome, figures, and whether the run can be resumed."""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from station.cell.rundb import RunDB
+from station.cell.summary import RunSummary
+
+#: outcomes of a run that reached its end: nothing left to resume
+_ENDED = ("SUCCESS", "NOT_UPLOADED", "TARGET_MISSED")
+
+
+@dataclass(frozen=True)
+class RunInfo:
+    id: int
+    created_utc: str
+    cell: str
+    robot: str
+    status: str
+    steps_done: int
+    steps_total: int
+    outcome: str | None  # the stored summary's outcome name; None while unfinished
+    rms_before_um: float | None
+    rms_after_um: float | None
+    gain: float | None
+
+    @property
+    def resumable(self) -> bool:
+        """Interrupted or failed before its end: ``--resume`` continues at the next missing step."""
+        return self.outcome not in _ENDED
+
+    def to_json(self) -> dict[str, Any]:
+        return {"run_id": self.id, "created_utc": self.created_utc, "cell": self.cell, "robot": self.robot,
+                "status": self.status, "steps_done": self.steps_done, "steps_total": self.steps_total,
+                "outcome": self.outcome, "rms_before_um": self.rms_before_um, "rms_after_um": self.rms_after_um,
+                "gain": self.gain, "resumable": self.resumable}
+
+
+def _names(config_toml: str) -> tuple[str, str]:
+    try:
+        data = tomllib.loads(config_toml)
+    except tomllib.TOMLDecodeError:
+        return "?", "?"
+    cell = data.get("cell", {}).get("name", "calibration cell") if isinstance(data.get("cell"), dict) else "?"
+    robot = data.get("robot", {}).get("model", "?") if isinstance(data.get("robot"), dict) else "?"
+    return str(cell), Path(str(robot)).name
+
+
+def list_runs(db: RunDB) -> list[RunInfo]:
+    """Every run, newest first."""
+    out = []
+    for run in db.runs():
+        stored = db.load_result(run.id, "summary", default=None)
+        summary = RunSummary.from_json(stored) if stored else None
+        cell, robot = _names(run.config_toml)
+        out.append(RunInfo(
+            id=run.id, created_utc=run.created_utc, cell=summary.cell if summary else cell,
+            robot=summary.robot if summary else robot, status=run.status,
+            steps_done=len(db.completed_steps(run.id, ok_only=True)), steps_total=run.n_steps,
+            outcome=summary.outcome.name if summary else None,
+            rms_before_um=summary.before.rms_um if summary and summary.before else None,
+            rms_after_um=summary.after.rms_um if summary and summary.after else None,
+            gain=summary.gain if summary else None))
+    return out

@@ -1,0 +1,224 @@
+"""Registration of external measurements to the nominal model, and the data checks before a fit.
+
+A laser tracker or CMM measures in its own frame, which may stand anywhere (turned, tilted,
+metres away, upside down). Before identifying, the measured tool positions are aligned with the
+nominal model's positions at the same joints (brief §10):
+
+* a **similarity** fit ``m ≈ s·R·b + t`` (rotation by ``scipy.spatial.transform.Rotation
+  .align_vectors``, i.e. Kabsch; scale and translation from the centroids, Umeyama) whose scale
+  ``s`` exposes a unit mistake: 0.001 means metres written as mm, 1/25.4 inches, 1000 µm;
+* a **rigid** fit (``s = 1``) whose transform starts the set-up R of the identification, and
+  whose residual tells whether the nominal model can describe the data at all. A residual far
+  above what an uncalibrated robot misses by points at a wrong joint order, wrong joint units
+  or a wrong robot file; the worst rows are named.
+
+:func:`data_information` measures what the data can support before any fit: distinct
+configurations, duplicate rows, the spread of every joint and of the measured points.
+Everything here is pure numerics (mm, rad inside).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from station.core.kinematics import forward
+from station.core.model import RobotModel
+from station.core.transforms import matrix_to_pose
+from station.errors import ConfigError, IdentificationError
+
+# Scale of a similarity fit accepted as "the same unit": an uncalibrated robot is off by well
+# under 1 % of its reach; 10 % is far outside anything a robot's geometry explains.
+SCALE_TOLERANCE = 0.10
+# A rigid-fit RMS residual above max(RESIDUAL_NOISE_FACTOR · σ, RESIDUAL_SPREAD_FRACTION · spread)
+# is not an uncalibrated robot (1–3 mm on a 1–2 m arm) but a wrong description of the data.
+RESIDUAL_NOISE_FACTOR = 30.0
+RESIDUAL_SPREAD_FRACTION = 0.01
+# Measured coordinates beyond this [mm] are not a robot cell (1e308, overflow, bad export).
+MAX_ABS_MM = 1e6
+
+_UNITS = (  # (scale m/b if the data were in this unit but labelled mm, unit, how to label it)
+    (1e-3, "m", "x [m]"),
+    (1.0 / 25.4, "inch", "convert to mm (×25.4)"),
+    (1e3, "µm", "x [um]"),
+    (1e-2, "cm", "convert to mm (×10)"),
+)
+
+
+@dataclass(frozen=True)
+class Registration:
+    """Result of :func:`register`. ``transform``: ``(4, 4)`` measurement ← robot base (rigid);
+    ``scale``: the similarity fit's scale (1 for consistent units); ``residuals_mm``: ``(n,)``
+    per-row distance after the rigid fit; ``rms_mm``: their RMS; ``limit_mm``: the largest RMS
+    accepted; ``worst_rows``: 0-based indices of the largest residuals, largest first."""
+
+    transform: np.ndarray
+    scale: float
+    residuals_mm: np.ndarray
+    rms_mm: float
+    limit_mm: float
+    worst_rows: tuple[int, ...]
+    unit_check: str
+
+    @property
+    def setup_pose(self) -> np.ndarray:
+        """The rigid transform as a set-up pose ``(6,)`` [mm, rad]."""
+        return matrix_to_pose(self.transform)
+
+    def to_dict(self) -> dict:
+        pose = self.setup_pose
+        return {
+            "setup_xyz_mm": pose[:3].tolist(),
+            "setup_rpy_rad": pose[3:].tolist(),
+            "rotation_angle_rad": float(Rotation.from_matrix(self.transform[:3, :3]).magnitude()),
+            "translation_mm": float(np.linalg.norm(self.transform[:3, 3])),
+            "similarity_scale": self.scale,
+            "rms_residual_mm": self.rms_mm,
+            "limit_mm": self.limit_mm,
+            "worst_rows": [i + 1 for i in self.worst_rows],
+            "unit_check": self.unit_check,
+        }
+
+
+def likely_unit(scale: float) -> tuple[str, str] | None:
+    for s, unit, fix in _UNITS:
+        if abs(np.log(scale / s)) < np.log(1.15):
+            return unit, fix
+    return None
+
+
+def _similarity(b: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
+    """Rotation (3, 3), scale and translation (3,) with ``m ≈ s R b + t`` (least squares)."""
+    bc, mc = b.mean(axis=0), m.mean(axis=0)
+    B, M = b - bc, m - mc
+    rot, _ = Rotation.align_vectors(M, B)
+    R = rot.as_matrix()
+    s = float(np.sum(M * (B @ R.T)) / np.sum(B * B))
+    return R, s, mc - s * R @ bc
+
+
+def register(model: RobotModel, joints: np.ndarray, measured_mm: np.ndarray, sigma_mm: float,
+             params=None) -> Registration:
+    """Register measured tool positions ``(n, 3)`` [mm] to ``model`` at ``joints`` ``(n, g)``.
+
+    Raises :class:`ConfigError` for a unit mistake (scale far from 1: names m, inch, µm) and
+    :class:`IdentificationError` when even the best rigid alignment leaves residuals far above
+    an uncalibrated robot's errors (wrong joint order, joint units or robot file).
+    """
+    q = np.asarray(joints, dtype=float)
+    m = np.asarray(measured_mm, dtype=float)
+    b = forward(model, q, params, setup=False)[:, :3, 3]
+    spread_b = float(np.sqrt(np.mean(np.sum((b - b.mean(0)) ** 2, axis=1))))
+    spread_m = float(np.sqrt(np.mean(np.sum((m - m.mean(0)) ** 2, axis=1))))
+    if spread_b < 1e-6 * max(1.0, float(np.abs(b).max())):
+        raise ConfigError("the nominal model puts every row at the same tool position; measure "
+                          "poses spread over the workspace (move every joint)")
+    if spread_m == 0.0:
+        raise ConfigError("every measured position is the same point; check the export of the "
+                          "instrument (all rows equal or zero) and measure poses spread over the workspace")
+    # Rotation needs two independent directions in the nominal points.
+    sv = np.linalg.svd(b - b.mean(0), compute_uv=False)
+    if sv[1] < 1e-6 * sv[0]:
+        raise ConfigError("the tool positions lie on one line, which leaves the tracker frame's "
+                          "rotation about it open; measure poses that move at least two axes")
+    _, s, _ = _similarity(b, m)
+    # Rigid fit: the start of the set-up transform, and the residual check.
+    bc, mc = b.mean(0), m.mean(0)
+    rot, _ = Rotation.align_vectors(m - mc, b - bc)
+    Rr = rot.as_matrix()
+    T = np.eye(4)
+    T[:3, :3] = Rr
+    T[:3, 3] = mc - Rr @ bc
+    res = np.linalg.norm(m - (b @ Rr.T + T[:3, 3]), axis=1)
+    rms = float(np.sqrt(np.mean(res**2)))
+    limit = max(RESIDUAL_NOISE_FACTOR * sigma_mm, RESIDUAL_SPREAD_FRACTION * spread_b)
+    worst = tuple(int(i) for i in np.argsort(-res)[:5])
+    rows = ", ".join(f"row {i + 1}: {res[i]:.1f} mm" for i in worst)
+    unit = "consistent (similarity scale {:.5f})".format(s)
+    if not np.isfinite(s) or abs(s - 1.0) > SCALE_TOLERANCE:
+        likely = likely_unit(s) if np.isfinite(s) and s > 0 else None
+        if likely:
+            raise ConfigError(
+                f"the measured positions are {s:.4g}× the nominal model's: they look like {likely[0]}, "
+                f"not mm. Label the columns with their unit or {likely[1]}")
+        raise IdentificationError(
+            f"the measured positions are {s:.4g}× the nominal model's (spread {spread_m:.4g} vs "
+            f"{spread_b:.4g} mm), which no unit explains, and the best rigid alignment misses by "
+            f"{rms:.3g} mm RMS (worst {rows}): check the joint order and joint units of the data "
+            f"file, the length unit of x, y, z, and that the robot file is this robot")
+    reg = Registration(T, s, res, rms, limit, worst, unit)
+    if rms > limit:
+        raise IdentificationError(
+            f"after the best rigid alignment the measured positions still miss the nominal model by "
+            f"{rms:.3g} mm RMS (an uncalibrated robot misses by about {limit:.3g} mm at most); "
+            f"worst {rows}. Check the joint order and joint units (deg/rad, mm/m) of the data "
+            f"file, the sign conventions, and that the robot file is this robot")
+    return reg
+
+
+@dataclass(frozen=True)
+class DataInformation:
+    """What a data set can support, measured before fitting."""
+
+    n_rows: int
+    n_distinct_joints: int
+    duplicate_rows: tuple[tuple[int, int], ...]
+    joint_spread: np.ndarray  # (g,) range of each joint [rad | mm]
+    point_spread_mm: float
+
+    def to_dict(self) -> dict:
+        return {"rows": self.n_rows, "distinct_joint_configurations": self.n_distinct_joints,
+                "duplicate_rows": [[a + 1, b + 1] for a, b in self.duplicate_rows],
+                "joint_range_rad_or_mm": self.joint_spread.tolist(),
+                "point_spread_mm": self.point_spread_mm}
+
+
+def data_information(model: RobotModel, joints: np.ndarray, measured: np.ndarray | None = None,
+                     rows_per_item: int = 3) -> DataInformation:
+    """Count distinct joint configurations and duplicate rows, and the spread of the data.
+
+    Raises :class:`ConfigError` for data that cannot support any identification: values that
+    are not a robot cell (beyond ±1 km), too few distinct configurations, or exactly repeated
+    rows (joints *and* measured values identical: a copied row, which would make the stated
+    uncertainty too small)."""
+    q = np.asarray(joints, dtype=float)
+    n = q.shape[0]
+    if measured is not None:
+        mm = np.asarray(measured, dtype=float).reshape(n, -1)
+        big = np.nonzero(np.abs(mm) > MAX_ABS_MM)[0]
+        if big.size:
+            raise ConfigError(f"row {big[0] + 1}: a measured value beyond ±{MAX_ABS_MM:.0e} mm is not a "
+                              f"robot cell; repair the export (overflow, wrong column) and measure again")
+        rows = np.concatenate([q, mm], axis=1)
+    else:
+        rows = q
+    if np.any(np.abs(q) > MAX_ABS_MM):
+        bad = int(np.nonzero(np.any(np.abs(q) > MAX_ABS_MM, axis=1))[0][0])
+        raise ConfigError(f"row {bad + 1}: joint values beyond ±{MAX_ABS_MM:.0e} are not a robot; "
+                          f"repair the data file")
+    dup: tuple[tuple[int, int], ...] = ()
+    if measured is not None:  # equal joints alone are a legitimate repeat; equal readings are not
+        _, first, inv = np.unique(rows, axis=0, return_index=True, return_inverse=True)
+        inv = np.asarray(inv).reshape(-1)
+        dup = tuple((int(first[inv[i]]), i) for i in range(n) if first[inv[i]] != i)
+    n_distinct = len(np.unique(q, axis=0))
+    spread = q.max(axis=0) - q.min(axis=0) if n else np.zeros(q.shape[1])
+    pts = None if measured is None else np.asarray(measured, dtype=float).reshape(n, -1)[:, :3]
+    ps = 0.0 if pts is None else float(np.sqrt(np.mean(np.sum((pts - pts.mean(0)) ** 2, axis=1))))
+    info = DataInformation(n, n_distinct, dup, spread, ps)
+    need = model.minimal_param_count
+    min_distinct = max(3, -(-need // max(1, rows_per_item)))
+    if n_distinct < min_distinct:
+        raise ConfigError(
+            f"only {n_distinct} distinct joint configuration(s) in {n} rows; identifying {model.name} "
+            f"needs at least {min_distinct} (its complete model has {need} parameters). "
+            f"Measure poses spread over the workspace, moving every joint over its range")
+    if dup:
+        a, b = dup[0]
+        raise ConfigError(
+            f"{len(dup)} row(s) repeat another row exactly (joints and measured values), e.g. row {b + 1} = "
+            f"row {a + 1}: a copied row counts the same measurement twice and makes the stated σ too "
+            f"small. Remove the copies; a real repeat of a pose is measured again and never reads identically")
+    return info
