@@ -3,22 +3,45 @@ identification and correction settings. ``station init`` writes :data:`TEMPLATE`
 
 Validation names the key and the fix. Inside, everything is mm and rad; the file holds degrees
 where people write angles (keys ending in ``_deg``), µm and arc seconds for uncertainties.
+
+Every key is checked before anything moves, in two stages:
+
+1. The file's schema (:class:`_CellFile`, pydantic v2 in strict mode): types, bounds and unknown
+   keys. Every numeric key has bounds (the template states them); an integer is never a bool or a
+   float, a float is finite. The bounds are the one source: the error messages and the test that
+   reads the template's comments take them from the schema.
+2. What needs the robot: the robot file, ``[limits]`` (one finite, ordered pair per joint, inside
+   the robot's limits), the parameter names of ``prefer``/``fix``/``exclude``, and the correction
+   grid (whole number of steps, the controller's capacity for this robot's joints).
+
+Every failure is a :class:`ConfigError` (exit code 2); a malformed file never gives a traceback.
 """
 
 from __future__ import annotations
 
 import math
+import re
+import reprlib
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Annotated, Any, Literal
 
+import annotated_types
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic.fields import FieldInfo
 
 from station.core.model import RobotModel
+from station.core.table_grid import GridSpec
 from station.core.transforms import pose_to_matrix
 from station.core.units import ARCSEC, DEG
 from station.errors import ConfigError
-from station.io.robot_files import load_robot
+from station.io.robot_files import load_robot, read_user_text
+
+#: a configuration file larger than this is refused before it is read (a real one is a few kB;
+#: a body of 5 000 points is ~0.5 MB)
+MAX_CONFIG_BYTES = 4 * 1024 * 1024
 
 
 @dataclass(frozen=True)
@@ -97,184 +120,418 @@ class CellConfig:
     simulated_seed: int | None = None
 
 
-def _get(d: dict, key: str, path: str, kind, default=None, required=False):
-    if key not in d:
-        if required:
-            raise ConfigError(f"{path}.{key} is missing; add it (see 'station init' for the template)")
-        return default
-    v = d[key]
-    if kind is float and isinstance(v, int) and not isinstance(v, bool):
-        v = float(v)
-    if not isinstance(v, kind) or (kind is float and not math.isfinite(v)):
-        raise ConfigError(f"{path}.{key} = {v!r}: expected {getattr(kind, '__name__', kind)}")
-    return v
+# --------------------------------------------------------------------------------------------
+# stage 1: the file's schema (types, bounds, unknown keys)
+# --------------------------------------------------------------------------------------------
+
+#: positions (set-up, body points, grid) are within ±10 m of the body frame
+MAX_MM = 10_000.0
+_NO_CONTROL = r"^[^\x00-\x1f\x7f]*$"  # no control characters (NUL, newline, escape, ...)
+
+Text = Annotated[str, Field(min_length=1, max_length=256, pattern=_NO_CONTROL)]
+PathText = Annotated[str, Field(min_length=1, max_length=1024, pattern=_NO_CONTROL)]
+PointId = Annotated[str, Field(min_length=1, max_length=64, pattern=_NO_CONTROL)]
+ParamName = Annotated[str, Field(min_length=1, max_length=64, pattern=_NO_CONTROL)]
+Mm = Annotated[float, Field(ge=-MAX_MM, le=MAX_MM)]
+Deg = Annotated[float, Field(ge=-360.0, le=360.0)]
+# TOML gives lists; the tuple fixes the length and the bounds of each element (elements stay strict)
+Pose = Annotated[tuple[Mm, Mm, Mm, Deg, Deg, Deg], Field(strict=False)]
+GridStep = Annotated[float, Field(ge=1.0, le=MAX_MM)]
+GridAxis = Annotated[tuple[Mm, Mm, GridStep], Field(strict=False)]
+
+_POSE_WHAT = "x, y, z [mm] within ±10000, roll, pitch, yaw [deg] within ±360"
 
 
-def _vec(d, key, path, n, default=None):
-    v = d.get(key, default)
-    if v is None:
-        raise ConfigError(f"{path}.{key} is missing; add it as a list of {n} numbers")
-    if not (isinstance(v, list) and len(v) == n and all(isinstance(x, (int, float)) and math.isfinite(x) for x in v)):
-        raise ConfigError(f"{path}.{key} must be a list of {n} finite numbers, got {v!r}")
-    return [float(x) for x in v]
+def _num(default: Any, *, what: str, ge: float | None = None, gt: float | None = None,
+         le: float | None = None) -> Any:
+    """A bounded number; ``what`` says what it is (it ends up in the error message)."""
+    return Field(default, ge=ge, gt=gt, le=le, description=what)
 
 
-def _check_keys(d: dict, allowed: set, path: str):
-    unknown = set(d) - allowed
-    if unknown:
-        raise ConfigError(f"{path}: unknown key(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
+def _absent(**kw: Any) -> Any:
+    """No default: the key may be left out (``None`` then means "not given")."""
+    return Field(None, **kw)
 
+
+class _Section(BaseModel):
+    # strict: an int is never a bool or a float, a float never a string; finite only; unknown
+    # keys are refused so that a typo never silently falls back to a default
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False, frozen=True)
+
+
+class _Cell(_Section):
+    name: Text = Field("calibration cell", description="the cell's name in reports, 1 … 256 characters")
+
+
+class _Robot(_Section):
+    model: PathText = Field(description='a built-in robot ("sr800") or a robot file (docs/robot-file.md)')
+    setup: Pose = Field((0.0,) * 6, description=f"nominal pose of the robot base in the body frame: {_POSE_WHAT}")
+
+
+class _Limits(_Section):
+    # checked against the robot in stage 2 (one [lower, upper] per joint)
+    joints: list[Any] = _absent(max_length=64, description="[lower, upper] per joint (deg | mm)")
+
+
+class _Point(_Section):
+    id: PointId = Field(description="the point's name from the CMM report, 1 … 64 characters")
+    pose: Pose = Field(description=f"pose of the corner frame in the body frame: {_POSE_WHAT}")
+
+
+class _Body(_Section):
+    cube_edge_mm: float = _num(40.0, gt=0.0, le=1000.0, what="edge of the body's cubes [mm]")
+    points: list[_Point] = Field(
+        min_length=3, max_length=5000,
+        description='3 … 5000 measuring points from the CMM report: { id = "C1.a", pose = [x, y, z, '
+                    'roll, pitch, yaw] } in mm and deg')
+
+    @field_validator("points")
+    @classmethod
+    def _unique_ids(cls, pts: list[_Point]) -> list[_Point]:
+        seen: set[str] = set()
+        for p in pts:
+            if p.id in seen:
+                raise ValueError(f"point id {p.id!r} appears twice; ids must be unique")
+            seen.add(p.id)
+        return pts
+
+
+_CONTROLLER = re.compile(r"^([^\s:][^\s]*):([0-9]{1,5})$")
+
+
+class _Devices(_Section):
+    probe_head: PathText = Field("/dev/ttyUSB0", description="serial device, or socket://host:port, rfc2217://host:port")
+    baudrate: Literal[9600, 19200, 38400, 57600, 115200] = Field(
+        38400, description="the rate set on the probe unit: 9600, 19200, 38400, 57600 or 115200")
+    probe_timeout_s: float = _num(0.5, ge=0.01, le=60.0, what="seconds to wait for a probe reply")
+    controller: str = Field("127.0.0.1:502", max_length=300,
+                            description='Modbus TCP host:port, e.g. "192.168.0.10:502" (port 1 … 65535)')
+    device_id: int = _num(1, ge=0, le=255, what="Modbus unit id of the controller")
+    word_order: Literal["big", "little"] = Field(
+        "big", description='"big" or "little" (how the controller orders 32-bit words)')
+    controller_timeout_s: float = _num(1.0, ge=0.01, le=60.0, what="seconds to wait for a controller reply")
+    motion_timeout_s: float = _num(60.0, ge=1.0, le=600.0, what="seconds one motion may take")
+
+    @field_validator("controller")
+    @classmethod
+    def _host_port(cls, v: str) -> str:
+        m = _CONTROLLER.match(v)
+        if not m or not 1 <= int(m.group(2)) <= 65535:
+            raise ValueError("write it as host:port with a port 1 … 65535")
+        return v
+
+
+class _Plan(_Section):
+    elbows: list[Literal[1, -1]] = Field(
+        [1, -1], description="[1, -1] (both elbows, the correction table's order) or [1]")
+    approach_deg: float = _num(0.5, gt=0.0, le=10.0, what="approach from below per joint [deg]")
+    approach_mm: float = _num(1.0, gt=0.0, le=50.0, what="approach of a prismatic joint [mm]")
+    clearance_mm: float = _num(20.0, gt=0.0, le=500.0, what="retract height above a measuring point [mm]")
+    speed: float = _num(0.5, gt=0.0, le=1.0, what="fraction of the robot's maximum speed")
+    settle_s: float = _num(0.2, ge=0.0, le=30.0, what="wait after a motion before reading the probes [s]")
+    samples: int = _num(4, ge=1, le=100, what="probe snapshots averaged per reading")
+    max_spread_um: float = _num(10.0, gt=0.0, le=1000.0, what="largest spread of a reading's snapshots [µm]")
+    both_directions: bool = Field(False, description="true or false")
+    verification_every: int = _num(4, ge=2, le=100, what="every k-th (point, elbow) is held out for verification")
+    verification_cycles: int = _num(3, ge=1, le=30, what="ISO 9283 repetitions per verification pose")
+    select: int = _num(0, ge=0, le=5000, what="0: every identification step; N: the N most informative")
+    repeats: int = _num(2, ge=1, le=20, what="visits per identification pose")
+    recenter_attempts: int = _num(2, ge=0, le=10, what="re-centring attempts near a probe's stroke end")
+    recenter_margin_mm: float = _num(1.5, ge=0.0, le=4.0, what="distance from the stroke end that triggers a re-centring [mm]")
+    max_residual_um: float = _num(10.0, gt=0.0, le=1000.0, what="plane residual above which a reading is not valid [µm]")
+
+    @field_validator("elbows")
+    @classmethod
+    def _elbow_order(cls, v: list[int]) -> list[int]:
+        if tuple(v) not in ((1, -1), (1,)):
+            raise ValueError("the correction table holds elbow +1, then elbow -1: write [1, -1] or [1]")
+        return v
+
+
+class _Identification(_Section):
+    objective: Literal["pose", "distance"] = Field(
+        "pose", description='"pose" (robot + set-up + head) or "distance" (robot only)')
+    sigma_position_um: float = _num(15.0, ge=0.01, le=1000.0, what="σ of a measured position [µm]")
+    sigma_angle_arcsec: float = _num(20.0, ge=0.01, le=3600.0, what="σ of a measured angle [arc seconds]")
+    prefer: list[ParamName] = _absent(max_length=500, description='parameter names such as "K.x"')
+    fix: list[ParamName] = Field([], max_length=500, description='parameter names such as "K.x"')
+    exclude: list[ParamName] = Field([], max_length=500, description='parameter names such as "K.x"')
+
+
+class _Correction(_Section):
+    x_mm: GridAxis = Field((250.0, 650.0, 40.0), description="[start, stop, step] in mm, step 1 … 10000")
+    y_mm: GridAxis = Field((-350.0, 350.0, 50.0), description="[start, stop, step] in mm, step 1 … 10000")
+    z_mm: GridAxis = Field((250.0, 450.0, 200.0), description="[start, stop, step] in mm, step 1 … 10000")
+    yaw_step_deg: float = _num(30.0, ge=1.0, le=180.0, what="yaw step of the table [deg], a divisor of 360")
+    max_interpolation_um: float = _num(15.0, gt=0.0, le=1000.0, what="largest interpolation bound accepted [µm]")
+
+
+class _Simulation(_Section):
+    seed: int = _num(None, ge=0, le=2**32 - 1, what="seed of the simulated cell")
+
+
+class _CellFile(_Section):
+    cell: _Cell = Field(default_factory=lambda: _Cell.model_validate({}), description="a table [cell]")
+    robot: _Robot = Field(description='a table [robot] with model = "sr800" (or a robot file)')
+    body: _Body = Field(description="a table [body] with the measuring points from the CMM report")
+    devices: _Devices = Field(default_factory=lambda: _Devices.model_validate({}), description="a table [devices]")
+    limits: _Limits = Field(default_factory=lambda: _Limits.model_validate({}), description="a table [limits]")
+    plan: _Plan = Field(default_factory=lambda: _Plan.model_validate({}), description="a table [plan]")
+    identification: _Identification = Field(default_factory=lambda: _Identification.model_validate({}), description="a table [identification]")
+    correction: _Correction = Field(default_factory=lambda: _Correction.model_validate({}), description="a table [correction]")
+    simulation: _Simulation = Field(default_factory=lambda: _Simulation.model_validate({}), description="a table [simulation]")
+
+
+# -- messages: the key, what is wrong, and the fix ----------------------------------------------
+
+_short = reprlib.Repr()
+_short.maxstring, _short.maxother, _short.maxlist, _short.maxdict, _short.maxlevel = 60, 60, 8, 6, 3
+
+
+def _key(loc: tuple) -> str:
+    out = ""
+    for part in loc:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out
+
+
+def _section_of(annotation: Any) -> type[BaseModel] | None:
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return annotation
+    for arg in getattr(annotation, "__args__", ()):
+        found = _section_of(arg)
+        if found is not None:
+            return found
+    return None
+
+
+def _field_info(loc: tuple) -> tuple[type[BaseModel] | None, FieldInfo | None]:
+    """The section and the field a location points into (list indices are skipped)."""
+    model: type[BaseModel] | None = _CellFile
+    parent, info = None, None
+    for part in loc:
+        if isinstance(part, int):
+            continue
+        if model is None or part not in model.model_fields:
+            return model, None
+        parent, info = model, model.model_fields[part]
+        model = _section_of(info.annotation)
+    return parent, info
+
+
+def bounds_text(info: FieldInfo) -> str:
+    """The bounds of a numeric field as the template states them: ``1 … 100``, ``> 0 … 1``."""
+    lo = hi = ""
+    for m in info.metadata:
+        if isinstance(m, annotated_types.Ge):
+            lo = f"{m.ge:g}"
+        elif isinstance(m, annotated_types.Gt):
+            lo = f"> {m.gt:g}"
+        elif isinstance(m, annotated_types.Le):
+            hi = f"{m.le:g}"
+    return f"{lo} … {hi}" if lo and hi else ""
+
+
+_PROBLEM = {
+    "finite_number": "not a finite number",
+    "int_type": "expected an integer",
+    "float_type": "expected a number",
+    "bool_type": "expected true or false",
+    "string_type": "expected a string in quotes",
+    "list_type": "expected a list [ … ]",
+    "tuple_type": "expected a list [ … ]",
+    "model_type": "expected a table",
+    "dict_type": "expected a table",
+    "literal_error": "not one of the allowed values",
+    "string_pattern_mismatch": "contains control characters",
+    "string_too_short": "is empty",
+}
+
+
+def _describe(err: dict) -> str:
+    loc, typ = tuple(err["loc"]), err["type"]
+    if typ == "missing" and loc and isinstance(loc[-1], int):  # a list too short for a tuple
+        loc, typ = loc[:-1], "too_short"
+    key = _key(loc)
+    parent, info = _field_info(loc)
+    if typ == "extra_forbidden":
+        where = _key(loc[:-1]) or "the file"
+        allowed = ", ".join(parent.model_fields) if parent is not None and not isinstance(loc[-1], int) else ""
+        return (f"{where}: unknown key {loc[-1]!r}; allowed: {allowed} (check the spelling: an unknown "
+                f"key would otherwise be ignored)")
+    what = info.description if info is not None and info.description else ""
+    rng = bounds_text(info) if info is not None else ""
+    if typ == "missing":
+        return f"{key} is missing; add {what or 'it'} (see 'station init' for the template)"
+    ctx = err.get("ctx") or {}
+    bound = {"greater_than": ("gt", ">"), "greater_than_equal": ("ge", "≥"), "less_than": ("lt", "<"),
+             "less_than_equal": ("le", "≤")}.get(typ)
+    if bound is not None:
+        limit = ctx.get(bound[0])
+        problem = f"must be {bound[1]} {limit:g}" if isinstance(limit, (int, float)) else "out of range"
+    elif typ == "value_error":  # the validator's message says what to write
+        v = err.get("input")
+        shown = f" = {_short.repr(v)}" if isinstance(v, (str, int, float)) else ""
+        return f"{key}{shown}: {str(err['msg']).removeprefix('Value error, ')}"
+    elif typ in ("too_short", "too_long"):
+        n = ctx.get("actual_length")
+        problem = f"has {n} items" if n is not None else "has the wrong number of items"
+    else:
+        problem = _PROBLEM.get(typ, str(err["msg"]))
+    fix = f"use {rng} ({what})" if rng else (f"expected {what}" if what else "see 'station init' for the template")
+    value = _short.repr(err["input"]) if "input" in err else "?"
+    return f"{key} = {value}: {problem}; {fix}"
+
+
+def _validate_schema(data: dict, source: str) -> _CellFile:
+    try:
+        return _CellFile.model_validate(data)
+    except ValidationError as exc:
+        errors = exc.errors(include_url=False)
+        msgs = list(dict.fromkeys(_describe(dict(e)) for e in errors))
+        more = f" (and {len(msgs) - 5} more)" if len(msgs) > 5 else ""
+        raise ConfigError(f"{source}: " + "; ".join(msgs[:5]) + more) from None
+
+
+# --------------------------------------------------------------------------------------------
+# stage 2: what needs the robot
+# --------------------------------------------------------------------------------------------
 
 def _pose_deg(v) -> np.ndarray:
-    return np.array(v[:3] + [a * DEG for a in v[3:]])
+    return np.array([*v[:3], *(a * DEG for a in v[3:])], dtype=float)
+
+
+def _robot_path(model_name: str, source: str) -> str:
+    if Path(model_name).is_absolute():
+        return model_name
+    beside = Path(source).parent / model_name
+    try:
+        return str(beside) if beside.exists() else model_name
+    except (OSError, ValueError):  # a name too long for the file system: load_robot says why
+        return model_name
+
+
+def _soft_limits(raw: list | None, model: RobotModel, source: str) -> np.ndarray:
+    """``[limits].joints`` in rad / mm: one finite, ordered pair per joint inside the robot's."""
+    n = model.n_joints
+    units = ["deg" if k == "revolute" else "mm" for k in model.joint_types]
+    if raw is None:
+        return np.array(model.joint_limits, dtype=float)
+    if len(raw) != n:
+        raise ConfigError(f"{source}: limits.joints lists {len(raw)} joints; the robot {model.name!r} has {n}: "
+                          f"write [lower, upper] for each joint (deg for revolute, mm for prismatic)")
+    soft = np.zeros((n, 2))
+    for j, (pair, unit) in enumerate(zip(raw, units)):
+        label = f"{source}: limits.joints: joint {j + 1} = {_short.repr(pair)}"
+        if not (isinstance(pair, list) and len(pair) == 2
+                and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in pair)):
+            raise ConfigError(f"{label}: write [lower, upper] as two numbers ({unit})")
+        lo, hi = float(pair[0]), float(pair[1])
+        if not (math.isfinite(lo) and math.isfinite(hi)):
+            raise ConfigError(f"{label}: lower and upper must be finite numbers ({unit}); a NaN or "
+                              f"infinite limit would switch the soft-limit check off")
+        if not lo < hi:
+            raise ConfigError(f"{label}: lower must be < upper; write [{hi:g}, {lo:g}]" if lo > hi
+                              else f"{label}: lower must be < upper")
+        scale = DEG if unit == "deg" else 1.0
+        soft[j] = lo * scale, hi * scale
+        rlo, rhi = model.joint_limits[j] / scale
+        if soft[j, 0] < model.joint_limits[j, 0] - 1e-9 or soft[j, 1] > model.joint_limits[j, 1] + 1e-9:
+            raise ConfigError(f"{label}: joint {j + 1}'s soft limits exceed the robot's limits "
+                              f"[{rlo:g}, {rhi:g}] {unit}; narrow them")
+    return soft
+
+
+def correction_grid(correction: CorrectionConfig, elbows: tuple[int, ...]) -> GridSpec:
+    """The configured correction grid (robot base frame) for the given plan elbows."""
+    c = correction
+    return GridSpec(x_range=(c.x_mm[0], c.x_mm[1]), x_step=c.x_mm[2], y_range=(c.y_mm[0], c.y_mm[1]),
+                    y_step=c.y_mm[2], z_range=(c.z_mm[0], c.z_mm[1]), z_step=c.z_mm[2],
+                    yaw_step=float(np.deg2rad(c.yaw_step_deg)), elbows=tuple(elbows))
+
+
+_GRID_KEY = {"x": "correction.x_mm", "y": "correction.y_mm", "z": "correction.z_mm", "yaw": "correction.yaw_step_deg"}
+
+
+def _check_grid(corr: CorrectionConfig, elbows: tuple[int, ...], n_joints: int, source: str) -> None:
+    """The grid's ranges and steps and the controller's capacity, before anything moves (the
+    same :class:`GridSpec` the pipeline builds the table on)."""
+    for key in ("x_mm", "y_mm", "z_mm"):
+        lo, hi, step = getattr(corr, key)
+        if not hi > lo:
+            raise ConfigError(f"{source}: correction.{key} = [{lo:g}, {hi:g}, {step:g}]: [start, stop, step] needs "
+                              f"stop > start")
+    n = 360.0 / corr.yaw_step_deg
+    if abs(n - round(n)) > 1e-9 * n:
+        steps = [360.0 / k for k in range(2, 361) if (3600 % k) == 0]  # divisors to 0.1 deg
+        lower = max((v for v in steps if v < corr.yaw_step_deg), default=1.0)
+        upper = min((v for v in steps if v > corr.yaw_step_deg), default=180.0)
+        hint = f"{lower:g} or {upper:g}"
+        raise ConfigError(f"{source}: correction.yaw_step_deg = {corr.yaw_step_deg:g}: must divide 360 deg "
+                          f"({n:.4g} steps); use e.g. {hint}")
+    try:
+        correction_grid(corr, elbows).check_capacity(n_joints)
+    except ConfigError as exc:
+        m = re.match(r"grid (yaw|x|y|z)", str(exc))
+        key = _GRID_KEY[m.group(1)] if m else "correction (x_mm, y_mm, z_mm, yaw_step_deg)"
+        raise ConfigError(f"{source}: {key}: {exc}") from None
+    except ValueError as exc:  # TableError: a node count the controller cannot hold
+        raise ConfigError(f"{source}: correction (x_mm, y_mm, z_mm, yaw_step_deg): {exc}; use larger steps") from None
 
 
 def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellConfig:
-    _check_keys(data, {"cell", "robot", "body", "devices", "limits", "plan", "identification",
-                       "correction", "simulation"}, source)
-    cell = data.get("cell", {})
-    _check_keys(cell, {"name"}, "cell")
-    name = _get(cell, "name", "cell", str, "calibration cell")
+    """A validated :class:`CellConfig` from parsed TOML; :class:`ConfigError` names the key."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: a configuration is a TOML document of tables, got {type(data).__name__}")
+    f = _validate_schema(data, source)
 
-    rob = data.get("robot")
-    if not isinstance(rob, dict):
-        raise ConfigError(f"{source}: [robot] table missing; add model = \"sr800\" (or a robot file)")
-    _check_keys(rob, {"model", "setup"}, "robot")
-    model_name = _get(rob, "model", "robot", str, required=True)
-    if not Path(model_name).is_absolute() and Path(source).parent.joinpath(model_name).exists():
-        model_name = str(Path(source).parent / model_name)
-    model = load_robot(model_name)
-    setup = _vec(rob, "setup", "robot", 6, [0.0] * 6)
-    model = model.with_setup(_pose_deg(setup))
+    model = load_robot(_robot_path(f.robot.model, source)).with_setup(_pose_deg(f.robot.setup))
+    soft = _soft_limits(f.limits.joints, model, source)
 
-    lim = data.get("limits", {})
-    _check_keys(lim, {"joints"}, "limits")
-    if "joints" in lim:
-        raw = lim["joints"]
-        if not (isinstance(raw, list) and len(raw) == model.n_joints and all(isinstance(r, list) and len(r) == 2 for r in raw)):
-            raise ConfigError(f"limits.joints must list [lower, upper] for each of the {model.n_joints} joints (deg for revolute, mm for prismatic)")
-        soft = np.array([[float(a), float(b)] for a, b in raw])
-        for j, kind in enumerate(model.joint_types):
-            if kind == "revolute":
-                soft[j] *= DEG
-        if np.any(soft[:, 0] >= soft[:, 1]):
-            raise ConfigError("limits.joints: every joint needs lower < upper")
-        outside = (soft[:, 0] < model.joint_limits[:, 0] - 1e-9) | (soft[:, 1] > model.joint_limits[:, 1] + 1e-9)
-        if np.any(outside):
-            j = int(np.argmax(outside)) + 1
-            raise ConfigError(f"limits.joints: joint {j}'s soft limits exceed the robot's limits; narrow them")
-    else:
-        soft = np.array(model.joint_limits)
-
-    body = data.get("body")
-    if not isinstance(body, dict):
-        raise ConfigError(f"{source}: [body] table missing; list the measuring points from the CMM report")
-    _check_keys(body, {"cube_edge_mm", "points"}, "body")
-    edge = _get(body, "cube_edge_mm", "body", float, 40.0)
-    pts = body.get("points")
-    if not isinstance(pts, list) or len(pts) < 3:
-        raise ConfigError("body.points needs at least 3 measuring points: { id = \"C1.a\", pose = [x, y, z, roll, pitch, yaw] } in mm and deg")
-    ids, poses = [], []
-    for k, p in enumerate(pts):
-        if not isinstance(p, dict) or "id" not in p or "pose" not in p:
-            raise ConfigError(f"body.points[{k}] needs an id and a pose = [x, y, z, roll, pitch, yaw] (mm, deg)")
-        ids.append(str(p["id"]))
-        poses.append(_pose_deg(_vec(p, "pose", f"body.points[{k}]", 6)))
-    if len(set(ids)) != len(ids):
-        raise ConfigError("body.points: ids must be unique")
-
-    dev = data.get("devices", {})
-    _check_keys(dev, {"probe_head", "baudrate", "probe_timeout_s", "controller", "device_id",
-                      "word_order", "controller_timeout_s", "motion_timeout_s"}, "devices")
-    ctrl = _get(dev, "controller", "devices", str, "127.0.0.1:502")
-    host, _, port = ctrl.rpartition(":")
-    if not host or not port.isdigit():
-        raise ConfigError(f"devices.controller = {ctrl!r}: write it as host:port, e.g. \"192.168.0.10:502\"")
-    wo = _get(dev, "word_order", "devices", str, "big")
-    if wo not in ("big", "little"):
-        raise ConfigError("devices.word_order must be \"big\" or \"little\" (how the controller orders 32-bit words)")
-    baud = _get(dev, "baudrate", "devices", int, 38400)
-    if baud not in (9600, 19200, 38400, 57600, 115200):
-        raise ConfigError(f"devices.baudrate = {baud}: use the rate set on the probe unit (9600 … 115200)")
+    d = f.devices
+    host, _, port = d.controller.rpartition(":")
     devices = DeviceConfig(
-        probe_head=_get(dev, "probe_head", "devices", str, "/dev/ttyUSB0"), baudrate=baud,
-        probe_timeout_s=_get(dev, "probe_timeout_s", "devices", float, 0.5),
-        controller_host=host, controller_port=int(port),
-        device_id=_get(dev, "device_id", "devices", int, 1), word_order=wo,
-        controller_timeout_s=_get(dev, "controller_timeout_s", "devices", float, 1.0),
-        motion_timeout_s=_get(dev, "motion_timeout_s", "devices", float, 60.0))
-
-    pl = data.get("plan", {})
-    allowed = {f.name for f in PlanConfig.__dataclass_fields__.values()}
-    _check_keys(pl, allowed, "plan")
-    elbows = tuple(pl.get("elbows", [1, -1]))
-    if not elbows or any(e not in (1, -1) for e in elbows):
-        raise ConfigError("plan.elbows must list +1 and/or -1")
+        probe_head=d.probe_head, baudrate=d.baudrate, probe_timeout_s=d.probe_timeout_s,
+        controller_host=host, controller_port=int(port), device_id=d.device_id, word_order=d.word_order,
+        controller_timeout_s=d.controller_timeout_s, motion_timeout_s=d.motion_timeout_s)
+    p = f.plan
     plan = PlanConfig(
-        elbows=elbows,
-        approach_deg=_get(pl, "approach_deg", "plan", float, 0.5),
-        approach_mm=_get(pl, "approach_mm", "plan", float, 1.0),
-        clearance_mm=_get(pl, "clearance_mm", "plan", float, 20.0),
-        speed=_get(pl, "speed", "plan", float, 0.5),
-        settle_s=_get(pl, "settle_s", "plan", float, 0.2),
-        samples=_get(pl, "samples", "plan", int, 4),
-        max_spread_um=_get(pl, "max_spread_um", "plan", float, 10.0),
-        both_directions=_get(pl, "both_directions", "plan", bool, False),
-        verification_every=_get(pl, "verification_every", "plan", int, 4),
-        verification_cycles=_get(pl, "verification_cycles", "plan", int, 3),
-        select=_get(pl, "select", "plan", int, 0),
-        repeats=_get(pl, "repeats", "plan", int, 2),
-        recenter_attempts=_get(pl, "recenter_attempts", "plan", int, 2),
-        recenter_margin_mm=_get(pl, "recenter_margin_mm", "plan", float, 1.5),
-        max_residual_um=_get(pl, "max_residual_um", "plan", float, 10.0),
-    )
-    if not 0 < plan.speed <= 1:
-        raise ConfigError("plan.speed is a fraction of the maximum speed: 0 < speed <= 1")
-    if plan.samples < 1 or plan.verification_cycles < 1 or plan.verification_every < 2 or plan.repeats < 1:
-        raise ConfigError("plan.samples, plan.repeats and plan.verification_cycles must be >= 1, "
-                          "plan.verification_every >= 2")
-    if plan.approach_deg <= 0 or plan.approach_mm <= 0 or plan.clearance_mm <= 0:
-        raise ConfigError("plan.approach_deg, plan.approach_mm and plan.clearance_mm must be > 0")
+        elbows=tuple(p.elbows), approach_deg=p.approach_deg, approach_mm=p.approach_mm,
+        clearance_mm=p.clearance_mm, speed=p.speed, settle_s=p.settle_s, samples=p.samples,
+        max_spread_um=p.max_spread_um, both_directions=p.both_directions,
+        verification_every=p.verification_every, verification_cycles=p.verification_cycles,
+        select=p.select, repeats=p.repeats, recenter_attempts=p.recenter_attempts,
+        recenter_margin_mm=p.recenter_margin_mm, max_residual_um=p.max_residual_um)
 
-    idc = data.get("identification", {})
-    _check_keys(idc, {"objective", "sigma_position_um", "sigma_angle_arcsec", "prefer", "fix", "exclude"}, "identification")
-    obj = _get(idc, "objective", "identification", str, "pose")
-    if obj not in ("pose", "distance"):
-        raise ConfigError("identification.objective must be \"pose\" or \"distance\"")
+    i = f.identification
     ident = IdentificationConfig(
-        objective=obj,
-        sigma_position_um=_get(idc, "sigma_position_um", "identification", float, 15.0),
-        sigma_angle_arcsec=_get(idc, "sigma_angle_arcsec", "identification", float, 20.0),
-        prefer=tuple(idc.get("prefer", model.prefer)), fix=tuple(idc.get("fix", ())),
-        exclude=tuple(idc.get("exclude", ())))
-    for n in (*ident.prefer, *ident.fix, *ident.exclude):
-        model.param_index(n)
+        objective=i.objective, sigma_position_um=i.sigma_position_um,
+        sigma_angle_arcsec=i.sigma_angle_arcsec,
+        prefer=tuple(model.prefer if i.prefer is None else i.prefer), fix=tuple(i.fix), exclude=tuple(i.exclude))
+    for key in ("prefer", "fix", "exclude"):
+        for n in getattr(ident, key):
+            try:
+                model.param_index(n)
+            except ConfigError as exc:
+                raise ConfigError(f"{source}: identification.{key}: {exc}") from None
 
-    co = data.get("correction", {})
-    _check_keys(co, {"x_mm", "y_mm", "z_mm", "yaw_step_deg", "max_interpolation_um"}, "correction")
-    corr = CorrectionConfig(
-        x_mm=tuple(_vec(co, "x_mm", "correction", 3, [250.0, 650.0, 40.0])),
-        y_mm=tuple(_vec(co, "y_mm", "correction", 3, [-350.0, 350.0, 50.0])),
-        z_mm=tuple(_vec(co, "z_mm", "correction", 3, [250.0, 450.0, 200.0])),
-        yaw_step_deg=_get(co, "yaw_step_deg", "correction", float, 30.0),
-        max_interpolation_um=_get(co, "max_interpolation_um", "correction", float, 15.0))
-    for key in ("x_mm", "y_mm", "z_mm"):
-        lo, hi, step = getattr(corr, key)
-        if not (hi > lo and step > 0):
-            raise ConfigError(f"correction.{key} = [start, stop, step] needs stop > start and step > 0")
+    c = f.correction
+    corr = CorrectionConfig(x_mm=c.x_mm, y_mm=c.y_mm, z_mm=c.z_mm, yaw_step_deg=c.yaw_step_deg,
+                            max_interpolation_um=c.max_interpolation_um)
+    _check_grid(corr, plan.elbows, model.n_joints, source)
 
-    sim = data.get("simulation", {})
-    _check_keys(sim, {"seed"}, "simulation")
-    seed = _get(sim, "seed", "simulation", int, None)
-    return CellConfig(name, model, soft, tuple(ids), pose_to_matrix(np.array(poses)), edge, devices,
-                      plan, ident, corr, text, seed)
+    ids = tuple(pt.id for pt in f.body.points)
+    poses = np.array([_pose_deg(pt.pose) for pt in f.body.points])
+    return CellConfig(f.cell.name, model, soft, ids, pose_to_matrix(poses), f.body.cube_edge_mm,
+                      devices, plan, ident, corr, text, f.simulation.seed)
 
 
 def load_config(path: str | Path) -> CellConfig:
+    """Read and validate a configuration file: only a regular file of at most
+    :data:`MAX_CONFIG_BYTES`, UTF-8 (a device, FIFO or directory is refused before reading)."""
     p = Path(path)
-    if not p.exists():
-        raise ConfigError(f"{p}: no such configuration file; 'station init {p}' writes a template")
-    text = p.read_text(encoding="utf-8")
+    text = read_user_text(p, MAX_CONFIG_BYTES, "configuration file",
+                          missing=f"no such configuration file; 'station init {p}' writes a template")
     return parse_text(text, str(p))
 
 
@@ -283,30 +540,37 @@ def parse_text(text: str, source: str = "<config>") -> CellConfig:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{source}: not valid TOML ({exc}); fix the syntax there") from None
+    except RecursionError:
+        raise ConfigError(f"{source}: not valid TOML (nested too deeply); fix the syntax there") from None
     return parse_config(data, source, text)
 
 
 TEMPLATE = """\
 # Calibration cell configuration. Lengths in mm, angles in degrees, uncertainties in µm and
 # arc seconds. 'station check THIS_FILE' connects to every device and reports what works.
+# Every number has bounds, given as "lo … hi" in its comment; a value outside them, an unknown
+# key or a wrong type is refused before anything moves, with the key and the fix.
 
 [cell]
 name = "cell 1"
 
 [robot]
 model = "sr800"                  # built-in robot or a robot file (docs/robot-file.md)
-# Nominal pose of the robot base in the calibration-body frame: x, y, z [mm], roll, pitch, yaw [deg].
+# Nominal pose of the robot base in the calibration-body frame: x, y, z [mm], roll, pitch, yaw [deg]
+# (positions within ±10000 mm, angles within ±360 deg).
 # It only has to be right to a few mm / a few tenths of a degree; the calibration identifies it.
 setup = [-450.0, 0.0, -170.0, 0.0, 0.0, 0.0]
 
 [limits]
-# Soft limits the station never commands a motion beyond: [lower, upper] per joint (deg | mm).
+# Soft limits the station never commands a motion beyond: [lower, upper] per joint (deg | mm),
+# finite, lower < upper, inside the robot file's limits.
 joints = [[-125.0, 125.0], [-140.0, 140.0], [-195.0, -5.0], [-355.0, 355.0]]
 
 [body]
-cube_edge_mm = 40.0
+cube_edge_mm = 40.0              # > 0 … 1000
 # Measuring points (cube corners) from the body's CMM report: pose of each corner frame in the
 # body frame, x, y, z [mm], roll, pitch, yaw [deg]. Corner frame: origin at the top corner, cube in x>=0, y>=0, z<=0.
+# 3 … 5000 points; ids are unique, 1 … 64 characters.
 points = [
   { id = "C1.a", pose = [-28.3, -319.7, 40.0, 0.0, 0.0, 10.0] },
   { id = "C1.b", pose = [11.1, -312.8, 40.0, 0.0, 0.0, 100.0] },
@@ -315,45 +579,47 @@ points = [
 
 [devices]
 probe_head = "/dev/ttyUSB0"      # serial device, or socket://host:port, rfc2217://host:port
-baudrate = 38400
-probe_timeout_s = 0.5
+baudrate = 38400                 # 9600, 19200, 38400, 57600 or 115200
+probe_timeout_s = 0.5            # 0.01 … 60
 controller = "192.168.0.10:502"  # Modbus TCP host:port
-device_id = 1
+device_id = 1                    # Modbus unit id, 0 … 255
 word_order = "big"               # 32-bit word order of the controller: "big" or "little"
-controller_timeout_s = 1.0
-motion_timeout_s = 60.0
+controller_timeout_s = 1.0       # 0.01 … 60
+motion_timeout_s = 60.0          # longest single motion [s], 1 … 600
 
 [plan]
-elbows = [1, -1]                 # elbow configurations to measure every point in
-approach_deg = 0.5               # every joint approaches its target from below by this much
-approach_mm = 1.0
-clearance_mm = 20.0              # retract height above a measuring point before moving on
-speed = 0.5                      # fraction of the robot's maximum speed
-settle_s = 0.2                   # wait after a motion before reading the probes
-samples = 4                      # probe snapshots averaged per reading
-max_spread_um = 10.0             # reject a reading whose snapshots spread more than this
+elbows = [1, -1]                 # elbow configurations to measure every point in: [1, -1] or [1]
+approach_deg = 0.5               # every joint approaches its target from below by this much, > 0 … 10
+approach_mm = 1.0                # > 0 … 50
+clearance_mm = 20.0              # retract height above a measuring point before moving on, > 0 … 500
+speed = 0.5                      # fraction of the robot's maximum speed, > 0 … 1
+settle_s = 0.2                   # wait after a motion before reading the probes [s], 0 … 30
+samples = 4                      # probe snapshots averaged per reading, 1 … 100
+max_spread_um = 10.0             # reject a reading whose snapshots spread more than this, > 0 … 1000
 both_directions = false          # also approach from above to measure the reversal error
-verification_every = 4           # every 4th (point, elbow) is held out for verification
-verification_cycles = 3          # ISO 9283 repetitions per verification pose
-select = 0                       # > 0: keep only this many most informative steps (D-optimal)
-repeats = 2                      # visits per identification pose (robot repeatability averages out)
-recenter_attempts = 2            # re-centre when a probe is near the end of its stroke
-recenter_margin_mm = 1.5
-max_residual_um = 10.0           # plane residual above which a reading is not valid
+verification_every = 4           # every 4th (point, elbow) is held out for verification, 2 … 100
+verification_cycles = 3          # ISO 9283 repetitions per verification pose, 1 … 30
+select = 0                       # > 0: keep only this many most informative steps (D-optimal), 0 … 5000
+repeats = 2                      # visits per identification pose (robot repeatability averages out), 1 … 20
+recenter_attempts = 2            # re-centre when a probe is near the end of its stroke, 0 … 10
+recenter_margin_mm = 1.5         # 0 … 4 (the probes' stroke is ±5 mm)
+max_residual_um = 10.0           # plane residual above which a reading is not valid, > 0 … 1000
 
 [identification]
 objective = "pose"               # "pose" (robot + set-up + head) or "distance" (robot only)
-sigma_position_um = 15.0
-sigma_angle_arcsec = 20.0
+sigma_position_um = 15.0         # 0.01 … 1000
+sigma_angle_arcsec = 20.0        # 0.01 … 3600
 # prefer = ["K.x", ...]          # minimal-set preferences; default: the robot file's
 # fix = []
 # exclude = []
 
 [correction]
-# Grid of the correction table in the robot base frame: [start, stop, step].
+# Grid of the correction table in the robot base frame: [start, stop, step], stop > start, the
+# range a whole number of steps, step 1 … 10000 mm; with the yaw step (a divisor of 360) it must fit
+# the controller's 32 000 values (nodes × elbows × joints): checked when the file is read.
 x_mm = [250.0, 650.0, 40.0]
 y_mm = [-350.0, 350.0, 50.0]
 z_mm = [250.0, 450.0, 200.0]
-yaw_step_deg = 30.0
-max_interpolation_um = 15.0      # refuse a table whose interpolation bound exceeds this
+yaw_step_deg = 30.0              # 1 … 180
+max_interpolation_um = 15.0      # refuse a table whose interpolation bound exceeds this, > 0 … 1000
 """

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from station.cell.config import CellConfig, parse_text
+from station.cell.config import CellConfig, correction_grid, parse_text
 from station.cell.devices import CellController, ProbeHead
 from station.cell.events import Event, Notice, PhaseChanged, RunFinished, RunStarted
 from station.cell.fingerprint import check_same_cell, fingerprint
@@ -166,11 +166,8 @@ def oracle_params(cfg: CellConfig, truth: Any) -> np.ndarray:
 
 
 def grid_for(cfg: CellConfig) -> GridSpec:
-    """The configured correction grid."""
-    c = cfg.correction
-    return GridSpec(x_range=(c.x_mm[0], c.x_mm[1]), x_step=c.x_mm[2], y_range=(c.y_mm[0], c.y_mm[1]),
-                    y_step=c.y_mm[2], z_range=(c.z_mm[0], c.z_mm[1]), z_step=c.z_mm[2],
-                    yaw_step=np.deg2rad(c.yaw_step_deg), elbows=tuple(cfg.plan.elbows))
+    """The configured correction grid: the one the configuration was checked against."""
+    return correction_grid(cfg.correction, tuple(cfg.plan.elbows))
 
 
 def build_table_for(cfg: CellConfig, params: np.ndarray) -> CorrectionTable:

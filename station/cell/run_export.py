@@ -18,6 +18,19 @@ if TYPE_CHECKING:
     from station.cell.rundb import RunDB
 
 
+#: a cell that starts with one of these is read as a formula by spreadsheet programs
+_FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
+
+
+def csv_text(value: object) -> str:
+    """A text cell safe to open in a spreadsheet: one that begins like a formula (``=``, ``+``,
+    ``-``, ``@``, tab, carriage return) gets a leading single quote, as the OWASP guidance on
+    CSV injection says, so ``=HYPERLINK(…)`` stays text. Numbers are written by ``_num`` and
+    never pass through here."""
+    s = "" if value is None else str(value)
+    return "'" + s if s.startswith(_FORMULA_START) else s
+
+
 def export_csv(db: RunDB, run_id: int, path: str | Path,
                joint_units: Sequence[str] | None = None) -> Path:
     """Write one CSV row per measurement (docs/run-database.md, "Export").
@@ -54,11 +67,12 @@ def export_csv(db: RunDB, run_id: int, path: str | Path,
                 pose = None if m.pose is None else matrix_to_pose(m.pose)
                 status = "" if m.channel_status is None else ";".join(
                     str(s) for s in m.channel_status)
-                w.writerow([m.step_index, m.kind, m.point_id, m.label, m.t_utc]
+                w.writerow([m.step_index, csv_text(m.kind), csv_text(m.point_id), csv_text(m.label),
+                            csv_text(m.t_utc)]
                            + cells(m.joints_read, n_q) + cells(m.joints_commanded, n_q)
                            + cells(pose, 6) + [_num(m.pose_residual_um)]
                            + cells(m.readings_mm, n_p)
-                           + [status, int(m.ok), m.message])
+                           + [csv_text(status), int(m.ok), csv_text(m.message)])
     except OSError as e:
         raise RunDatabaseError(f"{out}: cannot write the CSV export ({e}); check the folder "
                                f"and its permissions") from e

@@ -79,8 +79,9 @@ class RobotModel:
             raise ConfigError(
                 f"robot {self.name!r}: joint_limits must have shape ({self.n_joints}, 2)"
             )
-        if np.any(self.joint_limits[:, 0] >= self.joint_limits[:, 1]):
-            raise ConfigError(f"robot {self.name!r}: every joint limit needs lower < upper")
+        lim = self.joint_limits
+        if not np.all(np.isfinite(lim)) or not np.all(lim[:, 0] < lim[:, 1]):  # NaN fails both tests
+            raise ConfigError(f"robot {self.name!r}: every joint limit must be finite with lower < upper")
 
     # --- structure -----------------------------------------------------------------------
     @property
@@ -183,11 +184,10 @@ class RobotModel:
 
 def robot_from_dict(data: dict, source: str = "<dict>") -> RobotModel:
     """Build a model from the parsed TOML of a robot file (format in docs/robot-file.md)."""
-    try:
-        head = data["robot"]
-        name = str(head["name"])
-    except (KeyError, TypeError):
-        raise ConfigError(f"{source}: missing [robot] table with a 'name'") from None
+    head = data.get("robot") if isinstance(data, dict) else None
+    if not isinstance(head, dict) or not isinstance(head.get("name"), str) or not head["name"]:
+        raise ConfigError(f"{source}: missing [robot] table with a 'name' (a string)")
+    name = head["name"]
     angle_unit = head.get("angle_unit", "deg")
     length_unit = head.get("length_unit", "mm")
     if angle_unit not in ("deg", "rad"):
@@ -203,8 +203,8 @@ def robot_from_dict(data: dict, source: str = "<dict>") -> RobotModel:
         )
     specs, params, limits = [], [], []
     for k, e in enumerate(entries):
-        if not isinstance(e, dict) or "name" not in e:
-            raise ConfigError(f"{source}: [[transform]] number {k + 1} needs a 'name'")
+        if not isinstance(e, dict) or not isinstance(e.get("name"), str) or not e["name"]:
+            raise ConfigError(f"{source}: [[transform]] number {k + 1} needs a 'name' (a string)")
         unknown = set(e) - {"name", "joint", "limits", *PARAM_SUFFIXES}
         if unknown:
             raise ConfigError(
@@ -219,7 +219,7 @@ def robot_from_dict(data: dict, source: str = "<dict>") -> RobotModel:
         vals = []
         for i, s in enumerate(PARAM_SUFFIXES):
             v = e.get(s, 0.0)
-            if not isinstance(v, (int, float)) or not math.isfinite(v):
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                 raise ConfigError(f"{source}: {e['name']}.{s} must be a finite number, got {v!r}")
             vals.append(float(v) * (a_scale if i in _ANGLE else l_scale))
         specs.append(TransformSpec(str(e["name"]), joint))
@@ -233,11 +233,18 @@ def robot_from_dict(data: dict, source: str = "<dict>") -> RobotModel:
             if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in lim):
                 raise ConfigError(
                     f"{source}: transform {e['name']!r}: limits must be two finite numbers [lower, upper]")
+            if not float(lim[0]) < float(lim[1]):
+                raise ConfigError(
+                    f"{source}: transform {e['name']!r}: limits {lim!r} must be [lower, upper] with lower < upper")
             scale = a_scale if joint == "revolute" else l_scale
             limits.append([float(lim[0]) * scale, float(lim[1]) * scale])
         elif "limits" in e:
             raise ConfigError(f"{source}: transform {e['name']!r} has no joint, so no limits")
-    prefer = tuple(head.get("prefer", ()))
+    prefer_raw = head.get("prefer", [])
+    if not (isinstance(prefer_raw, list) and all(isinstance(p, str) for p in prefer_raw)):
+        raise ConfigError(f"{source}: [robot].prefer must be a list of parameter names such as [\"K.x\"], "
+                          f"got {prefer_raw!r}")
+    prefer = tuple(prefer_raw)
     model = RobotModel(name, tuple(specs), np.array(params), np.array(limits).reshape(-1, 2),
                        str(head.get("description", "")), prefer)
     for p in prefer:
