@@ -95,7 +95,7 @@ def _unit(header: str) -> str:
 
 def robot_from_dh_file(path: Path) -> RobotModel:
     conv = "mdh" if path.name.endswith(".mdh.csv") else "dh"
-    with open(path, newline="") as f:
+    with open(path, newline="", encoding="utf-8-sig") as f:
         rows = [r for r in csv.reader(line for line in f if not line.lstrip().startswith("#")) if r]
     if len(rows) < 2:
         raise ConfigError(f"{path}: needs a header and one row per joint")
@@ -214,6 +214,9 @@ def robot_from_urdf(path: Path) -> RobotModel:
                     raise ConfigError(f"{path}: joint {_joint_name(j)!r}: <axis> has no 'xyz' attribute")
                 axis_text = ax_xyz
             axis = np.array(_urdf_numbers(path, j, "axis", "xyz", axis_text, 3))
+            if not np.linalg.norm(axis) > 1e-9:
+                raise ConfigError(f"{path}: joint {_joint_name(j)!r}: <axis xyz=\"{axis_text}\"> has no direction; "
+                                  f"give the joint axis as a non-zero vector")
             A = _T(_axis_to_z(axis))
             specs.append(TransformSpec(f"A{len(specs)}", "prismatic" if kind == "prismatic" else "revolute"))
             poses.append(matrix_to_pose(T @ A))

@@ -443,3 +443,12 @@ def test_urdf_origin_and_axis_default(tmp_path):
     m = robot_from_urdf(f)
     np.testing.assert_allclose(m.joint_limits, [[-2 * math.pi, 2 * math.pi]])
     np.testing.assert_allclose(forward(m, [[0.3]]), [Rz(0.5) @ Rx(0.3)], atol=1e-12)
+
+
+def test_urdf_zero_axis_is_refused_naming_the_joint(tmp_path):
+    p = tmp_path / "zero.urdf"
+    p.write_text('<robot name="z"><link name="base"/><link name="l1"/>'
+                 '<joint name="j1" type="revolute"><parent link="base"/><child link="l1"/>'
+                 '<axis xyz="0 0 0"/><limit lower="-1" upper="1"/></joint></robot>')
+    with pytest.raises(ConfigError, match="j1.*no direction"):
+        load_robot(str(p))
