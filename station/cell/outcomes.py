@@ -24,7 +24,13 @@ from drivers.controller import (
 )
 from drivers.controller_map import ControllerError
 from drivers.correction_table import TableError, TableVerifyError
-from drivers.probe_protocol import ProbeDisconnected, ProbeError, ProbeOutOfRange, ProbeTimeout
+from drivers.probe_protocol import (
+    ProbeDisconnected,
+    ProbeError,
+    ProbeFrameError,
+    ProbeOutOfRange,
+    ProbeTimeout,
+)
 from station.cell.summary import Failure, RunSummary
 from station.errors import Outcome, RunAborted, StationError
 
@@ -61,6 +67,8 @@ _TABLE: tuple[_Row, ...] = (
     _Row((ProbeTimeout,), Outcome.DEVICE_FAULT, f"check the probe cable and [devices].baudrate, {RESUME}"),
     _Row((ProbeDisconnected,), Outcome.DEVICE_FAULT, f"reconnect the probe interface, {RESUME}"),
     _Row((ProbeOutOfRange,), Outcome.DEVICE_FAULT, f"check the probe named in the message, {RESUME}"),
+    _Row((ProbeFrameError,), Outcome.DEVICE_FAULT,
+         f"the replies are garbled: check [devices].baudrate against the unit's setting and the cable, {RESUME}"),
     _Row((ProbeError,), Outcome.DEVICE_FAULT, f"check the probe interface and its cable, {RESUME}"),
 )
 
