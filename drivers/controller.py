@@ -40,17 +40,20 @@ from .controller_errors import (
     DriveFault,
     EmergencyStop,
     HandshakeTimeout,
+    MapVersionError,
     ModbusExceptionError,
+    ModbusResponseError,
     MotionAborted,
     MotionRejected,
     MotionTimeout,
     SequenceError,
+    WordOrderError,
     error_for,
 )
 from .controller_map import (
-    MAP_VERSION,
     MAX_JOINTS,
     REG,
+    SUPPORTED_MAP_VERSIONS,
     TABLE_DATA_ADDRESS,
     Command,
     ControllerError,
@@ -58,6 +61,7 @@ from .controller_map import (
     WordOrder,
     decode,
     encode,
+    implausible_limits,
     register_span,
 )
 from .controller_status import CommandStatus, ControllerStatus, MotionStatus
@@ -73,6 +77,9 @@ __all__ = [
     "ControllerError",
     "RegisterDecodeError",
     "ModbusExceptionError",
+    "ModbusResponseError",
+    "MapVersionError",
+    "WordOrderError",
     "ControllerConnectionError",
     "ControllerLinkLost",
     "CommandRejected",
@@ -161,7 +168,14 @@ class ModbusController:
             except OSError as exc:
                 raise ControllerConnectionError(
                     f"socket error talking to {self.host}:{self.port}: {exc}; check the network") from exc
-        if rr.isError():
+        # pymodbus matches a response to its request by transaction id only and hands back
+        # whatever function it carries: a read answered with FC 4, or an exception response
+        # for another function, must not be taken for the answer.
+        error = rr.isError()
+        got = getattr(rr, "function_code", None)  # every pymodbus PDU has it
+        if got is not None and int(got) != (fc | 0x80 if error else fc):
+            raise ModbusResponseError(fc, int(got), address, n_regs)
+        if error:
             raise ModbusExceptionError(getattr(rr, "exception_code", 0), fc, address, n_regs)
         return rr
 
@@ -203,16 +217,13 @@ class ModbusController:
                 f"cannot connect to the controller at {self.host}:{self.port}: check that it is "
                 f"powered, the IP address and port, and that the robot program is running")
         version = self._read_entry("map_version")
-        if version != MAP_VERSION:
-            raise ControllerError(
-                f"controller register map version {version}, driver expects {MAP_VERSION}: update the "
-                f"robot program or the driver so that both use the same map")
+        if version not in SUPPORTED_MAP_VERSIONS:
+            raise MapVersionError(version, SUPPORTED_MAP_VERSIONS)
         g = self._read_entry("n_joints")
         if not 1 <= g <= MAX_JOINTS:
             raise ControllerError(f"controller reports {g} joints; supported are 1..{MAX_JOINTS}")
         self._n_joints = int(g)
-        lim = self._read_entry("soft_limits")
-        self._soft_limits = np.asarray(lim[:2 * g], dtype=float).reshape(g, 2)
+        self._soft_limits = self._checked_soft_limits(g)
         self._seq = int(self._read_entry("cmd_seq"))
         self._link_lost = None
         self._pending = None
@@ -221,6 +232,23 @@ class ModbusController:
             self._heartbeat_once()  # the controller sees a live PC before the first command
             self._start_heartbeat()
         return self
+
+    def _checked_soft_limits(self, g: int) -> np.ndarray:
+        """Soft limits ``(g, 2)``, read once and decoded in the configured word order; if they
+        are implausible there but plausible in the other order, the link's word order is
+        wrong (:class:`WordOrderError`), else the map does not fit (:class:`RegisterDecodeError`)."""
+        r = REG["soft_limits"]
+        raw = self._read(r.address, r.n_registers)
+        lim = np.asarray(decode(r, raw, self.word_order), dtype=float)[:2 * g]
+        problem = implausible_limits(lim, g)
+        if problem is not None:
+            other = WordOrder.LITTLE if self.word_order is WordOrder.BIG else WordOrder.BIG
+            if implausible_limits(decode(r, raw, other), g) is None:
+                raise WordOrderError(self.word_order, other, problem)
+            raise RegisterDecodeError(
+                f"the controller's soft limits are implausible in either word order ({problem}): "
+                f"the robot program does not fill the register map as documented; check it")
+        return lim.reshape(g, 2)
 
     def close(self) -> None:
         """Stop the heartbeat and close the socket (pending motions are not stopped)."""

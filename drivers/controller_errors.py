@@ -25,6 +25,9 @@ if TYPE_CHECKING:
 
 __all__ = [
     "ModbusExceptionError",
+    "ModbusResponseError",
+    "MapVersionError",
+    "WordOrderError",
     "ControllerConnectionError",
     "ControllerLinkLost",
     "CommandRejected",
@@ -55,6 +58,48 @@ class ModbusExceptionError(ControllerError):
             f"word order configured for this controller; the request may be repeated once the "
             f"cause is fixed"
         )
+
+
+class ModbusResponseError(ControllerError):
+    """The controller answered a request with a response that does not belong to it (another
+    function code). The response is not used; requests are not repeated automatically."""
+
+    def __init__(self, expected_fc: int, got_fc: int, address: int, count: int):
+        self.expected_fc = int(expected_fc)
+        self.got_fc = int(got_fc)
+        self.address = int(address)
+        self.count = int(count)
+        super().__init__(
+            f"the controller answered function {self.expected_fc} at register {self.address} "
+            f"(count {self.count}) with function {self.got_fc} ({self.got_fc:#04x}): the response "
+            f"does not belong to the request and was not used; check that only the robot "
+            f"program answers on this address and port (gateway, second server, unit id)")
+
+
+class MapVersionError(ControllerError):
+    """The controller reports a register-map version this driver does not know."""
+
+    def __init__(self, found: int, supported: tuple[int, ...]):
+        self.found = int(found)
+        self.supported = tuple(int(v) for v in supported)
+        known = ", ".join(str(v) for v in self.supported)
+        super().__init__(
+            f"the controller reports register map version {self.found}; this driver supports "
+            f"version {known} only: nothing was commanded. Install the robot program that speaks "
+            f"map version {known}, or a driver that knows version {self.found}")
+
+
+class WordOrderError(ControllerError):
+    """The controller's 32-bit values decode plausibly only in the other word order."""
+
+    def __init__(self, configured: Any, detected: Any, detail: str):
+        self.configured = configured
+        self.detected = detected
+        super().__init__(
+            f"word order mismatch: with the configured word order {configured.name} the "
+            f"controller's soft limits decode as implausible values ({detail}); with "
+            f"{detected.name} they are plausible. Set the link's word order to {detected.name} "
+            f"([devices].word_order = \"{detected.value}\"); nothing was commanded")
 
 
 class ControllerConnectionError(ControllerError):
@@ -133,6 +178,9 @@ def error_for(st: ControllerStatus, seq: int, command: Command, target: Any,
                 detail += f" (target {float(target[j - 1]):.6g})"
         return MotionRejected(f"{command.name} seq {seq}: {detail}: choose a target inside the limits",
                               code, seq)
+    if ec is ErrorCode.BAD_COMMAND and command in (Command.MOVE_JOINTS, Command.MOVE_CARTESIAN) \
+            and st.error_joint > 0:
+        return MotionRejected(f"{msg} (joint {st.error_joint})", code, seq)
     if ec in (ErrorCode.UNREACHABLE, ErrorCode.TARGET_OUTSIDE_TABLE, ErrorCode.NOT_READY,
               ErrorCode.BAD_COMMAND):
         return MotionRejected(msg, code, seq)

@@ -31,6 +31,8 @@ import numpy as np
 
 __all__ = [
     "MAP_VERSION",
+    "SUPPORTED_MAP_VERSIONS",
+    "implausible_limits",
     "MAX_JOINTS",
     "MAX_TABLE_AXES",
     "MAX_TABLE_VALUES",
@@ -62,6 +64,8 @@ __all__ = [
 
 #: Version of this register map, readable at ``map_version``.
 MAP_VERSION = 1
+#: Map versions the driver can talk to (it refuses a controller that reports another).
+SUPPORTED_MAP_VERSIONS: tuple[int, ...] = (MAP_VERSION,)
 #: Joint count the command / response blocks are sized for.
 MAX_JOINTS = 6
 #: Correction-table axes the header is sized for (x, y, z, yaw of the Cartesian target).
@@ -179,7 +183,7 @@ REGISTERS: tuple[Register, ...] = (
     _r("error_code", 43, "u16", meaning="error code of the last error (see ErrorCode); 0 none or cleared by RESET"),
     _r("status", 44, "u16", meaning="status bits (see StatusBit)"),
     _r("error_joint", 45, "i16",
-       meaning="joint (1-based) an error refers to, 0 if none (soft limit, drive fault)"),
+       meaning="joint (1-based) an error refers to, 0 if none (soft limit, non-finite target, drive fault)"),
     _r("error_bound", 46, "i16",
        meaning="soft-limit side of a SOFT_LIMIT error: -1 lower, +1 upper, 0 n/a"),
     _r("act_joints", 48, "f32", count=MAX_JOINTS, unit="rad or mm",
@@ -280,7 +284,8 @@ ERROR_MESSAGES: dict[ErrorCode, str] = {
     ErrorCode.UNREACHABLE: "Cartesian target not reachable with the requested elbow configuration",
     ErrorCode.ESTOP: "emergency stop: release the e-stop, check the cell, then reset the error",
     ErrorCode.DRIVE_FAULT: "drive fault (error_joint says which axis): check the drive, then reset",
-    ErrorCode.BAD_COMMAND: "unknown command code or invalid argument (speed, elbow, or busy)",
+    ErrorCode.BAD_COMMAND: "unknown command code or invalid argument (speed, elbow, a target that "
+                           "is not a finite number - error_joint says which joint -, or busy)",
     ErrorCode.SEQUENCE_ERROR: "sequence number is not previous+1; resynchronise from ack_seq",
     ErrorCode.TABLE_CRC_MISMATCH: "staged table values do not match the header CRC-32: re-upload",
     ErrorCode.TABLE_NOT_STAGED: "no staged table: upload and stage (TABLE_STAGE) before activating",
@@ -432,3 +437,31 @@ def decode_f32_array(regs: Sequence[int], order: WordOrder = WordOrder.BIG) -> n
     if order is WordOrder.LITTLE:
         w = w[:, ::-1]
     return np.ascontiguousarray(w.astype(">u2")).view(">f4").ravel().astype(np.float32)
+
+
+#: Largest magnitude a plausible soft limit has (mm or rad); the smallest non-zero one.
+PLAUSIBLE_LIMIT_MAX = 1e5
+PLAUSIBLE_LIMIT_MIN = 1e-6
+
+
+def implausible_limits(soft_limits: Sequence[float] | np.ndarray, n_joints: int) -> str | None:
+    """Why the decoded ``soft_limits`` (lower_1, upper_1, ...) cannot be a robot's soft limits,
+    or None if they can: every value finite, zero or of magnitude within
+    [1e-6, 1e5] (mm or rad), and lower < upper for each of the ``n_joints`` joints.
+
+    A 32-bit value read with the wrong word order almost never passes (its halves swap: 1.0
+    becomes 2.3e-41, -2.0 becomes 6.9e-41), which is how the driver tells a word-order mismatch
+    from a real limit (see ``docs/protocols.md``, "Data types and word order")."""
+    v = np.asarray(soft_limits, dtype=float)[:2 * n_joints]
+    if v.size != 2 * n_joints:
+        return f"expected {2 * n_joints} values, got {v.size}"
+    for i, x in enumerate(v):
+        name = f"{'lower' if i % 2 == 0 else 'upper'}_{i // 2 + 1}"
+        if not np.isfinite(x):
+            return f"{name} = {x}"
+        if x != 0.0 and not PLAUSIBLE_LIMIT_MIN <= abs(x) <= PLAUSIBLE_LIMIT_MAX:
+            return f"{name} = {x:.6g}"
+    for j in range(n_joints):
+        if not v[2 * j] < v[2 * j + 1]:
+            return f"joint {j + 1}: lower {v[2 * j]:.6g} is not below upper {v[2 * j + 1]:.6g}"
+    return None

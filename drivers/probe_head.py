@@ -3,14 +3,24 @@
 Opens any pyserial URL (``/dev/ttyUSB0``, a pseudo-terminal, ``socket://host:port``,
 ``rfc2217://...``) or wraps an already-open serial-like object (tests use a scripted fake).
 
-Transaction rules, each for a reason seen in the field:
+Transaction rules (the sequence rule of ``docs/protocols.md``), each for a reason seen in the
+field:
 
-* stale input is flushed before every request, so a late reply to an earlier, timed-out
-  request is not taken for the answer to this one;
+* stale input is flushed before every request;
+* after a timeout the line is out of step: a reply may still be on its way and, for ``M0``,
+  would look exactly like the answer to the next request. Before the next request the driver
+  therefore sends ``ID`` as a fence and discards every line up to the fence's answer (the unit
+  answers strictly in order, so every late reply comes before it); only then is the request
+  sent. A fence that is not answered in time leaves the line out of step (ProbeTimeout);
+* while waiting for a reply, complete lines that do not name the request (another command's
+  echo, an unsolicited frame) are discarded, counted and logged, never parsed as the answer;
 * ``read_until`` returns a partial line on timeout without raising, so the terminator is
   checked and a missing one is a :class:`ProbeTimeout`;
 * only read-only commands (the protocol table says which) are retried, a bounded number of
   times; zero/preset change the unit's state and are never repeated blindly;
+* every timeout, retry, resynchronisation and discarded frame is logged (logger
+  ``drivers.probe_head``) and counted in :attr:`ProbeHead.stats`: a retried snapshot is a
+  fresh reading, so a run with retries does not repeat a run without them bit for bit;
 * every serial-layer exception becomes :class:`ProbeDisconnected` (chained, never swallowed).
 
 The driver knows nothing of the station: channel values are plain millimetres.
@@ -18,8 +28,9 @@ The driver knows nothing of the station: channel values are plain millimetres.
 
 from __future__ import annotations
 
+import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Protocol
 
 import numpy as np
@@ -28,6 +39,7 @@ import serial
 from drivers.probe_protocol import (
     COMMANDS,
     REPLY_TERMINATOR,
+    RESYNC_COMMAND,
     ChannelStatus,
     DeviceInfo,
     ProbeDeviceError,
@@ -42,6 +54,7 @@ from drivers.probe_protocol import (
     parse_id,
     parse_m0,
     parse_ms,
+    reply_names,
 )
 
 try:  # tcflush on a pty whose master has gone raises termios.error, not SerialException
@@ -54,6 +67,7 @@ except ImportError:  # pragma: no cover - not on POSIX
 __all__ = [
     "ProbeHead",
     "ProbeSnapshot",
+    "LinkStats",
     "ChannelStatus",
     "DeviceInfo",
     "ProbeError",
@@ -65,9 +79,35 @@ __all__ = [
     "ProbeOutOfRange",
 ]
 
+log = logging.getLogger(__name__)
+
 _PORT_ERRORS = (serial.SerialException, OSError) + _TERMIOS_ERRORS
 # The longest legal reply: "M0," + 15 * 9 value characters + 14 commas + CR LF, with margin.
 _MAX_REPLY_BYTES = 256
+# Foreign lines discarded while waiting for one reply before the wait is given up (a babbling
+# line must not keep a transaction alive forever).
+_MAX_DISCARDED_LINES = 16
+_RESYNC_FRAME = format_request(RESYNC_COMMAND)
+
+
+@dataclass
+class LinkStats:
+    """What the line did since the port was opened (counters only grow).
+
+    ``timeouts``: transactions without a complete reply; ``retries``: repeated read-only
+    requests; ``resyncs``: ``ID`` fences sent after a timeout; ``discarded_frames``: stale or
+    unsolicited lines dropped (flushed before a request, or not naming the request);
+    ``discarded_bytes``: their bytes.
+    """
+
+    timeouts: int = 0
+    retries: int = 0
+    resyncs: int = 0
+    discarded_frames: int = 0
+    discarded_bytes: int = 0
+
+    def copy(self) -> "LinkStats":
+        return LinkStats(**{f.name: getattr(self, f.name) for f in fields(self)})
 
 
 class SerialLike(Protocol):
@@ -138,6 +178,8 @@ class ProbeHead:
         self._timeout = timeout
         self._retries = retries
         self._channels: int | None = None  # learnt from ID or the first M0
+        self._in_step = True  # False after a timeout: fence with ID before the next request
+        self.stats = LinkStats()
         self.info: DeviceInfo | None = None
 
     # ---------------------------------------------------------------- lifetime
@@ -160,29 +202,94 @@ class ProbeHead:
 
     # ---------------------------------------------------------------- transport
 
-    def _exchange(self, frame: bytes) -> tuple[bytes, float]:
+    def _exchange(self, frame: bytes, name: str) -> tuple[bytes, float]:
         """One request/reply; returns the reply line (with CR LF) and the send time."""
         try:
-            self._port.reset_input_buffer()
+            if not self._in_step:
+                self._resync(frame)
+            self._flush()
             sent_at = time.time()
             self._port.write(frame)
-            line = self._port.read_until(REPLY_TERMINATOR, _MAX_REPLY_BYTES)
+            line = self._read_reply(frame, name)
         except _PORT_ERRORS as exc:
             raise ProbeDisconnected(
                 f"serial port {self._name} failed during {frame.strip()!r}: {exc}; the port has "
                 "gone (USB adapter unplugged, unit switched off?) - reconnect and reopen it"
             ) from exc
-        if not line.endswith(REPLY_TERMINATOR):
-            if line:
-                raise ProbeTimeout(
-                    f"incomplete reply to {frame.strip()!r} from {self._name} within "
-                    f"{self._timeout} s ({line[:40]!r}): check the baud rate and the cable"
-                )
-            raise ProbeTimeout(
-                f"no reply to {frame.strip()!r} from {self._name} within {self._timeout} s: check "
-                "that the unit is on, the cable (TX/RX crossed?) and the baud rate"
-            )
         return line, sent_at
+
+    def _flush(self) -> None:
+        """Discard buffered input (counted when the port can tell how much there was)."""
+        pending = getattr(self._port, "in_waiting", 0)
+        if isinstance(pending, int) and pending > 0:
+            self.stats.discarded_frames += 1
+            self.stats.discarded_bytes += pending
+            log.warning("%s: discarded %d stale byte(s) before a request (a late reply or an "
+                        "unsolicited frame)", self._name, pending)
+        self._port.reset_input_buffer()
+
+    def _discard(self, line: bytes, waiting_for: str) -> None:
+        self.stats.discarded_frames += 1
+        self.stats.discarded_bytes += len(line)
+        log.warning("%s: discarded %r while waiting for the reply to %s: it does not answer "
+                    "that request (late reply or unsolicited frame)", self._name, line[:60],
+                    waiting_for)
+
+    def _lost_step(self, frame: bytes, line: bytes) -> ProbeTimeout:
+        """A wait ended without a complete reply: the line is out of step until a fence."""
+        self._in_step = False
+        self.stats.timeouts += 1
+        log.warning("%s: no complete reply to %r within %s s (got %r); the line will be "
+                    "resynchronised with %s before the next request", self._name, frame.strip(),
+                    self._timeout, line[:40], RESYNC_COMMAND)
+        if line:
+            return ProbeTimeout(
+                f"incomplete reply to {frame.strip()!r} from {self._name} within "
+                f"{self._timeout} s ({line[:40]!r}): check the baud rate and the cable"
+            )
+        return ProbeTimeout(
+            f"no reply to {frame.strip()!r} from {self._name} within {self._timeout} s: check "
+            "that the unit is on, the cable (TX/RX crossed?) and the baud rate"
+        )
+
+    def _read_reply(self, frame: bytes, name: str) -> bytes:
+        """Read lines until one names ``name``; discard the others (bounded)."""
+        deadline = time.monotonic() + self._timeout
+        for _ in range(_MAX_DISCARDED_LINES):
+            line = self._port.read_until(REPLY_TERMINATOR, _MAX_REPLY_BYTES)
+            if not line.endswith(REPLY_TERMINATOR):
+                raise self._lost_step(frame, line)
+            if reply_names(line, name):
+                return line
+            self._discard(line, name)
+            if time.monotonic() >= deadline:
+                raise self._lost_step(frame, b"")
+        raise self._lost_step(frame, b"")
+
+    def _resync(self, frame: bytes) -> None:
+        """The fence: send ID and discard every line up to its answer. Raises ProbeTimeout
+        (line still out of step) if the unit does not answer it in time."""
+        self.stats.resyncs += 1
+        self._flush()
+        self._port.write(_RESYNC_FRAME)
+        deadline = time.monotonic() + self._timeout
+        for _ in range(_MAX_DISCARDED_LINES):
+            line = self._port.read_until(REPLY_TERMINATOR, _MAX_REPLY_BYTES)
+            if not line.endswith(REPLY_TERMINATOR):
+                break
+            if reply_names(line, RESYNC_COMMAND):
+                self._in_step = True
+                log.info("%s: line resynchronised (%s answered)", self._name, RESYNC_COMMAND)
+                return
+            self._discard(line, f"{RESYNC_COMMAND} (resynchronisation)")
+            if time.monotonic() >= deadline:
+                break
+        self.stats.timeouts += 1
+        raise ProbeTimeout(
+            f"{self._name} did not answer the resynchronisation request {RESYNC_COMMAND} within "
+            f"{self._timeout} s after an earlier timeout, so {frame.strip()!r} was not sent: "
+            "check that the unit is on, the cable and the baud rate"
+        )
 
     def _transact(self, name: str, parse, *args):
         """Send a command and parse its reply, retrying read-only commands on transient
@@ -190,9 +297,13 @@ class ProbeHead:
         frame = format_request(name, *args)
         attempts = 1 + (self._retries if COMMANDS[name].read_only else 0)
         last: ProbeError | None = None
-        for _ in range(attempts):
+        for attempt in range(attempts):
+            if attempt:
+                self.stats.retries += 1
+                log.warning("%s: repeating %s (attempt %d of %d) after: %s", self._name, name,
+                            attempt + 1, attempts, last)
             try:
-                raw, sent_at = self._exchange(frame)
+                raw, sent_at = self._exchange(frame, name)
                 return parse(raw), raw, sent_at
             except (ProbeTimeout, ProbeFrameError) as exc:
                 last = exc

@@ -63,6 +63,8 @@ __all__ = [
     "parse_ms",
     "parse_id",
     "parse_ack",
+    "reply_names",
+    "RESYNC_COMMAND",
 ]
 
 # --------------------------------------------------------------------------------------------
@@ -155,6 +157,9 @@ VALUE_LIMIT_MM = 999.9999
 #: The unit discards a request line longer than this (answers ER,??,01).
 MAX_REQUEST_BYTES = 64
 REPLY_TERMINATOR = b"\r\n"
+#: The request a driver sends to resynchronise the line after a timeout (docs/protocols.md,
+#: "Sequence rule"): read-only, its reply is static and cannot be taken for a reading.
+RESYNC_COMMAND = "ID"
 
 
 class Field(enum.Enum):
@@ -415,6 +420,24 @@ def _reply_kinds(spec: CommandSpec, n: int) -> tuple[Field, ...] | None:
             return None
         return spec.reply[:-1] + (spec.reply[-1],) * (n - fixed)
     return spec.reply if n == len(spec.reply) else None
+
+
+def reply_names(line: bytes, name: str) -> bool:
+    """True if the complete line ``line`` presents itself as the answer to command ``name``:
+    it echoes ``name`` (``NAME,...`` or ``NAME`` CR LF), or is an error reply for ``name`` or for
+    an unreadable request (``ER,<name>,..``, ``ER,??,..``). Anything else on the line while a
+    driver waits for ``name``'s reply is a stale or unsolicited frame, to be discarded. Pure;
+    never raises for bytes input."""
+    if not isinstance(line, (bytes, bytearray, memoryview)):
+        return False
+    body = bytes(line)
+    if body.endswith(REPLY_TERMINATOR):
+        body = body[:-2]
+    parts = body.split(b",", 2)
+    echo = name.encode("ascii")
+    if parts[0] == echo:
+        return True
+    return parts[0] == b"ER" and len(parts) > 1 and parts[1] in (echo, b"??")
 
 
 def parse_reply(line: bytes, name: str) -> tuple:

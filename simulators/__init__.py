@@ -12,7 +12,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-from drivers.controller_map import WordOrder
+from drivers.controller_map import MAP_VERSION, WordOrder
 
 __all__ = ["SimulatedCellServers", "start_simulated_cell"]
 
@@ -79,15 +79,19 @@ class SimulatedCellServers:
 def start_simulated_cell(seed: int = 0, time_scale: float = 0.0, pace: bool = False,
                          baudrate: int = 38400, host: str = "127.0.0.1", port: int = 0,
                          word_order: WordOrder = WordOrder.BIG, watchdog: float = 1.0,
-                         cell: Any = None, ready_timeout: float = 10.0) -> SimulatedCellServers:
-    """Start the controller and probe-head simulators on one :class:`SimulatedCell`."""
+                         cell: Any = None, ready_timeout: float = 10.0,
+                         map_version: int | None = None) -> SimulatedCellServers:
+    """Start the controller and probe-head simulators on one :class:`SimulatedCell`.
+    ``map_version``: publish another register-map version (the driver must refuse it)."""
     from simulators.cell import SimulatedCell
     from simulators.controller_server import SimulatedController
     from simulators.probe_head_sim import ProbeHeadServer
 
     cell = cell if cell is not None else SimulatedCell(seed=seed)
     ctrl = SimulatedController(cell=cell, host=host, port=port, word_order=word_order,
-                               time_scale=time_scale, watchdog=watchdog).start(ready_timeout)
+                               time_scale=time_scale, watchdog=watchdog,
+                               map_version=MAP_VERSION if map_version is None else map_version
+                               ).start(ready_timeout)
     try:
         _wait_tcp(ctrl.host, ctrl.port, ready_timeout)
         probe = ProbeHeadServer(snapshot_source=cell.probe_values, baudrate=baudrate, pace=pace).start()

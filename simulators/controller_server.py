@@ -88,7 +88,8 @@ class SimulatedController:
     def __init__(self, model: RobotModel | None = None, cell: "SimulatedCell | None" = None,
                  host: str = "127.0.0.1", port: int = 0, word_order: WordOrder = WordOrder.BIG,
                  time_scale: float = 0.0, heartbeat_period: float = 0.1, watchdog: float = 1.0,
-                 max_speed: np.ndarray | None = None, soft_limits: np.ndarray | None = None):
+                 max_speed: np.ndarray | None = None, soft_limits: np.ndarray | None = None,
+                 map_version: int = MAP_VERSION):
         if model is None:
             model = cell.truth.model if cell is not None else load_robot("sr800")
         self.model = model
@@ -106,6 +107,12 @@ class SimulatedController:
             max_speed = np.array([2.5 if t == "revolute" else 1000.0 for t in model.joint_types])
         self.max_speed = np.asarray(max_speed, dtype=float)
         self.soft_limits = np.array(model.joint_limits if soft_limits is None else soft_limits, float)
+        if self.soft_limits.shape != (self.g, 2) or not np.all(np.isfinite(self.soft_limits)) \
+                or not np.all(self.soft_limits[:, 0] < self.soft_limits[:, 1]):
+            raise ValueError(f"soft limits must be ({self.g}, 2) finite [lower, upper] pairs with "
+                             f"lower < upper, got {self.soft_limits.tolist()}")
+        #: the version published in ``map_version`` (another one plays a foreign robot program)
+        self.map_version = int(map_version)
         self._regs = [0] * 65536
         self._lock = threading.Lock()
         # robot state
@@ -129,6 +136,7 @@ class SimulatedController:
         # introspection
         self.command_writes: list[tuple[int, int]] = []  # (code, seq) per write of the command block
         self.requests = 0
+        self.motion_failures = 0  # motions that ended in an internal error (reported DRIVE_FAULT)
         self.failure: BaseException | None = None
         # thread/loop
         self._thread: threading.Thread | None = None
@@ -153,7 +161,7 @@ class SimulatedController:
         return decode(r, self._regs[r.address:r.end], self.word_order)
 
     def _init_registers(self) -> None:
-        self._set("map_version", MAP_VERSION)
+        self._set("map_version", self.map_version)
         self._set("n_joints", self.g)
         self._set("watchdog_ms", int(round(self.watchdog * 1000)))
         lim = np.zeros(2 * MAX_JOINTS)
@@ -397,10 +405,17 @@ class SimulatedController:
                 return self._error(seq, ErrorCode.NOT_READY)
             if not 0.001 <= speed <= 1.0:
                 return self._error(seq, ErrorCode.BAD_COMMAND)
+            # Safety invariants (the station's guard enforces the same): every target is
+            # finite, and every joint the robot would move to (after the correction table) lies
+            # inside the soft limits. A NaN compares false with everything, so the checks are
+            # written to let only values that positively pass through.
             if cmd is Command.MOVE_JOINTS:
                 target = joints.astype(float)
+                bad = np.flatnonzero(~np.isfinite(target))
+                if bad.size:
+                    return self._error(seq, ErrorCode.BAD_COMMAND, int(bad[0]) + 1)
             else:
-                if elbow not in (1, -1):
+                if elbow not in (1, -1) or not np.all(np.isfinite(pose)):
                     return self._error(seq, ErrorCode.BAD_COMMAND)
                 try:
                     target = self.cartesian_target(pose, elbow)
@@ -408,7 +423,7 @@ class SimulatedController:
                     return self._error(seq, a.code, a.joint)
             for j in range(self.g):
                 lo, hi = self.soft_limits[j]
-                if target[j] < lo or target[j] > hi:
+                if not lo <= target[j] <= hi:
                     return self._error(seq, ErrorCode.SOFT_LIMIT, j + 1, -1 if target[j] < lo else 1)
             self._move_task = asyncio.create_task(self._move(seq, target, speed))
             return None
@@ -491,6 +506,13 @@ class SimulatedController:
                 self._bits = self._bits & ~StatusBit.MOVING
                 self._publish_state()
             self._error(seq, a.code, a.joint)
+        except Exception:  # a bug of the simulated program must not leave it MOVING for good
+            log.exception("controller simulator: motion seq %d failed", seq)
+            self.motion_failures += 1
+            with self._lock:
+                self._bits = self._bits & ~StatusBit.MOVING
+                self._publish_state()
+            self._error(seq, ErrorCode.DRIVE_FAULT, 0)
         finally:
             self._stop_request = False
 

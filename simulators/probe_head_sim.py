@@ -7,8 +7,10 @@
   pseudo-terminal; ``.port`` is the slave device path for ``serial.serial_for_url``. Replies are
   paced at the configured baud rate (10 bits per byte) so throughput is realistic.
   :class:`ProbeHeadTcpServer` serves the same unit on ``socket://127.0.0.1:<port>``.
-* :class:`ProbeFaults` scripts faults at run time: one-shot garble / truncate / drop / busy,
-  added latency, a per-channel forced marker; ``server.disconnect()`` makes the port vanish.
+* :class:`ProbeFaults` scripts faults at run time: one-shot garble / truncate / drop / busy /
+  delay, added latency, a per-channel forced marker, unsolicited frames (before the next reply);
+  ``server.send_unsolicited()`` puts a frame on the line between requests and
+  ``server.disconnect()`` makes the port vanish.
 """
 
 from __future__ import annotations
@@ -85,6 +87,8 @@ class FaultKind(enum.Enum):
     TRUNCATE = "truncate"  # next reply: only its first half, no CR LF
     DROP = "drop"          # next reply: not sent at all (lost)
     BUSY = "busy"          # next request: answered ER,<cmd>,05 instead
+    DELAY = "delay"        # next reply: held back (0.5 s, or the seconds given to inject_delay)
+    UNSOLICITED = "unsolicited"  # next reply: preceded by a frame nobody asked for
 
 
 class ProbeFaults:
@@ -92,14 +96,30 @@ class ProbeFaults:
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
-        self._queue: collections.deque[FaultKind] = collections.deque()
+        self._queue: collections.deque[tuple[FaultKind, object]] = collections.deque()
         self._forced: dict[int, ChannelStatus] = {}
         self.latency_s = 0.0  # added before every reply
 
     def inject(self, kind: FaultKind, count: int = 1) -> None:
-        """Queue ``count`` one-shot faults, applied to the next replies in order."""
+        """Queue ``count`` one-shot faults, applied to the next replies in order
+        (``DELAY`` holds a reply back by 0.5 s; see :meth:`inject_delay`)."""
+        default = {FaultKind.DELAY: 0.5, FaultKind.UNSOLICITED: b"ID,NOBODY-ASKED,0.0,06\r\n"}
         with self._lock:
-            self._queue.extend([kind] * count)
+            self._queue.extend([(kind, default.get(kind))] * count)
+
+    def inject_delay(self, seconds: float, count: int = 1) -> None:
+        """The next ``count`` replies are each held back by ``seconds`` (a one-off stall of the
+        unit, unlike :attr:`latency_s` which delays every reply). Later requests queue up
+        behind it and are answered in order, as a real unit would."""
+        if not seconds >= 0:
+            raise ValueError("delay must be >= 0 seconds")
+        with self._lock:
+            self._queue.extend([(FaultKind.DELAY, float(seconds))] * count)
+
+    def inject_unsolicited(self, frame: bytes, count: int = 1) -> None:
+        """The next ``count`` replies are each preceded by ``frame`` (sent as is)."""
+        with self._lock:
+            self._queue.extend([(FaultKind.UNSOLICITED, bytes(frame))] * count)
 
     def force_status(self, channel: int, status: ChannelStatus | None) -> None:
         """Make a channel report a marker (a probe fault) until called again with None."""
@@ -120,9 +140,9 @@ class ProbeFaults:
         with self._lock:
             return len(self._queue)
 
-    def _next(self) -> FaultKind | None:
+    def _next(self) -> tuple[FaultKind, object] | tuple[None, None]:
         with self._lock:
-            return self._queue.popleft() if self._queue else None
+            return self._queue.popleft() if self._queue else (None, None)
 
     def _forced_now(self) -> dict[int, ChannelStatus]:
         with self._lock:
@@ -239,6 +259,9 @@ class ProbeHeadServer:
         self._thread: threading.Thread | None = None
         self._wake_r, self._wake_w = -1, -1
         self._fd = -1          # the fd the loop reads and writes
+        self._write_lock = threading.Lock()  # replies and send_unsolicited() never interleave
+        #: unsolicited frames written so far (send_unsolicited and UNSOLICITED faults)
+        self.unsolicited_sent = 0
         self._closed = False
         self.port = ""
 
@@ -348,9 +371,22 @@ class ProbeHeadServer:
             if delay > 0:
                 self._stop.wait(delay)
 
+    def send_unsolicited(self, frame: bytes) -> None:
+        """Put ``frame`` on the line now, between requests (a unit that babbles, a second
+        device on the bus, line noise that happens to look like a frame)."""
+        if self._thread is None or self._closed or self._fd < 0:
+            raise RuntimeError("server not running, or no client connected")
+        self._send(bytes(frame))
+        self.unsolicited_sent += 1
+
     def _reply(self, reply: bytes, line: bytes) -> None:
-        fault = self.faults._next()
-        if fault is FaultKind.BUSY:
+        fault, arg = self.faults._next()
+        if fault is FaultKind.DELAY and isinstance(arg, float):
+            self._stop.wait(arg)
+        elif fault is FaultKind.UNSOLICITED and isinstance(arg, bytes):
+            self._send(arg)
+            self.unsolicited_sent += 1
+        elif fault is FaultKind.BUSY:
             name = line[:2].decode("ascii", "replace") if line[:2].isalnum() else "??"
             reply = format_error(name, ERR_BUSY)
         elif fault is FaultKind.DROP:
@@ -369,17 +405,18 @@ class ProbeHeadServer:
 
     def _send(self, data: bytes) -> None:
         """Write paced in small chunks: a chunk goes out when its last byte would have arrived."""
-        start = time.monotonic()
-        chunk = 8 if self.pace else len(data)
-        for i in range(0, len(data), chunk):
-            part = data[i: i + chunk]
-            self._pace_until(start + (i + len(part)) * self._byte_s)
-            try:
-                os.write(self._fd, part)
-            except (BrokenPipeError, ConnectionResetError):
-                return  # TCP client went away; the next read notices and waits for another
-            except BlockingIOError:
-                return  # nobody is draining the line: a real UART would lose these bytes too
+        with self._write_lock:
+            start = time.monotonic()
+            chunk = 8 if self.pace else len(data)
+            for i in range(0, len(data), chunk):
+                part = data[i: i + chunk]
+                self._pace_until(start + (i + len(part)) * self._byte_s)
+                try:
+                    os.write(self._fd, part)
+                except (BrokenPipeError, ConnectionResetError):
+                    return  # TCP client went away; the next read notices and waits for another
+                except BlockingIOError:
+                    return  # nobody is draining the line: a real UART would lose these bytes
 
 
 class ProbeHeadTcpServer(ProbeHeadServer):

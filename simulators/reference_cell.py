@@ -54,6 +54,9 @@ probe_head = "{servers.probe_port}"
 baudrate = 38400
 controller = "{servers.controller_host}:{servers.controller_port}"
 {word_order_line}motion_timeout_s = 30.0
+# The simulators share the CPU with the station (and, in CI, with the tests): a loaded machine
+# must not turn into probe timeouts, whose retries make a run stop reproducing.
+probe_timeout_s = 2.0
 
 [plan]
 settle_s = 0.0

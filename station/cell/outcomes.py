@@ -22,6 +22,7 @@ from drivers.controller import (
     ModbusExceptionError,
     MotionTimeout,
 )
+from drivers.controller_errors import MapVersionError, ModbusResponseError, WordOrderError
 from drivers.controller_map import ControllerError
 from drivers.correction_table import TableError, TableVerifyError
 from drivers.probe_protocol import (
@@ -58,6 +59,12 @@ _TABLE: tuple[_Row, ...] = (
     _Row((ControllerLinkLost,), Outcome.DEVICE_FAULT, f"check the network cable and the controller, {RESUME}"),
     _Row((ControllerConnectionError,), Outcome.DEVICE_FAULT,
          "check [devices].controller (host:port), that the robot program runs, and the network"),
+    _Row((WordOrderError,), Outcome.CONFIG_ERROR, "set [devices].word_order as the message says, then run again"),
+    _Row((MapVersionError,), Outcome.DEVICE_FAULT,
+         "the robot program implements another register map version: install the one the station supports"),
+    _Row((ModbusResponseError,), Outcome.DEVICE_FAULT,
+         "the controller answered with the wrong function: check that the device at [devices].controller is "
+         "the robot controller and device_id is right"),
     _Row((ModbusExceptionError,), Outcome.DEVICE_FAULT,
          "check the register map version and [devices].word_order / device_id for this controller"),
     _Row((MotionTimeout,), Outcome.DEVICE_FAULT,

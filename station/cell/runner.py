@@ -232,8 +232,16 @@ class Runner:
             return None
         if isinstance(msg, ReadProbes):
             t0 = time.perf_counter()
+            before = _link_counts(self.probe)
             snap = self.probe.read_averaged(cfg.plan.samples, cfg.plan.max_spread_um * 1e-3)
             self.timing["sampling"] += time.perf_counter() - t0
+            after = _link_counts(self.probe)
+            if before is not None and after is not None and after != before:
+                # A retried or resynchronised read is a fresh reading: say so, because a repeat of
+                # this run (same seed, same cell) differs from here on.
+                d = [a - b for a, b in zip(after, before)]
+                self.emit(Notice("warning", f"step {index + 1}: probe link: {d[0]} timeout(s), {d[1]} retry(ies), "
+                                            f"{d[2]} stale frame(s) discarded; the step's readings are fresh ones"))
             self._last_snapshot = snap
             return snap
         raise TypeError(f"unknown runner message {msg!r}")
@@ -296,6 +304,16 @@ class Runner:
                     f"(cable, stroke, debris, a stuck tip) with 'station check', then resume: the invalid "
                     f"steps are measured again")
         return n
+
+
+def _link_counts(probe: object) -> tuple[int, int, int] | None:
+    """(timeouts, retries, discarded frames) of a driver that counts them (the serial driver's
+    ``stats``); None for one that does not."""
+    stats = getattr(probe, "stats", None)
+    if stats is None:
+        return None
+    return (int(getattr(stats, "timeouts", 0)), int(getattr(stats, "retries", 0)),
+            int(getattr(stats, "discarded_frames", 0)))
 
 
 #: consecutive failed readings with the same cause that stop a run

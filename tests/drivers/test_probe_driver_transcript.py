@@ -66,6 +66,7 @@ def head(steps, stale=b"", retries=2):
 
 
 M0_OK = b"M0,+000.1000,-000.2000,+000.0000,+001.5000,-002.2500,+000.0001\r\n"
+ID_REPLY = b"ID,DL-SIM,2.10,06\r\n"
 
 
 def test_identify_exact_bytes_and_channel_count():
@@ -105,15 +106,23 @@ def test_markers_become_status_and_nan():
     ids=["timeout", "truncated", "garbled", "busy"],
 )
 def test_reads_are_retried_after_transient_faults(bad_reply):
-    ph, port = head([(b"M0\r", bad_reply), (b"M0\r", M0_OK)])
+    timed_out = not bad_reply.endswith(b"\r\n")
+    # after a timeout the line is out of step: the retry is preceded by the ID fence
+    fence = [(b"ID\r", ID_REPLY)] if timed_out else []
+    ph, port = head([(b"M0\r", bad_reply), *fence, (b"M0\r", M0_OK)])
     assert ph.read_all().values_mm[0] == 0.1
     port.assert_done()
     # each attempt starts with a flush: the partial line of the first one is discarded
-    assert [k for k, _ in port.log] == ["flush", "write", "read", "flush", "write", "read"]
+    kinds = ["flush", "write", "read"] * (3 if timed_out else 2)
+    assert [k for k, _ in port.log] == kinds
+    assert ph.stats.retries == 1 and ph.stats.timeouts == int(timed_out)
+    assert ph.stats.resyncs == int(timed_out)
 
 
 def test_reads_give_up_after_bounded_retries():
-    ph, port = head([(b"M0\r", b"")] * 3, retries=2)
+    # the first attempt times out; the next two are fences that get no answer: the M0 is
+    # never sent into a line that is out of step
+    ph, port = head([(b"M0\r", b""), (b"ID\r", b""), (b"ID\r", b"")], retries=2)
     with pytest.raises(ProbeTimeout, match="gave up after 3 attempts"):
         ph.read_all()
     port.assert_done()  # exactly three requests, no fourth
@@ -242,3 +251,65 @@ def test_context_manager_closes_port():
 def test_open_failure_is_disconnected():
     with pytest.raises(ProbeDisconnected, match="device path"):
         ProbeHead("/dev/does-not-exist-probe")
+
+
+# ---------------------------------------------------------------- sequence rule (docs/protocols.md)
+
+LATE_M0 = b"M0,+111.1111,+111.1111,+111.1111,+111.1111,+111.1111,+111.1111\r\n"
+
+
+def test_after_a_timeout_the_next_request_is_fenced_and_the_late_reply_discarded():
+    ph, port = head([
+        (b"M0\r", b""),                      # times out: the reply is late
+        (b"ID\r", LATE_M0 + ID_REPLY),       # the fence: the late reply arrives before its answer
+        (b"M0\r", M0_OK),
+    ], retries=0)
+    with pytest.raises(ProbeTimeout, match="no reply"):
+        ph.read_all()
+    snap = ph.read_all()
+    assert snap.values_mm[0] == 0.1 and snap.raw == M0_OK  # never the late 111.1111
+    port.assert_done()
+    assert port.log == [
+        ("flush", b""), ("write", b"M0\r"), ("read", b""),
+        ("flush", b""), ("write", b"ID\r"), ("read", LATE_M0), ("read", ID_REPLY),
+        ("flush", b""), ("write", b"M0\r"), ("read", M0_OK),
+    ]
+    assert (ph.stats.timeouts, ph.stats.resyncs, ph.stats.discarded_frames) == (1, 1, 1)
+
+
+def test_an_unanswered_fence_keeps_the_request_unsent():
+    ph, port = head([(b"M0\r", b""), (b"ID\r", b""), (b"ID\r", ID_REPLY), (b"M0\r", M0_OK)],
+                    retries=0)
+    with pytest.raises(ProbeTimeout):
+        ph.read_all()
+    with pytest.raises(ProbeTimeout, match="resynchronisation request ID"):
+        ph.read_all()  # the M0 is not written into a line that is out of step
+    assert ph.read_all().raw == M0_OK  # the next call fences again, then asks
+    port.assert_done()
+
+
+@pytest.mark.parametrize("foreign", [
+    b"ID,DL-SIM,2.10,06\r\n",        # a reply to another command
+    b"MS,03,+000.5000\r\n",
+    b"ER,ZS,04\r\n",                  # an error reply for another command
+    b"\x00\x7fLINE NOISE\r\n",        # junk that happens to end in CR LF
+])
+def test_a_frame_that_does_not_name_the_request_is_discarded(foreign):
+    ph, port = head([(b"M0\r", foreign + M0_OK)], retries=0)
+    snap = ph.read_all()
+    assert snap.raw == M0_OK
+    assert port.log[-2:] == [("read", foreign), ("read", M0_OK)]
+    assert ph.stats.discarded_frames == 1 and ph.stats.retries == 0
+
+
+def test_endless_foreign_frames_end_in_a_timeout_not_a_hang():
+    ph, port = head([(b"M0\r", b"ID,X,1,06\r\n" * 40)], retries=0)
+    with pytest.raises(ProbeTimeout):
+        ph.read_all()
+    assert ph.stats.discarded_frames == 16  # bounded
+
+
+def test_error_reply_for_an_unreadable_request_names_it():
+    ph, _ = head([(b"MS,02\r", b"ER,??,01\r\n")], retries=0)
+    with pytest.raises(ProbeFrameError):
+        ph.read_channel(2)  # taken as this request's answer (not silently skipped), and refused

@@ -5,7 +5,7 @@ import tomllib
 import numpy as np
 import pytest
 
-from drivers.controller import ModbusController
+from drivers.controller import ModbusController, WordOrderError
 from drivers.controller_map import WordOrder
 from simulators import start_simulated_cell
 from simulators.cell import DEFAULT_SETUP
@@ -55,8 +55,12 @@ def test_little_word_order_cell_serves_true_joints(little_cell):
         truth = sim.joints
         np.testing.assert_allclose(truth, target, atol=1e-3)
         np.testing.assert_allclose(c.read_joints(), truth, rtol=1e-6, atol=1e-6)
-    # A client configured for the other word order swaps the halves of every 32-bit value.
-    with ModbusController(servers.controller_host, servers.controller_port, word_order=WordOrder.BIG,
-                          heartbeat_period=None) as c:
-        wrong = c.read_joints()
-        assert not np.any(np.isclose(wrong, truth, rtol=1e-3, atol=1e-6))
+    # A client configured for the other word order would swap the halves of every 32-bit value
+    # (the soft limits read as implausible numbers): it is refused on connect, naming the order.
+    c = ModbusController(servers.controller_host, servers.controller_port, word_order=WordOrder.BIG,
+                         heartbeat_period=None)
+    with pytest.raises(WordOrderError) as info:
+        c.connect()
+    c.close()
+    assert info.value.detected is WordOrder.LITTLE
+    np.testing.assert_allclose(sim.joints, truth)  # nothing moved

@@ -1,0 +1,360 @@
+"""Issue 12 on the Modbus link: the reply's function code is checked (exact wire transcript),
+the map version and the word order are checked on connect, and the simulated controller
+enforces the motion safety invariants for any client (raw pymodbus, property-based)."""
+
+from __future__ import annotations
+
+import math
+import socket
+import struct
+import threading
+import time
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from pymodbus.client import ModbusTcpClient
+
+from drivers.controller import (
+    MapVersionError,
+    ModbusController,
+    ModbusExceptionError,
+    ModbusResponseError,
+    MotionRejected,
+    RegisterDecodeError,
+    WordOrderError,
+)
+from drivers.controller_map import (
+    REG,
+    Command,
+    ErrorCode,
+    StatusBit,
+    WordOrder,
+    encode,
+    implausible_limits,
+    register_span,
+)
+from simulators.controller_server import SimulatedController
+
+# --------------------------------------------------------------------------------------------
+# function code: a scripted server on a real socket, exact bytes both ways
+# --------------------------------------------------------------------------------------------
+
+LIMITS = [-2.0, 2.0, -2.5, 2.5, -200.0, 0.0, -6.0, 6.0]
+
+
+def _regs(name, value, order=WordOrder.BIG) -> bytes:
+    return b"".join(struct.pack(">H", w) for w in encode(name, value, order))
+
+
+def _read_reply(payload: bytes) -> bytes:
+    return bytes([3, len(payload)]) + payload
+
+
+class ScriptedServer:
+    """One TCP client; answers the n-th request with ``script[n](request_pdu)`` (a PDU)."""
+
+    def __init__(self, script):
+        self.script = list(script)
+        self.requests: list[bytes] = []
+        self.sock = socket.create_server(("127.0.0.1", 0))
+        self.port = self.sock.getsockname()[1]
+        self.thread = threading.Thread(target=self._serve, daemon=True)
+        self.thread.start()
+
+    def _recv(self, conn, n):
+        buf = b""
+        while len(buf) < n:
+            chunk = conn.recv(n - len(buf))
+            if not chunk:
+                return b""
+            buf += chunk
+        return buf
+
+    def _serve(self):
+        conn, _ = self.sock.accept()
+        with conn:
+            for answer in self.script:
+                head = self._recv(conn, 7)
+                if not head:
+                    return
+                (length,) = struct.unpack(">H", head[4:6])
+                adu = head + self._recv(conn, length - 1)
+                self.requests.append(adu)
+                pdu = answer(adu[7:])
+                conn.sendall(head[:4] + struct.pack(">H", len(pdu) + 1) + head[6:7] + pdu)
+
+    def close(self):
+        self.sock.close()
+
+
+CONNECT = [
+    lambda req: _read_reply(_regs("map_version", 1)),
+    lambda req: _read_reply(_regs("n_joints", 4)),
+    lambda req: _read_reply(_regs("soft_limits", LIMITS + [0.0] * 4)),
+    lambda req: _read_reply(_regs("cmd_seq", 0)),
+]
+CONNECT_REQUESTS = [  # MBAP (tid, protocol 0, length 6, unit 1) + FC 3, address, count
+    bytes.fromhex("0001 0000 0006 01 03 0002 0001"),
+    bytes.fromhex("0002 0000 0006 01 03 0003 0001"),
+    bytes.fromhex("0003 0000 0006 01 03 0048 0018"),
+    bytes.fromhex("0004 0000 0006 01 03 000b 0001"),
+]
+
+
+@pytest.mark.parametrize("reply, error, got", [
+    (bytes.fromhex("04 0e") + bytes(14), ModbusResponseError, 4),   # FC 4 (input registers)
+    (bytes.fromhex("10 0028 0007"), ModbusResponseError, 16),        # a write's response
+    (bytes.fromhex("84 02"), ModbusResponseError, 0x84),             # exception for FC 4
+    (bytes.fromhex("83 02"), ModbusExceptionError, None),            # the right exception
+])
+def test_a_reply_with_another_function_code_is_refused(reply, error, got):
+    srv = ScriptedServer(CONNECT + [lambda req: reply])
+    c = ModbusController("127.0.0.1", srv.port, heartbeat_period=None, timeout=2.0)
+    try:
+        c.connect()
+        with pytest.raises(error) as info:
+            c.status()
+    finally:
+        c.close()
+        srv.close()
+    status_first, status_count = register_span("ack_seq", "error_bound")
+    assert srv.requests == CONNECT_REQUESTS + [
+        bytes.fromhex("0005 0000 0006 01 03") + struct.pack(">HH", status_first, status_count)]
+    if got is not None:
+        assert (info.value.expected_fc, info.value.got_fc) == (3, got)
+        assert "was not used" in str(info.value)
+    else:
+        assert info.value.code == 2
+
+
+def test_a_write_answered_with_a_read_response_is_refused():
+    srv = ScriptedServer(CONNECT + [lambda req: _read_reply(b"\x00\x01")])
+    c = ModbusController("127.0.0.1", srv.port, heartbeat_period=None, timeout=2.0)
+    try:
+        c.connect()
+        with pytest.raises(ModbusResponseError) as info:
+            c._write(REG["hb_pc"].address, [7])
+    finally:
+        c.close()
+        srv.close()
+    assert srv.requests[-1] == bytes.fromhex("0005 0000 0009 01 10 0000 0001 02 0007")
+    assert (info.value.expected_fc, info.value.got_fc) == (16, 3)
+
+
+# --------------------------------------------------------------------------------------------
+# map version and word order on connect
+# --------------------------------------------------------------------------------------------
+
+
+def test_unknown_map_version_is_refused_naming_both_versions():
+    with SimulatedController(map_version=2) as sim:
+        c = ModbusController("127.0.0.1", sim.port, heartbeat_period=None)
+        with pytest.raises(MapVersionError) as info:
+            c.connect()
+        c.close()
+        assert sim.command_writes == []
+    assert (info.value.found, info.value.supported) == (2, (1,))
+    assert "version 2" in str(info.value) and "version 1" in str(info.value)
+
+
+@pytest.mark.parametrize("sim_order, drv_order", [(WordOrder.LITTLE, WordOrder.BIG),
+                                                  (WordOrder.BIG, WordOrder.LITTLE)])
+def test_wrong_word_order_is_a_word_order_error_not_a_soft_limit(sim_order, drv_order):
+    with SimulatedController(word_order=sim_order) as sim:
+        c = ModbusController("127.0.0.1", sim.port, word_order=drv_order, heartbeat_period=None)
+        with pytest.raises(WordOrderError) as info:
+            c.connect()
+        c.close()
+        assert sim.command_writes == []  # nothing was commanded
+    assert info.value.detected is sim_order and info.value.configured is drv_order
+    assert f'word_order = "{sim_order.value}"' in str(info.value)
+
+
+def test_right_word_order_connects():
+    with SimulatedController(word_order=WordOrder.LITTLE) as sim:
+        c = ModbusController("127.0.0.1", sim.port, word_order=WordOrder.LITTLE,
+                             heartbeat_period=None)
+        c.connect()
+        np.testing.assert_allclose(c.soft_limits(), sim.soft_limits, rtol=1e-6)
+        c.close()
+
+
+def test_implausible_limits():
+    assert implausible_limits(LIMITS, 4) is None
+    assert "lower_1" in implausible_limits([math.nan] + LIMITS[1:], 4)
+    assert "not below" in implausible_limits([2.0, -2.0] + LIMITS[2:], 4)
+    assert "not below" in implausible_limits([1.0, 1.0] + LIMITS[2:], 4)
+    assert implausible_limits([2.3e-41, 1.0] + LIMITS[2:], 4) is not None  # a swapped 1.0
+    assert implausible_limits([-1e9, 1.0] + LIMITS[2:], 4) is not None
+    assert implausible_limits(LIMITS[:6], 4) is not None
+
+
+class _Resp:
+    def __init__(self, registers):
+        self.registers = registers
+
+    def isError(self):
+        return False
+
+
+class NaNLimitsClient:
+    """Soft limits that are implausible in either word order (NaN): a broken program."""
+
+    def __init__(self):
+        self.regs = [0] * 200
+        for name, value in (("map_version", 1), ("n_joints", 1)):
+            w = encode(name, value)
+            self.regs[REG[name].address:REG[name].address + len(w)] = w
+        self.regs[72:76] = [0x7FC0, 0x0000, 0x3F80, 0x0000]  # NaN, 1.0 (BIG)
+
+    def connect(self):
+        return True
+
+    def close(self):
+        pass
+
+    def read_holding_registers(self, address, *, count=1, device_id=1):
+        return _Resp(self.regs[address:address + count])
+
+
+def test_limits_implausible_in_either_order_are_a_decode_error():
+    c = ModbusController("x", 0, heartbeat_period=None, client=NaNLimitsClient())
+    with pytest.raises(RegisterDecodeError, match="either word order"):
+        c.connect()
+
+
+# --------------------------------------------------------------------------------------------
+# safety invariants in the simulated controller (any client) and in the driver
+# --------------------------------------------------------------------------------------------
+
+_CMD_FIRST, _ = register_span("cmd_code", "cmd_pose")
+_ST_FIRST, _ST_COUNT = register_span("ack_seq", "error_bound")
+
+
+def _f32_words(values) -> list[int]:
+    out = []
+    for v in values:
+        b = struct.pack(">f", v)
+        out += [int.from_bytes(b[:2], "big"), int.from_bytes(b[2:], "big")]
+    return out
+
+
+class RawClient:
+    """A bare pymodbus client that writes command blocks the driver would never send."""
+
+    def __init__(self, port: int):
+        self.client = ModbusTcpClient("127.0.0.1", port=port, timeout=2.0, retries=0)
+        assert self.client.connect()
+        self.seq = self.read(REG["cmd_seq"].address, 1)[0]
+
+    def read(self, address, count):
+        rr = self.client.read_holding_registers(address, count=count, device_id=1)
+        assert not rr.isError()
+        return list(rr.registers)
+
+    def command(self, code: Command, joints=(0.0,) * 6, pose=(0.0,) * 6, elbow=1, speed=500):
+        self.seq = self.seq % 0xFFFF + 1
+        block = [int(code), self.seq, elbow & 0xFFFF, speed]
+        block += _f32_words(list(joints) + [0.0] * (6 - len(joints)))
+        block += _f32_words(pose)
+        assert not self.client.write_registers(_CMD_FIRST, block, device_id=1).isError()
+        deadline = time.monotonic() + 5.0
+        while True:  # resolved: done_seq or error_seq is this command's number
+            ack, done, err, code_, bits, joint, bound = self.read(_ST_FIRST, _ST_COUNT)
+            if ack == self.seq and self.seq in (done, err):
+                as_i16 = lambda w: w - 0x10000 if w & 0x8000 else w  # noqa: E731
+                return (done == self.seq), code_, StatusBit(bits), as_i16(joint), as_i16(bound)
+            assert time.monotonic() < deadline, "command never resolved (stuck)"
+            time.sleep(0.002)
+
+    def close(self):
+        self.client.close()
+
+
+@pytest.fixture(scope="module")
+def raw():
+    sim = SimulatedController(time_scale=0.0, watchdog=60.0).start()
+    client = RawClient(sim.port)
+    yield sim, client
+    client.close()
+    sim.stop()
+
+
+HOME = [0.0, 0.0, -100.0, 0.0]
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+@pytest.mark.parametrize("joint", [0, 2])
+def test_non_finite_joint_target_is_refused_and_never_stuck(raw, bad, joint):
+    sim, client = raw
+    target = list(HOME)
+    target[joint] = bad
+    ok, code, bits, err_joint, _ = client.command(Command.MOVE_JOINTS, joints=target)
+    assert not ok and code == ErrorCode.BAD_COMMAND and err_joint == joint + 1
+    assert not bits & StatusBit.MOVING and bits & StatusBit.READY
+    assert np.all(np.isfinite(sim.joints))
+    ok, *_ = client.command(Command.MOVE_JOINTS, joints=HOME)  # and it still moves
+    assert ok
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf])
+@pytest.mark.parametrize("axis", [0, 5])
+def test_non_finite_cartesian_target_is_refused(raw, bad, axis):
+    _, client = raw
+    pose = [550.0, 150.0, 320.0, 0.0, 0.0, 0.3]
+    pose[axis] = bad
+    ok, code, bits, _, _ = client.command(Command.MOVE_CARTESIAN, pose=pose)
+    assert not ok and code == ErrorCode.BAD_COMMAND
+    assert not bits & StatusBit.MOVING
+
+
+_LIM = SimulatedController().soft_limits  # the sr800's, as the simulator publishes them
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.lists(st.one_of(st.floats(allow_nan=True, allow_infinity=True, width=32),
+                          st.floats(-3.0, 3.0, width=32), st.floats(-400.0, 50.0, width=32)),
+                min_size=4, max_size=4))
+def test_property_a_joint_move_is_done_only_inside_the_limits(raw, q):
+    sim, client = raw
+    ok, code, bits, err_joint, bound = client.command(Command.MOVE_JOINTS, joints=q)
+    assert not bits & StatusBit.MOVING  # resolved, never left moving
+    q = np.asarray(q, dtype=float)
+    finite = np.isfinite(q)
+    inside = finite & (q >= _LIM[:, 0]) & (q <= _LIM[:, 1])
+    if inside.all():
+        assert ok, f"refused a valid target {q} (code {code})"
+        np.testing.assert_allclose(sim.joints, q, atol=1e-5)
+        return
+    assert not ok
+    j = int(np.argmin(inside))  # the first joint that fails
+    if not finite.all():
+        assert code == ErrorCode.BAD_COMMAND and err_joint == int(np.argmin(finite)) + 1
+    else:
+        assert code == ErrorCode.SOFT_LIMIT and err_joint == j + 1
+        assert bound == (-1 if q[j] < _LIM[j, 0] else 1)
+    assert np.all(np.isfinite(sim.joints))
+
+
+def test_simulator_refuses_non_finite_or_unordered_soft_limits():
+    for bad in ([[math.nan, 1.0]] * 4, [[1.0, -1.0]] * 4, [[-1.0, math.inf]] * 4):
+        with pytest.raises(ValueError, match="soft limits"):
+            SimulatedController(soft_limits=np.array(bad))
+
+
+def test_driver_refuses_non_finite_targets_before_writing_anything():
+    with SimulatedController() as sim:
+        c = ModbusController("127.0.0.1", sim.port, heartbeat_period=None)
+        c.connect()
+        writes = sim.requests
+        for q in ([math.nan, 0, -100, 0], [0, math.inf, -100, 0]):
+            with pytest.raises(ValueError, match="NaN or infinity"):
+                c.move_joints(q)
+        with pytest.raises(ValueError, match="finite"):
+            c.move_cartesian([550.0, math.nan, 320.0, 0, 0, 0])
+        assert sim.requests == writes and sim.command_writes == []  # not one request went out
+        with pytest.raises(MotionRejected):  # and a real refusal still comes back typed
+            c.move_joints([0.0, 0.0, -100.0, 99.0]).wait(2.0)
+        c.close()
