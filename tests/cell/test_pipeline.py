@@ -24,6 +24,7 @@ class Cell:
     """A simulated cell, its configuration, a database and connected devices."""
 
     def __init__(self, tmp_path, seed=1, **cfg_overrides):
+        tmp_path.mkdir(parents=True, exist_ok=True)
         self.stack = ExitStack()
         self.srv = start_simulated_cell(seed=seed)
         self.stack.callback(self.srv.stop)
@@ -318,3 +319,28 @@ def test_the_operator_rolls_the_new_table_back(cell):
     assert asked[1].gain >= 20 and asked[1].rms_after_um < asked[1].rms_before_um
     assert summary.outcome is Outcome.NOT_UPLOADED and summary.after is not None
     assert cell.srv.controller_server.active_table is None  # the previous state (no table) again
+
+
+@pytest.mark.slow
+def test_runs_reproduce_and_a_late_probe_reply_is_logged_not_taken(tmp_path):
+    """Item 9 of the safety issue: two runs of one seed give the same result; a probe reply that
+    comes later than the timeout is never taken as the next answer, and the log says that the
+    step's readings are fresh ones (the reason a repeat would differ)."""
+    results = []
+    for attempt in ("a", "b", "late"):
+        c = Cell(tmp_path / attempt, seed=1, **{"repeats = 4": "repeats = 1"})
+        try:
+            if attempt == "late":
+                emit = _after_n_measurements(c, 10, lambda c=c: c.srv.probe_server.faults.inject_delay(2.5))
+            else:
+                emit = c.events.append
+            summary = run_calibration(c.cfg, c.probe, c.ctrl, c.db, emit, options=Options(upload=False))
+            results.append((summary, list(c.events)))
+        finally:
+            c.close()
+    (a, _), (b, _), (late, events) = results
+    assert [p.value for p in a.identification.parameters] == [p.value for p in b.identification.parameters]
+    assert a.before == b.before
+    notices = [e.message for e in events if isinstance(e, Notice) and "probe link" in e.message]
+    assert notices and "fresh" in notices[0]
+    assert late.outcome is Outcome.NOT_UPLOADED and late.identification is not None
