@@ -16,6 +16,7 @@ hold lengths in mm and angles in degrees or radians as their header says.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import Literal
@@ -93,7 +94,7 @@ class RobotModel:
         """Indices into ``transforms`` of the transforms that carry a joint."""
         return tuple(i for i, t in enumerate(self.transforms) if t.joint is not None)
 
-    @property
+    @functools.cached_property  # derived from frozen fields; the hot loops read it often
     def joint_types(self) -> tuple[JointType, ...]:
         return tuple(t.joint for t in self.transforms if t.joint is not None)
 
@@ -102,7 +103,7 @@ class RobotModel:
         """The joint sequence of a SCARA (R R P R): closed-form IK and an x, y, z, yaw table apply."""
         return self.joint_types == ("revolute", "revolute", "prismatic", "revolute")
 
-    @property
+    @functools.cached_property  # derived from frozen fields; the hot loops read it often
     def n_joints(self) -> int:
         return sum(t.joint is not None for t in self.transforms)
 
@@ -110,7 +111,7 @@ class RobotModel:
     def n_params(self) -> int:
         return 6 * len(self.transforms)
 
-    @property
+    @functools.cached_property  # derived from frozen fields; the hot loops read it often
     def param_names(self) -> tuple[str, ...]:
         return tuple(f"{t.name}.{s}" for t in self.transforms for s in PARAM_SUFFIXES)
 
