@@ -19,6 +19,7 @@ from station.ui.commands_cell import (
     cmd_check,
     cmd_export,
     cmd_init,
+    cmd_plan,
     cmd_report,
     cmd_reset,
     cmd_runs,
@@ -133,6 +134,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("config")
     p.add_argument("--yes", action="store_true", help="confirm without asking: the e-stop is released, the cell clear")
     p.set_defaults(func=cmd_reset)
+
+    p = sub.add_parser("plan", help="preview a calibration's plan: steps, margins, expected accuracy (nothing moves)")
+    p.add_argument("config")
+    p.add_argument("--no-upload", action="store_true", help="the plan of a run without the upload")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_plan)
 
     p = sub.add_parser("runs", help="list the runs of a run database (status, outcome, figures, resumable)")
     p.add_argument("--db", default="runs.sqlite")

@@ -207,6 +207,18 @@ def _check_report_dir(path: Path) -> None:
         raise ConfigError(f"--report {path}: cannot write there ({exc.strerror or exc}); choose another folder") from None
 
 
+def cmd_plan(args: argparse.Namespace) -> int:
+    """The plan preview: nothing moves."""
+    from station.cell.preview import describe, preview
+
+    p = preview(load_config(args.config), with_upload=not args.no_upload)
+    if args.json:
+        print(json.dumps(p.to_json()))
+    else:
+        print("\n".join(describe(p)))
+    return 0
+
+
 def cmd_runs(args: argparse.Namespace) -> int:
     """The runs of a run database: a table for people, one JSON object for scripts."""
     if not Path(args.db).exists():
