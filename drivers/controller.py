@@ -136,6 +136,7 @@ class ModbusController:
         self._cmd_lock = threading.Lock()
         self._seq = 0
         self._n_joints = 0
+        self.map_version: int | None = None
         self._soft_limits: np.ndarray | None = None
         self._pending: CommandStatus | None = None
         self._link_lost: str | None = None
@@ -219,6 +220,7 @@ class ModbusController:
         version = self._read_entry("map_version")
         if version not in SUPPORTED_MAP_VERSIONS:
             raise MapVersionError(version, SUPPORTED_MAP_VERSIONS)
+        self.map_version = int(version)  # for the record (a report names it)
         g = self._read_entry("n_joints")
         if not 1 <= g <= MAX_JOINTS:
             raise ControllerError(f"controller reports {g} joints; supported are 1..{MAX_JOINTS}")

@@ -96,7 +96,9 @@ def describe_devices(devices: Devices) -> dict[str, str]:
     controller's register-map version."""
     info = {}
     try:
-        info["probe_interface"] = str(devices.probe.identify())
+        ident = devices.probe.identify()
+        fields = [f"{k} {getattr(ident, k)}" for k in ("model", "firmware", "channels") if hasattr(ident, k)]
+        info["probe_interface"] = ", ".join(fields) if fields else str(ident)
     except Exception as exc:  # noqa: BLE001 - a missing identification must not stop a run
         info["probe_interface"] = f"not identified ({exc})"
     version = getattr(devices.controller, "map_version", None)
