@@ -80,9 +80,10 @@ class RobotModel:
             raise ConfigError(
                 f"robot {self.name!r}: joint_limits must have shape ({self.n_joints}, 2)"
             )
-        lim = self.joint_limits
-        if not np.all(np.isfinite(lim)) or not np.all(lim[:, 0] < lim[:, 1]):  # NaN fails both tests
-            raise ConfigError(f"robot {self.name!r}: every joint limit must be finite with lower < upper")
+        for j, (lo, hi) in enumerate(self.joint_limits):
+            if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):  # NaN fails every comparison
+                raise ConfigError(f"robot {self.name!r}: joint {j + 1} has limits [{lo}, {hi}]; every joint "
+                                  f"limit must be finite with lower < upper")
 
     # --- structure -----------------------------------------------------------------------
     @property
