@@ -24,10 +24,10 @@ import numpy as np
 
 from station.core.model import RobotModel
 from station.core.transforms import pose_to_matrix
+from station.core.units import ARCSEC, DEG, UM
 from station.errors import ConfigError
 
-_SCALE = {"mm": 1.0, "m": 1000.0, "um": 1e-3, "µm": 1e-3, "deg": math.pi / 180, "rad": 1.0,
-          "arcsec": math.pi / 180 / 3600}
+_SCALE = {"mm": 1.0, "m": 1000.0, "um": UM, "µm": UM, "deg": DEG, "rad": 1.0, "arcsec": ARCSEC}
 _LENGTH_UNITS = ("mm", "m", "um", "µm")
 MAX_FILE_BYTES = 256 * 2**20
 _ANGLE_UNITS = ("deg", "rad", "arcsec")
