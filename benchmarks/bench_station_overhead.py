@@ -19,26 +19,29 @@ from contextlib import ExitStack
 from pathlib import Path
 
 from simulators import start_simulated_cell
+from simulators.reference_cell import cell_config_text
 from station.cell.config import parse_text
-from station.cell.pipeline import _proc_for, full_plan
+from station.cell.pipeline import _proc_for
+from station.cell.plan import build_plan
 from station.cell.rundb import RunDB
 from station.cell.runner import Runner
-from station.ui.commands_cell import open_devices, simulated_config_text
+from station.cell.session import open_cell
+from station.cell.steps import StepKind
 
 
 def one_run(n_steps: int, settle: float) -> dict:
     with ExitStack() as st, tempfile.TemporaryDirectory() as d:
         srv = start_simulated_cell(seed=1, time_scale=1.0, pace=True)
         st.callback(srv.stop)
-        text = simulated_config_text(srv, 1).replace("settle_s = 0.0", f"settle_s = {settle}")
+        text = cell_config_text(srv, 1).replace("settle_s = 0.0", f"settle_s = {settle}")
         cfg = parse_text(text)
-        plan = [s for s in full_plan(cfg, False) if s["kind"] == "identification"][:n_steps]
+        plan = [s for s in build_plan(cfg).identification if s.kind is StepKind.IDENTIFICATION][:n_steps]
         db = st.enter_context(RunDB(Path(d) / "b.sqlite"))
-        run = db.create_run(cfg.source_text, plan)
-        probe, ctrl = open_devices(cfg, st)
-        runner = Runner(cfg, probe, ctrl, lambda e: None)
+        run = db.create_run(cfg.source_text, [s.to_record() for s in plan])
+        cell = open_cell(cfg, st)
+        runner = Runner(cfg, cell.probe, cell.controller, lambda e: None)
         t0 = time.perf_counter()
-        runner.measure_steps(db, run, plan, {"identification"}, len(plan), _proc_for(cfg, None))
+        runner.measure_steps(db, run, plan, {StepKind.IDENTIFICATION}, len(plan), _proc_for(cfg, None))
         total = time.perf_counter() - t0
         busy = sum(runner.timing.values())
         return {"total": total, **runner.timing, "own": total - busy}

@@ -137,6 +137,7 @@ class ModbusController:
         self._seq = 0
         self._n_joints = 0
         self.map_version: int | None = None
+        self._hb_robot_seen: float | None = None
         self._soft_limits: np.ndarray | None = None
         self._pending: CommandStatus | None = None
         self._link_lost: str | None = None
@@ -293,6 +294,7 @@ class ModbusController:
                 if hb != last_robot:
                     last_robot = hb
                     last_change = time.monotonic()
+                    self._hb_robot_seen = last_change
             except ControllerError as exc:
                 # Recorded, reported as the cause if the link is declared lost.
                 self._hb_last_error = exc
@@ -306,6 +308,12 @@ class ModbusController:
                     f"the robot, then call connect() again")
                 log.error(self._link_lost)
                 return
+
+    @property
+    def heartbeat_age_s(self) -> float | None:
+        """Seconds since the robot's heartbeat last advanced (None before the first one)."""
+        seen = self._hb_robot_seen
+        return None if seen is None else time.monotonic() - seen
 
     def _heartbeat_once(self) -> int:
         """Advance and write the PC heartbeat; return the robot heartbeat."""

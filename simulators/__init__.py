@@ -37,6 +37,7 @@ class SimulatedCellServers:
     controller_server: Any
     probe_server: Any
     seed: int = 0
+    drift: dict = field(default_factory=dict)  # the [simulation] drift keys it was started with
     _stopped: bool = field(default=False, repr=False)
 
     @property
@@ -80,14 +81,28 @@ def start_simulated_cell(seed: int = 0, time_scale: float = 0.0, pace: bool = Fa
                          baudrate: int = 38400, host: str = "127.0.0.1", port: int = 0,
                          word_order: WordOrder = WordOrder.BIG, watchdog: float = 1.0,
                          cell: Any = None, ready_timeout: float = 10.0,
-                         map_version: int | None = None) -> SimulatedCellServers:
+                         map_version: int | None = None, thermal_length_um: float = 0.0,
+                         thermal_offset_arcsec: float = 0.0, thermal_time_constant_s: float = 600.0,
+                         step_joint: int = 0, step_offset_deg: float = 0.0,
+                         step_tool_um: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> SimulatedCellServers:
     """Start the controller and probe-head simulators on one :class:`SimulatedCell`.
-    ``map_version``: publish another register-map version (the driver must refuse it)."""
-    from simulators.cell import SimulatedCell
+    ``map_version``: publish another register-map version (the driver must refuse it).
+
+    Drift (``simulators/thermal.py``; the ``[simulation]`` keys of the same names): a thermal
+    model (``thermal_length_um`` growth of the arm lengths, ``thermal_offset_arcsec`` of the
+    revolute joint offsets when warm, time constant ``thermal_time_constant_s`` of simulated
+    motion) and a step change against the seed's robot (``step_joint`` from 1 re-mastered by
+    ``step_offset_deg``; the tool bumped by ``step_tool_um``)."""
+    from simulators.cell import CellTruth, SimulatedCell
     from simulators.controller_server import SimulatedController
     from simulators.probe_head_sim import ProbeHeadServer
+    from simulators.thermal import ThermalModel, step_change
 
-    cell = cell if cell is not None else SimulatedCell(seed=seed)
+    if cell is None:
+        model = CellTruth.generate(seed=seed).model
+        thermal = ThermalModel.for_model(model, thermal_length_um, thermal_offset_arcsec, thermal_time_constant_s)
+        step = step_change(model, step_joint, step_offset_deg, tuple(step_tool_um))  # type: ignore[arg-type]
+        cell = SimulatedCell(seed=seed, thermal=thermal, step=step)
     ctrl = SimulatedController(cell=cell, host=host, port=port, word_order=word_order,
                                time_scale=time_scale, watchdog=watchdog,
                                map_version=MAP_VERSION if map_version is None else map_version
@@ -98,4 +113,10 @@ def start_simulated_cell(seed: int = 0, time_scale: float = 0.0, pace: bool = Fa
     except BaseException:
         ctrl.stop()
         raise
-    return SimulatedCellServers(cell, ctrl, probe, seed)
+    drift: dict[str, Any] = {k: v for k, v in (("thermal_length_um", thermal_length_um), ("thermal_offset_arcsec", thermal_offset_arcsec),
+                               ("step_joint", step_joint), ("step_offset_deg", step_offset_deg)) if v}
+    if thermal_length_um or thermal_offset_arcsec:
+        drift["thermal_time_constant_s"] = thermal_time_constant_s
+    if any(step_tool_um):
+        drift["step_tool_um"] = [float(v) for v in step_tool_um]
+    return SimulatedCellServers(cell, ctrl, probe, seed, drift)

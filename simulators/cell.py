@@ -12,6 +12,8 @@ body, and what the probe head touches.
   physical joints (backlash by approach direction, repeatability noise), the true probe-head
   pose world<-MKKS = R_true A(q_phys) K_true, the measuring point in capture range and the true
   contact pose ``M_true = inv(world<-MKKS) I_true_j`` fed to the probe-head physics.
+  Optionally a thermal model (``simulators/thermal.py``) drifts the true parameters along a
+  warm-up curve over the robot's simulated motion time (:attr:`SimulatedCell.motion_time_s`).
 
 "World" is the calibration-body frame KKS. Units mm and rad.
 """
@@ -112,10 +114,17 @@ class CellTruth:
         enc = np.full(model.n_joints, float(encoder_resolution))
         return cls(model, model.nominal + err.ravel(), rep, bl, enc, seed)
 
-    def head_pose(self, joints_physical: np.ndarray) -> np.ndarray:
-        """True world<-MKKS ``(n, 4, 4)`` for physical joints ``(n, g)``."""
+    def head_pose(self, joints_physical: np.ndarray, delta: np.ndarray | None = None) -> np.ndarray:
+        """True world<-MKKS ``(n, 4, 4)`` for physical joints ``(n, g)``; ``delta``: a drift
+        (n_params,) added to the true parameters (the thermal state)."""
         q = np.atleast_2d(np.asarray(joints_physical, dtype=float))
-        return forward(self.model, q, params=self.params, setup=True)
+        p = self.params if delta is None else self.params + delta
+        return forward(self.model, q, params=p, setup=True)
+
+    def with_change(self, delta: np.ndarray) -> "CellTruth":
+        """The same robot after a step change ``delta`` (n_params,) of its parameters."""
+        return CellTruth(self.model, self.params + np.asarray(delta, dtype=float), self.repeatability,
+                         self.backlash, self.encoder_resolution, self.seed)
 
 
 @dataclass(frozen=True)
@@ -197,10 +206,17 @@ class SimulatedCell:
     def __init__(self, truth: CellTruth | None = None, body: CalibrationBody | None = None,
                  probe=None, seed: int = 0, capture_mm: float = 8.0,
                  capture_angle_rad: float = np.deg2rad(10.0), probe_noise_mm: float = 0.0005,
-                 initial_joints: np.ndarray | None = None):
+                 initial_joints: np.ndarray | None = None, thermal=None, step: np.ndarray | None = None):
+        """``thermal``: a :class:`simulators.thermal.ThermalModel` (None: no drift with
+        warm-up); ``step``: a step change (n_params,) of the true parameters (a re-mastered axis,
+        a bumped tool) applied before the first move."""
         from simulators.probe_head_sim import ProbeHeadPhysics  # the other simulator's physics
 
         self.truth = truth if truth is not None else CellTruth.generate(seed=seed)
+        if step is not None and np.any(np.asarray(step) != 0):
+            self.truth = self.truth.with_change(step)
+        self.thermal = thermal if thermal is not None and thermal.active else None
+        self._motion_time_s = 0.0
         self.body = body if body is not None else CalibrationBody.generate(seed=seed)
         self.probe = probe if probe is not None else ProbeHeadPhysics(noise_mm=probe_noise_mm, seed=seed + 1)
         self.capture_mm = float(capture_mm)
@@ -243,6 +259,10 @@ class SimulatedCell:
         encoder reading (``q_cmd`` quantised to the encoder resolution)."""
         q_cmd = np.asarray(q_cmd, dtype=float).ravel()
         with self._lock:
+            if self.thermal is not None:
+                from simulators.thermal import motion_seconds
+
+                self._motion_time_s += motion_seconds(self.truth.model, q_cmd - self._cmd)
             d = np.sign(q_cmd - self._cmd)
             self._direction = np.where(d != 0, d, self._direction)
             self._prev_cmd = self._cmd
@@ -274,10 +294,28 @@ class SimulatedCell:
         with self._lock:
             return self._direction.copy()
 
+    # ----------------------------------------------------------------- thermal state
+    @property
+    def motion_time_s(self) -> float:
+        """Seconds of simulated motion since the cell started cold (counted with a thermal model)."""
+        with self._lock:
+            return self._motion_time_s
+
+    def set_motion_time(self, seconds: float) -> None:
+        """Set the thermal clock (a test: ``inf`` is the steady state, 0 cold)."""
+        with self._lock:
+            self._motion_time_s = float(seconds)
+
+    def drift(self) -> np.ndarray:
+        """The thermal change (n_params,) of the true parameters now."""
+        if self.thermal is None:
+            return np.zeros(self.truth.model.n_params)
+        return self.thermal.delta(self.motion_time_s)
+
     # ----------------------------------------------------------------- head and contact
     def head_pose(self) -> np.ndarray:
-        """True world(KKS)<-MKKS (4,4) at the current physical joints."""
-        return self.truth.head_pose(self.joints_physical)[0]
+        """True world(KKS)<-MKKS (4,4) at the current physical joints (with the thermal drift)."""
+        return self.truth.head_pose(self.joints_physical, None if self.thermal is None else self.drift())[0]
 
     def contact_for_head_pose(self, T_head: np.ndarray) -> tuple[int | None, np.ndarray | None]:
         """Measuring point in capture range of a head at ``T_head`` and the true contact pose

@@ -10,6 +10,9 @@ frame (``station.core.kinematics.scara_ik``) plus the multilinear table correcti
 table area itself is :class:`simulators.controller_tables.TableSlots`.
 
 Faults are injected at run time through methods of :class:`SimulatedController` (thread-safe).
+A robot program that implements the protocol *wrongly* is played with ``quirks`` (see
+:data:`QUIRKS`): deliberate, documented deviations that ``station conformance`` must catch. The
+default (no quirks) is the conforming program.
 
 Requires the pymodbus 3.16 server data model (``pymodbus.simulator.SimDevice`` with ``action``).
 """
@@ -22,7 +25,7 @@ import logging
 import threading
 import time
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, cast
+from typing import TYPE_CHECKING, Iterable, cast
 
 import numpy as np
 from pymodbus.constants import ExcCodes
@@ -56,12 +59,25 @@ from station.io.robot_files import load_robot
 if TYPE_CHECKING:
     from simulators.cell import SimulatedCell
 
-__all__ = ["SimulatedController", "ModbusFault"]
+__all__ = ["SimulatedController", "ModbusFault", "QUIRKS"]
 
 log = logging.getLogger(__name__)
 
 _CMD_FIRST, _CMD_COUNT = register_span("cmd_code", "cmd_pose")
 _LATCHING = (ErrorCode.ESTOP, ErrorCode.DRIVE_FAULT, ErrorCode.WATCHDOG_TIMEOUT)
+
+#: Fault injection for the conformance kit: a robot program that gets one rule of
+#: ``docs/protocols.md`` wrong. ``SimulatedController(..., quirks={"no_heartbeat"})``.
+QUIRKS: dict[str, str] = {
+    "swapped_word_order": "every 32-bit value (limits, joints, pose, table, CRCs) is written and read with its "
+                          "two words in the other order than the link's word_order",
+    "ack_without_seq": "ack_seq is set to 1 (a flag) instead of the command's sequence number",
+    "no_heartbeat": "hb_robot never advances (the program does not run its heartbeat)",
+    "crc_mismatch": "TABLE_STAGE computes the CRC-32 over little-endian f32 bytes instead of big-endian ones, "
+                    "so a correct table is refused with TABLE_CRC_MISMATCH",
+    "done_before_motion": "done_seq is written when a motion starts, not when it has arrived (observable with "
+                          "time_scale > 0)",
+}
 
 
 @dataclass
@@ -83,13 +99,18 @@ class _Abort(Exception):
 
 
 class SimulatedController:
-    """The simulated controller. ``start()`` returns once the port accepts connections."""
+    """The simulated controller. ``start()`` returns once the port accepts connections.
+
+    ``quirks``: names from :data:`QUIRKS`, each a deliberate deviation from the protocol that
+    plays a wrong robot program (fault injection for ``station conformance``); the default, none,
+    is the conforming program.
+    """
 
     def __init__(self, model: RobotModel | None = None, cell: "SimulatedCell | None" = None,
                  host: str = "127.0.0.1", port: int = 0, word_order: WordOrder = WordOrder.BIG,
                  time_scale: float = 0.0, heartbeat_period: float = 0.1, watchdog: float = 1.0,
                  max_speed: np.ndarray | None = None, soft_limits: np.ndarray | None = None,
-                 map_version: int = MAP_VERSION):
+                 map_version: int = MAP_VERSION, quirks: Iterable[str] = ()):
         if model is None:
             model = cell.truth.model if cell is not None else load_robot("sr800")
         self.model = model
@@ -99,6 +120,14 @@ class SimulatedController:
             raise ValueError(f"the register map holds at most {MAX_JOINTS} joints")
         self.host, self._port_req = host, int(port)
         self.port = 0
+        #: deliberate protocol deviations (:data:`QUIRKS`); empty for the conforming program
+        self.quirks = frozenset(quirks)
+        unknown = sorted(self.quirks - set(QUIRKS))
+        if unknown:
+            raise ValueError(f"unknown quirks {unknown}; known: {sorted(QUIRKS)}")
+        if "swapped_word_order" in self.quirks:
+            word_order = WordOrder.LITTLE if word_order is WordOrder.BIG else WordOrder.BIG
+        #: the word order the program uses (the link's, unless the swapped_word_order quirk)
         self.word_order = word_order
         self.time_scale = float(time_scale)
         self.heartbeat_period = float(heartbeat_period)
@@ -120,7 +149,7 @@ class SimulatedController:
         self._bits = StatusBit.READY | StatusBit.IN_POSITION
         self._last_seq = 0
         self._latched: ErrorCode | None = None
-        self._tables = TableSlots()
+        self._tables = TableSlots(crc_little_endian="crc_mismatch" in self.quirks)
         self._move_task: asyncio.Task | None = None
         self._stop_request = False
         self._hb_robot = 0
@@ -132,7 +161,7 @@ class SimulatedController:
         self._lose_ack = False
         self._estop_next = False
         self._drive_fault_next: int = 0
-        self._hb_frozen = False
+        self._hb_frozen = "no_heartbeat" in self.quirks
         # introspection
         self.command_writes: list[tuple[int, int]] = []  # (code, seq) per write of the command block
         self.requests = 0
@@ -374,7 +403,7 @@ class SimulatedController:
                 self._lose_ack = False
                 log.info("fault: command seq %d lost (not acknowledged)", seq)
                 return
-            self._set("ack_seq", seq)
+            self._set("ack_seq", 1 if "ack_without_seq" in self.quirks else seq)
         if seq != expected:
             return self._error(seq, ErrorCode.SEQUENCE_ERROR)
         try:
@@ -475,6 +504,8 @@ class SimulatedController:
         with self._lock:
             self._bits = (self._bits | StatusBit.MOVING) & ~StatusBit.IN_POSITION
             self._publish_state()
+        if "done_before_motion" in self.quirks:
+            self._done(seq)
         t0 = time.monotonic()
         try:
             while True:

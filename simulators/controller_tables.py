@@ -32,7 +32,10 @@ _HDR_FIRST, _HDR_COUNT = register_span("table_format", "table_crc")
 class TableSlots:
     """The three tables of the robot program. Not thread-safe: the caller holds its lock."""
 
-    def __init__(self) -> None:
+    def __init__(self, crc_little_endian: bool = False) -> None:
+        #: fault injection (quirk ``crc_mismatch``): the CRC over little-endian f32 bytes, which
+        #: the protocol forbids; False is the documented big-endian rule
+        self.crc_little_endian = crc_little_endian
         self.staged: CorrectionTableData | None = None
         self.active: CorrectionTableData | None = None
         self.previous: CorrectionTableData | None = None
@@ -49,7 +52,8 @@ class TableSlots:
         vals = decode_f32_array(data, word_order)
         if h["n_joints"] != n_joints or not np.all(np.isfinite(vals)):
             return ErrorCode.TABLE_SHAPE_INVALID
-        if zlib.crc32(vals.astype(">f4").tobytes()) & 0xFFFFFFFF != h["crc"]:
+        byte_order = "<f4" if self.crc_little_endian else ">f4"
+        if zlib.crc32(vals.astype(byte_order).tobytes()) & 0xFFFFFFFF != h["crc"]:
             return ErrorCode.TABLE_CRC_MISMATCH
         shape = (h["n_configs"], *[a.count for a in h["axes"]], h["n_joints"])
         self.staged = CorrectionTableData(h["axes"], vals.reshape(shape))

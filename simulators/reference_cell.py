@@ -7,6 +7,8 @@ reads the text like any other cell configuration (``docs/station.md``, "Cell con
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from simulators import SimulatedCellServers
@@ -14,6 +16,12 @@ from simulators.cell import DEFAULT_SETUP
 from station.core.transforms import matrix_to_pose
 
 __all__ = ["cell_config_text"]
+
+
+def _toml(key: str, v: Any) -> str:
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(repr(float(x)) for x in v) + "]"
+    return repr(int(v)) if key == "step_joint" else repr(float(v))
 
 
 def cell_config_text(servers: SimulatedCellServers, seed: int, word_order: str = "big") -> str:
@@ -32,6 +40,8 @@ def cell_config_text(servers: SimulatedCellServers, seed: int, word_order: str =
         lines.append(f'  {{ id = "C{cube + 1}.{"abcd"[corner]}", pose = [{", ".join(repr(float(v)) for v in vals)}] }},')
     setup = [*DEFAULT_SETUP[:3], *np.degrees(DEFAULT_SETUP[3:])]
     word_order_line = "" if word_order == "big" else f'word_order = "{word_order}"\n'
+    # the drift the simulator was started with, recorded with every run (a baseline check ignores it)
+    drift = "".join(f"{k} = {_toml(k, v)}\n" for k, v in getattr(servers, "drift", {}).items())
     return f"""# Built-in simulated reference cell (seed {seed}).
 [cell]
 name = "simulated reference cell"
@@ -71,4 +81,4 @@ sigma_angle_arcsec = 6.0
 
 [simulation]
 seed = {seed}
-"""
+{drift}"""

@@ -28,6 +28,8 @@ class Outcome(enum.IntEnum):
     UPLOAD_FAILED = 9
     TARGET_MISSED = 10
     NOT_UPLOADED = 11
+    DRIFTED = 12
+    RECHECK_UNTRUSTED = 13
 
     @property
     def description(self) -> str:
@@ -47,6 +49,8 @@ _DESCRIPTIONS = {
     Outcome.UPLOAD_FAILED: "correction table upload failed verification — it was not activated",
     Outcome.TARGET_MISSED: "verification showed less than the required gain",
     Outcome.NOT_UPLOADED: "identified and verified before correction, but no correction is active (--no-upload, or the operator declined or rolled it back)",
+    Outcome.DRIFTED: "recheck: the robot drifted beyond the tolerance since its baseline calibration — recalibrate",
+    Outcome.RECHECK_UNTRUSTED: "recheck: the measurement is not trustworthy (invalid readings, or the repeated pose moved) — no verdict",
 }
 
 

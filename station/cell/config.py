@@ -101,6 +101,45 @@ class CorrectionConfig:
     max_interpolation_um: float
 
 
+@dataclass(frozen=True)
+class RecheckConfig:
+    """``station recheck``: how many poses, and the tolerances (0: derived from the baseline)."""
+
+    poses: int = 10
+    tolerance_um: float = 0.0  # RMS position drift accepted; 0: 3× the baseline's accuracy
+    offset_tolerance_arcsec: float = 0.0  # 0: tolerance_um over a 500 mm lever
+    length_tolerance_um: float = 0.0  # 0: tolerance_um
+    repeat_tolerance_um: float = 0.0  # first pose vs its repeat at the end; 0: tolerance_um
+
+
+@dataclass(frozen=True)
+class WarmupConfig:
+    """A warm-up before measuring: cycles of a motion program over the workspace, each ended by
+    a measurement of one reference pose, until its extrapolated remaining drift is below
+    ``converged_um`` (``until = "converged"``) or for ``minutes`` (``until = "time"``)."""
+
+    until: str = "converged"
+    minutes: float = 20.0
+    max_cycles: int = 200
+    converged_um: float = 2.0
+    program_poses: int = 8
+
+
+@dataclass(frozen=True, eq=False)
+class ConformanceConfig:
+    """``station conformance``: where the robot is parked and how far the kit may move it.
+    ``park_joints`` [rad | mm]; the park zone is ``park_joints ± test_move_joint`` per joint."""
+
+    park_joints: np.ndarray
+    test_move_joint: np.ndarray  # test_move in joint units (rad for revolute, mm for prismatic)
+    move_speed: float
+    position_tolerance_joint: np.ndarray  # in joint units
+
+    def zone(self) -> np.ndarray:
+        """The park zone ``(n_joints, 2)`` [lower, upper] (rad | mm)."""
+        return np.stack([self.park_joints - self.test_move_joint, self.park_joints + self.test_move_joint], axis=1)
+
+
 @dataclass(frozen=True, eq=False)  # identity: it holds arrays, and caches key on it
 class CellConfig:
     """A validated cell configuration. ``body_points``: ``(n, 4, 4)`` KKS←MPKS nominal
@@ -118,6 +157,9 @@ class CellConfig:
     correction: CorrectionConfig
     source_text: str = field(repr=False, default="")
     simulated_seed: int | None = None
+    recheck: RecheckConfig = RecheckConfig()
+    warmup: WarmupConfig | None = None  # None: no warm-up ([warmup] absent or enabled = false)
+    conformance: ConformanceConfig | None = None  # None: no [conformance].park_joints
 
 
 # --------------------------------------------------------------------------------------------
@@ -268,6 +310,51 @@ class _Correction(_Section):
 
 class _Simulation(_Section):
     seed: int = _num(None, ge=0, le=2**32 - 1, what="seed of the simulated cell")
+    # drift of the simulated robot (simulators/thermal.py); a recheck's baseline check ignores these
+    thermal_length_um: float = _num(0.0, ge=0.0, le=5000.0,
+                                    what="steady-state growth of the arm lengths when warm [µm], 0: no thermal model")
+    thermal_offset_arcsec: float = _num(0.0, ge=-3600.0, le=3600.0,
+                                        what="steady-state drift of the revolute joint offsets when warm [arc seconds]")
+    thermal_time_constant_s: float = _num(600.0, gt=0.0, le=1e6,
+                                          what="time constant of the warm-up curve [s of simulated motion]")
+    step_joint: int = _num(0, ge=0, le=16, what="joint (1 …) whose offset steps (a re-mastered axis), 0: none")
+    step_offset_deg: float = _num(0.0, ge=-10.0, le=10.0, what="the joint offset step [deg]")
+    step_tool_um: tuple[Annotated[float, Field(ge=-10000.0, le=10000.0)], ...] = Field(
+        (0.0, 0.0, 0.0), min_length=3, max_length=3, strict=False,
+        description="a bumped tool: shift of the head x, y, z [µm], each within ±10000")
+
+
+class _Recheck(_Section):
+    poses: int = _num(10, ge=3, le=100, what="poses a recheck measures")
+    tolerance_um: float = _num(0.0, ge=0.0, le=10000.0,
+                               what="RMS position drift accepted [µm]; 0: 3× the baseline's accuracy")
+    offset_tolerance_arcsec: float = _num(0.0, ge=0.0, le=36000.0,
+                                          what="joint offset change accepted [arc seconds]; 0: tolerance_um over 500 mm")
+    length_tolerance_um: float = _num(0.0, ge=0.0, le=10000.0, what="arm length change accepted [µm]; 0: tolerance_um")
+    repeat_tolerance_um: float = _num(0.0, ge=0.0, le=10000.0,
+                                      what="first pose against its repeat at the end [µm]; 0: tolerance_um")
+
+
+class _Warmup(_Section):
+    enabled: bool = Field(False, description="true or false")
+    until: Literal["converged", "time"] = Field(
+        "converged", description='"converged" (the reference pose stops moving) or "time" (minutes)')
+    minutes: float = _num(20.0, gt=0.0, le=600.0, what="longest warm-up [min] (with until = \"time\": its length)")
+    max_cycles: int = _num(200, ge=1, le=100000, what="most warm-up cycles")
+    converged_um: float = _num(2.0, gt=0.0, le=1000.0,
+                               what="remaining drift of the reference pose, extrapolated, below which it is warm [µm]")
+    program_poses: int = _num(8, ge=2, le=100, what="poses of the motion program per cycle")
+
+
+class _Conformance(_Section):
+    # checked against the robot and [limits] in stage 2 (one value per joint, inside the limits)
+    park_joints: list[Annotated[float, Field(ge=-MAX_MM, le=MAX_MM)]] | None = _absent(
+        min_length=1, max_length=16, strict=False,
+        description="the joints the robot is parked at for 'station conformance', one per joint (deg | mm)")
+    test_move: float = _num(1.0, ge=0.1, le=5.0, what="half-width of the park zone around park_joints (deg | mm)")
+    move_speed: float = _num(0.05, ge=0.001, le=0.2, what="speed of the kit's test motions, fraction of the maximum")
+    position_tolerance: float = _num(0.01, ge=0.0001, le=1.0,
+                                     what="largest difference between target and arrived joints (deg | mm)")
 
 
 class _CellFile(_Section):
@@ -280,6 +367,9 @@ class _CellFile(_Section):
     identification: _Identification = Field(default_factory=lambda: _Identification.model_validate({}), description="a table [identification]")
     correction: _Correction = Field(default_factory=lambda: _Correction.model_validate({}), description="a table [correction]")
     simulation: _Simulation = Field(default_factory=lambda: _Simulation.model_validate({}), description="a table [simulation]")
+    recheck: _Recheck = Field(default_factory=lambda: _Recheck.model_validate({}), description="a table [recheck]")
+    warmup: _Warmup = Field(default_factory=lambda: _Warmup.model_validate({}), description="a table [warmup]")
+    conformance: _Conformance = Field(default_factory=lambda: _Conformance.model_validate({}), description="a table [conformance]")
 
 
 # -- messages: the key, what is wrong, and the fix ----------------------------------------------
@@ -479,6 +569,26 @@ def _check_grid(corr: CorrectionConfig, elbows: tuple[int, ...], n_joints: int, 
         raise ConfigError(f"{source}: correction (x_mm, y_mm, z_mm, yaw_step_deg): {exc}; use larger steps") from None
 
 
+def _conformance(c: _Conformance, model: RobotModel, soft: np.ndarray, source: str) -> ConformanceConfig | None:
+    """``[conformance]`` in rad / mm: one park value per joint, inside the soft limits (None
+    without ``park_joints``: the cell has not been prepared for ``station conformance``)."""
+    if c.park_joints is None:
+        return None
+    n = model.n_joints
+    if len(c.park_joints) != n:
+        raise ConfigError(f"{source}: conformance.park_joints lists {len(c.park_joints)} joints; the robot "
+                          f"{model.name!r} has {n}: give one value per joint (deg for revolute, mm for prismatic)")
+    scale = np.array([DEG if k == "revolute" else 1.0 for k in model.joint_types])
+    park = np.asarray(c.park_joints, dtype=float) * scale
+    for j in range(n):
+        if not soft[j, 0] <= park[j] <= soft[j, 1]:
+            unit = "deg" if model.joint_types[j] == "revolute" else "mm"
+            raise ConfigError(f"{source}: conformance.park_joints: joint {j + 1} = {c.park_joints[j]:g} {unit} is outside "
+                              f"the soft limits [{soft[j, 0] / scale[j]:g}, {soft[j, 1] / scale[j]:g}] {unit}; park "
+                              f"the robot inside [limits]")
+    return ConformanceConfig(park, c.test_move * scale, c.move_speed, c.position_tolerance * scale)
+
+
 def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellConfig:
     """A validated :class:`CellConfig` from parsed TOML; :class:`ConfigError` names the key."""
     if not isinstance(data, dict):
@@ -522,8 +632,33 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
 
     ids = tuple(pt.id for pt in f.body.points)
     poses = np.array([_pose_deg(pt.pose) for pt in f.body.points])
+    r, w = f.recheck, f.warmup
+    recheck = RecheckConfig(poses=r.poses, tolerance_um=r.tolerance_um, offset_tolerance_arcsec=r.offset_tolerance_arcsec,
+                            length_tolerance_um=r.length_tolerance_um, repeat_tolerance_um=r.repeat_tolerance_um)
+    warmup = (WarmupConfig(until=w.until, minutes=w.minutes, max_cycles=w.max_cycles, converged_um=w.converged_um,
+                           program_poses=w.program_poses) if w.enabled else None)
+    sim = f.simulation
+    if sim.step_joint > model.n_joints:
+        raise ConfigError(f"{source}: simulation.step_joint = {sim.step_joint}: the robot has {model.n_joints} joints")
     return CellConfig(f.cell.name, model, soft, ids, pose_to_matrix(poses), f.body.cube_edge_mm,
-                      devices, plan, ident, corr, text, f.simulation.seed)
+                      devices, plan, ident, corr, text, f.simulation.seed, recheck, warmup,
+                      conformance=_conformance(f.conformance, model, soft, source))
+
+
+def simulation_settings(text: str, source: str = "<config>") -> dict[str, Any]:
+    """The ``[simulation]`` table of a configuration (or of a file holding only that table), validated:
+    what ``station … --simulated CONFIG`` passes to the simulated cell (seed, thermal model, step)."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{source}: not valid TOML ({exc}); fix the syntax there") from None
+    raw = data.get("simulation", {})
+    try:
+        sim = _Simulation.model_validate(raw)
+    except ValidationError as exc:
+        msgs = [_describe({**dict(e), "loc": ("simulation", *e["loc"])}) for e in exc.errors(include_url=False)]
+        raise ConfigError(f"{source}: " + "; ".join(msgs[:5])) from None
+    return sim.model_dump()
 
 
 def load_config(path: str | Path) -> CellConfig:
@@ -622,4 +757,34 @@ y_mm = [-350.0, 350.0, 50.0]
 z_mm = [250.0, 450.0, 200.0]
 yaw_step_deg = 30.0              # 1 … 180
 max_interpolation_um = 15.0      # refuse a table whose interpolation bound exceeds this, > 0 … 1000
+
+[recheck]
+# 'station recheck': a short check of a few poses against the last calibration (the baseline).
+# A tolerance of 0 is derived from the baseline's own accuracy.
+poses = 10                       # poses measured (plus one repeat of the first), 3 … 100
+tolerance_um = 0.0               # RMS position drift accepted [µm]; 0: 3× the baseline's accuracy, 0 … 10000
+offset_tolerance_arcsec = 0.0    # joint offset change accepted [″]; 0: tolerance_um over 500 mm, 0 … 36000
+length_tolerance_um = 0.0        # arm length change accepted [µm]; 0: tolerance_um, 0 … 10000
+repeat_tolerance_um = 0.0        # first pose vs its repeat [µm], else untrusted; 0: tolerance_um, 0 … 10000
+
+[warmup]
+# Before 'calibrate' and 'recheck': cycles of a motion program over the workspace, each ended by
+# a measurement of one reference pose, until the pose stops moving or for a set time.
+enabled = false
+until = "converged"              # "converged" or "time"
+minutes = 20.0                   # longest warm-up (until = "time": its length) [min], > 0 … 600
+max_cycles = 200                 # 1 … 100000
+converged_um = 2.0               # remaining drift of the reference pose (extrapolated) [µm], > 0 … 1000
+program_poses = 8                # poses of the motion program per cycle, 2 … 100
+
+[conformance]
+# 'station conformance': checks the robot program against the register map and handshake
+# (docs/robot-program.md). Park the robot at park_joints first; the kit moves it only inside the
+# park zone, park_joints ± test_move per joint. With one joint parked within test_move of its
+# soft limit (here the quill near its top) the kit also checks that an out-of-limits target is
+# refused, with a target that stays inside the park zone.
+# park_joints = [0.0, 90.0, -6.0, 0.0]  # deg | mm, one per joint, inside [limits]: required for it
+test_move = 2.0                  # half-width of the park zone (deg | mm), 0.1 … 5
+move_speed = 0.05                # speed of the test motions, fraction of the maximum, 0.001 … 0.2
+position_tolerance = 0.01        # arrived joints vs target (deg | mm), 0.0001 … 1
 """

@@ -40,6 +40,31 @@ def fingerprint(cfg: CellConfig) -> dict[str, str]:
     return out
 
 
+#: what a recheck may change against its baseline calibration: its own settings and the warm-up
+#: (sections), and in simulation the drift it injects (keys of ``[simulation]``; the seed stays)
+_BASELINE_IGNORED = ("devices", "recheck", "warmup")
+_SIMULATED_DRIFT_KEYS = ("thermal_length_um", "thermal_offset_arcsec", "thermal_time_constant_s",
+                         "step_joint", "step_offset_deg", "step_tool_um")
+
+
+def baseline_fingerprint(config_toml: str) -> dict[str, str]:
+    """Section name → digest of a configuration text as a recheck compares it with its baseline:
+    ``[devices]``, ``[recheck]`` and ``[warmup]`` left out, and the simulated drift keys of
+    ``[simulation]`` (the robot moved; that is what a recheck is for)."""
+    try:
+        data = tomllib.loads(config_toml) if config_toml else {}
+    except tomllib.TOMLDecodeError:
+        data = {}
+    out = {}
+    for k, v in data.items():
+        if k in _BASELINE_IGNORED:
+            continue
+        if k == "simulation" and isinstance(v, dict):
+            v = {kk: vv for kk, vv in v.items() if kk not in _SIMULATED_DRIFT_KEYS}
+        out[f"[{k}]"] = _digest(v)
+    return out
+
+
 def check_same_cell(stored: dict[str, str], current: dict[str, str], run_id: int) -> None:
     """Refuse (:class:`ConfigError`) to resume ``run_id`` on a cell whose fingerprint differs,
     naming what changed."""

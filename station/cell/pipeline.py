@@ -262,6 +262,10 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
     def stats(kind: StepKind) -> ErrorStats | None:
         return ErrorStats.from_errors(verification_errors(cfg, steps, db.measurements(run_id, kind=kind.value)))
 
+    if cfg.warmup is not None and len(db.completed_steps(run_id, ok_only=True)) < total:  # [warmup] (issue 13)
+        from station.cell.warmup import run_warmup
+
+        run_warmup(cfg, runner, db, run_id, steps[0], emit)
     emit(PhaseChanged("measure", "identification poses"))
     db.set_status(run_id, "measuring")
     measure({StepKind.IDENTIFICATION, StepKind.REVERSAL}, None)
@@ -338,6 +342,7 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
         oracle_table = build_table_for(cfg, p_true).data
         verified_upload(controller, oracle_table, emit)
         runner.guard.table = oracle_table
+        emit(PhaseChanged("verify", "oracle (true parameters)"))  # back from the upload's phase
         measure({StepKind.ORACLE}, p_true[:6])
         summary = summary.replace(oracle=stats(StepKind.ORACLE))
         controller.rollback_table()  # the station's own table is the one left active

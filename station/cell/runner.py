@@ -132,13 +132,16 @@ def approach_and_read(cfg: CellConfig, q_target: np.ndarray, direction: int = 1,
             # Without a pose there is no safe re-centre direction: report and move on.
             break
         res_um = float(np.sqrt(np.mean(sol.residuals_mm**2)) * 1e3)
+        # Six probes fix the six degrees of freedom exactly: their residual is zero by
+        # construction and says nothing about the touch, so it is not reported as a figure.
+        shown = res_um if np.count_nonzero(np.isfinite(values)) > 6 else None
         near = np.max(np.abs(values)) > half - cfg.plan.recenter_margin_mm
         ok = res_um <= cfg.plan.max_residual_um
-        last = Reading(q, q_read, raw, values, status, sol.M, res_um, ok,
+        last = Reading(q, q_read, raw, values, status, sol.M, shown, ok,
                        "" if ok else f"plane residual {res_um:.1f} µm exceeds {cfg.plan.max_residual_um} µm")
         if not near or attempt == cfg.plan.recenter_attempts:
             if near:
-                last = Reading(q, q_read, raw, values, status, sol.M, res_um, ok,
+                last = Reading(q, q_read, raw, values, status, sol.M, shown, ok,
                                "probes near the end of their stroke after re-centring")
             break
         # Re-centre: the head frame must move by D = M_measured · M_nominal⁻¹ (SCARA: x, y, z, yaw).

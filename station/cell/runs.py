@@ -1,5 +1,6 @@
 """The runs a run database holds, as the operator and a nightly script read them: id, cell,
-robot, status, outcome, figures, and whether the run can be resumed."""
+robot, status, outcome, figures, and whether the run can be resumed. Rechecks (``station
+recheck``) stand beside the calibrations with their drift figures: the trend of a robot."""
 
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from station.cell.rundb import RunDB
 from station.cell.summary import RunSummary
 
 #: outcomes of a run that reached its end: nothing left to resume
-_ENDED = ("SUCCESS", "NOT_UPLOADED", "TARGET_MISSED")
+_ENDED = ("SUCCESS", "NOT_UPLOADED", "TARGET_MISSED", "DRIFTED")
 
 
 @dataclass(frozen=True)
@@ -28,17 +29,28 @@ class RunInfo:
     rms_before_um: float | None
     rms_after_um: float | None
     gain: float | None
+    kind: str = "calibration"  # or "recheck"
+    baseline: int | None = None  # a recheck's baseline calibration
+    drift_rms_um: float | None = None  # a recheck's RMS position drift against its baseline
+    drift_max_um: float | None = None
+    drift_tolerance_um: float | None = None
+    moved: tuple[str, ...] = ()  # parameters a recheck found moved (names such as "A2.yaw")
 
     @property
     def resumable(self) -> bool:
-        """Interrupted or failed before its end: ``--resume`` continues at the next missing step."""
+        """Interrupted or failed before its end: ``--resume`` continues at the next missing step
+        (an untrusted recheck only while it has steps without a valid measurement)."""
+        if self.outcome == "RECHECK_UNTRUSTED":
+            return self.steps_done < self.steps_total
         return self.outcome not in _ENDED
 
     def to_json(self) -> dict[str, Any]:
         return {"run_id": self.id, "created_utc": self.created_utc, "cell": self.cell, "robot": self.robot,
                 "status": self.status, "steps_done": self.steps_done, "steps_total": self.steps_total,
                 "outcome": self.outcome, "rms_before_um": self.rms_before_um, "rms_after_um": self.rms_after_um,
-                "gain": self.gain, "resumable": self.resumable}
+                "gain": self.gain, "resumable": self.resumable, "kind": self.kind, "baseline": self.baseline,
+                "drift_rms_um": self.drift_rms_um, "drift_max_um": self.drift_max_um,
+                "drift_tolerance_um": self.drift_tolerance_um, "moved": list(self.moved)}
 
 
 def _names(config_toml: str) -> tuple[str, str]:
@@ -58,6 +70,7 @@ def list_runs(db: RunDB) -> list[RunInfo]:
         stored = db.load_result(run.id, "summary", default=None)
         summary = RunSummary.from_json(stored) if stored else None
         cell, robot = _names(run.config_toml)
+        recheck = _recheck_figures(db, run.id, run.plan)
         out.append(RunInfo(
             id=run.id, created_utc=run.created_utc, cell=summary.cell if summary else cell,
             robot=summary.robot if summary else robot, status=run.status,
@@ -65,5 +78,17 @@ def list_runs(db: RunDB) -> list[RunInfo]:
             outcome=summary.outcome.name if summary else None,
             rms_before_um=summary.before.rms_um if summary and summary.before else None,
             rms_after_um=summary.after.rms_um if summary and summary.after else None,
-            gain=summary.gain if summary else None))
+            gain=summary.gain if summary else None, **recheck))
     return out
+
+
+def _recheck_figures(db: RunDB, run_id: int, plan: tuple) -> dict[str, Any]:
+    """A recheck's fields of :class:`RunInfo` (empty for a calibration)."""
+    if not plan or not all(isinstance(r, dict) and r.get("kind") == "recheck" for r in plan):
+        return {}
+    base = db.load_result(run_id, "recheck_baseline", default=None) or {}
+    res = db.load_result(run_id, "recheck", default=None) or {}
+    tol = res.get("tolerances") or {}
+    return {"kind": "recheck", "baseline": base.get("run_id"), "drift_rms_um": res.get("rms_um"),
+            "drift_max_um": res.get("max_um"), "drift_tolerance_um": tol.get("position_um"),
+            "moved": tuple(res.get("moved", ()))}

@@ -23,6 +23,7 @@ class StepKind(str, enum.Enum):
     VERIFY_BEFORE = "verification_before"  # held-out pose, no correction active
     VERIFY_AFTER = "verification_after"  # held-out pose, the station's correction active
     ORACLE = "oracle"  # held-out pose, the simulator's true correction active (simulation only)
+    RECHECK = "recheck"  # a recheck pose, compared with a baseline calibration's model (station recheck)
 
     @property
     def caption(self) -> str:
@@ -40,6 +41,7 @@ _TITLES = {
     StepKind.VERIFY_BEFORE: "verification before correction",
     StepKind.VERIFY_AFTER: "verification after correction",
     StepKind.ORACLE: "verification with the true correction",
+    StepKind.RECHECK: "recheck against the baseline",
 }
 
 #: the measurement kinds the run database accepts

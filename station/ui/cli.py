@@ -25,6 +25,7 @@ from station.ui.commands_cell import (
     cmd_runs,
     cmd_tui,
 )
+from station.ui.commands_conformance import cmd_conformance
 from station.ui.commands_core import (
     cmd_analyze,
     cmd_export_model,
@@ -33,6 +34,7 @@ from station.ui.commands_core import (
     cmd_study,
     cmd_validate,
 )
+from station.ui.commands_recheck import cmd_recheck
 
 
 def _add_robot(p):
@@ -118,6 +120,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("config")
     p.set_defaults(func=cmd_check)
 
+    p = sub.add_parser("conformance", help="check the robot program against the register map and handshake "
+                       "(the robot parked at [conformance].park_joints)")
+    p.add_argument("config")
+    p.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    p.set_defaults(func=cmd_conformance)
+
     p = sub.add_parser("calibrate", help="measure, identify, correct, upload, verify")
     p.add_argument("config", nargs="?")
     p.add_argument("--simulated", action="store_true", help="run against the built-in simulated cell")
@@ -126,9 +134,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--db", default="runs.sqlite", help="run database (default runs.sqlite)")
     p.add_argument("--resume", type=int, metavar="RUN", help="continue an interrupted run")
     p.add_argument("--no-upload", action="store_true", help="identify and verify 'before' only")
-    p.add_argument("--report", metavar="DIR", help="write a report (Markdown + plots) here")
+    p.add_argument("--report", metavar="DIR", help="write the run's report here: one self-contained report.html (printable), report.md beside it")
     p.add_argument("--json", action="store_true", help="JSON summary on stdout")
     p.set_defaults(func=cmd_calibrate)
+
+    p = sub.add_parser("recheck", help="a short accuracy check against the last calibration (drift)")
+    p.add_argument("config", nargs="?", help="cell configuration; with --simulated: its [simulation], [recheck], [warmup]")
+    p.add_argument("--simulated", action="store_true", help="run against the built-in simulated cell")
+    p.add_argument("--seed", type=int, default=1, help="simulated cell seed (default 1)")
+    p.add_argument("--time-scale", type=float, default=0.0, help="simulated motion time scale (0 = instant)")
+    p.add_argument("--db", default="runs.sqlite", help="run database (default runs.sqlite)")
+    p.add_argument("--baseline", type=int, metavar="RUN", help="calibration to compare with (default: the latest "
+                   "successful calibration of this cell)")
+    p.add_argument("--poses", type=int, metavar="N", help="poses to measure (default [recheck].poses, 10)")
+    p.add_argument("--resume", type=int, metavar="RUN", help="continue an interrupted recheck")
+    p.add_argument("--json", action="store_true", help="JSON summary on stdout")
+    p.set_defaults(func=cmd_recheck)
 
     p = sub.add_parser("reset", help="clear the controller's latched e-stop or fault (asks for confirmation)")
     p.add_argument("config")
@@ -163,6 +184,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--simulated", action="store_true")
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--db", default="runs.sqlite")
+    p.add_argument("--recheck", action="store_true", help="run a recheck against the last calibration (drift)")
+    p.add_argument("--baseline", type=int, metavar="RUN", help="with --recheck: the calibration run to compare with")
+    p.add_argument("--poses", type=int, metavar="N", help="with --recheck: poses to measure (default [recheck].poses)")
     p.set_defaults(func=cmd_tui)
     return ap
 

@@ -26,7 +26,7 @@ from station.cell.rundb import RunDB
 from station.cell.runs import list_runs
 from station.cell.session import CellRequest, check_cell, reset_controller, run_calibration_session
 from station.cell.summary import RunSummary
-from station.errors import ConfigError
+from station.errors import ConfigError, Outcome, StationError
 
 
 def request_from(args: argparse.Namespace) -> CellRequest:
@@ -134,12 +134,14 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     control = RunControl()
     with safe_stop_on_signals(control):
         summary = run_calibration_session(request, progress_printer(sys.stderr), control)
-    if args.report and summary.run_id is not None and summary.failure is None:
+    if args.report and summary.run_id is not None and summary.outcome is not Outcome.ABORTED:
         from station.ui.report_data import report_for_run
 
         try:
             path = report_for_run(args.db, summary.run_id, Path(args.report))
             summary = summary.replace(report=str(path))
+        except StationError as exc:  # e.g. the run stopped before there was anything to report
+            summary = summary.replace(notes=(*summary.notes, f"no report: {exc}"))
         except Exception as exc:  # noqa: BLE001 - the run's result stands; say why the report is missing
             log = write_traceback(exc, Path(args.report))
             summary = summary.replace(notes=(*summary.notes, f"the report could not be written ({exc}); "
@@ -236,6 +238,11 @@ def cmd_runs(args: argparse.Namespace) -> int:
         print(f"{r.id:>4}  {r.created_utc[:19]:20}  {r.cell[:24]:24}  {r.robot[:8]:8}  {r.status:10}  "
               f"{r.steps_done:>4}/{r.steps_total:<4}  {(r.outcome or 'unfinished'):22}  {um(r.rms_before_um):>8}  "
               f"{um(r.rms_after_um):>8}  {'--resume ' + str(r.id) if r.resumable else ''}")
+        if r.kind == "recheck":  # the trend: a recheck's drift beside the calibrations
+            moved = f"; moved: {', '.join(r.moved)}" if r.moved else ""
+            tol = "" if r.drift_tolerance_um is None else f" (tolerance {r.drift_tolerance_um:.1f})"
+            print(f"        recheck of run {r.baseline}: drift RMS {um(r.drift_rms_um)} µm{tol}, "
+                  f"max {um(r.drift_max_um)} µm{moved}")
     if not runs:
         print("(no runs yet)")
     return 0
@@ -265,9 +272,16 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 
 def cmd_tui(args: argparse.Namespace) -> int:
+    from station.cell.recheck import RecheckOptions
     from station.ui.tui_launch import launch
 
-    return launch(request_from(args))
+    recheck = getattr(args, "recheck", False)
+    baseline, poses = getattr(args, "baseline", None), getattr(args, "poses", None)
+    if not recheck and (baseline is not None or poses is not None):
+        raise ConfigError("--baseline and --poses go with --recheck")
+    if poses is not None and not 3 <= poses <= 100:
+        raise ConfigError(f"--poses {poses}: give 3 … 100 poses")
+    return launch(request_from(args), recheck=RecheckOptions(baseline=baseline, poses=poses) if recheck else None)
 
 
 __all__ = ["cmd_calibrate", "print_summary", "progress_printer", "request_from"]

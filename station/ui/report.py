@@ -25,7 +25,7 @@ from station.cell.summary import RunSummary
 from station.core.units import ARCSEC, UM
 from station.errors import ConfigError
 
-__all__ = ["ReportData", "write_report", "HTML_NAME", "MARKDOWN_NAME"]
+__all__ = ["ReportData", "TrendRun", "write_report", "HTML_NAME", "MARKDOWN_NAME"]
 
 HTML_NAME = "report.html"
 MARKDOWN_NAME = "report.md"
@@ -46,6 +46,41 @@ def _labels(value: Any, n: int, name: str) -> tuple[str, ...] | None:
     if len(labels) != n:
         raise ConfigError(f"report: {name} has {len(labels)} entries, expected {n}")
     return labels
+
+
+@dataclass(frozen=True)
+class TrendRun:
+    """One run of the robot's history (the report's trend): a calibration with its RMS after
+    correction [µm] (None when nothing was uploaded or it did not finish), or a recheck with its
+    RMS position drift against its baseline and the tolerance [µm]."""
+
+    run_id: int
+    created: str = ""  # the run database's created_utc
+    kind: str = "calibration"  # or "recheck"
+    outcome: str = ""  # the stored outcome's name; "" while unfinished
+    status: str = ""  # the run database's status (shown while there is no outcome)
+    rms_after_um: float | None = None
+    drift_rms_um: float | None = None
+    drift_tolerance_um: float | None = None
+    moved: Sequence[str] = ()
+    baseline: int | None = None  # a recheck's baseline calibration
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "run_id", int(self.run_id))
+        object.__setattr__(self, "moved", tuple(str(m) for m in self.moved))
+        for attr in ("rms_after_um", "drift_rms_um", "drift_tolerance_um"):
+            v = getattr(self, attr)
+            object.__setattr__(self, attr, None if v is None else float(v))
+
+    @property
+    def is_recheck(self) -> bool:
+        return self.kind == "recheck"
+
+    @property
+    def figure_um(self) -> float | None:
+        """The run's accuracy figure: the drift RMS of a recheck, the RMS after correction of a
+        calibration."""
+        return self.drift_rms_um if self.is_recheck else self.rms_after_um
 
 
 @dataclass(frozen=True)
@@ -79,6 +114,8 @@ class ReportData:
       was stored), ``run_status`` (the run database's status), ``table_info`` (facts about the
       correction table rebuilt from the identification: ``grid``, ``unreachable_nodes``,
       ``max_correction``, ``crc32``, ...), ``notes`` (what the report builder wants said).
+    * ``trend``: the robot's history, :class:`TrendRun` per run of the same cell and robot up to
+      and including this one (kept in run order); the report shows it from two runs on.
     """
 
     robot_name: str
@@ -108,6 +145,7 @@ class ReportData:
     run_status: str = ""
     table_info: Mapping[str, Any] | None = None
     notes: Sequence[str] = ()
+    trend: Sequence[TrendRun] = ()
 
     def __post_init__(self) -> None:
         names = tuple(str(n) for n in self.param_names)
@@ -165,6 +203,7 @@ class ReportData:
         if self.devices is not None:
             object.__setattr__(self, "devices", {str(k): str(v) for k, v in self.devices.items()})
         object.__setattr__(self, "notes", tuple(str(n) for n in self.notes))
+        object.__setattr__(self, "trend", tuple(sorted(self.trend, key=lambda r: r.run_id)))
 
     # --- derived figures, in people units --------------------------------------------------
     @property

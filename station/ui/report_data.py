@@ -19,6 +19,7 @@ from station.cell.pipeline import build_table_for, identify_run, stored_plan, ve
 from station.cell.plan import build_plan
 from station.cell.run_records import MeasurementRecord
 from station.cell.rundb import RunDB
+from station.cell.runs import RunInfo, list_runs
 from station.cell.steps import PlannedStep, StepKind
 from station.cell.summary import RunSummary
 from station.core.identification import IdentificationResult
@@ -27,7 +28,7 @@ from station.core.transforms import pose_to_matrix
 from station.core.uncertainty import pose_accuracy
 from station.core.units import ARCSEC, UM
 from station.errors import ConfigError, IdentificationError, StationError
-from station.ui.report import ReportData, write_report
+from station.ui.report import ReportData, TrendRun, write_report
 
 __all__ = ["report_data_for_run", "report_for_run", "correlation_from_covariance"]
 
@@ -180,6 +181,27 @@ def _identify(cfg: CellConfig, db: RunDB, run_id: int, status: str, summary: Run
                                   f"measurements fails: {exc}") from None
 
 
+def _trend_run(r: RunInfo) -> TrendRun:
+    return TrendRun(run_id=r.id, created=r.created_utc, kind=r.kind, outcome=r.outcome or "", status=r.status,
+                    rms_after_um=r.rms_after_um, drift_rms_um=r.drift_rms_um,
+                    drift_tolerance_um=r.drift_tolerance_um, moved=r.moved, baseline=r.baseline)
+
+
+def _trend(db: RunDB, run_id: int, notes: list[str]) -> list[TrendRun]:
+    """The runs of this run's cell and robot up to and including it, oldest first (the report's
+    trend); empty when the run database cannot list them (the report goes on without)."""
+    try:
+        runs = list_runs(db)
+    except (StationError, KeyError, TypeError, ValueError) as exc:
+        notes.append(f"the run history could not be read for the trend ({exc})")
+        return []
+    this = next((r for r in runs if r.id == run_id), None)
+    if this is None:
+        return []
+    same = [r for r in runs if r.id <= run_id and r.cell == this.cell and r.robot == this.robot]
+    return [_trend_run(r) for r in sorted(same, key=lambda r: r.id)]
+
+
 def report_data_for_run(db: RunDB, run_id: int) -> ReportData:
     run = db.run(run_id)
     summary = _stored_summary(db, run_id)
@@ -223,7 +245,8 @@ def report_data_for_run(db: RunDB, run_id: int) -> ReportData:
         verify_labels=labels, created=run.created_utc,
         config_toml=run.config_toml, station_version=run.station_version,
         devices=devices if isinstance(devices, Mapping) else None, run_status=run.status,
-        table_info=_table_info(cfg, table) if table is not None else None, notes=notes)
+        table_info=_table_info(cfg, table) if table is not None else None, notes=notes,
+        trend=_trend(db, run_id, notes))
 
 
 def report_for_run(db_path: str | Path, run_id: int, out_dir: Path) -> Path:

@@ -42,6 +42,7 @@ table.corr { font-size: 10.5px; }
 table.corr th, table.corr td { padding: 1px 3px; text-align: center; }
 table.corr td.strong { font-weight: 700; outline: 2px solid #000; outline-offset: -2px; }
 tr.total td { font-weight: 700; border-top: 2px solid #333; }
+tr.this-run td { font-weight: 700; background: #f6f9ff; }
 td.elbow-pos { color: #1f4e9c; } td.elbow-neg { color: #a1271d; }
 nav.toc { font-size: 13px; margin: 6px 0 0; } nav.toc a { margin-right: 10px; }
 @media print {
@@ -69,6 +70,7 @@ SECTIONS = (
     ("accuracy", "Predicted accuracy over the workspace"),
     ("table", "Correction table and its bound"),
     ("reversal", "Reversal error"),
+    ("trend", "Trend: this robot's calibrations and rechecks"),
 )
 
 
@@ -280,6 +282,16 @@ def _reversal(d: ReportData) -> str:
             + _kv(rows, table_id="reversal-table"))
 
 
+def _trend(d: ReportData) -> str:
+    this = str(d.run_id)
+    rows = t.trend_rows(d)
+    classes = ["this-run" if r[0] == this else "" for r in rows]
+    return (f'<p class="note">{_e(t.trend_line(d))}</p>'
+            + _table(t.TREND_HEAD, rows, table_id="trend-table", num_from=4, row_classes=classes)
+            + _img(plots.plot_trend(d), "accuracy per run over time",
+                   "One column per run, oldest first; a recheck's red dash is its tolerance."))
+
+
 def render_html(d: ReportData) -> str:
     title = f"Calibration report — {d.robot_name}, run {d.run_id}"
     parts = [
@@ -287,7 +299,10 @@ def render_html(d: ReportData) -> str:
         ("residuals", _residuals(d)), ("verification", _verification(d)), ("accuracy", _accuracy(d)),
         ("table", _table_section(d)), ("reversal", _reversal(d)),
     ]
-    toc = "".join(f'<a href="#{k}">{_e(v)}</a>' for k, v in SECTIONS)
+    if t.has_trend(d):  # one run has no history: no section
+        parts.append(("trend", _trend(d)))
+    shown = {k for k, _ in parts}
+    toc = "".join(f'<a href="#{k}">{_e(v)}</a>' for k, v in SECTIONS if k in shown)
     created = f"created {_e(d.created)} UTC · " if d.created else ""
     meta = (f'<p class="meta">{created}station {_e(d.station_version or "version not recorded")} · units: '
             f"µm and arc seconds (″); nominal and identified values in mm and degrees</p>")

@@ -92,4 +92,10 @@ def render_markdown(d: ReportData) -> str:
     L += ["## Reversal error", ""]
     rows_r = t.reversal_rows(d)
     L += _table(("item", "value"), rows_r, num_from=9) if rows_r else ["Not measured in this run.", ""]
+
+    if t.has_trend(d):  # one run has no history: no section
+        L += ["## Trend: this robot's calibrations and rechecks", "", t.trend_line(d), ""]
+        this = str(d.run_id)
+        L += _table(t.TREND_HEAD, [(f"**{r[0]}**" if r[0] == this else r[0], *r[1:]) for r in t.trend_rows(d)],
+                    num_from=4)
     return "\n".join(L)

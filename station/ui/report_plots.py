@@ -198,3 +198,60 @@ def plot_verification(d: ReportData) -> bytes:
     worst = f" (max after correction: {nanmax(d.errors_after_um):.1f} µm)" if d.errors_after_um.size else " (nothing uploaded)"
     ax.set_title(f"{d.robot_name}, run {d.run_id}: verification per held-out pose{worst}", fontsize=10)
     return _png(fig)
+
+
+def plot_trend(d: ReportData) -> bytes | None:
+    """The robot's accuracy per run, in run order: calibrations' RMS after correction, rechecks'
+    drift RMS with their tolerance (a drifted recheck filled red). None without a history (one
+    run) or without any figure to draw."""
+    runs = list(d.trend)
+    if len(runs) < 2 or not any(r.figure_um is not None or r.drift_tolerance_um is not None for r in runs):
+        return None
+    x = np.arange(len(runs))
+    fig = _new_figure(10, 3.8)
+    ax = fig.subplots()
+
+    def pick(cond: Any, value: Any) -> tuple[list[int], list[float]]:
+        xs, ys = [], []
+        for i, r in enumerate(runs):
+            v = value(r)
+            if cond(r) and v is not None:
+                xs.append(i)
+                ys.append(v)
+        return xs, ys
+
+    cx, cy = pick(lambda r: not r.is_recheck, lambda r: r.rms_after_um)
+    if cx:
+        ax.plot(cx, cy, "o-", color="tab:green", label="calibration: RMS after correction")
+    rx, ry = pick(lambda r: r.is_recheck, lambda r: r.drift_rms_um)
+    if rx:
+        ax.plot(rx, ry, "s--", color="tab:blue", label="recheck: drift RMS")
+    dx, dy = pick(lambda r: r.is_recheck and r.outcome == "DRIFTED", lambda r: r.drift_rms_um)
+    if dx:
+        ax.plot(dx, dy, "s", color="tab:red", ms=9, label="recheck: drifted")
+    tx, ty = pick(lambda r: r.is_recheck, lambda r: r.drift_tolerance_um)
+    if tx:
+        ax.plot(tx, ty, "_", color="tab:red", ms=22, mew=2, ls="none", label="recheck: tolerance")
+    for i, r in enumerate(runs):
+        if not r.is_recheck and r.rms_after_um is None:
+            ax.annotate("no upload" if r.outcome == "NOT_UPLOADED" else "no figure", (i, 0.0),
+                        xytext=(0, 4), textcoords="offset points", ha="center", fontsize=7, color="gray")
+    ax.set_xlim(-0.5, len(runs) - 0.5)
+    ax.set_ylim(bottom=0.0)
+    ax.set_xticks(x, [f"run {r.run_id}\n{r.created[:10]}" for r in runs], fontsize=7,
+                  rotation=0 if len(runs) <= 12 else 60)
+    for tick, r in zip(ax.get_xticklabels(), runs):
+        if r.run_id == _int_or_none(d.run_id):
+            tick.set_fontweight("bold")
+    ax.set_ylabel("position error [µm]")
+    ax.grid(True, axis="y", alpha=0.3)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    ax.set_title(f"{d.robot_name}: accuracy per run, oldest first (this report: run {d.run_id})", fontsize=10)
+    return _png(fig)
+
+
+def _int_or_none(v: Any) -> int | None:
+    try:
+        return int(v)
+    except (TypeError, ValueError):
+        return None

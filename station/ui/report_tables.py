@@ -388,3 +388,46 @@ def groups_present(d: ReportData) -> list[tuple[str, str, str]]:
     have = {param_group(n) for n in d.param_names}
     return [g for g in PARAM_GROUPS if g[0] in have]
 
+
+
+# ----------------------------------------------------------------------------- trend
+TREND_HEAD = ("run", "date (UTC)", "kind", "outcome", "RMS after / drift RMS µm", "tolerance µm", "moved parameters")
+
+
+def has_trend(d: ReportData) -> bool:
+    """The trend is shown from two runs of the robot on (one run has no history)."""
+    return len(d.trend) > 1
+
+
+def trend_date(created: str) -> str:
+    """``2026-11-22T05:32:27.905242Z`` → ``2026-11-22 05:32``; other text as it is."""
+    text = created.strip().rstrip("Z")
+    if len(text) >= 16 and text[10] in "T ":
+        return f"{text[:10]} {text[11:16]}"
+    return text or "—"
+
+
+def trend_rows(d: ReportData) -> list[tuple[str, str, str, str, str, str, str]]:
+    """Per run (oldest first): run, date, kind, outcome, its accuracy figure (a calibration's RMS
+    after correction, a recheck's drift RMS), a recheck's tolerance, the parameters it found moved."""
+    rows = []
+    for r in d.trend:
+        outcome = r.outcome or (f"unfinished ({r.status})" if r.status else "unfinished")
+        if r.is_recheck:
+            kind = f"recheck of run {r.baseline}" if r.baseline is not None else "recheck"
+            moved = ", ".join(r.moved) if r.moved else ("none" if r.outcome else "—")
+            tol = fmt(r.drift_tolerance_um)
+        else:
+            kind, moved, tol = "calibration", "—", "—"
+        rows.append((str(r.run_id), trend_date(r.created), kind, outcome, fmt(r.figure_um), tol, moved))
+    return rows
+
+
+def trend_line(d: ReportData) -> str:
+    n_cal = sum(1 for r in d.trend if not r.is_recheck)
+    n_re = len(d.trend) - n_cal
+    return (f"The runs of this cell and robot in the run database up to and including run {d.run_id}: "
+            f"{n_cal} calibration{'s' if n_cal != 1 else ''} and {n_re} recheck{'s' if n_re != 1 else ''}. "
+            "A calibration's figure is the RMS position error at the held-out poses after correction (none "
+            "when nothing was uploaded); a recheck's is the RMS position drift against its baseline "
+            "calibration, beside the tolerance it was judged by.")

@@ -1,11 +1,15 @@
 """Operator terminal UI of the calibration station (Textual).
 
 The UI is a *client of the runner*: it never imports drivers and never talks to a device.  It is
-given a ``start_run(emit, control) -> RunSummary`` callable (dependency injection); on Start it
-calls it in a thread worker, receives the runner's typed :mod:`station.cell.events` through
-``emit`` (forwarded thread-safely into the app as :class:`EventMessage`), and steers the run only
-through the shared :class:`~station.cell.runcontrol.RunControl` (pause / resume / abort at safe
-points).  Every widget is updated from messages on the UI thread; nothing blocks it.
+given a ``start_run(emit, control[, confirm, resume]) -> RunSummary`` callable (dependency
+injection); on Start it calls it in a thread worker, receives the runner's typed
+:mod:`station.cell.events` through ``emit`` (forwarded thread-safely into the app as
+:class:`EventMessage`), steers the run only through the shared
+:class:`~station.cell.runcontrol.RunControl` (pause / resume / abort at safe points), and answers
+the pipeline's questions (:mod:`station.cell.questions`) through ``confirm``, which blocks the
+worker until the operator has answered in a modal screen.  Every widget is updated from messages
+on the UI thread; nothing blocks it.  Reading the run database (the unfinished runs, a run's
+results) and writing the report are injected callables too, run in thread workers.
 
 How a run ended is the :class:`~station.cell.summary.RunSummary` alone: the exit code shown and
 returned is ``summary.exit_code``.  An exception that escapes ``start_run`` (the session never
@@ -19,19 +23,22 @@ to a log file the UI names.
 
 from __future__ import annotations
 
+import inspect
+import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from rich.text import Text
-from textual import on
-from textual.app import App, ComposeResult
+from textual import events, on
+from textual.app import ComposeResult
 from textual.binding import Binding
-from textual.containers import Horizontal
-from textual.message import Message
+from textual.containers import Horizontal, VerticalScroll
 from textual.widgets import Button, DataTable, Footer, Header, ProgressBar, RichLog, Static
 from textual.worker import Worker, WorkerState
 
 from station.cell.events import (
+    DeviceSnapshot,
     Event,
     MeasurementRecorded,
     Notice,
@@ -45,12 +52,16 @@ from station.cell.events import (
 )
 from station.cell.outcomes import classify, failure_summary
 from station.cell.runcontrol import RunControl
+from station.cell.runs import RunInfo
 from station.cell.summary import Failure, RunSummary
 from station.errors import Outcome
+from station.ui.report import ReportData
+from station.ui.tui_side import EventMessage, QuestionMessage, SideActions
 from station.ui.tui_widgets import (
     ABORTED,
     ABORTING,
     ACTIVE_STATES,
+    APP_CSS,
     FAILED,
     FINISHED,
     IDLE,
@@ -60,61 +71,60 @@ from station.ui.tui_widgets import (
     RUNNING,
     STATE_TEXT,
     ConfirmScreen,
+    DevicePanel,
+    Eta,
+    activity_text,
     esc,
     fmt_num,
     phase_markup,
     summary_markup,
 )
 
-__all__ = ["StationApp", "EventMessage", "ConfirmScreen", "StartRun", "PHASES"]
+__all__ = ["StationApp", "EventMessage", "QuestionMessage", "ConfirmScreen", "StartRun", "PHASES"]
 
-StartRun = Callable[[Callable[[Event], None], RunControl], RunSummary]
+StartRun = Callable[..., RunSummary]
+"""``start_run(emit, control)``; when it takes ``confirm`` and ``resume`` keywords the UI passes
+its question dialog and the run picked to resume."""
 
-
-class EventMessage(Message):
-    """A runner event, carried into the app's message queue."""
-
-    def __init__(self, event: Event) -> None:
-        super().__init__()
-        self.event = event
+LABEL_WIDTH = 26  # the point column: long labels are shortened in the middle, keeping "cycle N"
 
 
-class StationApp(App[RunSummary | None]):
+def _accepts(fn: Callable[..., Any], name: str) -> bool:
+    try:
+        params = inspect.signature(fn).parameters
+    except (TypeError, ValueError):
+        return False
+    return name in params or any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values())
+
+
+def _shorten(label: str, width: int = LABEL_WIDTH) -> str:
+    return label if len(label) <= width else label[: width // 2 - 1] + "…" + label[-(width - width // 2):]
+
+
+class StationApp(SideActions):
     """Operator UI for one calibration run at a time.
 
     ``start_run(emit, control)`` runs the whole calibration (blocking, in a worker thread); it
     reports through ``emit``, calls ``control.checkpoint()`` at every safe point and returns the
-    run's :class:`RunSummary`.  ``log_dir`` receives the traceback of an exception that escapes
-    it.
+    run's :class:`RunSummary`; with ``confirm=`` / ``resume=`` keywords it also gets the question
+    dialog and the run to resume.  ``list_runs()`` (the database's runs), ``load_results(run_id)``
+    (a :class:`ReportData`) and ``write_report(run_id) -> Path`` are optional and run in worker
+    threads.  ``clock`` drives the time-left estimate (injectable for tests).  ``log_dir``
+    receives the traceback of an exception that escapes ``start_run``.
 
     After the app ends, ``app.return_code`` is the run's exit code (0 when no run was started) and
     the app's result (``app.run()``'s return) is the summary (None when no run was started).
     """
 
-    CSS = """
-    #status-bar { height: 1; padding: 0 1; background: $boost; }
-    #run-id { width: 14; text-style: bold; }
-    #state { width: 1fr; }
-    #phases { height: 1; padding: 0 1; }
-    #phase-detail { height: 1; padding: 0 1; color: $text-muted; }
-    #step { height: 1; padding: 0 1; }
-    #progress { padding: 0 1; height: 1; }
-    #progress Bar { width: 1fr; }
-    #middle { height: 1fr; }
-    #measurements { width: 3fr; height: 100%; border: round $primary; }
-    #notices { width: 2fr; height: 100%; border: round $secondary; }
-    #summary { height: auto; max-height: 24; padding: 0 1; border: round $accent; display: none; }
-    #summary.-shown { display: block; }
-    #summary.-ok { border: round $success; }
-    #summary.-failed { border: thick $error; }
-    #buttons { height: 3; }
-    #buttons Button { margin: 0 1; min-width: 14; }
-    """
+    CSS = APP_CSS
 
     BINDINGS = [
         Binding("s", "start", "Start"),
-        Binding("p", "pause", "Pause/Resume"),
+        Binding("r", "resume_run", "Resume run"),
+        Binding("p", "pause", "Pause"),
         Binding("a", "abort", "Abort"),
+        Binding("v", "results", "Results"),
+        Binding("question_mark,h,f1", "help", "Help"),
         Binding("q", "quit", "Quit"),
         Binding("ctrl+q", "quit", "Quit", show=False, priority=True),
     ]
@@ -126,12 +136,22 @@ class StationApp(App[RunSummary | None]):
         *,
         autostart: bool = False,
         log_dir: str | Path = ".",
+        list_runs: Callable[[], list[RunInfo]] | None = None,
+        load_results: Callable[[int], ReportData] | None = None,
+        write_report: Callable[[int], Path] | None = None,
+        db_label: str = "",
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         super().__init__()
         self._start_run = start_run
         self.title = title
         self._autostart = autostart
         self.log_dir = Path(log_dir)
+        self._list_runs = list_runs
+        self._load_results = load_results
+        self._write_report = write_report
+        self.db_label = db_label
+        self.eta = Eta(clock)
         self.control: RunControl | None = None
         self.worker: Worker[RunSummary] | None = None
         self.state: str = IDLE
@@ -139,9 +159,13 @@ class StationApp(App[RunSummary | None]):
         self.phase: str | None = None
         self.summary: RunSummary | None = None
         self.step_index: int | None = None
+        self.question: QuestionMessage | None = None  # the question waiting for the operator
+        self.report_path: Path | None = None
         self._quit_when_done = False
         self._settled = False  # the worker has ended; its return value is final
         self._visited: set[str] = set()
+        self._phase_event: PhaseChanged | None = None
+        self._before_upload: PhaseChanged | None = None  # verification goes on after an upload
 
     # Derived from the summary only, so no second notion of how the run ended can drift.
     @property
@@ -166,49 +190,73 @@ class StationApp(App[RunSummary | None]):
         with Horizontal(id="status-bar"):
             yield Static("run —", id="run-id")
             yield Static(STATE_TEXT[IDLE], id="state")
+            yield Static("", id="eta")
         yield Static(phase_markup(None, set()), id="phases")
         yield Static("", id="phase-detail")
         yield Static("step —", id="step")
-        yield ProgressBar(total=None, show_eta=True, id="progress")
-        with Horizontal(id="middle"):
-            table: DataTable = DataTable(id="measurements", zebra_stripes=True, cursor_type="row")
-            table.border_title = "Measurements"
-            yield table
+        yield ProgressBar(total=1, show_eta=False, id="progress")  # no pulsing bar: snapshots stay still
+        table: DataTable = DataTable(id="measurements", zebra_stripes=True, cursor_type="row")
+        table.border_title = "Measurements"
+        yield table
+        with Horizontal(id="bottom"):
+            devices = DevicePanel(id="devices")
+            devices.border_title = "Devices"
+            yield devices
+            with VerticalScroll(id="summary-box") as box:
+                box.border_title = "Result"
+                yield Static("", id="summary")
             log = RichLog(id="notices", wrap=True, min_width=20)
             log.border_title = "Notices"
             yield log
-        summary = Static("", id="summary")
-        summary.border_title = "Result"
-        yield summary
         with Horizontal(id="buttons"):
             yield Button("Start (s)", id="start", variant="success")
             yield Button("Pause (p)", id="pause", variant="warning", disabled=True)
             yield Button("Abort (a)", id="abort", variant="error", disabled=True)
+            yield Button("Resume run (r)", id="resume")
             yield Button("Quit (q)", id="quit")
         yield Footer()
 
     def on_mount(self) -> None:
         table = self.query_one("#measurements", DataTable)
         table.add_column("#", key="index", width=4)
-        table.add_column("point", key="label")
-        table.add_column("ok", key="ok", width=4)
-        table.add_column("residual µm", key="residual", width=12)
-        table.add_column("note", key="note")
+        table.add_column("point", key="label", width=LABEL_WIDTH)
+        table.add_column("ok", key="ok", width=2)
+        table.add_column("µm", key="residual", width=6)
+        table.add_column("note (why not valid)", key="note")
+        self._fit(self.size.width, self.size.height)
         self.set_interval(0.1, self._poll_control)
+        self.set_interval(1.0, self._show_eta)
         if self._autostart:
             self.call_after_refresh(self.action_start)
+
+    def on_resize(self, event: events.Resize) -> None:
+        self._fit(event.size.width, event.size.height)
+
+    def _fit(self, width: int, height: int) -> None:
+        # Small terminals (80×24) keep the footer's key labels and drop the button row.
+        self.set_class(height < 32, "-short")
+        self.set_class(width >= 140, "-wide")
 
     # ------------------------------------------------------------------ helpers
     def _set_state(self, state: str) -> None:
         self.state = state
         self.query_one("#state", Static).update(STATE_TEXT[state])
         self.query_one("#start", Button).disabled = state in ACTIVE_STATES
+        self.query_one("#resume", Button).disabled = state in ACTIVE_STATES or self._list_runs is None
         steerable = state in (RUNNING, PAUSING, PAUSED)
         pause_btn = self.query_one("#pause", Button)
         pause_btn.disabled = not steerable
         pause_btn.label = "Resume (p)" if state in (PAUSING, PAUSED) else "Pause (p)"
         self.query_one("#abort", Button).disabled = not steerable
+        if state == PAUSED or state not in ACTIVE_STATES:
+            self.eta.pause()
+        elif state == RUNNING and self.question is None:
+            self.eta.resume()
+        self._show_eta()
         self.sub_title = f"run {self.run_id} — {state}" if self.run_id is not None else state
+
+    def _show_eta(self) -> None:
+        self.query_one("#eta", Static).update(self.eta.text() if self.run_id is not None else "")
 
     def _note(self, *parts: str | tuple[str, str]) -> None:
         """Append a line to the notices log; parts are plain text or (text, rich style)."""
@@ -232,20 +280,26 @@ class StationApp(App[RunSummary | None]):
         self.phase = None
         self.summary = None
         self.step_index = None
+        self.report_path = None
         self._settled = False
         self._visited = set()
+        self._phase_event = self._before_upload = None
+        self.eta.reset()
+        self.remove_class("-ended")
         self.query_one("#measurements", DataTable).clear()
-        self.query_one("#progress", ProgressBar).update(total=None, progress=0)
+        self.query_one("#notices", RichLog).clear()
+        self.query_one("#devices", DevicePanel).show(None)
+        self.query_one("#progress", ProgressBar).update(total=1, progress=0)
         self.query_one("#run-id", Static).update("run —")
         self._show_phases(None)
         self.query_one("#phase-detail", Static).update("")
         self.query_one("#step", Static).update("step —")
-        panel = self.query_one("#summary", Static)
-        panel.update("")
-        panel.remove_class("-shown", "-ok", "-failed")
+        self.query_one("#summary", Static).update("")
+        self.query_one("#summary", Static).remove_class("-ok", "-failed")
+        self.query_one("#summary-box").remove_class("-shown", "-ok", "-failed")
 
     # ------------------------------------------------------------------ actions
-    def action_start(self) -> None:
+    def action_start(self, resume: int | None = None) -> None:
         if self.running:
             self.notify("A run is already in progress.", severity="warning")
             return
@@ -253,10 +307,15 @@ class StationApp(App[RunSummary | None]):
         self.control = RunControl()
         control = self.control
         self._set_state(RUNNING)
-        self._note(("Start", "bold"), " pressed — run starting")
+        self._note(("Start", "bold"), f" — resuming run #{resume}" if resume is not None else " — new run starting")
+        kwargs: dict[str, Any] = {}
+        if _accepts(self._start_run, "confirm"):
+            kwargs["confirm"] = self._confirm
+        if resume is not None:
+            kwargs["resume"] = resume
 
         def work() -> RunSummary:
-            return self._start_run(self._emit, control)
+            return self._start_run(self._emit, control, **kwargs)
 
         self.worker = self.run_worker(work, name="calibration-run", group="run", thread=True,
                                       exit_on_error=False)
@@ -282,13 +341,16 @@ class StationApp(App[RunSummary | None]):
                 self._set_state(ABORTING)
                 what = "Quit confirmed" if then_quit else "Abort confirmed"
                 self._note((what, "bold red"), " — stopping at the next safe point")
+                self._release_question()
 
         self.push_screen(ConfirmScreen(question), answered)
 
     def action_abort(self) -> None:
         if self.control is None or self.state not in (RUNNING, PAUSING, PAUSED):
             return
-        self._confirm_abort("Abort the calibration run?\nThe robot stops at the next safe point.", False)
+        run = f"run #{self.run_id}" if self.run_id is not None else "the calibration run"
+        self._confirm_abort(f"Abort {run}?\nThe robot stops at the next safe point; what is measured stays "
+                            f"in the database and the run can be resumed (r).", False)
 
     async def action_quit(self) -> None:
         if not self.running:
@@ -314,6 +376,10 @@ class StationApp(App[RunSummary | None]):
     def _abort_pressed(self) -> None:
         self.action_abort()
 
+    @on(Button.Pressed, "#resume")
+    def _resume_pressed(self) -> None:
+        self.action_resume_run()
+
     @on(Button.Pressed, "#quit")
     async def _quit_pressed(self) -> None:
         await self.action_quit()
@@ -321,20 +387,28 @@ class StationApp(App[RunSummary | None]):
     # ------------------------------------------------------------------ events from the runner
     def on_event_message(self, message: EventMessage) -> None:
         ev = message.event
-        if isinstance(ev, RunStarted):
+        if isinstance(ev, DeviceSnapshot):
+            self.query_one("#devices", DevicePanel).show(ev)
+        elif isinstance(ev, RunStarted):
             self.run_id = ev.run_id
             self.query_one("#run-id", Static).update(f"run #{ev.run_id}")
             self.query_one("#progress", ProgressBar).update(total=ev.n_steps, progress=ev.resumed_from)
+            self.eta.start(ev.resumed_from, ev.n_steps)
             extra = f", resuming after {ev.resumed_from} steps on disk" if ev.resumed_from else ""
             self._note("Run ", (f"#{ev.run_id}", "bold"), f" started: {ev.n_steps} steps{extra}")
             self._set_state(self.state)
         elif isinstance(ev, PhaseChanged):
+            if ev.phase == "upload" and self.phase == "verify":
+                self._before_upload = self._phase_event
+            self._phase_event = ev
             self.phase = ev.phase
             self._visited.add(ev.phase)
             self._show_phases(ev.phase)
-            self.query_one("#phase-detail", Static).update(esc(ev.detail))
-            self._note("phase ", (ev.phase, "bold"), f": {ev.detail}" if ev.detail else "")
+            self.query_one("#phase-detail", Static).update(esc(activity_text(ev.phase, ev.detail)))
+            self._note((activity_text(ev.phase, ev.detail), "bold"))
         elif isinstance(ev, StepStarted):
+            if self.phase == "upload" and self._before_upload is not None:  # the oracle's upload
+                self.on_event_message(EventMessage(self._before_upload))
             self.step_index = ev.index
             self.query_one("#step", Static).update(f"step [b]{ev.index + 1}[/]/{ev.total}: {esc(ev.label)}")
             bar = self.query_one("#progress", ProgressBar)
@@ -344,12 +418,16 @@ class StationApp(App[RunSummary | None]):
             self._add_measurement(ev)
             bar = self.query_one("#progress", ProgressBar)
             bar.update(total=ev.total, progress=max(bar.progress, ev.index + 1))
+            self.eta.update(int(bar.progress), ev.total)
+            self._show_eta()
         elif isinstance(ev, Notice):
+            if self.phase == "upload":  # read back, activation: shown where the operator looks
+                self.query_one("#phase-detail", Static).update(esc(activity_text("upload", ev.message)))
             if ev.level == "warning":
                 self._note(("WARNING ", "bold yellow"), (ev.message, "yellow"))
                 self.notify(ev.message, severity="warning")
             else:
-                self._note(("info ", "bold"), ev.message)
+                self._note(ev.message)
         elif isinstance(ev, Paused):
             if self.state in (RUNNING, PAUSING):
                 self._set_state(PAUSED)
@@ -366,7 +444,8 @@ class StationApp(App[RunSummary | None]):
         key = str(ev.index)
         ok = Text("✓", style="bold green") if ev.ok else Text("✗", style="bold red")
         residual = Text(fmt_num(ev.residual_um, digits=2), justify="right")
-        cells = (Text(str(ev.index + 1)), Text(ev.label), ok, residual, Text(ev.message))
+        note = Text(ev.message, style="" if ev.ok else "bold red")
+        cells = (Text(str(ev.index + 1)), Text(_shorten(ev.label)), ok, residual, note)
         if key in table.rows:  # a repeated measurement of the same step replaces the row
             for col, value in zip(("index", "label", "ok", "residual", "note"), cells):
                 table.update_cell(key, col, value)
@@ -392,12 +471,15 @@ class StationApp(App[RunSummary | None]):
         self.summary = summary
         panel = self.query_one("#summary", Static)
         panel.update(summary_markup(summary, self.step_index))
-        panel.set_class(summary.ok, "-ok")
-        panel.set_class(not summary.ok, "-failed")
-        panel.add_class("-shown")
+        for widget in (panel, self.query_one("#summary-box")):
+            widget.set_class(summary.ok, "-ok")
+            widget.set_class(not summary.ok, "-failed")
+            widget.add_class("-shown")
+        self.add_class("-ended")
         if summary.failure is None:
             self._visited.add("done")
             self._show_phases("done")
+            self.query_one("#phase-detail", Static).update("Done — [b]v[/] shows the results")
             self._set_state(FINISHED)
         else:
             self._set_state(ABORTED if summary.outcome is Outcome.ABORTED else FAILED)
@@ -410,8 +492,6 @@ class StationApp(App[RunSummary | None]):
             self._note(("Run finished", "bold green" if summary.ok else "bold yellow"), f": {name}")
         else:
             self._note((f"{name} (exit code {summary.exit_code})", "bold red"), f": {summary.failure.message}")
-        for note in summary.notes:
-            self._note(("note ", "bold"), note)
 
     def on_worker_state_changed(self, event: Worker.StateChanged) -> None:
         if event.worker is not self.worker:
@@ -434,5 +514,10 @@ class StationApp(App[RunSummary | None]):
                 self._show_summary(failure_summary(error, run_id=self.run_id, log_dir=self.log_dir))
         else:
             return
+        s = self.summary
+        if (s is not None and s.failure is None and s.run_id is not None and s.report is None
+                and self._write_report is not None):
+            self._note("Writing the report …")
+            self._make_report(s.run_id)
         if self._quit_when_done:
             self._exit_with_summary()

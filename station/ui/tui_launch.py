@@ -1,26 +1,112 @@
 """``station tui``: the operator UI over the same session as ``station calibrate``.
 
-The UI gets only a ``start_run(emit, control)`` callable; the session opens the devices in the
-worker thread the UI runs it in, and its summary is the exit code.
+The UI gets a ``start_run(emit, control, confirm=, resume=)`` callable; the session opens the
+devices in the worker thread the UI runs it in, and its summary is the exit code.  With ``recheck=RecheckOptions(...)`` the
+same UI runs a recheck (``station tui --recheck``, issue 13): its outcome and drift figures fill the
+result panel, and only rechecks are offered to resume.  The run
+database is read (the unfinished runs, a run's results) and the report written through callables
+the UI runs in worker threads; the report goes into ``report-run-N/`` next to the database.
 """
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Callable
 from pathlib import Path
 
+from station.cell.events import Event
+from station.cell.questions import Confirm
+from station.cell.recheck import RecheckOptions, RecheckSummary
+from station.cell.recheck_session import run_recheck_session
+from station.cell.runcontrol import RunControl
+from station.cell.rundb import RunDB
+from station.cell.runs import RunInfo, list_runs
 from station.cell.session import CellRequest, run_calibration_session
+from station.cell.summary import RunSummary
+from station.ui.report import ReportData
 from station.ui.tui import StationApp
 
-__all__ = ["launch"]
+__all__ = ["launch", "make_app", "recheck_run_summary", "report_dir"]
 
 
-def launch(request: CellRequest, title: str | None = None) -> int:
-    """Run the operator UI on ``request``'s cell until the operator quits; returns the exit
-    code of the last run (0 when none was started)."""
+def report_dir(db: str | Path, run_id: int) -> Path:
+    """Where the UI writes a run's report: ``report-run-N/`` next to the run database."""
+    return Path(db).resolve().parent / f"report-run-{run_id}"
+
+
+def recheck_run_summary(s: RecheckSummary) -> RunSummary:
+    """A recheck's end as the result panel shows it: its outcome and exit code, the baseline and
+    the drift figures as notes (the lines ``station recheck`` prints)."""
+    b, r = s.baseline, s.result
+    notes = [f"against run {b.run_id} ({b.created_utc[:19]} UTC), baseline accuracy {b.accuracy_um:.1f} µm"]
+    if r is not None:
+        if r.rms_um is not None and r.max_um is not None:
+            notes.append(f"drift over {r.n_valid}/{r.n_planned} poses: RMS {r.rms_um:.1f} µm "
+                         f"(tolerance {r.tolerances.position_um:.1f}), max {r.max_um:.1f} µm")
+        if r.rms_arcsec is not None and r.max_arcsec is not None:
+            notes.append(f"angular drift: RMS {r.rms_arcsec:.1f}″, max {r.max_arcsec:.1f}″")
+        if r.repeat_um is not None:
+            notes.append(f"repeated first pose: {r.repeat_um:.1f} µm (at most {r.tolerances.repeat_um:.1f})")
+        if r.moved:
+            notes.append("parameters moved: " + ", ".join(r.moved))
+        notes.extend(r.reasons)
+    if s.warmup:
+        notes.append(f"warm-up: {s.warmup.get('cycles')} cycles, "
+                     f"{'converged' if s.warmup.get('converged') else 'NOT converged'}")
+    if s.outcome.name == "DRIFTED":
+        notes.append("what to do: recalibrate ('station calibrate CONFIG')")
+    elif s.outcome.name == "RECHECK_UNTRUSTED":
+        notes.append("what to do: check the probe head and the body, warm the robot up ([warmup]), and recheck")
+    return RunSummary(outcome=s.outcome, run_id=s.run_id, cell=s.cell, robot=s.robot, db=s.db,
+                      notes=(*notes, *s.notes))
+
+
+def make_app(request: CellRequest, title: str | None = None, app_class: type[StationApp] = StationApp,
+             recheck: RecheckOptions | None = None, **kwargs: object) -> StationApp:
+    """The operator UI wired to ``request``'s cell and run database; with ``recheck`` it runs a
+    recheck against the baseline calibration instead of a calibration."""
     if title is None:
-        title = "Calibration station — " + ("simulated cell" if request.simulated else str(request.config))
+        title = (("Recheck" if recheck is not None else "Calibration") + " station — "
+                 + ("simulated cell" if request.simulated else str(request.config)))
+    db = request.db
+
+    def start_run(emit: Callable[[Event], None], control: RunControl, confirm: Confirm | None = None,
+                  resume: int | None = None) -> RunSummary:
+        req = dataclasses.replace(request, resume=resume) if resume is not None else request
+        if recheck is None:
+            return run_calibration_session(req, emit, control, confirm)
+        summary = run_recheck_session(req, emit, control, recheck)
+        return summary if isinstance(summary, RunSummary) else recheck_run_summary(summary)
+
+    def runs() -> list[RunInfo]:
+        if not Path(db).exists():
+            return []
+        with RunDB(db) as rdb:
+            found = list_runs(rdb)
+        return [r for r in found if r.kind == "recheck"] if recheck is not None else found
+
+    def load_results(run_id: int) -> ReportData:
+        from station.ui.report_data import report_data_for_run
+
+        with RunDB(db) as rdb:
+            return report_data_for_run(rdb, run_id)
+
+    def write_report(run_id: int) -> Path:
+        from station.ui.report_data import report_for_run
+
+        return Path(report_for_run(db, run_id, report_dir(db, run_id)))
+
     # The session writes its tracebacks next to the database; an escaping one goes there too.
-    app = StationApp(lambda emit, control: run_calibration_session(request, emit, control), title=title,
-                     log_dir=Path(request.db).resolve().parent)
+    # A recheck has no calibration report: its figures are in the result panel and the database.
+    return app_class(start_run, title=title, log_dir=Path(db).resolve().parent, list_runs=runs,
+                     load_results=load_results, write_report=write_report if recheck is None else None,
+                     db_label=str(db),
+                     **kwargs)  # type: ignore[arg-type]
+
+
+def launch(request: CellRequest, title: str | None = None, recheck: RecheckOptions | None = None) -> int:
+    """Run the operator UI on ``request``'s cell until the operator quits; returns the exit
+    code of the last run (0 when none was started).  ``recheck``: run rechecks, not calibrations."""
+    app = make_app(request, title, StationApp, recheck=recheck)
     app.run()
     return int(app.return_code or 0)

@@ -189,7 +189,7 @@ async def test_full_run_progress_table_and_summary():
         assert row(text, "exit code") == "0"
         assert app.summary is SUMMARY and app.outcome == "SUCCESS" and app.exit_code == 0
         assert "-ok" in app.query_one("#summary").classes
-        assert "done" in plain(app.query_one("#phases", Static))
+        assert "Done" in plain(app.query_one("#phases", Static))
 
         await pilot.press("q")  # not running any more: quits at once
         await wait_until(pilot, lambda: not app.is_running, "app exit")

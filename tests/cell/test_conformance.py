@@ -1,0 +1,206 @@
+"""station conformance against the simulated controller, and against deliberately wrong variants
+of it (``SimulatedController(quirks=...)``): the simulator passes every requirement, each wrong
+variant fails exactly its requirement. Also: the kit moves only inside the park zone, restores the
+controller's tables, and docs/robot-program.md lists every register of the map."""
+
+from __future__ import annotations
+
+import json
+import re
+import socket
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from drivers.controller import ModbusController
+from drivers.controller_map import REGISTERS, Command, ErrorCode, StatusBit, WordOrder
+from drivers.correction_table import CorrectionTableData, TableAxis
+from simulators.controller_server import QUIRKS, SimulatedController
+from station.cell import conformance as cf
+from station.cell.config import parse_text
+from station.errors import ConfigError
+from station.ui.cli import main
+
+DOC = Path(__file__).resolve().parents[2] / "docs" / "robot-program.md"
+PARK = "[0.0, 0.0, -1.0, 0.0]"  # joint 3 (the quill) 1 mm below its upper limit 0 mm: inside the 2 mm zone
+
+
+def config_text(port: int, order: str = "big", park: str | None = PARK) -> str:
+    conformance = "" if park is None else f"[conformance]\npark_joints = {park}\ntest_move = 2.0\n"
+    return f"""
+[robot]
+model = "sr800"
+[body]
+points = [
+  {{ id = "a", pose = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0] }},
+  {{ id = "b", pose = [10.0, 0.0, 0.0, 0.0, 0.0, 0.0] }},
+  {{ id = "c", pose = [0.0, 10.0, 0.0, 0.0, 0.0, 0.0] }},
+]
+[devices]
+controller = "127.0.0.1:{port}"
+word_order = "{order}"
+{conformance}"""
+
+
+@pytest.fixture
+def sent_targets(monkeypatch):
+    """Every command block the kit writes: (code, seq, joints)."""
+    sent: list[tuple[int, int, np.ndarray | None]] = []
+    original = cf._Link.send_block
+
+    def record(self, code, seq, joints=None, speed=0.0):
+        sent.append((int(code), int(seq), None if joints is None else np.array(joints, dtype=float)))
+        return original(self, code, seq, joints, speed)
+
+    monkeypatch.setattr(cf._Link, "send_block", record)
+    return sent
+
+
+@pytest.mark.parametrize("order", [WordOrder.BIG, WordOrder.LITTLE])
+def test_the_simulator_passes_every_requirement_inside_the_park_zone(order, sent_targets):
+    with SimulatedController(time_scale=1.0, word_order=order) as sim:
+        q_start = sim.joints
+        cfg = parse_text(config_text(sim.port, order.value))
+        report = cf.run_conformance(cfg)
+        assert report.passed, "\n".join(report.describe())
+        assert [r.id for r in report.requirements] == [rid for rid, _ in cf.REQUIREMENTS]
+        np.testing.assert_allclose(sim.joints, q_start, atol=1e-9)  # back where it was parked
+        assert sim.active_table is None  # no table was active, none is
+    assert cfg.conformance is not None
+    zone = cfg.conformance.zone()
+    motions = [q for code, _, q in sent_targets if code == Command.MOVE_JOINTS]
+    assert len(motions) >= 5
+    for q in motions:  # never a target outside the park zone (the soft-limit probe included)
+        assert q is not None and np.all(q[:4] >= zone[:, 0] - 1e-9) and np.all(q[:4] <= zone[:, 1] + 1e-9), q
+    assert report.to_json()["exit_code"] == 0
+
+
+@pytest.mark.parametrize("quirk,requirement", [
+    ("swapped_word_order", "word_order"),
+    ("ack_without_seq", "ack"),
+    ("no_heartbeat", "heartbeat"),
+    ("crc_mismatch", "table"),
+    ("done_before_motion", "done"),
+])
+def test_each_wrong_variant_fails_exactly_its_requirement(quirk, requirement):
+    assert quirk in QUIRKS
+    with SimulatedController(time_scale=1.0, quirks={quirk}) as sim:
+        report = cf.run_conformance(parse_text(config_text(sim.port)))
+    failed = {r.id for r in report.requirements if r.status != cf.PASSED}
+    assert failed == {requirement}, "\n".join(report.describe())
+    r = report.requirement(requirement)
+    assert r.status == cf.FAILED and r.fix, r  # and it says what to fix
+    assert report.outcome == 7
+
+
+def test_the_controllers_tables_are_restored():
+    with SimulatedController(time_scale=0.0) as sim:
+        with ModbusController("127.0.0.1", sim.port, heartbeat_period=None) as c:
+            active = CorrectionTableData((TableAxis(250.0, 100.0, 2),), np.full((1, 2, 4), 1e-5))
+            c.upload_table(active)
+            c.verify_table()
+            c.stage_table()
+            c.activate_table()
+            staged = CorrectionTableData((TableAxis(250.0, 100.0, 3),), np.full((1, 3, 4), 2e-5))
+            c.upload_table(staged)
+            c.stage_table()
+            before = c.table_crcs()
+        report = cf.run_conformance(parse_text(config_text(sim.port)))
+        assert report.passed, "\n".join(report.describe())
+        with ModbusController("127.0.0.1", sim.port, heartbeat_period=None) as c:
+            after = c.table_crcs()
+        assert after["active"] == before["active"] == active.crc32()
+        assert after["staged"] == before["staged"] == staged.crc32()
+        assert sim.active_table is not None and sim.active_table.same_as(active)
+
+
+def test_a_robot_outside_the_park_zone_is_not_moved(sent_targets):
+    with SimulatedController(time_scale=0.0) as sim:
+        q_start = sim.joints
+        report = cf.run_conformance(parse_text(config_text(sim.port, park="[30.0, 0.0, -1.0, 0.0]")))
+        np.testing.assert_array_equal(sim.joints, q_start)
+    for rid in ("sequence", "done", "soft_limit"):
+        r = report.requirement(rid)
+        assert r.status == cf.NOT_CHECKED and "jog it to [conformance].park_joints" in " ".join(r.detail + r.fix)
+    assert not [code for code, _, _ in sent_targets if code in (Command.MOVE_JOINTS, Command.MOVE_CARTESIAN)]
+    assert not report.passed and report.outcome == 7
+
+
+def test_without_a_limit_in_the_park_zone_the_soft_limit_check_is_not_run():
+    with SimulatedController(time_scale=0.0) as sim:
+        with ModbusController("127.0.0.1", sim.port, heartbeat_period=None) as c:
+            c.move_joints([0.0, 0.0, -50.0, 0.0]).wait(2.0)  # the operator parks the robot
+        report = cf.run_conformance(parse_text(config_text(sim.port, park="[0.0, 0.0, -50.0, 0.0]")))
+    r = report.requirement("soft_limit")
+    assert r.status == cf.NOT_CHECKED and "within test_move of its soft limit" in " ".join(r.fix)
+    assert {x.id for x in report.requirements if x.status != cf.PASSED} == {"soft_limit"}
+
+
+def test_configuration_of_the_park_zone():
+    text = config_text(1502)
+    assert parse_text(config_text(1502, park=None)).conformance is None
+    with pytest.raises(ConfigError, match="conformance.park_joints is missing"):
+        cf.run_conformance(parse_text(config_text(1502, park=None)))
+    with pytest.raises(ConfigError, match="park_joints lists 3 joints"):
+        parse_text(config_text(1502, park="[0.0, 0.0, -1.0]"))
+    with pytest.raises(ConfigError, match="joint 3 = 5 mm is outside the soft limits"):
+        parse_text(config_text(1502, park="[0.0, 0.0, 5.0, 0.0]"))
+    with pytest.raises(ConfigError, match=re.escape("conformance.test_move")):
+        parse_text(text.replace("test_move = 2.0", "test_move = 50.0"))
+    c = parse_text(text).conformance
+    assert c is not None
+    np.testing.assert_allclose(c.zone()[2], [-3.0, 1.0])
+    np.testing.assert_allclose(c.zone()[0], np.radians([-2.0, 2.0]))
+
+
+def _closed_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_cli(tmp_path, capsys):
+    with SimulatedController(time_scale=0.0) as sim:
+        p = tmp_path / "cell.toml"
+        p.write_text(config_text(sim.port))
+        assert main(["conformance", str(p), "--json"]) == 0
+        out = json.loads(capsys.readouterr().out)
+        assert out["passed"] and out["outcome"] == "SUCCESS" and len(out["requirements"]) == len(cf.REQUIREMENTS)
+        assert main(["conformance", str(p)]) == 0
+        assert "9 of 9 requirements passed" in capsys.readouterr().out
+    p.write_text(config_text(_closed_port()))
+    assert main(["conformance", str(p), "--json"]) == 7
+    captured = capsys.readouterr()
+    assert json.loads(captured.out)["exit_code"] == 7 and "Traceback" not in captured.err
+    p.write_text(config_text(1502, park=None))
+    assert main(["conformance", str(p), "--json"]) == 2
+    assert json.loads(capsys.readouterr().out)["exit_code"] == 2
+
+
+# ------------------------------------------------------------------ the robot programmer's document
+
+def register_rows() -> list[str]:
+    """The register table of docs/robot-program.md, generated from the map (the one source)."""
+    rows = []
+    for r in REGISTERS:
+        where = f"{r.address}" if r.n_registers == 1 else f"{r.address}–{r.end - 1}"
+        count = f"{r.type.value}" if r.count == 1 else f"{r.type.value} × {r.count}"
+        writer = "PC" if r.access == "rw" else "robot program"
+        rows.append(f"| {where} | `{r.name}` | {count} | {writer} | {r.unit} | {r.meaning} |")
+    return rows
+
+
+def test_robot_program_document_lists_every_register_and_code():
+    doc = DOC.read_text(encoding="utf-8")
+    for row in register_rows():
+        assert row in doc, f"register row missing or out of date in {DOC.name}:\n{row}"
+    for code in ErrorCode:
+        assert f"| {int(code)} | `{code.name}` |" in doc, code
+    for cmd in Command:
+        assert f"| {int(cmd)} | `{cmd.name}` |" in doc, cmd
+    for bit in StatusBit:
+        assert f"`{bit.name}`" in doc, bit
+    for rid, _ in cf.REQUIREMENTS:
+        assert f"`{rid}`" in doc, rid
+    assert "station conformance" in doc

@@ -1,0 +1,71 @@
+"""``station tui --recheck`` (issue 13): a recheck through the operator UI — the same events,
+device panel and result panel, with the recheck's outcome and drift figures."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+from textual.content import Content
+from textual.widgets import DataTable, Static
+
+from station.cell.recheck import RecheckOptions
+from station.cell.session import CellRequest
+from station.errors import Outcome
+from station.ui import tui_launch
+from station.ui.cli import main
+from station.ui.tui import StationApp
+from station.ui.tui_widgets import DevicePanel
+
+
+def panel(app: StationApp) -> str:
+    content = app.query_one("#summary", Static).content
+    return Content.from_markup(content).plain if isinstance(content, str) else str(content)
+
+
+async def wait_until(pilot, cond, what: str, rounds: int = 12000) -> None:
+    for _ in range(rounds):
+        if cond():
+            return
+        await pilot.pause(0.01)
+    raise AssertionError(f"timed out waiting for: {what}")
+
+
+@pytest.fixture(scope="module")
+def calibrated_db(tmp_path_factory) -> str:
+    """A run database holding a calibration of the simulated cell (seed 1): the baseline."""
+    db = str(tmp_path_factory.mktemp("recheck") / "runs.sqlite")
+    assert main(["calibrate", "--simulated", "--seed", "1", "--db", db]) == 0
+    return db
+
+
+async def test_simulated_recheck_through_the_ui(calibrated_db):
+    request = CellRequest(simulated=True, seed=1, db=calibrated_db)
+    app = tui_launch.make_app(request, recheck=RecheckOptions())
+    assert "Recheck" in str(app.title)
+    async with app.run_test(size=(160, 45)) as pilot:
+        await pilot.press("s")
+        await wait_until(pilot, lambda: app.worker is not None and app.worker.is_finished, "recheck ended")
+        await pilot.pause()
+        summary = app.summary
+        assert summary is not None, panel(app)
+        assert summary.failure is None, summary.failure
+        assert summary.outcome is Outcome.SUCCESS and app.exit_code == 0 and app.state == "finished"
+        assert summary.db == calibrated_db  # the worker's converted summary, not the event's copy
+        text = panel(app)
+        assert re.search(r"^outcome\s+SUCCESS", text, re.MULTILINE), text
+        assert "against run 1" in text and "drift over" in text and "µm" in text
+        assert re.search(r"^exit code\s+0$", text, re.MULTILINE), text
+        assert app.query_one("#measurements", DataTable).row_count > 0
+        assert app.query_one("#devices", DevicePanel).snapshot is not None
+        assert app.report_path is None  # a recheck writes no calibration report
+        await pilot.press("q")
+        await wait_until(pilot, lambda: not app.is_running, "app exit")
+    assert app.return_code == 0
+
+
+def test_recheck_options_need_recheck(tmp_path: Path):
+    db = str(tmp_path / "runs.sqlite")
+    assert main(["tui", "--simulated", "--poses", "5", "--db", db]) == Outcome.CONFIG_ERROR
+    assert main(["tui", "--simulated", "--recheck", "--poses", "2", "--db", db]) == Outcome.CONFIG_ERROR

@@ -1,0 +1,58 @@
+"""One full simulated calibration through the operator UI, at 80×24 and 160×48: pause,
+resume, abort, resume from the list of unfinished runs, upload confirmation and roll back."""
+
+from __future__ import annotations
+
+import pytest
+from textual.widgets import DataTable
+
+from station.cell.session import CellRequest
+from station.errors import Outcome
+from station.ui.tui_launch import make_app
+from station.ui.tui_screens import QuestionScreen, ResumeScreen
+from station.ui.tui_widgets import ConfirmScreen
+
+
+async def wait_until(pilot, cond, what: str, rounds: int = 4000) -> None:
+    for _ in range(rounds):
+        if cond():
+            return
+        await pilot.pause(0.01)
+    raise AssertionError(f"timed out waiting for: {what}")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("size", [(80, 24), (160, 48)])
+async def test_full_simulated_run_with_pause_abort_resume_upload_and_roll_back(tmp_path, size):
+    app = make_app(CellRequest(simulated=True, db=str(tmp_path / "runs.sqlite")))
+    async with app.run_test(size=size) as pilot:
+        table = app.query_one("#measurements", DataTable)
+        await pilot.press("s")
+        await wait_until(pilot, lambda: table.row_count >= 3, "3 rows")
+        await pilot.press("p")
+        await wait_until(pilot, lambda: app.state == "paused", "paused")
+        n = table.row_count
+        await pilot.pause(0.2)
+        assert table.row_count == n and not app.eta.running
+        await pilot.press("p")
+        await wait_until(pilot, lambda: table.row_count > n, "running again")
+        await pilot.press("a")
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), "abort?")
+        await pilot.press("y")
+        await wait_until(pilot, lambda: app.state == "aborted" and app.worker.is_finished, "aborted")
+        run_id = app.summary.run_id
+        assert app.exit_code == 6 and f"pick run #{run_id}" in str(app.query_one("#summary").content)
+
+        await pilot.press("r")
+        await wait_until(pilot, lambda: isinstance(app.screen, ResumeScreen), "resume list")
+        await pilot.press("enter")
+        await wait_until(pilot, lambda: isinstance(app.screen, QuestionScreen), "upload?", 20000)
+        assert app.run_id == run_id
+        await pilot.press("y")
+        await wait_until(pilot, lambda: isinstance(app.screen, QuestionScreen)
+                         and type(app.screen.question).__name__ == "KeepCorrection", "keep?", 20000)
+        await pilot.press("n")  # roll back
+        await wait_until(pilot, lambda: app.worker.is_finished and app.summary is not None, "ended", 20000)
+        await wait_until(pilot, lambda: app.report_path is not None, "report", 6000)
+        assert app.summary.outcome is Outcome.NOT_UPLOADED and app.exit_code == 11
+        assert app.report_path.parent == tmp_path / f"report-run-{run_id}" and app.report_path.exists()
