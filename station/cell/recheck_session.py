@@ -21,7 +21,7 @@ from station.cell.outcomes import failure_summary
 from station.cell.recheck import RecheckOptions, RecheckSummary, run_recheck
 from station.cell.runcontrol import RunControl
 from station.cell.rundb import RunDB
-from station.cell.session import CellRequest, LoadedCell, describe_devices, load_cell, open_cell
+from station.cell.session import CellRequest, LoadedCell, describe_devices, load_cell, open_cell, store_failure
 from station.cell.summary import RunSummary
 from station.io.robot_files import read_user_text
 
@@ -104,10 +104,6 @@ def run_recheck_session(request: CellRequest, emit: Callable[[Event], None], con
                 failed.failure.error_type, failed.failure.message,
                 failed.failure.hint.replace("station calibrate", "station recheck"), failed.failure.log_file))
         if run_id is not None:
-            try:
-                with RunDB(request.db) as db:
-                    db.save_result(run_id, "summary", {**failed.to_json(), "kind": "recheck"})
-            except Exception:  # noqa: BLE001 - the failure itself is what must reach the operator
-                pass
+            store_failure(request.db, run_id, {**failed.to_json(), "kind": "recheck"})
         emit(RunFailed(failed))
         return failed

@@ -10,6 +10,7 @@ is what the CLI and the TUI call: it never raises for a run that ends badly; it 
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 from contextlib import ExitStack
 from dataclasses import dataclass, field
@@ -31,6 +32,8 @@ from station.cell.runcontrol import RunControl
 from station.cell.rundb import RunDB
 from station.cell.summary import RunSummary
 from station.errors import ConfigError, Outcome, RunAborted
+
+log = logging.getLogger(__name__)
 
 __all__ = ["CellRequest", "Devices", "LoadedCell", "open_cell", "open_probe", "open_controller", "load_cell", "check_cell", "CheckReport",
            "run_calibration_session", "reset_controller"]
@@ -157,13 +160,20 @@ def run_calibration_session(request: CellRequest, emit: Callable[[Event], None],
         summary = failure_summary(exc, run_id=run_id, log_dir=Path(request.db).resolve().parent,
                                   cell=cell_name, robot=robot, db=request.db)
         if run_id is not None:  # 'station runs' shows why it stopped
-            try:
-                with RunDB(request.db) as db:
-                    db.save_result(run_id, "summary", summary.to_json())
-            except Exception:  # noqa: BLE001 - the failure itself is what must reach the operator
-                pass
+            store_failure(request.db, run_id, summary.to_json())
         emit(RunFailed(summary))
         return summary
+
+
+def store_failure(db_path: str, run_id: int, record: dict[str, Any]) -> None:
+    """Store a failed run's summary so that 'station runs' shows why it stopped. A database that
+    cannot take it (the very error may be the database's) is logged, not raised: the failure
+    itself is what must reach the operator."""
+    try:
+        with RunDB(db_path) as db:
+            db.save_result(run_id, "summary", record)
+    except Exception as exc:  # noqa: BLE001 - see above
+        log.warning("run %s: the failure summary could not be stored in %s: %s", run_id, db_path, exc)
 
 
 def reset_controller(cfg: CellConfig, confirm: Callable[[str], bool]) -> tuple[str, ...]:
