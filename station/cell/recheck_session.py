@@ -16,12 +16,20 @@ from pathlib import Path
 from typing import Any
 
 from station.cell.config import MAX_CONFIG_BYTES, parse_text, simulation_settings
-from station.cell.events import Event, PhaseChanged, RunFailed, RunStarted
+from station.cell.events import Event, PhaseChanged, RunFailed
 from station.cell.outcomes import failure_summary
 from station.cell.recheck import RecheckOptions, RecheckSummary, run_recheck
 from station.cell.runcontrol import RunControl
 from station.cell.rundb import RunDB
-from station.cell.session import CellRequest, LoadedCell, describe_devices, load_cell, open_cell, store_failure
+from station.cell.session import (
+    CellRequest,
+    LoadedCell,
+    RunTracker,
+    describe_devices,
+    load_cell,
+    open_cell,
+    store_failure,
+)
 from station.cell.summary import RunSummary
 from station.io.robot_files import read_user_text
 
@@ -71,14 +79,8 @@ def run_recheck_session(request: CellRequest, emit: Callable[[Event], None], con
     """Load the cell, open its devices and run (or resume) a recheck. Never raises: a failure
     is classified, emitted as ``RunFailed`` and returned as a :class:`RunSummary`.
     ``on_cell``: called with the loaded cell (a test reaches the simulator's state through it)."""
-    run_id: int | None = None
+    tracker = RunTracker(emit)
     cell_name = robot = ""
-
-    def tracking_emit(event: Event) -> None:
-        nonlocal run_id
-        if isinstance(event, RunStarted):
-            run_id = event.run_id
-        emit(event)
 
     try:
         with ExitStack() as stack:
@@ -91,19 +93,19 @@ def run_recheck_session(request: CellRequest, emit: Callable[[Event], None], con
             db = stack.enter_context(RunDB(request.db))
             emit(PhaseChanged("connect", "connecting the probe head and the controller"))
             devices = open_cell(cfg, stack)
-            summary = run_recheck(cfg, devices.probe, devices.controller, db, tracking_emit, control,
+            summary = run_recheck(cfg, devices.probe, devices.controller, db, tracker, control,
                                   options or RecheckOptions(),
                                   resume_run=request.resume, seed=request.seed if request.simulated else None,
                                   devices_info=describe_devices(devices))
             return summary.replace(db=request.db)
     except Exception as exc:  # every failure becomes an outcome; nothing escapes as a traceback
-        failed = failure_summary(exc, run_id=run_id, log_dir=Path(request.db).resolve().parent,
+        failed = failure_summary(exc, run_id=tracker.run_id, log_dir=Path(request.db).resolve().parent,
                                  cell=cell_name, robot=robot, db=request.db)
-        if failed.failure is not None and run_id is not None:
+        if failed.failure is not None and tracker.run_id is not None:
             failed = failed.replace(failure=failed.failure.__class__(
                 failed.failure.error_type, failed.failure.message,
                 failed.failure.hint.replace("station calibrate", "station recheck"), failed.failure.log_file))
-        if run_id is not None:
-            store_failure(request.db, run_id, {**failed.to_json(), "kind": "recheck"})
+        if tracker.run_id is not None:
+            store_failure(request.db, tracker.run_id, {**failed.to_json(), "kind": "recheck"})
         emit(RunFailed(failed))
         return failed

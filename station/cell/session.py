@@ -36,7 +36,7 @@ from station.errors import ConfigError, Outcome, RunAborted
 log = logging.getLogger(__name__)
 
 __all__ = ["CellRequest", "Devices", "LoadedCell", "open_cell", "open_probe", "open_controller", "load_cell", "check_cell", "CheckReport",
-           "run_calibration_session", "reset_controller"]
+           "run_calibration_session", "reset_controller", "RunTracker", "store_failure"]
 
 
 @dataclass(frozen=True)
@@ -125,6 +125,19 @@ def load_cell(request: CellRequest, stack: ExitStack) -> LoadedCell:
     return LoadedCell(load_config(request.config))
 
 
+class RunTracker:
+    """Forwards events and remembers the run they belong to (a failure summary names it)."""
+
+    def __init__(self, emit: Callable[[Event], None]) -> None:
+        self._emit = emit
+        self.run_id: int | None = None
+
+    def __call__(self, event: Event) -> None:
+        if isinstance(event, RunStarted):
+            self.run_id = event.run_id
+        self._emit(event)
+
+
 def run_calibration_session(request: CellRequest, emit: Callable[[Event], None],
                             control: RunControl | None = None, confirm: Confirm | None = None) -> RunSummary:
     """Load the cell, open its devices and run (or resume) a calibration.
@@ -133,14 +146,8 @@ def run_calibration_session(request: CellRequest, emit: Callable[[Event], None],
     (:func:`station.cell.outcomes.classify`), emitted as ``RunFailed`` and returned with its
     hint. An internal error (a bug) writes its traceback to a log file the message names.
     """
-    run_id: int | None = None
+    tracker = RunTracker(emit)
     cell_name = robot = ""
-
-    def tracking_emit(event: Event) -> None:
-        nonlocal run_id
-        if isinstance(event, RunStarted):
-            run_id = event.run_id
-        emit(event)
 
     try:
         with ExitStack() as stack:
@@ -151,16 +158,16 @@ def run_calibration_session(request: CellRequest, emit: Callable[[Event], None],
             emit(PhaseChanged("connect", "connecting the probe head and the controller"))
             devices = open_cell(cfg, stack)
             seed = request.seed if request.simulated else None
-            summary = run_calibration(cfg, devices.probe, devices.controller, db, tracking_emit, control,
+            summary = run_calibration(cfg, devices.probe, devices.controller, db, tracker, control,
                                       Options(upload=request.upload, oracle_truth=loaded.truth, confirm=confirm),
                                       resume_run=request.resume, seed=seed,
                                       devices_info=describe_devices(devices))
             return summary.replace(db=request.db)
     except Exception as exc:  # every failure becomes an outcome; nothing escapes as a traceback
-        summary = failure_summary(exc, run_id=run_id, log_dir=Path(request.db).resolve().parent,
+        summary = failure_summary(exc, run_id=tracker.run_id, log_dir=Path(request.db).resolve().parent,
                                   cell=cell_name, robot=robot, db=request.db)
-        if run_id is not None:  # 'station runs' shows why it stopped
-            store_failure(request.db, run_id, summary.to_json())
+        if tracker.run_id is not None:  # 'station runs' shows why it stopped
+            store_failure(request.db, tracker.run_id, summary.to_json())
         emit(RunFailed(summary))
         return summary
 
