@@ -160,6 +160,12 @@ class CellConfig:
     recheck: RecheckConfig = RecheckConfig()
     warmup: WarmupConfig | None = None  # None: no warm-up ([warmup] absent or enabled = false)
     conformance: ConformanceConfig | None = None  # None: no [conformance].park_joints
+    # --- one field per owner; each is filled in parse_config on its own line below ---
+    head: Any = None  # ProbeHeadGeometry of the [head] file (None: not yet given)
+    head_in_flange: np.ndarray | None = None  # (4,4) MKKS in the flange frame, from the head's CMM report
+    body_sigma: np.ndarray | None = None  # (n_points, 2) σ of each body point: position [mm], angle [rad]
+    tools: tuple[Any, ...] = ()  # the tools that replace the head ([[tool]])
+    simulation: Any = None  # the validated [simulation] table (what --simulated CONFIG simulates)
 
 
 # --------------------------------------------------------------------------------------------
@@ -640,9 +646,16 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
     sim = f.simulation
     if sim.step_joint > model.n_joints:
         raise ConfigError(f"{source}: simulation.step_joint = {sim.step_joint}: the robot has {model.n_joints} joints")
-    return CellConfig(f.cell.name, model, soft, ids, pose_to_matrix(poses), f.body.cube_edge_mm,
-                      devices, plan, ident, corr, text, f.simulation.seed, recheck, warmup,
-                      conformance=_conformance(f.conformance, model, soft, source))
+    return CellConfig(
+        f.cell.name, model, soft, ids, pose_to_matrix(poses), f.body.cube_edge_mm,
+        devices, plan, ident, corr, text, f.simulation.seed, recheck, warmup,
+        conformance=_conformance(f.conformance, model, soft, source),
+        # head=...,            (owner: probe-head file)
+        # head_in_flange=...,  (owner: probe-head file)
+        # body_sigma=...,      (owner: body CMM file)
+        # tools=...,           (owner: tools after the head)
+        # simulation=...,      (owner: rehearse your cell)
+    )
 
 
 def simulation_settings(text: str, source: str = "<config>") -> dict[str, Any]:
