@@ -16,7 +16,7 @@ import numpy as np
 
 from station.cell.config import CellConfig
 from station.cell.pipeline import MIN_VALID_FRACTION, min_valid_identification
-from station.cell.plan import Plan, build_plan, travel_joints
+from station.cell.plan import Plan, all_motion_poses, build_plan, retracted, travel_joints
 from station.cell.steps import PlannedStep, StepKind
 from station.core.identifiability import analyze
 from station.core.measurements import residuals_and_jacobian, synthetic_set
@@ -46,6 +46,8 @@ class PlanPreview:
     sigma_orientation_arcsec: tuple[float, float, float]
     settle_s_total: float
     joint_types: tuple[str, ...] = ()
+    #: motion time [s] at [plan].speed from the robot file's joint speeds (None: not given there)
+    motion_s_estimate: float | None = None
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -63,6 +65,8 @@ class PlanPreview:
             "predicted_sigma_orientation_arcsec": dict(zip(("min", "mean", "max"), self.sigma_orientation_arcsec)),
             "predicted_accuracy_includes": "parameter uncertainty from the measurement noise only",
             "settle_s_total": self.settle_s_total,
+            "motion_s_estimate": self.motion_s_estimate,
+            "motion_estimate_basis": "each move at the slowest joint's maximum speed × [plan].speed, no acceleration",
             "units": {"joints": "rad | mm", "limit_margin": "deg | mm"},
         }
 
@@ -72,6 +76,23 @@ def _margins(cfg: CellConfig, q: np.ndarray) -> tuple[float, ...]:
     m = np.minimum(q - lo, hi - q)
     scale = np.array([1 / DEG if k == "revolute" else 1.0 for k in cfg.model.joint_types])
     return tuple(float(v) for v in m * scale)
+
+
+def motion_seconds(cfg: CellConfig, steps: tuple[PlannedStep, ...]) -> float | None:
+    """Motion time [s] of ``steps`` from the robot file's joint speeds at ``[plan].speed``: every
+    move a measurement makes (approach, above the point, touch, retract) at the speed of its
+    slowest joint, without acceleration, so a real robot takes somewhat longer. None when the
+    robot file gives no speeds."""
+    v = cfg.model.max_speed
+    if v is None or not steps:
+        return None
+    vmax = np.asarray(v, dtype=float) * cfg.plan.speed
+    path = []
+    for s in steps:
+        q = np.asarray(s.q, dtype=float)
+        path += [*all_motion_poses(cfg, q, s.direction), retracted(cfg, q)]
+    dq = np.abs(np.diff(np.array(path), axis=0))
+    return float(np.sum(np.max(dq / vmax, axis=1)))
 
 
 def preview(cfg: CellConfig, with_upload: bool = True) -> PlanPreview:
@@ -106,7 +127,8 @@ def preview(cfg: CellConfig, with_upload: bool = True) -> PlanPreview:
         identifiable=tuple(a.chosen), condition=float(a.chosen_condition),
         sigma_position_um=(float(pos.min()), float(pos.mean()), float(pos.max())),
         sigma_orientation_arcsec=(float(ori.min()), float(ori.mean()), float(ori.max())),
-        settle_s_total=float(len(steps) * cfg.plan.settle_s), joint_types=tuple(cfg.model.joint_types))
+        settle_s_total=float(len(steps) * cfg.plan.settle_s), joint_types=tuple(cfg.model.joint_types),
+        motion_s_estimate=motion_seconds(cfg, steps))
 
 
 def describe(p: PlanPreview) -> list[str]:
@@ -121,8 +143,13 @@ def describe(p: PlanPreview) -> list[str]:
                  f"{p.sigma_orientation_arcsec[0]:.1f}–{p.sigma_orientation_arcsec[2]:.1f}″")
     if p.travel_clearance_mm is not None:
         lines.append(f"  travel height: {p.travel_clearance_mm:.1f} mm above the highest target")
-    lines.append(f"  settling: {p.settle_s_total:.0f} s in all; motion time is not estimated "
-                 f"(the robot file gives no joint speeds)")
+    if p.motion_s_estimate is None:
+        lines.append(f"  settling: {p.settle_s_total:.0f} s in all; motion time is not estimated "
+                     f"(the robot file gives no joint speeds: add max_speed per joint)")
+    else:
+        total = p.motion_s_estimate + p.settle_s_total
+        lines.append(f"  estimated duration: {total / 60:.1f} min ({p.motion_s_estimate:.0f} s of motion at the "
+                     f"robot file's joint speeds × [plan].speed, no acceleration; {p.settle_s_total:.0f} s settling)")
     if p.steps:
         tight = min(p.steps, key=lambda s: min(s.limit_margin))
         lines.append(f"  smallest margin to a soft limit: {min(tight.limit_margin):.2f} (deg | mm) at step "

@@ -16,6 +16,7 @@ hold lengths in mm and angles in degrees or radians as their header says.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from dataclasses import dataclass, field
@@ -60,10 +61,17 @@ class RobotModel:
     description: str = ""
     # Minimal-set preferences a robot file may carry (see identifiability.choose_parameters).
     prefer: tuple[str, ...] = field(default=())
+    #: ``(n_joints,)`` [rad/s or mm/s] the joints' maximum speeds from the robot file (None: not
+    #: given); the plan preview estimates the motion time from them
+    max_speed: np.ndarray | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "nominal", _readonly(self.nominal))
         object.__setattr__(self, "joint_limits", _readonly(self.joint_limits))
+        if self.max_speed is not None:
+            object.__setattr__(self, "max_speed", _readonly(self.max_speed))
+            if self.max_speed.shape != (self.n_joints,) or not np.all(np.isfinite(self.max_speed) & (self.max_speed > 0)):
+                raise ConfigError(f"robot {self.name!r}: max_speed must give one finite speed > 0 per joint")
         names = [t.name for t in self.transforms]
         if len(set(names)) != len(names):
             raise ConfigError(f"robot {self.name!r}: transform names must be unique, got {names}")
@@ -153,7 +161,8 @@ class RobotModel:
         params = np.asarray(params, dtype=float)
         if params.shape != self.nominal.shape:
             raise ValueError(f"expected {self.nominal.shape} parameters, got {params.shape}")
-        return RobotModel(self.name, self.transforms, params, self.joint_limits, self.description, self.prefer)
+        return RobotModel(self.name, self.transforms, params, self.joint_limits, self.description, self.prefer,
+                          self.max_speed)
 
     def with_setup(self, pose: np.ndarray) -> "RobotModel":
         """The same robot with the set-up transform R set to ``pose`` (6,) [mm, rad]."""
@@ -204,14 +213,15 @@ def robot_from_dict(data: dict, source: str = "<dict>") -> RobotModel:
             f"{source}: need [[transform]] entries: a set-up transform, one per joint, and a tool"
         )
     specs, params, limits = [], [], []
+    speeds: list[float] = []
     for k, e in enumerate(entries):
         if not isinstance(e, dict) or not isinstance(e.get("name"), str) or not e["name"]:
             raise ConfigError(f"{source}: [[transform]] number {k + 1} needs a 'name' (a string)")
-        unknown = set(e) - {"name", "joint", "limits", *PARAM_SUFFIXES}
+        unknown = set(e) - {"name", "joint", "limits", "max_speed", *PARAM_SUFFIXES}
         if unknown:
             raise ConfigError(
                 f"{source}: transform {e['name']!r} has unknown keys {sorted(unknown)}; "
-                f"allowed: name, joint, limits, {', '.join(PARAM_SUFFIXES)}"
+                f"allowed: name, joint, limits, max_speed, {', '.join(PARAM_SUFFIXES)}"
             )
         joint = e.get("joint")
         if joint not in (None, "revolute", "prismatic"):
@@ -240,8 +250,14 @@ def robot_from_dict(data: dict, source: str = "<dict>") -> RobotModel:
                     f"{source}: transform {e['name']!r}: limits {lim!r} must be [lower, upper] with lower < upper")
             scale = a_scale if joint == "revolute" else l_scale
             limits.append([float(lim[0]) * scale, float(lim[1]) * scale])
-        elif "limits" in e:
-            raise ConfigError(f"{source}: transform {e['name']!r} has no joint, so no limits")
+            v = e.get("max_speed")
+            if v is not None:
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
+                    raise ConfigError(f"{source}: transform {e['name']!r}: max_speed must be a finite number > 0 "
+                                      f"({'deg/s' if joint == 'revolute' and angle_unit == 'deg' else 'per s'}), got {v!r}")
+                speeds.append(float(v) * scale)
+        elif "limits" in e or "max_speed" in e:
+            raise ConfigError(f"{source}: transform {e['name']!r} has no joint, so no limits or max_speed")
     prefer_raw = head.get("prefer", [])
     if not (isinstance(prefer_raw, list) and all(isinstance(p, str) for p in prefer_raw)):
         raise ConfigError(f"{source}: [robot].prefer must be a list of parameter names such as [\"K.x\"], "
@@ -249,6 +265,11 @@ def robot_from_dict(data: dict, source: str = "<dict>") -> RobotModel:
     prefer = tuple(prefer_raw)
     model = RobotModel(name, tuple(specs), np.array(params), np.array(limits).reshape(-1, 2),
                        str(head.get("description", "")), prefer)
+    if speeds:
+        if len(speeds) != model.n_joints:
+            raise ConfigError(f"{source}: max_speed is given for {len(speeds)} of {model.n_joints} joints; give it "
+                              f"for every joint or for none")
+        model = dataclasses.replace(model, max_speed=np.array(speeds))
     for p in prefer:
         model.param_index(p)
     return model
@@ -286,6 +307,8 @@ def robot_to_toml(model: RobotModel, params: np.ndarray | None = None, angle_uni
         if spec.joint:
             scale = a_scale if spec.joint == "revolute" else 1.0
             e["limits"] = [float(model.joint_limits[li, 0]) * scale, float(model.joint_limits[li, 1]) * scale]
+            if model.max_speed is not None:
+                e["max_speed"] = float(model.max_speed[li]) * scale
             li += 1
         doc["transform"].append(e)
     return tomli_w.dumps(doc)

@@ -52,3 +52,30 @@ def test_station_plan_json(text, tmp_path, capsys):
     d = json.loads(capsys.readouterr().out)
     assert d["min_valid_identification"] > 0 and d["steps"][0]["order"] == 1
     assert d["units"]["limit_margin"] == "deg | mm"
+
+
+def test_preview_estimates_the_motion_time_from_the_robot_files_speeds(text):
+    import dataclasses
+
+    import numpy as np
+
+    from station.cell.preview import motion_seconds
+
+    cfg = parse_text(text)
+    p = preview(cfg)
+    assert p.motion_s_estimate is not None and p.motion_s_estimate > 0
+    assert "estimated duration" in "\n".join(describe(p))
+    # half the joint speed doubles the motion time; no speeds in the robot file: no estimate
+    slow = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, max_speed=cfg.model.max_speed / 2))
+    steps = tuple(s.step for s in p.steps)
+    assert motion_seconds(slow, steps) == pytest.approx(2 * p.motion_s_estimate, rel=1e-9)
+    none = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, max_speed=None))
+    assert motion_seconds(none, steps) is None
+    assert "not estimated" in "\n".join(describe(preview(none)))
+    # one step's moves: approach, above, touch, retract, each at its slowest joint
+    one = steps[:1]
+    q = np.array(one[0].q)
+    from station.cell.plan import all_motion_poses, retracted
+    path = np.array([*all_motion_poses(cfg, q, 1), retracted(cfg, q)])
+    expect = np.sum(np.max(np.abs(np.diff(path, axis=0)) / (cfg.model.max_speed * cfg.plan.speed), axis=1))
+    assert motion_seconds(cfg, one) == pytest.approx(expect)
