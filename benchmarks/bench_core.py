@@ -9,15 +9,14 @@ from __future__ import annotations
 
 import argparse
 import os
-import statistics
 import sys
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
+from benchmarks._timing import median_time  # noqa: E402
 from station.core.identification import identify  # noqa: E402
 from station.core.kinematics import forward_with_jacobian  # noqa: E402
 from station.core.measurements import synthetic_set  # noqa: E402
@@ -25,16 +24,6 @@ from station.core.poses import spread_joints  # noqa: E402
 from station.core.study import StudyInputs, perturbed  # noqa: E402
 from station.core.uncertainty import monte_carlo  # noqa: E402
 from station.io.robot_files import load_robot  # noqa: E402
-
-
-def median_time(fn, repeat: int) -> float:
-    fn()  # warm-up
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
 
 
 def main(argv=None) -> int:

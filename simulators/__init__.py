@@ -38,6 +38,7 @@ class SimulatedCellServers:
     probe_server: Any
     seed: int = 0
     drift: dict = field(default_factory=dict)  # the [simulation] drift keys it was started with
+    physics: dict = field(default_factory=dict)  # the [simulation] physics keys that differ from the defaults
     _stopped: bool = field(default=False, repr=False)
 
     @property
@@ -84,7 +85,8 @@ def start_simulated_cell(seed: int = 0, time_scale: float = 0.0, pace: bool = Fa
                          map_version: int | None = None, thermal_length_um: float = 0.0,
                          thermal_offset_arcsec: float = 0.0, thermal_time_constant_s: float = 600.0,
                          step_joint: int = 0, step_offset_deg: float = 0.0,
-                         step_tool_um: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> SimulatedCellServers:
+                         step_tool_um: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                         soft_limits: Any = None, **physics: float) -> SimulatedCellServers:
     """Start the controller and probe-head simulators on one :class:`SimulatedCell`.
     ``map_version``: publish another register-map version (the driver must refuse it).
 
@@ -92,19 +94,39 @@ def start_simulated_cell(seed: int = 0, time_scale: float = 0.0, pace: bool = Fa
     model (``thermal_length_um`` growth of the arm lengths, ``thermal_offset_arcsec`` of the
     revolute joint offsets when warm, time constant ``thermal_time_constant_s`` of simulated
     motion) and a step change against the seed's robot (``step_joint`` from 1 re-mastered by
-    ``step_offset_deg``; the tool bumped by ``step_tool_um``)."""
+    ``step_offset_deg``; the tool bumped by ``step_tool_um``).
+
+    ``physics``: the built-in cell's true-error magnitudes and physics, the ``[simulation]`` keys
+    of :class:`simulators.from_config.SimulationPhysics` (µm, arc seconds, degrees); left out, the
+    built-in cell is exactly today's. With ``cell`` given, the drift and physics arguments only
+    describe it (the cell already holds them). ``soft_limits`` ``(n_joints, 2)`` [rad | mm]: the
+    controller's (default: the robot's joint limits). A user's cell: :mod:`simulators.from_config`."""
     from simulators.cell import CellTruth, SimulatedCell
     from simulators.controller_server import SimulatedController
     from simulators.probe_head_sim import ProbeHeadServer
     from simulators.thermal import ThermalModel, step_change
 
+    recorded: dict[str, float] = {}
     if cell is None:
-        model = CellTruth.generate(seed=seed).model
+        if physics:
+            from simulators.cell import CalibrationBody
+            from simulators.from_config import SimulationPhysics
+
+            phys = SimulationPhysics(**physics)
+            default = SimulationPhysics()
+            recorded = {k: float(v) for k, v in physics.items() if float(v) != getattr(default, k)}
+            truth = CellTruth.generate(seed=seed, **phys.truth_kwargs())
+            pos_sigma, ang_sigma = phys.body_sigma()
+            body = CalibrationBody.generate(seed=seed, position_sigma_mm=pos_sigma, angle_sigma_rad=ang_sigma)
+            cell_kw: dict[str, Any] = {"truth": truth, "body": body, **phys.cell_kwargs()}
+        else:
+            truth, cell_kw = CellTruth.generate(seed=seed), {}
+        model = truth.model
         thermal = ThermalModel.for_model(model, thermal_length_um, thermal_offset_arcsec, thermal_time_constant_s)
         step = step_change(model, step_joint, step_offset_deg, tuple(step_tool_um))  # type: ignore[arg-type]
-        cell = SimulatedCell(seed=seed, thermal=thermal, step=step)
+        cell = SimulatedCell(seed=seed, thermal=thermal, step=step, **cell_kw)
     ctrl = SimulatedController(cell=cell, host=host, port=port, word_order=word_order,
-                               time_scale=time_scale, watchdog=watchdog,
+                               time_scale=time_scale, watchdog=watchdog, soft_limits=soft_limits,
                                map_version=MAP_VERSION if map_version is None else map_version
                                ).start(ready_timeout)
     try:
@@ -119,4 +141,4 @@ def start_simulated_cell(seed: int = 0, time_scale: float = 0.0, pace: bool = Fa
         drift["thermal_time_constant_s"] = thermal_time_constant_s
     if any(step_tool_um):
         drift["step_tool_um"] = [float(v) for v in step_tool_um]
-    return SimulatedCellServers(cell, ctrl, probe, seed, drift)
+    return SimulatedCellServers(cell, ctrl, probe, seed, drift, recorded)

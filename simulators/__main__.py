@@ -1,7 +1,14 @@
 """``python -m simulators``: run the simulated cell until SIGINT/SIGTERM.
 
 Prints one JSON line ``{"controller": "127.0.0.1:PORT", "probe_head": "/dev/pts/N", "seed": N}``
-once both endpoints accept traffic. Log records (warnings and errors, e.g. pymodbus on malformed
+once both endpoints accept traffic.
+
+``--config CONFIG`` simulates the cell that configuration describes (its robot file and set-up,
+body, head, limits and word order; the true errors from its ``[simulation]``:
+:mod:`simulators.from_config`); ``--seed`` then overrides ``[simulation].seed`` (default 1).
+``--write-config OUT.toml`` writes the station's configuration of the simulated cell (CONFIG with
+``[devices]`` pointing at the simulators) before the JSON line, which then also names it as
+``"config"``: ``station check OUT.toml``, ``station calibrate OUT.toml`` run against it. Log records (warnings and errors, e.g. pymodbus on malformed
 frames) go to stderr without ever blocking: when nobody reads the pipe they are dropped and
 counted (:mod:`simulators.stderr_log`), so the simulators keep serving.
 """
@@ -14,27 +21,40 @@ import logging
 import signal
 import sys
 import threading
+from pathlib import Path
 
 from drivers.controller_map import MAP_VERSION, WordOrder
-from simulators import start_simulated_cell
+from simulators import SimulatedCellServers, start_simulated_cell
 from simulators.stderr_log import install as install_stderr_log
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m simulators", description=__doc__.splitlines()[0])
-    ap.add_argument("--seed", type=int, default=0, help="seed of the cell's true errors and noise")
+    ap.add_argument("--seed", type=int, default=None,
+                    help="seed of the cell's true errors and noise (default 0; with --config: its "
+                         "[simulation].seed, else 1)")
+    ap.add_argument("--config", metavar="CONFIG", help="simulate the cell this configuration describes")
+    ap.add_argument("--write-config", metavar="OUT", help="with --config: write the station's configuration of "
+                    "the simulated cell here (CONFIG with [devices] pointing at the simulators)")
     ap.add_argument("--time-scale", type=float, default=0.0,
                     help="motion-time scale of the controller (0 = instant moves, 1 = real time)")
-    ap.add_argument("--baud", type=int, default=38400, help="probe-head baud rate (pacing)")
+    ap.add_argument("--baud", type=int, default=None, help="probe-head baud rate (pacing; default 38400; with "
+                    "--config: its [devices].baudrate)")
     ap.add_argument("--pace", action="store_true", help="hold probe replies for their serial transfer time")
     ap.add_argument("--host", default="127.0.0.1")
     ap.add_argument("--port", type=int, default=0, help="controller TCP port (0 = ephemeral)")
-    ap.add_argument("--word-order", choices=[o.value for o in WordOrder], default="big",
-                    help="word order of the controller's 32-bit values")
-    ap.add_argument("--map-version", type=int, default=MAP_VERSION,
+    ap.add_argument("--word-order", choices=[o.value for o in WordOrder], default=None,
+                    help="word order of the controller's 32-bit values (default big; with --config: its "
+                         "[devices].word_order)")
+    ap.add_argument("--map-version", type=int, default=None,
                     help="register-map version the controller reports (another one plays a "
-                         "robot program the driver does not know)")
+                         "robot program the driver does not know; not with --config)")
     args = ap.parse_args(argv)
+    if args.write_config and not args.config:
+        ap.error("--write-config goes with --config")
+    if args.config and (args.word_order or args.baud is not None or args.map_version is not None):
+        ap.error("with --config the word order and the baud rate are CONFIG's [devices]; leave out "
+                 "--word-order, --baud and --map-version")
     install_stderr_log(logging.WARNING)
     stop = threading.Event()
 
@@ -43,17 +63,52 @@ def main(argv: list[str] | None = None) -> int:
 
     signal.signal(signal.SIGINT, _on_signal)
     signal.signal(signal.SIGTERM, _on_signal)
-    servers = start_simulated_cell(seed=args.seed, time_scale=args.time_scale, pace=args.pace,
-                                   baudrate=args.baud, host=args.host, port=args.port,
-                                   word_order=WordOrder(args.word_order),
-                                   map_version=args.map_version)
+    extra: dict[str, str] = {}
+    if args.config:
+        servers = _start_from_config(args)
+        if args.write_config:
+            extra["config"] = args.write_config
+    else:
+        servers = start_simulated_cell(seed=0 if args.seed is None else args.seed, time_scale=args.time_scale,
+                                       pace=args.pace, baudrate=38400 if args.baud is None else args.baud,
+                                       host=args.host, port=args.port, word_order=WordOrder(args.word_order or "big"),
+                                       map_version=MAP_VERSION if args.map_version is None else args.map_version)
     try:
-        print(json.dumps(servers.endpoints()), flush=True)
+        print(json.dumps({**servers.endpoints(), **extra}), flush=True)
         while not stop.wait(0.5):
             pass
     finally:
         servers.stop()
     return 0
+
+
+def _start_from_config(args: argparse.Namespace) -> SimulatedCellServers:
+    """The simulators on the cell of ``--config`` (an invalid configuration: exit 2 with the
+    station's message); ``--write-config`` written once they run."""
+    from simulators.from_config import simulate_config
+    from station.cell.config import load_config  # the station's own reading of the file
+    from station.errors import StationError
+
+    try:
+        cfg = load_config(args.config)
+    except StationError as exc:
+        print(f"python -m simulators: error: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
+    try:
+        rehearsal = simulate_config(cfg, seed=args.seed, source=args.config, time_scale=args.time_scale,
+                                    pace=args.pace, host=args.host, port=args.port)
+    except ValueError as exc:  # a [simulation] the cell cannot take (e.g. a step on a prismatic joint)
+        print(f"python -m simulators: error: {args.config}: [simulation]: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
+    if args.write_config:
+        try:
+            Path(args.write_config).write_text(rehearsal.text, encoding="utf-8")
+        except OSError as exc:
+            rehearsal.stop()
+            print(f"python -m simulators: error: --write-config {args.write_config}: {exc.strerror or exc}",
+                  file=sys.stderr)
+            raise SystemExit(2) from None
+    return rehearsal.servers
 
 
 if __name__ == "__main__":

@@ -198,6 +198,26 @@ class CalibrationBody:
         true = nominal @ pose_to_matrix(dev)
         return cls(cube_edge_mm, tuple(cubes), nominal, true, tuple(labels))
 
+    @classmethod
+    def from_frames(cls, nominal: np.ndarray, cube_edge_mm: float, sigma: np.ndarray,
+                    seed: int = 0) -> "CalibrationBody":
+        """A body known only by its measuring points (a user's CMM report): ``nominal (n,4,4)``
+        KKS<-MPKS, ``sigma (n,2)`` (or ``(2,)`` for every point) the σ of each point's true
+        deviation: position [mm], angle [rad]. No cube layout: ``cubes`` is empty and point
+        ``i`` is labelled ``(i, 0)``. The deviations are drawn as :meth:`generate` draws them."""
+        nominal = np.asarray(nominal, dtype=float)
+        if nominal.ndim != 3 or nominal.shape[1:] != (4, 4) or len(nominal) == 0:
+            raise ValueError(f"nominal must be (n, 4, 4) with n >= 1, got {nominal.shape}")
+        n = len(nominal)
+        s = np.broadcast_to(np.asarray(sigma, dtype=float), (n, 2))
+        if not np.all(np.isfinite(s)) or np.any(s < 0):
+            raise ValueError("sigma must be finite and >= 0")
+        rng = np.random.default_rng(seed + 7919)
+        dev = np.concatenate([rng.normal(0.0, 1.0, (n, 3)) * s[:, :1],
+                              rng.normal(0.0, 1.0, (n, 3)) * s[:, 1:]], axis=1)
+        true = nominal @ pose_to_matrix(dev)
+        return cls(float(cube_edge_mm), (), nominal, true, tuple((i, 0) for i in range(n)))
+
 
 class SimulatedCell:
     """The cell's state. Thread-safe: the controller simulator moves it, the probe-head
@@ -336,12 +356,14 @@ class SimulatedCell:
         return self.contact_for_head_pose(self.head_pose())
 
     def probe_values(self) -> np.ndarray:
-        """Probe readings (6,) [mm] with +inf/-inf/NaN markers at the current state."""
+        """The probe unit's channel values [mm] with +inf/-inf/NaN markers at the current state,
+        in channel order (the head's channel numbers; a 3-2-1 head: its six probes in order)."""
         _j, M = self.contact()
         with self._lock:
             self._reads_since_move += 1
             rng = self._keyed_rng(self._reads_since_move)
-        return self.probe.readings(M, rng=rng)
+        by_channel = getattr(self.probe, "channel_values", None)
+        return by_channel(M, rng=rng) if by_channel is not None else self.probe.readings(M, rng=rng)
 
     def nominal_head_target(self, point: int, nominal_body: bool = True) -> np.ndarray:
         """World<-MKKS that puts the head at mid-stroke on measuring point ``point``."""

@@ -5,7 +5,8 @@ The register map and the handshake are those of :mod:`drivers.controller_map` /
 validates (soft limits, reachability, correction-table range), moves with a simple max-speed
 motion-time model scaled by ``time_scale`` (0 = instant), and reports done or error with the
 same sequence number. Cartesian moves use the controller's NOMINAL kinematics in the robot base
-frame (``station.core.kinematics.scara_ik``) plus the multilinear table correction
+frame (``station.core.kinematics.scara_ik``; for an articulated arm general inverse kinematics
+from the joints the robot stands at, which keeps its configuration) plus the multilinear table correction
 (:meth:`drivers.correction_table.CorrectionTableData.interpolate`) when a table is active; the
 table area itself is :class:`simulators.controller_tables.TableSlots`.
 
@@ -50,7 +51,7 @@ from drivers.controller_map import (
 )
 from drivers.correction_table import CorrectionTableData, TableRangeError
 from simulators.controller_tables import TableSlots
-from station.core.kinematics import forward, scara_ik
+from station.core.kinematics import forward, inverse_kinematics, scara_ik
 from station.core.model import RobotModel
 from station.core.transforms import matrix_to_pose, pose_to_matrix
 from station.errors import UnreachableError
@@ -462,7 +463,13 @@ class SimulatedController:
         """Joints the controller commands for a Cartesian target (nominal IK + table)."""
         T = pose_to_matrix(np.asarray(pose, dtype=float))
         try:
-            q = scara_ik(self.model, T[None], elbow=elbow, setup=False, check_limits=False)[0]
+            if self.model.is_scara:
+                q = scara_ik(self.model, T[None], elbow=elbow, setup=False, check_limits=False)[0]
+            else:
+                # An articulated arm keeps the configuration it stands in: general IK on the
+                # nominal model from the current joints (the register map has no configuration
+                # word; the elbow flag is only checked to be +1 or -1).
+                q = inverse_kinematics(self.model, T[None], self._q[None], setup=False)[0]
         except UnreachableError as exc:
             raise _Abort(ErrorCode.UNREACHABLE) from exc
         if not np.all(np.isfinite(q)):

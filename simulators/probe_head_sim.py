@@ -54,9 +54,19 @@ _STATUS_VALUE = {
 
 
 class ProbeHeadPhysics:
-    """True probe head: ``readings(M_true)`` -> ``(n,)`` mm, +inf/-inf/NaN markers.
+    """True probe head: ``readings(M_true)`` -> ``(n,)`` mm, +inf/-inf/NaN markers, in the
+    geometry's probe order; :meth:`channel_values` is what the interface unit shows, channel by
+    channel (the head's channel numbers, each value divided by its probe's scale factor).
 
     ``M_true`` is the true pose of MPKS in MKKS, or None when no cube is near (all INVALID).
+
+    Per-probe faults (``probe``: its index in the geometry or its id):
+
+    * :meth:`inject_stuck`: the plunger sticks, its reading freezes (at ``value_mm``, or at the
+      reading of the next snapshot);
+    * :meth:`inject_debris`: debris on the tip adds ``offset_mm`` to its reading, for the next
+      ``touches`` touches (None: until cleared). A touch begins whenever the head's true pose
+      changes (the robot moved); the snapshots of one touch share it.
     """
 
     def __init__(self, geometry: ProbeHeadGeometry | None = None, noise_mm: float = 0.0005,
@@ -65,6 +75,44 @@ class ProbeHeadPhysics:
         self.noise_mm = noise_mm
         self.quantum_mm = quantum_mm
         self._rng = np.random.default_rng(seed)
+        self._lock = threading.Lock()
+        self._stuck: dict[int, float | None] = {}
+        self._debris: dict[int, list] = {}  # probe -> [offset_mm, touches left (None: forever)]
+        self._last_M: np.ndarray | None = None
+        #: touches seen so far (a change of the true pose starts one)
+        self.touches = 0
+
+    @property
+    def n_channels(self) -> int:
+        """Channels the unit serves: up to the highest channel the head uses."""
+        return int(np.max(self.geometry.probe_channels))
+
+    def _index(self, probe: int | str) -> int:
+        if isinstance(probe, str):
+            if probe not in self.geometry.probe_ids:
+                raise ValueError(f"no probe {probe!r}; the head has {list(self.geometry.probe_ids)}")
+            return self.geometry.probe_ids.index(probe)
+        if not 0 <= int(probe) < self.geometry.n_probes:
+            raise ValueError(f"probe index {probe} outside 0 … {self.geometry.n_probes - 1}")
+        return int(probe)
+
+    def inject_stuck(self, probe: int | str, value_mm: float | None = None) -> None:
+        """Freeze a probe's reading at ``value_mm`` (None: at its next reading) until cleared."""
+        with self._lock:
+            self._stuck[self._index(probe)] = None if value_mm is None else float(value_mm)
+
+    def inject_debris(self, probe: int | str, offset_mm: float, touches: int | None = None) -> None:
+        """Add ``offset_mm`` to a probe's reading for the next ``touches`` touches (None: until
+        cleared)."""
+        if touches is not None and touches < 1:
+            raise ValueError("touches must be >= 1 (or None: permanent)")
+        with self._lock:
+            self._debris[self._index(probe)] = [float(offset_mm), touches]
+
+    def clear_faults(self) -> None:
+        with self._lock:
+            self._stuck.clear()
+            self._debris.clear()
 
     def readings(self, M_true: np.ndarray | None, rng: np.random.Generator | None = None) -> np.ndarray:
         """``rng``: draw the noise from this generator (the cell keys it to the robot's state
@@ -74,11 +122,44 @@ class ProbeHeadPhysics:
             return np.full(n, np.nan)
         exact = readings_from_pose(self.geometry, M_true)
         noisy = exact + (self._rng if rng is None else rng).normal(0.0, self.noise_mm, n)
-        half = self.geometry.stroke_mm / 2.0
+        noisy = self._faulted(np.asarray(M_true, dtype=float), noisy)
+        half = self.geometry.strokes / 2.0
         # Noise may carry a reading just across the stroke end; markers stay markers.
         out = np.where(noisy > half, np.inf, np.where(noisy < -half, -np.inf, noisy))
         if self.quantum_mm > 0:
             out = np.where(np.isfinite(out), np.round(out / self.quantum_mm) * self.quantum_mm, out)
+        return out
+
+    def _faulted(self, M: np.ndarray, values: np.ndarray) -> np.ndarray:
+        with self._lock:
+            if self._last_M is None or not np.array_equal(M, self._last_M):
+                self.touches += 1
+                self._last_M = M.copy()
+                for k in list(self._debris):
+                    left = self._debris[k][1]
+                    if left is not None:
+                        if left <= 0:
+                            del self._debris[k]
+                        else:
+                            self._debris[k][1] = left - 1
+            if not (self._stuck or self._debris):
+                return values
+            out = values.copy()
+            for k, (offset, _) in self._debris.items():
+                out[k] += offset
+            for k, frozen in self._stuck.items():
+                if frozen is None:
+                    self._stuck[k] = frozen = float(out[k])
+                out[k] = frozen
+            return out
+
+    def channel_values(self, M_true: np.ndarray | None, rng: np.random.Generator | None = None) -> np.ndarray:
+        """``(n_channels,)``: what the unit displays on each channel (probe reading / scale),
+        NaN (invalid) on a channel no probe uses."""
+        r = self.readings(M_true, rng)
+        g = self.geometry
+        out = np.full(self.n_channels, np.nan)
+        out[g.probe_channels - 1] = np.where(np.isfinite(r), r / g.probe_scales, r)
         return out
 
 

@@ -7,15 +7,15 @@ reads the text like any other cell configuration (``docs/station.md``, "Cell con
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from simulators import SimulatedCellServers
-from simulators.cell import DEFAULT_SETUP
+from simulators.cell import DEFAULT_SETUP, SimulatedCell
 from station.core.transforms import matrix_to_pose
 
-__all__ = ["cell_config_text"]
+__all__ = ["cell_config_text", "body_and_devices_toml", "CellEndpoints"]
 
 
 def _toml(key: str, v: Any) -> str:
@@ -24,37 +24,30 @@ def _toml(key: str, v: Any) -> str:
     return repr(int(v)) if key == "step_joint" else repr(float(v))
 
 
-def cell_config_text(servers: SimulatedCellServers, seed: int, word_order: str = "big") -> str:
-    """A cell configuration for the built-in simulated cell (its CMM body report, endpoints).
+class CellEndpoints(Protocol):
+    """What the configuration text reads of running servers (:class:`SimulatedCellServers`)."""
 
-    ``word_order`` must be the one the controller simulator was started with (``"big"`` or
-    ``"little"``); only a little word order is written out, big being the configuration's default.
-    """
-    if word_order not in ("big", "little"):
-        raise ValueError(f'word_order must be "big" or "little", got {word_order!r}')
-    cell = servers.cell
+    @property
+    def cell(self) -> SimulatedCell: ...
+    @property
+    def probe_port(self) -> str: ...
+    @property
+    def controller_host(self) -> str: ...
+    @property
+    def controller_port(self) -> int: ...
+
+
+def body_and_devices_toml(servers: CellEndpoints, word_order_line: str = "") -> str:
+    """The ``[body]`` (the simulated body's CMM report: its nominal corner frames, named
+    ``C<cube>.<a-d>``) and ``[devices]`` (the simulators' endpoints) tables of a simulated cell."""
+    body = servers.cell.body
     lines = []
-    for (cube, corner), T in zip(cell.body.labels, cell.body.nominal):
+    for (cube, corner), T in zip(body.labels, body.nominal):
         p = matrix_to_pose(T)
         vals = [*p[:3], *np.degrees(p[3:])]
         lines.append(f'  {{ id = "C{cube + 1}.{"abcd"[corner]}", pose = [{", ".join(repr(float(v)) for v in vals)}] }},')
-    setup = [*DEFAULT_SETUP[:3], *np.degrees(DEFAULT_SETUP[3:])]
-    word_order_line = "" if word_order == "big" else f'word_order = "{word_order}"\n'
-    # the drift the simulator was started with, recorded with every run (a baseline check ignores it)
-    drift = "".join(f"{k} = {_toml(k, v)}\n" for k, v in getattr(servers, "drift", {}).items())
-    return f"""# Built-in simulated reference cell (seed {seed}).
-[cell]
-name = "simulated reference cell"
-
-[robot]
-model = "sr800"
-setup = [{", ".join(repr(float(v)) for v in setup)}]
-
-[limits]
-joints = [[-125.0, 125.0], [-140.0, 140.0], [-195.0, -5.0], [-355.0, 355.0]]
-
-[body]
-cube_edge_mm = {cell.body.cube_edge_mm!r}
+    return f"""[body]
+cube_edge_mm = {body.cube_edge_mm!r}
 points = [
 {chr(10).join(lines)}
 ]
@@ -67,7 +60,35 @@ controller = "{servers.controller_host}:{servers.controller_port}"
 # The simulators share the CPU with the station (and, in CI, with the tests): a loaded machine
 # must not turn into probe timeouts, whose retries make a run stop reproducing.
 probe_timeout_s = 2.0
+"""
 
+
+def cell_config_text(servers: SimulatedCellServers, seed: int, word_order: str = "big") -> str:
+    """A cell configuration for the built-in simulated cell (its CMM body report, endpoints).
+
+    ``word_order`` must be the one the controller simulator was started with (``"big"`` or
+    ``"little"``); only a little word order is written out, big being the configuration's default.
+    """
+    if word_order not in ("big", "little"):
+        raise ValueError(f'word_order must be "big" or "little", got {word_order!r}')
+    setup = [*DEFAULT_SETUP[:3], *np.degrees(DEFAULT_SETUP[3:])]
+    word_order_line = "" if word_order == "big" else f'word_order = "{word_order}"\n'
+    # the drift the simulator was started with, recorded with every run (a baseline check ignores it)
+    drift = "".join(f"{k} = {_toml(k, v)}\n" for k, v in getattr(servers, "drift", {}).items())
+    # and the physics it was started with where it differs from the defaults (another cell)
+    drift += "".join(f"{k} = {_toml(k, v)}\n" for k, v in getattr(servers, "physics", {}).items())
+    return f"""# Built-in simulated reference cell (seed {seed}).
+[cell]
+name = "simulated reference cell"
+
+[robot]
+model = "sr800"
+setup = [{", ".join(repr(float(v)) for v in setup)}]
+
+[limits]
+joints = [[-125.0, 125.0], [-140.0, 140.0], [-195.0, -5.0], [-355.0, 355.0]]
+
+{body_and_devices_toml(servers, word_order_line)}
 [plan]
 settle_s = 0.0
 repeats = 4

@@ -29,13 +29,13 @@ from typing import Annotated, Any, Literal
 
 import annotated_types
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 from pydantic.fields import FieldInfo
 
 from station.core.model import RobotModel
 from station.core.table_grid import GridSpec
 from station.core.transforms import pose_to_matrix
-from station.core.units import ARCSEC, DEG
+from station.core.units import ARCSEC, DEG, UM
 from station.errors import ConfigError
 from station.io.robot_files import load_robot, read_user_text
 
@@ -75,6 +75,7 @@ class PlanConfig:
     recenter_attempts: int
     recenter_margin_mm: float
     max_residual_um: float
+    remeasure_attempts: int = 1  # re-touches when a redundant head's probes disagree
 
 
 @dataclass(frozen=True)
@@ -140,6 +141,26 @@ class ConformanceConfig:
         return np.stack([self.park_joints - self.test_move_joint, self.park_joints + self.test_move_joint], axis=1)
 
 
+@dataclass(frozen=True, eq=False)
+class ToolConfig:
+    """A tool that replaces the probe head after the calibration (``[[tool]]``).
+
+    ``tcp``: ``(6,)`` x, y, z [mm], roll, pitch, yaw [rad] of the tool centre point in the flange
+    (tool-mount) frame, from the tool's own measurement (the file holds degrees).
+    ``correction``: the grid its table is built on: ``[correction]`` with the tool's own
+    ``x_mm`` / ``y_mm`` / ``z_mm`` where it gives them (a tool works at other heights than the head).
+    """
+
+    name: str
+    tcp: np.ndarray
+    correction: CorrectionConfig
+
+    @property
+    def tcp_matrix(self) -> np.ndarray:
+        """``(4, 4)`` flange ← TCP [mm]."""
+        return pose_to_matrix(self.tcp)
+
+
 @dataclass(frozen=True, eq=False)  # identity: it holds arrays, and caches key on it
 class CellConfig:
     """A validated cell configuration. ``body_points``: ``(n, 4, 4)`` KKS←MPKS nominal
@@ -164,8 +185,9 @@ class CellConfig:
     head: Any = None  # ProbeHeadGeometry of the [head] file (None: not yet given)
     head_in_flange: np.ndarray | None = None  # (4,4) MKKS in the flange frame, from the head's CMM report
     body_sigma: np.ndarray | None = None  # (n_points, 2) σ of each body point: position [mm], angle [rad]
-    tools: tuple[Any, ...] = ()  # the tools that replace the head ([[tool]])
+    tools: tuple[ToolConfig, ...] = ()  # the tools that replace the head ([[tool]])
     simulation: Any = None  # the validated [simulation] table (what --simulated CONFIG simulates)
+    source: str = ""  # the file it was read from (or a label such as "<simulated cell>")
 
 
 # --------------------------------------------------------------------------------------------
@@ -224,24 +246,39 @@ class _Limits(_Section):
 class _Point(_Section):
     id: PointId = Field(description="the point's name from the CMM report, 1 … 64 characters")
     pose: Pose = Field(description=f"pose of the corner frame in the body frame: {_POSE_WHAT}")
+    # the CMM's uncertainty of this point (absent: [body] default_sigma_*)
+    sigma_position_um: float | None = _absent(ge=0.0, le=1000.0, description="σ of the point's position [µm]")
+    sigma_angle_arcsec: float | None = _absent(ge=0.0, le=3600.0, description="σ of the point's angles [arc seconds]")
 
 
 class _Body(_Section):
     cube_edge_mm: float = _num(40.0, gt=0.0, le=1000.0, what="edge of the body's cubes [mm]")
-    points: list[_Point] = Field(
-        min_length=3, max_length=5000,
+    points: Annotated[list[_Point], Field(min_length=3, max_length=5000)] | None = _absent(
         description='3 … 5000 measuring points from the CMM report: { id = "C1.a", pose = [x, y, z, '
                     'roll, pitch, yaw] } in mm and deg')
+    file: PathText | None = _absent(
+        description='the body\'s CMM report, a CSV relative to this file (docs/data-files.md), e.g. "body.csv"')
+    default_sigma_position_um: float = _num(0.0, ge=0.0, le=1000.0,
+                                            what="σ of a point's position where the report gives none [µm], 0: exact")
+    default_sigma_angle_arcsec: float = _num(0.0, ge=0.0, le=3600.0,
+                                             what="σ of a point's angles where the report gives none [arc seconds], 0: exact")
 
     @field_validator("points")
     @classmethod
-    def _unique_ids(cls, pts: list[_Point]) -> list[_Point]:
+    def _unique_ids(cls, pts: list[_Point] | None) -> list[_Point] | None:
         seen: set[str] = set()
-        for p in pts:
+        for p in pts or ():
             if p.id in seen:
                 raise ValueError(f"point id {p.id!r} appears twice; ids must be unique")
             seen.add(p.id)
         return pts
+
+    @model_validator(mode="after")
+    def _points_or_file(self) -> "_Body":
+        if (self.points is None) == (self.file is None):
+            raise ValueError('give the measuring points either from the CMM report, file = "body.csv", or inline, '
+                             'points = [ … ] (exactly one of the two)')
+        return self
 
 
 _CONTROLLER = re.compile(r"^([^\s:][^\s]*):([0-9]{1,5})$")
@@ -287,6 +324,7 @@ class _Plan(_Section):
     recenter_attempts: int = _num(2, ge=0, le=10, what="re-centring attempts near a probe's stroke end")
     recenter_margin_mm: float = _num(1.5, ge=0.0, le=4.0, what="distance from the stroke end that triggers a re-centring [mm]")
     max_residual_um: float = _num(10.0, gt=0.0, le=1000.0, what="plane residual above which a reading is not valid [µm]")
+    remeasure_attempts: int = _num(1, ge=0, le=5, what="re-touches when the probes of a redundant head disagree")
 
     @field_validator("elbows")
     @classmethod
@@ -315,7 +353,38 @@ class _Correction(_Section):
 
 
 class _Simulation(_Section):
+    """``[simulation]``: what ``--simulated CONFIG`` and ``python -m simulators --config`` simulate.
+    The defaults are the built-in cell's (``simulators/from_config.py``, :class:`SimulationPhysics`
+    holds the same numbers): a realistic SCARA of the 800 mm class and a CMM-measured body."""
+
     seed: int = _num(None, ge=0, le=2**32 - 1, what="seed of the simulated cell")
+    # the true errors of the simulated robot (seeded; σ of a normal distribution each)
+    length_sigma_um: float = _num(40.0, ge=0.0, le=5000.0,
+                                  what="σ of the true errors of the robot's lengths (arms, head) [µm]")
+    angle_sigma_arcsec: float = _num(150.0, ge=0.0, le=36000.0,
+                                     what="σ of the true errors of the robot's angles (offsets, axis tilts) [arc seconds]")
+    setup_sigma_mm: float = _num(1.5, ge=0.0, le=100.0,
+                                 what="σ of the true set-up against the nominal [robot].setup, x, y, z [mm]")
+    setup_yaw_sigma_deg: float = _num(0.2, ge=0.0, le=10.0, what="σ of the true set-up's yaw [deg]")
+    setup_tilt_sigma_deg: float = _num(0.03, ge=0.0, le=5.0, what="σ of the true set-up's roll and pitch [deg]")
+    # the physics of the simulated robot, probe head and body
+    repeatability_um: float = _num(5.0, ge=0.0, le=1000.0,
+                                   what="σ of a joint's position per move [µm] (revolute: at lever_mm)")
+    backlash_um: float = _num(100.0, ge=0.0, le=5000.0,
+                              what="reversal error of a revolute joint at lever_mm [µm]")
+    prismatic_backlash_um: float = _num(20.0, ge=0.0, le=5000.0, what="reversal error of a prismatic joint [µm]")
+    lever_mm: float = _num(450.0, ge=10.0, le=5000.0,
+                           what="lever at which a revolute joint's repeatability and backlash are stated [mm]")
+    probe_noise_um: float = _num(0.5, ge=0.0, le=100.0, what="σ of a probe reading's noise [µm]")
+    body_position_sigma_um: float = _num(2.0, ge=0.0, le=1000.0,
+                                         what="σ of a body point's true position against its CMM report [µm] "
+                                              "(a point's own σ in the body file takes precedence)")
+    body_angle_sigma_arcsec: float = _num(3.0, ge=0.0, le=3600.0,
+                                          what="σ of a body point's true angles against its CMM report [arc seconds]")
+    capture_mm: float = _num(8.0, gt=0.0, le=100.0,
+                             what="distance within which the head finds a corner [mm]")
+    capture_angle_deg: float = _num(10.0, gt=0.0, le=45.0,
+                                    what="angle within which the head finds a corner [deg]")
     # drift of the simulated robot (simulators/thermal.py); a recheck's baseline check ignores these
     thermal_length_um: float = _num(0.0, ge=0.0, le=5000.0,
                                     what="steady-state growth of the arm lengths when warm [µm], 0: no thermal model")
@@ -363,6 +432,36 @@ class _Conformance(_Section):
                                      what="largest difference between target and arrived joints (deg | mm)")
 
 
+#: a tool's name: it names the tool in reports, the run database (``tool:<name>``) and on the command line
+ToolName = Annotated[str, Field(min_length=1, max_length=64)]
+ToolMm = Annotated[float, Field(ge=-2000.0, le=2000.0)]
+ToolPose = Annotated[tuple[ToolMm, ToolMm, ToolMm, Deg, Deg, Deg], Field(strict=False)]
+MAX_TOOLS = 16
+
+
+class _Tool(_Section):
+    name: ToolName = Field(description='the tool\'s name: letters, digits, "_", "." and "-", 1 … 64 characters, '
+                                       'starting with a letter or digit')
+    tcp: ToolPose = Field(description="the TCP in the flange frame from the tool's measurement: x, y, z [mm] within "
+                                      "±2000, roll, pitch, yaw [deg] within ±360")
+    x_mm: GridAxis | None = _absent(description="the tool's own grid x [start, stop, step] in mm (default: [correction])")
+    y_mm: GridAxis | None = _absent(description="the tool's own grid y [start, stop, step] in mm (default: [correction])")
+    z_mm: GridAxis | None = _absent(description="the tool's own grid z [start, stop, step] in mm (default: [correction])")
+
+    @field_validator("name")
+    @classmethod
+    def _name_chars(cls, v: str) -> str:
+        if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_.-]*", v):
+            raise ValueError('use letters, digits, "_", "." and "-", starting with a letter or digit (the name goes '
+                             'into the run database and onto the command line)')
+        return v
+
+
+class _Head(_Section):
+    file: PathText | None = _absent(description='the probe-head file (docs/probe-head.md), e.g. "head.toml", '
+                                                'relative to this configuration')
+
+
 class _CellFile(_Section):
     cell: _Cell = Field(default_factory=lambda: _Cell.model_validate({}), description="a table [cell]")
     robot: _Robot = Field(description='a table [robot] with model = "sr800" (or a robot file)')
@@ -376,6 +475,19 @@ class _CellFile(_Section):
     recheck: _Recheck = Field(default_factory=lambda: _Recheck.model_validate({}), description="a table [recheck]")
     warmup: _Warmup = Field(default_factory=lambda: _Warmup.model_validate({}), description="a table [warmup]")
     conformance: _Conformance = Field(default_factory=lambda: _Conformance.model_validate({}), description="a table [conformance]")
+    head: _Head = Field(default_factory=lambda: _Head.model_validate({}), description="a table [head] with file = \"head.toml\"")
+    tool: list[_Tool] = Field([], max_length=MAX_TOOLS, description=f"[[tool]] tables, at most {MAX_TOOLS}, "
+                              f'each with name = "…" and tcp = [x, y, z, roll, pitch, yaw] (mm, deg)')
+
+    @field_validator("tool")
+    @classmethod
+    def _unique_tools(cls, tools: list[_Tool]) -> list[_Tool]:
+        seen: set[str] = set()
+        for t in tools:
+            if t.name in seen:
+                raise ValueError(f"tool name {t.name!r} appears twice; each [[tool]] needs its own name")
+            seen.add(t.name)
+        return tools
 
 
 # -- messages: the key, what is wrong, and the fix ----------------------------------------------
@@ -507,6 +619,47 @@ def _robot_path(model_name: str, source: str) -> str:
         return model_name
 
 
+def _body_points(b: _Body, source: str) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
+    """ids, ``(n, 6)`` poses [mm, rad] and ``(n, 2)`` σ [mm, rad] of the body's measuring points:
+    from ``[body] file`` (the CMM report, relative to the configuration file) or inline; a point
+    without σ takes ``default_sigma_*``."""
+    default = (b.default_sigma_position_um * UM, b.default_sigma_angle_arcsec * ARCSEC)
+    if b.file is not None:
+        from station.io.body_file import read_body_file
+
+        path = Path(b.file)
+        if not path.is_absolute():
+            path = Path(source).parent / path
+        try:
+            report = read_body_file(path)
+        except ConfigError as exc:
+            raise ConfigError(f"{source}: body.file: {exc}") from None
+        return report.ids, np.array(report.poses), report.sigma_with_default(*default)
+    assert b.points is not None  # the schema allows exactly one of the two
+    ids = tuple(pt.id for pt in b.points)
+    poses = np.array([_pose_deg(pt.pose) for pt in b.points])
+    sigma = np.array([[default[0] if pt.sigma_position_um is None else pt.sigma_position_um * UM,
+                       default[1] if pt.sigma_angle_arcsec is None else pt.sigma_angle_arcsec * ARCSEC]
+                      for pt in b.points])
+    return ids, poses, sigma
+
+
+def _head(file: str | None, cube_edge_mm: float, model: RobotModel, source: str) -> tuple[Any, np.ndarray, RobotModel]:
+    """``[head] file``: the head's geometry, MKKS in the flange (4,4), and the robot model with
+    the head frame as its nominal K. Without it: the built-in reference head on the robot file's K."""
+    from station.core.probe_geometry import default_probe_head
+    from station.io.head_file import load_head
+
+    if file is None:
+        return default_probe_head(cube_edge_mm=cube_edge_mm), pose_to_matrix(model.nominal[-6:]), model
+    path = file if Path(file).is_absolute() else str(Path(source).parent / file)
+    try:
+        h = load_head(path, cube_edge_mm)
+    except ConfigError as exc:
+        raise ConfigError(f"{source}: head.file: {exc}") from None
+    return h.geometry, h.frame_in_flange, model.with_tool(h.frame_pose)
+
+
 def _soft_limits(raw: list | None, model: RobotModel, source: str) -> np.ndarray:
     """``[limits].joints`` in rad / mm: one finite, ordered pair per joint inside the robot's."""
     n = model.n_joints
@@ -595,6 +748,20 @@ def _conformance(c: _Conformance, model: RobotModel, soft: np.ndarray, source: s
     return ConformanceConfig(park, c.test_move * scale, c.move_speed, c.position_tolerance * scale)
 
 
+def _tools(tools: list[_Tool], corr: CorrectionConfig, elbows: tuple[int, ...], n_joints: int,
+           source: str) -> tuple[ToolConfig, ...]:
+    """``[[tool]]`` in mm / rad, each with its grid (``[correction]`` with the tool's overrides),
+    checked like the head's grid (whole steps, the controller's capacity)."""
+    out = []
+    for t in tools:
+        c = CorrectionConfig(x_mm=t.x_mm or corr.x_mm, y_mm=t.y_mm or corr.y_mm, z_mm=t.z_mm or corr.z_mm,
+                             yaw_step_deg=corr.yaw_step_deg, max_interpolation_um=corr.max_interpolation_um)
+        if c != corr:
+            _check_grid(c, elbows, n_joints, f"{source}: tool {t.name!r} (its x_mm, y_mm, z_mm replace [correction]'s)")
+        out.append(ToolConfig(t.name, _pose_deg(t.tcp), c))
+    return tuple(out)
+
+
 def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellConfig:
     """A validated :class:`CellConfig` from parsed TOML; :class:`ConfigError` names the key."""
     if not isinstance(data, dict):
@@ -602,6 +769,7 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
     f = _validate_schema(data, source)
 
     model = load_robot(_robot_path(f.robot.model, source)).with_setup(_pose_deg(f.robot.setup))
+    head, head_in_flange, model = _head(f.head.file, f.body.cube_edge_mm, model, source)  # [head]
     soft = _soft_limits(f.limits.joints, model, source)
 
     d = f.devices
@@ -617,7 +785,8 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
         max_spread_um=p.max_spread_um, both_directions=p.both_directions,
         verification_every=p.verification_every, verification_cycles=p.verification_cycles,
         select=p.select, repeats=p.repeats, recenter_attempts=p.recenter_attempts,
-        recenter_margin_mm=p.recenter_margin_mm, max_residual_um=p.max_residual_um)
+        recenter_margin_mm=p.recenter_margin_mm, max_residual_um=p.max_residual_um,
+        remeasure_attempts=p.remeasure_attempts)
 
     i = f.identification
     ident = IdentificationConfig(
@@ -634,10 +803,10 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
     c = f.correction
     corr = CorrectionConfig(x_mm=c.x_mm, y_mm=c.y_mm, z_mm=c.z_mm, yaw_step_deg=c.yaw_step_deg,
                             max_interpolation_um=c.max_interpolation_um)
-    _check_grid(corr, plan.elbows, model.n_joints, source)
+    if model.is_scara:  # an articulated arm gets compensated targets, not a table (issue 9)
+        _check_grid(corr, plan.elbows, model.n_joints, source)
 
-    ids = tuple(pt.id for pt in f.body.points)
-    poses = np.array([_pose_deg(pt.pose) for pt in f.body.points])
+    ids, poses, body_sigma = _body_points(f.body, source)
     r, w = f.recheck, f.warmup
     recheck = RecheckConfig(poses=r.poses, tolerance_um=r.tolerance_um, offset_tolerance_arcsec=r.offset_tolerance_arcsec,
                             length_tolerance_um=r.length_tolerance_um, repeat_tolerance_um=r.repeat_tolerance_um)
@@ -650,17 +819,19 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
         f.cell.name, model, soft, ids, pose_to_matrix(poses), f.body.cube_edge_mm,
         devices, plan, ident, corr, text, f.simulation.seed, recheck, warmup,
         conformance=_conformance(f.conformance, model, soft, source),
-        # head=...,            (owner: probe-head file)
-        # head_in_flange=...,  (owner: probe-head file)
-        # body_sigma=...,      (owner: body CMM file)
-        # tools=...,           (owner: tools after the head)
-        # simulation=...,      (owner: rehearse your cell)
+        head=head,  # ProbeHeadGeometry of the [head] file, or the built-in reference head
+        head_in_flange=head_in_flange,  # (4,4) MKKS in the flange frame (the robot model's nominal K)
+        body_sigma=body_sigma,  # (n, 2) [mm, rad] from the CMM report or the inline points (0: exact)
+        tools=_tools(f.tool, corr, plan.elbows, model.n_joints, source),  # [[tool]] (station/cell/tools.py)
+        simulation=f.simulation,  # the validated [simulation] table (simulators/from_config.py reads it)
+        source=source,  # where it was read: relative robot, head and body files resolve beside it
     )
 
 
 def simulation_settings(text: str, source: str = "<config>") -> dict[str, Any]:
     """The ``[simulation]`` table of a configuration (or of a file holding only that table), validated:
-    what ``station … --simulated CONFIG`` passes to the simulated cell (seed, thermal model, step)."""
+    what ``station … --simulated CONFIG`` passes to the simulated cell (seed, the true errors'
+    magnitudes, the physics, thermal model, step), in the file's units."""
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -718,12 +889,20 @@ joints = [[-125.0, 125.0], [-140.0, 140.0], [-195.0, -5.0], [-355.0, 355.0]]
 cube_edge_mm = 40.0              # > 0 … 1000
 # Measuring points (cube corners) from the body's CMM report: pose of each corner frame in the
 # body frame, x, y, z [mm], roll, pitch, yaw [deg]. Corner frame: origin at the top corner, cube in x>=0, y>=0, z<=0.
-# 3 … 5000 points; ids are unique, 1 … 64 characters.
+# 3 … 5000 points; ids are unique, 1 … 64 characters. Either the CMM report as a CSV file,
+# relative to this file (docs/data-files.md, "Calibration body"; columns id, x_mm, y_mm, z_mm,
+# roll_deg, pitch_deg, yaw_deg, optionally sigma_position_um, sigma_angle_arcsec):
+# file = "body.csv"
+# or the points inline (a point may add sigma_position_um = 2.0, sigma_angle_arcsec = 5.0):
 points = [
   { id = "C1.a", pose = [-28.3, -319.7, 40.0, 0.0, 0.0, 10.0] },
   { id = "C1.b", pose = [11.1, -312.8, 40.0, 0.0, 0.0, 100.0] },
   { id = "C1.c", pose = [4.1, -273.4, 40.0, 0.0, 0.0, 190.0] },
 ]
+# The CMM's uncertainty of a point that gives none; it goes into the identification's weights
+# and σ (the measurements of one point share its error). 0: the body is taken as exact.
+default_sigma_position_um = 0.0  # 0 … 1000
+default_sigma_angle_arcsec = 0.0 # 0 … 3600
 
 [devices]
 probe_head = "/dev/ttyUSB0"      # serial device, or socket://host:port, rfc2217://host:port
@@ -752,6 +931,11 @@ repeats = 2                      # visits per identification pose (robot repeata
 recenter_attempts = 2            # re-centre when a probe is near the end of its stroke, 0 … 10
 recenter_margin_mm = 1.5         # 0 … 4 (the probes' stroke is ±5 mm)
 max_residual_um = 10.0           # plane residual above which a reading is not valid, > 0 … 1000
+remeasure_attempts = 1           # re-touches when a redundant head's probes disagree, 0 … 5
+
+# [head]
+# file = "head.toml"             # the probe-head file (docs/probe-head.md), relative to this file;
+#                                # without it: the built-in reference 3-2-1 head (examples/heads/reference-321.toml)
 
 [identification]
 objective = "pose"               # "pose" (robot + set-up + head) or "distance" (robot only)
@@ -800,4 +984,13 @@ program_poses = 8                # poses of the motion program per cycle, 2 … 
 test_move = 2.0                  # half-width of the park zone (deg | mm), 0.1 … 5
 move_speed = 0.05                # speed of the test motions, fraction of the maximum, 0.001 … 0.2
 position_tolerance = 0.01        # arrived joints vs target (deg | mm), 0.0001 … 1
+
+# Tools that replace the probe head after the calibration, at most 16, one [[tool]] table each:
+# the station builds each tool's own correction from the identified model (docs/correction.md,
+# "Tools after the head"); 'station export --tool NAME' writes its table for the controller.
+# [[tool]]
+# name = "gripper"               # unique; letters, digits, _ . -, 1 … 64 characters
+# tcp = [50.0, 0.0, -200.0, 0.0, 0.0, 0.0]  # TCP in the flange frame from the tool's measurement:
+#                                # x, y, z [mm] within ±2000, roll, pitch, yaw [deg] within ±360
+# z_mm = [150.0, 350.0, 200.0]   # optional x_mm, y_mm, z_mm: the tool's own grid (default: [correction])
 """

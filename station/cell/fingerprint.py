@@ -37,6 +37,17 @@ def fingerprint(cfg: CellConfig) -> dict[str, str]:
     out["robot model"] = _digest({"name": m.name, "types": list(m.joint_types),
                                   "nominal": np.round(np.asarray(m.nominal), 12).tolist(),
                                   "limits": np.round(np.asarray(m.joint_limits), 12).tolist()})
+    body = data.get("body")
+    if isinstance(body, dict) and "file" in body:  # the CMM report as read: an edited body file counts
+        out["body points"] = _digest({"ids": list(cfg.point_ids), "poses": np.round(cfg.body_points, 9).tolist(),
+                                      "sigma": np.round(np.asarray(cfg.body_sigma), 12).tolist()})
+    head = data.get("head")
+    if isinstance(head, dict) and "file" in head and cfg.head is not None:  # the head file as read
+        g = cfg.head
+        out["probe head"] = _digest({k: np.round(np.asarray(v, dtype=float), 9).tolist() for k, v in (
+            ("mount", g.mount_points), ("dir", g.directions), ("faces", g.faces), ("tip", g.tip_radii),
+            ("stroke", g.strokes), ("channels", g.probe_channels), ("scales", g.probe_scales),
+            ("contact", g.nominal_contact_pose()), ("sigma", g.reading_sigma_mm))} | {"ids": list(g.probe_ids)})
     return out
 
 

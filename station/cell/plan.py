@@ -13,6 +13,7 @@ Jacobian of the minimal parameter set).
 from __future__ import annotations
 
 import weakref
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -71,9 +72,11 @@ class Plan:
 
 
 def nominal_contact(cfg: CellConfig) -> np.ndarray:
+    """MPKS in MKKS (4,4) at the nominal touch: the configured head's (``[head]``)."""
     from station.core.probe_geometry import default_probe_head
 
-    return default_probe_head(cube_edge_mm=cfg.cube_edge_mm).nominal_contact_pose()
+    head = cfg.head if cfg.head is not None else default_probe_head(cube_edge_mm=cfg.cube_edge_mm)
+    return head.nominal_contact_pose()
 
 
 def head_targets_world(cfg: CellConfig) -> np.ndarray:
@@ -91,7 +94,13 @@ def approach_offsets(cfg: CellConfig, direction: int = 1) -> np.ndarray:
 
 
 def retract_offset(cfg: CellConfig) -> np.ndarray:
-    """Joint offset (g,) that lifts the head by the clearance (prismatic joints only)."""
+    """Joint offset (g,) that lifts the head by the clearance (prismatic joints only). An
+    articulated arm instead stands short of the target by the approach offset in every joint
+    (``q + retract_offset`` is its last pose before the touch; see :mod:`station.cell.plan_articulated`)."""
+    if not cfg.model.is_scara:
+        from station.cell.plan_articulated import preload_offset
+
+        return -preload_offset(cfg)
     return np.array([cfg.plan.clearance_mm if k == "prismatic" else 0.0 for k in cfg.model.joint_types])
 
 
@@ -106,6 +115,11 @@ def travel_joints(cfg: CellConfig) -> np.ndarray:
     hit = _TRAVEL.get(cfg)
     if hit is not None:
         return hit
+    if not cfg.model.is_scara:  # an articulated arm retracts along the corner's diagonal instead
+        out = np.full(cfg.model.n_joints, np.nan)
+        out.setflags(write=False)
+        _TRAVEL[cfg] = out
+        return out
     heads = head_targets_world(cfg)
     q = joints_for(cfg, heads, cfg.plan.elbows[0])
     out = np.full(cfg.model.n_joints, np.nan)
@@ -118,7 +132,12 @@ def travel_joints(cfg: CellConfig) -> np.ndarray:
 
 
 def retracted(cfg: CellConfig, q: np.ndarray) -> np.ndarray:
-    """``q`` with every prismatic joint raised to the travel height (never lowered)."""
+    """``q`` with every prismatic joint raised to the travel height (never lowered); an
+    articulated arm backs the head off along the corner's diagonal by the clearance."""
+    if not cfg.model.is_scara:
+        from station.cell.plan_articulated import retract_from
+
+        return retract_from(cfg, q)
     t = travel_joints(cfg)
     return np.where(np.isnan(t), q, np.maximum(q, np.nan_to_num(t, nan=-np.inf)))
 
@@ -138,12 +157,29 @@ def joints_for(cfg: CellConfig, head_world: np.ndarray, elbow: int, setup_world_
     return scara_ik(cfg.model, T_base, elbow, setup=False, check_limits=False)
 
 
-def approach_pose(cfg: CellConfig, q: np.ndarray, direction: int = 1, cycle: int = 0) -> np.ndarray:
+#: a re-measure of a touch approaches with this much more offset per attempt: a path no other
+#: visit or cycle takes, so the repeat is a fresh touch, not a replay of the one that disagreed
+REMEASURE_STEP = 0.037
+
+
+def approach_pose(cfg: CellConfig, q: np.ndarray, direction: int = 1, cycle: int = 0,
+                  remeasure: int = 0) -> np.ndarray:
     """Where a measurement at ``q`` starts its final approach: every revolute joint offset
     against its direction of arrival, the quill at travel height. ``cycle`` varies the offset a
-    little between repetitions (from the same side)."""
-    a = approach_offsets(cfg, direction) * (1.0 + 0.25 * cycle)
+    little between repetitions (from the same side), ``remeasure`` (the touch's re-measure
+    attempt) a little more. An articulated arm: the target's retract pose (backed off along the
+    corner's diagonal); its offset comes right before the touch."""
+    if not cfg.model.is_scara:
+        from station.cell.plan_articulated import retract_pose
+
+        return retract_pose(cfg, q)
+    a = approach_offsets(cfg, direction) * (1.0 + 0.25 * cycle + REMEASURE_STEP * remeasure)
     return retracted(cfg, np.where(retract_offset(cfg) > 0, q, q - a))
+
+
+def above_offset(cfg: CellConfig, cycle: int = 0, remeasure: int = 0) -> np.ndarray:
+    """Joint offset (g,) of the pose above the point a SCARA's touch comes down from."""
+    return retract_offset(cfg) * (1.0 + 0.1 * cycle + REMEASURE_STEP * remeasure)
 
 
 def all_motion_poses(cfg: CellConfig, q: np.ndarray, direction: int = 1) -> list[np.ndarray]:
@@ -151,17 +187,30 @@ def all_motion_poses(cfg: CellConfig, q: np.ndarray, direction: int = 1) -> list
     return [approach_pose(cfg, q, direction), q + retract_offset(cfg), q]
 
 
+def widest_motion_poses(cfg: CellConfig, q: np.ndarray, direction: int = 1) -> list[np.ndarray]:
+    """The approach and the pose above the point farthest from ``q`` that a run commands: the
+    last repetition's (identification repeats, verification cycles) with every re-measure. The
+    soft limits are a box, so every approach in between lies inside when these and ``q`` do."""
+    last = max(cfg.plan.repeats, cfg.plan.verification_cycles) - 1
+    n = cfg.plan.remeasure_attempts
+    return [approach_pose(cfg, q, direction, last, n), q + above_offset(cfg, last, n)]
+
+
 def build_plan(cfg: CellConfig) -> Plan:
+    if not cfg.model.is_scara:  # head orientations × arm configurations (issue 9)
+        from station.cell.plan_articulated import build_articulated_plan
+
+        return build_articulated_plan(cfg)
     heads = head_targets_world(cfg)
     cands, rejected = [], []
     for j, pid in enumerate(cfg.point_ids):
         for elbow in cfg.plan.elbows:
             try:
                 q = joints_for(cfg, heads[j], elbow)[0]
-                for qq in all_motion_poses(cfg, q):
+                for qq in (*all_motion_poses(cfg, q), *widest_motion_poses(cfg, q)):
                     check_joints(cfg, qq, f"{pid} elbow {elbow:+d}")
                 if cfg.plan.both_directions:
-                    for qq in all_motion_poses(cfg, q, -1):
+                    for qq in (*all_motion_poses(cfg, q, -1), *widest_motion_poses(cfg, q, -1)):
                         check_joints(cfg, qq, f"{pid} elbow {elbow:+d} (reverse approach)")
             except UnreachableError as exc:
                 rejected.append((pid, elbow, str(exc)))
@@ -172,9 +221,17 @@ def build_plan(cfg: CellConfig) -> Plan:
     held = hold_out(cands, cfg.plan.verification_every, cfg.plan.elbows)
     verification = tuple(c for i, c in enumerate(cands) if i in held)
     ident = [c for i, c in enumerate(cands) if i not in held]
+    return assemble_plan(cfg, ident, verification, rejected, order_by_travel)
+
+
+def assemble_plan(cfg: CellConfig, ident: list[Target], verification: tuple[Target, ...],
+                  rejected: list[tuple[str, int, str]], order: Callable[[list[Target]], list[Target]]) -> Plan:
+    """The plan from its identification candidates: optionally the ``select`` most informative
+    (D-optimal), ordered by ``order`` for short travel, visited ``repeats`` times (every other
+    pass backwards), each with its reverse approach when ``both_directions``."""
     if cfg.plan.select and cfg.plan.select < len(ident):
         ident = select_d_optimal(cfg, ident, cfg.plan.select)
-    ident = order_by_travel(ident)
+    ident = order(ident)
     steps: list[PlannedStep] = []
     for rep in range(cfg.plan.repeats):
         for t in (ident if rep % 2 == 0 else ident[::-1]):
@@ -200,7 +257,8 @@ def order_by_travel(targets: list[Target]) -> list[Target]:
     """Greedy nearest neighbour in joint space (rad weighted as 500 mm, roughly the arm)."""
     if not targets:
         return targets
-    w = np.array([500.0, 500.0, 1.0, 100.0])[: len(targets[0].joints)]
+    g = len(targets[0].joints)
+    w = np.array([500.0, 500.0, 1.0, 100.0]) if g == 4 else np.full(g, 500.0)
     left = list(range(len(targets)))
     order = [left.pop(0)]
     while left:
@@ -227,15 +285,14 @@ def select_d_optimal(cfg: CellConfig, targets: list[Target], n: int) -> list[Tar
     p = J.shape[-1]
     info = 1e-9 * np.eye(p)
     chosen: list[int] = []
+    JtJ = np.swapaxes(J, -1, -2) @ J  # (n, p, p): each candidate's information
     for _ in range(n):
-        best, best_val = None, -np.inf
-        for i in range(len(targets)):
-            if i in chosen:
-                continue
-            sign, val = np.linalg.slogdet(info + J[i].T @ J[i])
-            if sign > 0 and val > best_val:
-                best, best_val = i, val
-        if best is None:  # no candidate adds information: the rest cannot help either
+        # every candidate at once (the same log det per candidate; the first best wins ties)
+        sign, val = np.linalg.slogdet(info[None] + JtJ)
+        val = np.where(sign > 0, val, -np.inf)
+        val[chosen] = -np.inf
+        best = int(np.argmax(val))
+        if not np.isfinite(val[best]):  # no candidate adds information: the rest cannot help either
             break
         chosen.append(best)
         info = info + J[best].T @ J[best]

@@ -4,7 +4,8 @@ Per step: the order, the joints, the margin to the soft limits, the clearance of
 height above the highest measuring point; for the design: the identifiable parameter set and its
 condition, the minimum of valid identification poses the run needs, and the attainable accuracy
 predicted by linear propagation of the measurement noise (parameter uncertainty only: no probe
-noise, repeatability or backlash of the verification itself).
+noise, repeatability or backlash of the verification itself; the body's CMM uncertainty is included
+when the body report gives one).
 """
 
 from __future__ import annotations
@@ -19,8 +20,9 @@ from station.cell.pipeline import MIN_VALID_FRACTION, min_valid_identification
 from station.cell.plan import Plan, all_motion_poses, build_plan, retracted, travel_joints
 from station.cell.steps import PlannedStep, StepKind
 from station.core.identifiability import analyze
+from station.core.kinematics import forward, scara_reach_margin
 from station.core.measurements import residuals_and_jacobian, synthetic_set
-from station.core.uncertainty import linear_uncertainty, pose_accuracy
+from station.core.uncertainty import body_sandwich, linear_uncertainty, pose_accuracy
 from station.core.units import ARCSEC, DEG
 
 
@@ -28,6 +30,7 @@ from station.core.units import ARCSEC, DEG
 class StepPreview:
     step: PlannedStep
     limit_margin: tuple[float, ...]  # per joint: distance to the nearer soft limit [deg | mm]
+    reach_margin_mm: float | None = None  # SCARA: wrist axis inside the stretched / folded arm [mm]
 
 
 @dataclass(frozen=True)
@@ -54,7 +57,8 @@ class PlanPreview:
             "cell": self.cell, "robot": self.robot,
             "steps": [{"order": i + 1, "index": p.step.index, "kind": p.step.kind.value, "point_id": p.step.point_id,
                        "elbow": p.step.elbow, "direction": p.step.direction, "cycle": p.step.cycle,
-                       "joints": list(p.step.joints), "limit_margin": list(p.limit_margin)}
+                       "joints": list(p.step.joints), "limit_margin": list(p.limit_margin),
+                       "reach_margin_mm": p.reach_margin_mm}
                       for i, p in enumerate(self.steps)],
             "rejected": [{"point_id": pid, "elbow": e, "reason": why} for pid, e, why in self.rejected],
             "n_identification": self.n_identification, "n_verification_targets": self.n_verification_targets,
@@ -67,7 +71,7 @@ class PlanPreview:
             "settle_s_total": self.settle_s_total,
             "motion_s_estimate": self.motion_s_estimate,
             "motion_estimate_basis": "each move at the slowest joint's maximum speed × [plan].speed, no acceleration",
-            "units": {"joints": "rad | mm", "limit_margin": "deg | mm"},
+            "units": {"joints": "rad | mm", "limit_margin": "deg | mm", "reach_margin_mm": "mm"},
         }
 
 
@@ -76,6 +80,15 @@ def _margins(cfg: CellConfig, q: np.ndarray) -> tuple[float, ...]:
     m = np.minimum(q - lo, hi - q)
     scale = np.array([1 / DEG if k == "revolute" else 1.0 for k in cfg.model.joint_types])
     return tuple(float(v) for v in m * scale)
+
+
+def _reach(cfg: CellConfig, steps: tuple[PlannedStep, ...]) -> list[float | None]:
+    """Per step the reach margin [mm] of a SCARA (None for other robots: their configurations'
+    margins are the soft-limit margins and the IK's singularity check)."""
+    if not cfg.model.is_scara or not steps:
+        return [None] * len(steps)
+    T = forward(cfg.model, np.array([s.q for s in steps]), setup=False)
+    return [float(v) for v in scara_reach_margin(cfg.model, T)]
 
 
 def motion_seconds(cfg: CellConfig, steps: tuple[PlannedStep, ...]) -> float | None:
@@ -107,7 +120,15 @@ def preview(cfg: CellConfig, with_upload: bool = True) -> PlanPreview:
                 exclude=cfg.identification.exclude, describe=False)
     _, J = residuals_and_jacobian(cfg.model, data, cfg.model.nominal)
     idx = a.chosen_indices()
-    unc = linear_uncertainty((J / data.sigma[:, None])[:, idx], tuple(a.chosen))
+    if cfg.body_sigma is not None and np.any(cfg.body_sigma > 0):
+        # the body's CMM σ is shared by every measurement of a point: the same sandwich as the run's
+        points = np.array([s.point for s in plan.identification if s.kind is StepKind.IDENTIFICATION])
+        heads = forward(cfg.model, ident_q, setup=True)
+        data = data.with_body(points, cfg.body_sigma, heads[:, :3, 3] - cfg.body_points[points, :3, 3])
+        fit = data.fit_sigma()
+        unc = body_sandwich((J / fit[:, None])[:, idx], tuple(a.chosen), data, fit)
+    else:
+        unc = linear_uncertainty((J / data.sigma[:, None])[:, idx], tuple(a.chosen))
     q_ver = np.array([t.joints for t in plan.verification]) if plan.verification else ident_q
     acc = pose_accuracy(cfg.model, cfg.model.nominal, idx, unc.covariance, q_ver, setup=False)
     pos = np.linalg.norm(acc.sigma[:, :3], axis=1) * 1e3
@@ -121,7 +142,8 @@ def preview(cfg: CellConfig, with_upload: bool = True) -> PlanPreview:
     n_ident = sum(1 for s in steps if s.kind is StepKind.IDENTIFICATION)
     return PlanPreview(
         cell=cfg.name, robot=cfg.model.name,
-        steps=tuple(StepPreview(s, _margins(cfg, s.q)) for s in steps), rejected=plan.rejected,
+        steps=tuple(StepPreview(s, _margins(cfg, s.q), r) for s, r in zip(steps, _reach(cfg, steps))),
+        rejected=plan.rejected,
         n_identification=n_ident, n_verification_targets=len(plan.verification),
         min_valid_identification=min_valid_identification(n_ident), travel_clearance_mm=clearance,
         identifiable=tuple(a.chosen), condition=float(a.chosen_condition),
@@ -154,13 +176,20 @@ def describe(p: PlanPreview) -> list[str]:
         tight = min(p.steps, key=lambda s: min(s.limit_margin))
         lines.append(f"  smallest margin to a soft limit: {min(tight.limit_margin):.2f} (deg | mm) at step "
                      f"{tight.step.index + 1} ({tight.step.point_id} elbow {tight.step.elbow:+d})")
+        reach = [s for s in p.steps if s.reach_margin_mm is not None]
+        if reach:
+            r = min(reach, key=lambda s: s.reach_margin_mm or 0.0)
+            lines.append(f"  smallest reach margin (stretched or folded arm): {r.reach_margin_mm:.1f} mm at step "
+                         f"{r.step.index + 1} ({r.step.point_id} elbow {r.step.elbow:+d})")
     for pid, elbow, why in p.rejected:
         why = why.split(": ", 1)[1] if why.startswith(pid) else why
         lines.append(f"  NOT measured: {pid} elbow {elbow:+d}: {why}")
-    lines.append(f"  {'order':>5}  {'kind':22}  {'point':10}  {'elbow':>5}  joints")
+    lines.append(f"  {'order':>5}  {'kind':22}  {'point':10}  {'elbow':>5}  {'limit':>7}  {'reach':>7}  joints")
     for i, s in enumerate(p.steps):
         st = s.step
         q = ", ".join(f"{v / DEG:.2f}°" if k == "revolute" else f"{v:.1f} mm"
                       for v, k in zip(st.joints, p.joint_types))
-        lines.append(f"  {i + 1:>5}  {st.kind.value:22}  {st.point_id:10}  {st.elbow:+5d}  {q}")
+        margin = "–" if s.reach_margin_mm is None else f"{s.reach_margin_mm:.0f} mm"
+        lines.append(f"  {i + 1:>5}  {st.kind.value:22}  {st.point_id:10}  {st.elbow:+5d}  "
+                     f"{min(s.limit_margin):7.1f}  {margin:>7}  {q}")
     return lines

@@ -28,10 +28,11 @@ from typing import Any
 
 import numpy as np
 
-from station.cell.config import CellConfig, parse_text
+from station.cell.config import CellConfig
 from station.cell.devices import CellController, ProbeHead
 from station.cell.events import Event, Notice, PhaseChanged, RunFinished, RunStarted
 from station.cell.fingerprint import baseline_fingerprint, check_same_cell, fingerprint
+from station.cell.pipeline import stored_config
 from station.cell.plan import Target, build_plan, order_by_travel
 from station.cell.runcontrol import RunControl
 from station.cell.rundb import MeasurementRecord, RunDatabaseError, RunDB
@@ -491,7 +492,7 @@ def run_recheck(cfg: CellConfig, probe: ProbeHead, controller: CellController, d
         if not _is_recheck(db, run_id):
             raise ConfigError(f"run {run_id} is a calibration; resume it with 'station calibrate CONFIG --resume {run_id}'")
         check_same_cell(db.load_result(run_id, "fingerprint", default=None)
-                        or fingerprint(parse_text(db.run(run_id).config_toml, f"run {run_id}")), fingerprint(cfg), run_id)
+                        or fingerprint(stored_config(db, run_id)), fingerprint(cfg), run_id)
         try:
             steps = tuple(PlannedStep.from_record(rec) for rec in db.run(run_id).plan)
         except (KeyError, ValueError, TypeError) as exc:

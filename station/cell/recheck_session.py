@@ -84,8 +84,7 @@ def run_recheck_session(request: CellRequest, emit: Callable[[Event], None], con
 
     try:
         with ExitStack() as stack:
-            loaded = (load_simulated(request.config, request.seed, request.time_scale, stack) if request.simulated
-                      else load_cell(request, stack))
+            loaded = load_cell(request, stack)  # simulated: the same cells as calibrate (rehearsal or built-in)
             if on_cell is not None:
                 on_cell(loaded)
             cfg = loaded.cfg
@@ -95,7 +94,8 @@ def run_recheck_session(request: CellRequest, emit: Callable[[Event], None], con
             devices = open_cell(cfg, stack)
             summary = run_recheck(cfg, devices.probe, devices.controller, db, tracker, control,
                                   options or RecheckOptions(),
-                                  resume_run=request.resume, seed=request.seed if request.simulated else None,
+                                  resume_run=request.resume,
+                                  seed=loaded.endpoints.get("seed", request.seed) if request.simulated else None,
                                   devices_info=describe_devices(devices))
             return summary.replace(db=request.db)
     except Exception as exc:  # every failure becomes an outcome; nothing escapes as a traceback

@@ -11,7 +11,9 @@ Every finished measurement is committed to the run database before the next moti
 
 from __future__ import annotations
 
+import functools
 import time
+from collections import Counter, deque
 from collections.abc import Callable, Collection, Generator, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -21,15 +23,15 @@ import numpy as np
 from station.cell.config import CellConfig
 from station.cell.devices import CellController, ProbeHead, Snapshot
 from station.cell.events import DeviceSnapshot, Event, MeasurementRecorded, Notice, StepStarted
-from station.cell.plan import approach_pose, retract_offset, retracted
+from station.cell.plan import above_offset, approach_pose, retracted
 from station.cell.runcontrol import RunControl
 from station.cell.rundb import RunDB
 from station.cell.safety import MotionGuard
 from station.cell.steps import PlannedStep, StepKind
 from station.core.kinematics import scara_ik
-from station.core.probe_geometry import default_probe_head
+from station.core.probe_geometry import ProbeHeadGeometry, default_probe_head
 from station.core.transforms import invert, matrix_to_pose, pose_to_matrix
-from station.errors import MeasurementFault
+from station.errors import ConfigError, MeasurementFault
 
 # --- messages -------------------------------------------------------------------------------
 
@@ -68,6 +70,12 @@ class ReadJoints:
 
 
 @dataclass(frozen=True)
+class RecentReadings:
+    """Ask the runner for the channel values of the last touches (most recent first, this
+    touch's included): a stuck probe repeats its reading from touch to touch."""
+
+
+@dataclass(frozen=True)
 class Reading:
     """What one measurement produced."""
 
@@ -80,12 +88,36 @@ class Reading:
     residual_um: float | None
     ok: bool
     message: str
+    #: the probe left out of the pose ("P3 (channel 4)"), when a redundant head excluded one
+    excluded: str | None = None
+    #: (probe id, channel) of each entry of readings_mm / status (head order); () : channel order
+    probes: tuple[tuple[str, int], ...] = ()
 
 
 Procedure = Generator[Any, Any, Reading]
 
 
 # --- procedures -----------------------------------------------------------------------------
+
+def head_of(cfg: CellConfig) -> ProbeHeadGeometry:
+    """The configured probe head (``[head]``; the built-in reference head without one)."""
+    head = cfg.head
+    return head if head is not None else default_probe_head(cube_edge_mm=cfg.cube_edge_mm)
+
+
+def probe_readings(geom: ProbeHeadGeometry, values_mm: np.ndarray, status: Sequence[Any]) -> tuple[np.ndarray, tuple[str, ...]]:
+    """The interface's channel values -> each probe's reading [mm] (head order, certificate
+    scale applied) and its channel status ('ok', 'over_range', …)."""
+    v = np.asarray(values_mm, dtype=float)
+    ch = geom.probe_channels - 1
+    if ch.max() >= v.shape[0]:
+        k = int(np.argmax(ch))
+        raise ConfigError(f"the probe interface reports {v.shape[0]} channels, but the head file gives probe "
+                          f"{geom.label(k)}: check the channel numbers in the head file against the interface's wiring")
+    out = v[ch] * geom.probe_scales
+    st = tuple(str(getattr(status[c], "value", status[c])) for c in ch)
+    return out, st
+
 
 def approach_and_read(cfg: CellConfig, q_target: np.ndarray, direction: int = 1,
                       cartesian: tuple[np.ndarray, int] | None = None, cycle: int = 0) -> Procedure:
@@ -95,65 +127,171 @@ def approach_and_read(cfg: CellConfig, q_target: np.ndarray, direction: int = 1,
     ``cartesian``: ``(pose6_base, elbow)`` to make the final move a Cartesian one (corrected by
     the controller's active table), as verification does. ``cycle`` (ISO 9283 repetitions)
     varies the approach a little from cycle to cycle, from the same side, as a real path would.
-    """
-    from station.core.probe_geometry import PoseSolveError, default_probe_head, solve_pose
 
-    geom = default_probe_head(cube_edge_mm=cfg.cube_edge_mm)
+    A head with more than six probes tests every touch (:mod:`station.core.probe_check`): when
+    the probes disagree the touch is measured again (``[plan] remeasure_attempts``); when the
+    same probe still disagrees and the others fix the pose and agree, the pose is solved without
+    it and the reading says so (``excluded``); otherwise the reading is invalid with the reason.
+    """
+    from station.core.probe_check import diagnose, residual_test
+    from station.core.probe_geometry import PoseSolveError, readings_from_pose, solve_pose
+
+    geom = head_of(cfg)
     M_nom = geom.nominal_contact_pose()
-    half = geom.stroke_mm / 2
-    r = retract_offset(cfg) * (1.0 + 0.1 * cycle)
+    half = geom.strokes / 2
+    redundant = geom.n_probes > 6
+    names = tuple((pid, int(c)) for pid, c in zip(geom.probe_ids, geom.probe_channels))
     raw = b""
     q = np.asarray(q_target, dtype=float)
     pose_cmd = None if cartesian is None else np.asarray(cartesian[0], dtype=float)
     last: Reading | None = None
-    for attempt in range(cfg.plan.recenter_attempts + 1):
+    recentred = remeasured = 0
+    first_suspect: int | None = None
+    notes: list[str] = []
+    while True:
+        # a re-measure approaches a little differently (3.7 % more offset, a path no other visit
+        # or cycle takes): a fresh touch, not a replay of the one that disagreed
+        r = above_offset(cfg, cycle, remeasured)
         yield Checkpoint()
         yield MoveJoints(None, "retract to travel height")
-        yield MoveJoints(approach_pose(cfg, q, direction, cycle), "approach")
+        yield MoveJoints(approach_pose(cfg, q, direction, cycle, remeasured), "approach")
         if pose_cmd is None or cartesian is None:
             yield MoveJoints(q + r, "above the point")
             yield MoveJoints(q, "touch")
         else:
             # Straight from the offset approach pose: the controller's corrected joints differ
             # from q by the table's Δq, whose sign must not decide the direction of arrival.
+            if not cfg.model.is_scara:  # an articulated arm stands short of q (its joints) first
+                yield MoveJoints(q + r, "above the point")
             yield MoveCartesian(pose_cmd, cartesian[1], q, "touch (Cartesian)")
         yield Settle(cfg.plan.settle_s)
         snap = yield ReadProbes()
         q_read = yield ReadJoints()
         raw += snap.raw
-        values = np.asarray(snap.values_mm, dtype=float)
-        # the status's value ('ok', 'over_range', …): what the run database and an operator read
-        status = tuple(str(getattr(s, 'value', s)) for s in snap.status)
+        values, status = probe_readings(geom, snap.values_mm, snap.status)
+        reading = functools.partial(_reading, q, q_read, raw, values, status, names, notes)
+
+        excluded: int | None = None
+        lead = ""  # what the stored message says first about a valid reading
         try:
-            sol = solve_pose(geom, values, noise_mm=cfg.plan.max_residual_um * 1e-3 / 3)
+            sol = solve_pose(geom, values, noise_mm=cfg.plan.max_residual_um * 1e-3 / 3,
+                             check_residuals=not redundant)
         except PoseSolveError as exc:
-            last = Reading(q, q_read, raw, values, status, None, None, False,
-                           f"pose not solved: {exc}")
-            # Without a pose there is no safe re-centre direction: report and move on.
-            break
-        res_um = float(np.sqrt(np.mean(sol.residuals_mm**2)) * 1e3)
+            last = reading(None, None, False, f"pose not solved: {exc}")
+            # A redundant head may still solve the pose from its probes that read: a re-centring
+            # direction when the silent probes are near their stroke end there; else (one probe
+            # silent where it should read well inside its stroke: a dead channel) the reading
+            # without it, when the others fix the pose and agree.
+            guide = _pose_from_finite(geom, values) if redundant else None
+            if guide is None:
+                # Without a pose there is no safe re-centre direction: report and move on.
+                break
+            missing = np.flatnonzero(~np.isfinite(values))
+            expect = readings_from_pose(geom, guide[0].M)[missing]
+            off_stroke = ~np.isfinite(expect) | (np.abs(expect) > half[missing] - cfg.plan.recenter_margin_mm)
+            if np.any(off_stroke) and recentred < cfg.plan.recenter_attempts:
+                recentred += 1
+                notes.append(f"touch {recentred + remeasured}: {missing.size} probe(s) without a reading; "
+                             f"re-centred on the pose of the others")
+                q, pose_cmd = _recentre(cfg, q, pose_cmd, guide[0].M, M_nom)
+                continue
+            if missing.size != 1 or np.any(off_stroke) or not guide[1].passed:
+                break
+            excluded = int(missing[0])
+            sol = guide[0]
+            lead = (f"probe {geom.label(excluded)} gave no reading ({status[excluded].replace('_', ' ')}) where it "
+                    f"should read {expect[0]:+.3f} mm: excluded; solved from the other {geom.n_probes - 1} probes, "
+                    f"residual test passed")
+        residuals = sol.residuals_mm
+        if redundant and excluded is None:
+            test = residual_test(geom, values, sol.M)
+            if not test.passed:
+                recent = yield RecentReadings()
+                previous = [probe_readings(geom, v, ["ok"] * len(v))[0] for v in list(recent)[1:]]
+                diag = diagnose(geom, values, test, previous)
+                if remeasured < cfg.plan.remeasure_attempts:
+                    remeasured += 1
+                    first_suspect = diag.suspect
+                    notes.append(f"touch {recentred + remeasured}: {diag.reason}; measured again")
+                    continue
+                agree = first_suspect is None or first_suspect == diag.suspect
+                if diag.suspect is None or diag.solution is None or not agree:
+                    why = diag.reason if agree else (f"{diag.reason} (the touch before pointed at probe "
+                                                     f"{geom.label(first_suspect or 0)})")
+                    last = reading(None, test.rms_um, False, why)
+                    break
+                excluded = diag.suspect
+                sol = diag.solution
+                residuals = diag.test.residuals_mm if diag.test is not None else sol.residuals_mm
+                lead = (f"probe {geom.label(excluded)} excluded from the pose ({diag.reason}); solved from "
+                        f"the other {geom.n_probes - 1} probes, residual test passed")
+            elif remeasured and "the re-measured touch agrees" not in notes:
+                notes.append("the re-measured touch agrees")
+        res_um = float(np.sqrt(np.mean(residuals**2)) * 1e3)
         # Six probes fix the six degrees of freedom exactly: their residual is zero by
         # construction and says nothing about the touch, so it is not reported as a figure.
-        shown = res_um if np.count_nonzero(np.isfinite(values)) > 6 else None
-        near = np.max(np.abs(values)) > half - cfg.plan.recenter_margin_mm
+        shown = res_um if redundant else None
+        used = np.ones(geom.n_probes, dtype=bool)
+        if excluded is not None:
+            used[excluded] = False
+        near = bool(np.any(np.abs(values[used]) > half[used] - cfg.plan.recenter_margin_mm))
         ok = res_um <= cfg.plan.max_residual_um
-        last = Reading(q, q_read, raw, values, status, sol.M, shown, ok,
-                       "" if ok else f"plane residual {res_um:.1f} µm exceeds {cfg.plan.max_residual_um} µm")
-        if not near or attempt == cfg.plan.recenter_attempts:
+        label = None if excluded is None else geom.label(excluded)
+        last = reading(sol.M, shown, ok, lead if ok else f"plane residual {res_um:.1f} µm exceeds "
+                                                         f"{cfg.plan.max_residual_um} µm", label)
+        if not near or recentred == cfg.plan.recenter_attempts:
             if near:
-                last = Reading(q, q_read, raw, values, status, sol.M, shown, ok,
-                               "probes near the end of their stroke after re-centring")
+                last = reading(sol.M, shown, ok, "; ".join(m for m in ("probes near the end of their stroke after "
+                                                                       "re-centring", lead) if m), label)
             break
-        # Re-centre: the head frame must move by D = M_measured · M_nominal⁻¹ (SCARA: x, y, z, yaw).
-        D = matrix_to_pose(sol.M @ invert(M_nom))
-        D[3:5] = 0.0
-        T_new = _fk_base(cfg, q) @ pose_to_matrix(D)
-        q = scara_ik(cfg.model, T_new[None], 1 if q[1] > 0 else -1, setup=False, check_limits=False)[0]
-        if pose_cmd is not None:
-            pose_cmd = matrix_to_pose(T_new)
+        recentred += 1
+        q, pose_cmd = _recentre(cfg, q, pose_cmd, sol.M, M_nom)
     yield MoveJoints(None, "retract after reading")  # None: retract from where we stand
     assert last is not None  # the loop runs at least once and sets it on every path
     return last
+
+
+def _recentre(cfg: CellConfig, q: np.ndarray, pose_cmd: np.ndarray | None, M: np.ndarray,
+              M_nom: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """Re-centre on the measured contact pose ``M``: the joints (and the Cartesian command)."""
+    if not cfg.model.is_scara:  # all six: back to the contact q was planned for (head tilted)
+        from station.cell.plan_articulated import recentred as recentre
+
+        q, T_new = recentre(cfg, q, M)
+        return q, (None if pose_cmd is None else matrix_to_pose(T_new))
+    # The head frame must move by D = M_measured · M_nominal⁻¹ (SCARA: x, y, z, yaw).
+    D = matrix_to_pose(M @ invert(M_nom))
+    D[3:5] = 0.0
+    T_new = _fk_base(cfg, q) @ pose_to_matrix(D)
+    q = scara_ik(cfg.model, T_new[None], 1 if q[1] > 0 else -1, setup=False, check_limits=False)[0]
+    return q, (None if pose_cmd is None else matrix_to_pose(T_new))
+
+
+def _pose_from_finite(geom: ProbeHeadGeometry, values: np.ndarray) -> tuple[Any, Any] | None:
+    """The pose solution and its residual test from the probes that read, when they still fix
+    the pose (else None)."""
+    from station.core.probe_check import fixes_pose, residual_test
+    from station.core.probe_geometry import PoseSolveError, solve_pose
+
+    ok = np.isfinite(values)
+    if ok.sum() < 6 or ok.all():
+        return None
+    sub = geom.subset(ok)
+    if not fixes_pose(sub):
+        return None
+    try:
+        sol = solve_pose(sub, values[ok], check_residuals=False)
+    except PoseSolveError:
+        return None
+    return sol, residual_test(sub, values[ok], sol.M)
+
+
+def _reading(q: np.ndarray, q_read: Any, raw: bytes, values: np.ndarray, status: tuple, names: tuple,
+             notes: list[str], pose: np.ndarray | None, shown: float | None, ok: bool, message: str,
+             excluded: str | None = None) -> Reading:
+    # the final word first (its head is the failure's cause), then what the earlier touches showed
+    text = "; ".join([m for m in (message, *notes) if m])
+    return Reading(q, q_read, raw, values, status, pose, shown, ok, text, excluded, names)
 
 
 def _fk_base(cfg: CellConfig, q) -> np.ndarray:
@@ -180,7 +318,11 @@ class Runner:
         # Every motion passes this guard; the pipeline tells it which table the controller applies.
         self.guard = MotionGuard(cfg.soft_limits, elbows=cfg.plan.elbows)
         self._last_snapshot: Snapshot | None = None
-        self._stroke_mm = float(default_probe_head(cube_edge_mm=cfg.cube_edge_mm).stroke_mm)
+        self._stroke_mm = float(np.min(head_of(cfg).strokes))
+        #: channel values of the last touches, most recent first (a stuck probe repeats its reading)
+        self._touches: deque[np.ndarray] = deque(maxlen=8)
+        #: how often each probe was left out of a reading ("P3 (channel 4)" -> count)
+        self.exclusions: Counter[str] = Counter()
         # Where the wall time goes: waiting for motions, settling, sampling the probes, and the
         # rest (the station's own computation and bookkeeping). benchmarks/ reads this.
         self.timing = {"motion": 0.0, "settle": 0.0, "sampling": 0.0}
@@ -200,6 +342,8 @@ class Runner:
         if isinstance(msg, Checkpoint):
             self.control.checkpoint(emit=self.emit, index=index)
             return None
+        if isinstance(msg, RecentReadings):
+            return tuple(self._touches)
         if isinstance(msg, ReadJoints):
             q = np.asarray(self.controller.read_joints(), dtype=float)
             self._last_q = q
@@ -246,8 +390,19 @@ class Runner:
                 self.emit(Notice("warning", f"step {index + 1}: probe link: {d[0]} timeout(s), {d[1]} retry(ies), "
                                             f"{d[2]} stale frame(s) discarded; the step's readings are fresh ones"))
             self._last_snapshot = snap
+            self._touches.appendleft(np.array(snap.values_mm, dtype=float))
             return snap
         raise TypeError(f"unknown runner message {msg!r}")
+
+    def _excluded(self, probe: str, label: str) -> None:
+        """Count a probe left out of a reading; say so when it happens again (at the 2nd, then
+        every 10th time): one exclusion is a speck of dust, repeated ones a probe to check."""
+        self.exclusions[probe] += 1
+        k = self.exclusions[probe]
+        if k == 2 or (k > 2 and k % 10 == 0):
+            self.emit(Notice("warning", f"probe {probe} stuck? check it: left out of {k} readings (the last: {label}) "
+                                        f"because it disagreed with the other probes or gave no reading; those "
+                                        f"readings stay valid, solved from the other probes"))
 
     def _report_devices(self, q: np.ndarray) -> None:
         """The device panel's view after a reading: probes, joints, controller state."""
@@ -292,6 +447,8 @@ class Runner:
             residual = float("nan") if reading.residual_um is None else float(reading.residual_um)
             self.emit(MeasurementRecorded(st.index, total, label, reading.ok, residual, reading.message))
             n += 1
+            if reading.excluded is not None:
+                self._excluded(reading.excluded, label)
             if reading.ok:
                 failures.clear()
                 continue
@@ -327,8 +484,9 @@ def failure_cause(reading: Reading) -> str:
     """What made a reading invalid, as an operator names it: the probes whose channel did not
     read (numbered from 1, as on the head's drawing), else the kind of failure."""
     if reading.status is not None:
-        bad = [f"probe {i + 1} {s.replace('_', ' ')}" for i, s in enumerate(reading.status)
-               if s != "ok"]
+        names = reading.probes or tuple((str(i + 1), i + 1) for i in range(len(reading.status)))
+        bad = [f"probe {pid} {s.replace('_', ' ')}" + ("" if pid == str(ch) else f" (channel {ch})")
+               for (pid, ch), s in zip(names, reading.status) if s != "ok"]
         if bad:
             return ", ".join(bad)
     return reading.message.split(":")[0] or "invalid reading"

@@ -2,8 +2,10 @@
 configuration, for ``calibrate``, ``tui``, ``check`` and the tests.
 
 :func:`open_cell` connects the probe head and the controller the configuration names (word
-order, device id, timeouts included). :func:`load_cell` reads the configuration, or starts the
-built-in simulated cell whose configuration the simulators write. :func:`run_calibration_session`
+order, device id, timeouts included). :func:`load_cell` reads the configuration, or, simulated,
+starts the simulators: on the cell a full configuration describes (its robot, body, head, limits,
+word order; the true errors from its ``[simulation]``: ``simulators/from_config.py``), or on the
+built-in cell, whose configuration the simulators write. :func:`run_calibration_session`
 is what the CLI and the TUI call: it never raises for a run that ends badly; it returns the
 :class:`~station.cell.summary.RunSummary` of whatever ended it, and emits ``RunFailed``.
 """
@@ -11,6 +13,7 @@ is what the CLI and the TUI call: it never raises for a run that ends badly; it 
 from __future__ import annotations
 
 import logging
+import tomllib
 from collections.abc import Callable
 from contextlib import ExitStack
 from dataclasses import dataclass, field
@@ -18,11 +21,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import tomli_w
 
 from drivers.controller import ModbusController
 from drivers.controller_map import WordOrder
 from drivers.probe_head import ProbeHead as SerialProbeHead
-from station.cell.config import CellConfig, load_config, parse_text
+from station.cell.config import MAX_CONFIG_BYTES, CellConfig, load_config, parse_text, simulation_settings
 from station.cell.devices import CellController, ProbeHead
 from station.cell.events import Event, PhaseChanged, RunFailed, RunStarted
 from station.cell.outcomes import classify, failure_summary, hint_for
@@ -32,6 +36,7 @@ from station.cell.runcontrol import RunControl
 from station.cell.rundb import RunDB
 from station.cell.summary import RunSummary
 from station.errors import ConfigError, Outcome, RunAborted
+from station.io.robot_files import read_user_text
 
 log = logging.getLogger(__name__)
 
@@ -45,11 +50,12 @@ class CellRequest:
 
     config: str | None = None
     simulated: bool = False
-    seed: int = 1
+    seed: int | None = None  # simulated: given, it overrides [simulation].seed; None: that seed, else 1
     time_scale: float = 0.0
     db: str = "runs.sqlite"
     resume: int | None = None
     upload: bool = True
+    robot: str | None = None  # with simulated: the built-in simulated cell of this robot (sr800, irb2600)
 
 
 @dataclass(frozen=True)
@@ -109,20 +115,86 @@ def describe_devices(devices: Devices) -> dict[str, str]:
     return info
 
 
-def load_cell(request: CellRequest, stack: ExitStack) -> LoadedCell:
-    """The request's configuration; with ``simulated`` the built-in simulated cell is started
-    (stopped when ``stack`` closes) and its configuration comes from the simulators."""
-    if request.simulated:
-        from simulators import start_simulated_cell
-        from simulators.reference_cell import cell_config_text
+#: the tables of a ``--simulated`` CONFIG without [robot] and [body] that the built-in simulated
+#: cell's configuration takes over (besides its [simulation], which the simulators take)
+_TAKEN = ("recheck", "warmup")
 
-        servers = start_simulated_cell(seed=request.seed, time_scale=request.time_scale)
-        stack.callback(servers.stop)
-        cfg = parse_text(cell_config_text(servers, request.seed), "<simulated cell>")
-        return LoadedCell(cfg, servers.cell.truth, servers.endpoints())
+
+def load_cell(request: CellRequest, stack: ExitStack) -> LoadedCell:
+    """The request's configuration. With ``simulated`` the simulators are started (stopped when
+    ``stack`` closes) and the configuration is theirs: a CONFIG that describes a cell ([robot],
+    [body]) is rehearsed, the station's configuration being CONFIG with [devices] pointing at the
+    simulators; without CONFIG, or with one holding only [simulation], [recheck] and [warmup], the
+    built-in cell is started with those. The seed: ``request.seed`` (``--seed``) when given, else
+    ``[simulation].seed``, else 1. ``LoadedCell.truth`` is the oracle."""
+    if request.simulated and request.robot not in (None, "sr800"):  # another robot's built-in cell (issue 9)
+        return _load_builtin_robot_cell(request, stack)
+    if request.simulated:
+        return _load_simulated(request, stack)
     if not request.config:
         raise ConfigError("give a configuration file, or --simulated for the built-in simulated cell")
     return LoadedCell(load_config(request.config))
+
+
+def _read_toml(path: str) -> tuple[str, dict[str, Any]]:
+    text = read_user_text(Path(path), MAX_CONFIG_BYTES, "configuration file",
+                          missing=f"no such configuration file: {path}")
+    try:
+        return text, tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML ({exc}); fix the syntax there") from None
+
+
+def _load_simulated(request: CellRequest, stack: ExitStack) -> LoadedCell:
+    from simulators import start_simulated_cell
+    from simulators.reference_cell import cell_config_text
+
+    text, data = _read_toml(request.config) if request.config else ("", {})
+    if "robot" in data or "body" in data:  # the user's cell: rehearse it
+        from simulators.from_config import simulate_config
+
+        cfg = parse_text(text, str(request.config))
+        try:
+            rehearsal = simulate_config(cfg, seed=request.seed, source=request.config,
+                                        time_scale=request.time_scale)
+        except ValueError as exc:  # e.g. a step change on a prismatic joint
+            raise ConfigError(f"{request.config}: [simulation]: {exc}") from None
+        stack.callback(rehearsal.stop)
+        return LoadedCell(rehearsal.cfg, rehearsal.servers.cell.truth, rehearsal.endpoints())
+    sim = simulation_settings(text, str(request.config)) if request.config else {}
+    given = sim.pop("seed", None)
+    seed = request.seed if request.seed is not None else (1 if given is None else int(given))
+    servers = start_simulated_cell(seed=seed, time_scale=request.time_scale, **sim)
+    stack.callback(servers.stop)
+    cell_text = cell_config_text(servers, seed)
+    taken = {t: data[t] for t in _TAKEN if isinstance(data.get(t), dict)}
+    if taken:
+        cell_text += "\n" + tomli_w.dumps(taken)
+    cfg = parse_text(cell_text, f"<simulated cell{' with ' + request.config if request.config else ''}>")
+    return LoadedCell(cfg, servers.cell.truth, servers.endpoints())
+
+
+#: the built-in simulated cells besides the SCARA's: robot name -> (start servers, config text)
+BUILTIN_ROBOT_CELLS = ("irb2600",)
+
+
+def _load_builtin_robot_cell(request: CellRequest, stack: ExitStack) -> LoadedCell:
+    """``--simulated --robot NAME``: the built-in simulated cell of that robot (the six-axis cell
+    for ``irb2600``, :mod:`simulators.six_axis_cell`); a CONFIG is not combined with it."""
+    if request.robot not in BUILTIN_ROBOT_CELLS:
+        raise ConfigError(f"--robot {request.robot}: no built-in simulated cell for this robot; the built-in cells "
+                          f"are sr800 (the default) and {', '.join(BUILTIN_ROBOT_CELLS)}. Rehearse your own cell "
+                          f"with --simulated CONFIG")
+    if request.config:
+        raise ConfigError(f"--robot {request.robot} starts a built-in simulated cell; give either it or a CONFIG "
+                          f"to rehearse, not both")
+    from simulators.six_axis_cell import six_axis_config_text, start_six_axis_cell
+
+    seed = 1 if request.seed is None else request.seed
+    servers = start_six_axis_cell(seed=seed, time_scale=request.time_scale)
+    stack.callback(servers.stop)
+    cfg = parse_text(six_axis_config_text(servers, seed), "<simulated six-axis cell>")
+    return LoadedCell(cfg, servers.cell.truth, servers.endpoints())
 
 
 class RunTracker:
@@ -157,7 +229,7 @@ def run_calibration_session(request: CellRequest, emit: Callable[[Event], None],
             db = stack.enter_context(RunDB(request.db))
             emit(PhaseChanged("connect", "connecting the probe head and the controller"))
             devices = open_cell(cfg, stack)
-            seed = request.seed if request.simulated else None
+            seed = loaded.endpoints.get("seed", request.seed) if request.simulated else None
             summary = run_calibration(cfg, devices.probe, devices.controller, db, tracker, control,
                                       Options(upload=request.upload, oracle_truth=loaded.truth, confirm=confirm),
                                       resume_run=request.resume, seed=seed,
@@ -242,10 +314,11 @@ def check_cell(cfg: CellConfig) -> CheckReport:
             q = controller.read_joints()
             lim = controller.soft_limits()
             lines.append(f"controller {where}: {st}; joints {np.round(q, 5).tolist()}")
-            wide = (cfg.soft_limits[:, 0] < lim[:, 0]) | (cfg.soft_limits[:, 1] > lim[:, 1])
+            tol = 1e-6 * np.maximum(1.0, np.abs(lim))  # the registers hold float32: equal limits read back rounded
+            wide = (cfg.soft_limits[:, 0] < lim[:, 0] - tol[:, 0]) | (cfg.soft_limits[:, 1] > lim[:, 1] + tol[:, 1])
             if np.any(wide):
                 lines.append(f"  warning: [limits] are wider than the controller's soft limits for joints "
-                             f"{list(np.nonzero(wide)[0] + 1)}")
+                             f"{[int(j) for j in np.nonzero(wide)[0] + 1]}")
         except Exception as exc:
             outcome = classify(exc) if outcome is Outcome.SUCCESS else outcome
             lines.append(f"controller {where}: FAILED: {type(exc).__name__}: {exc}")

@@ -101,6 +101,74 @@ class ReversalSummary:
 
 
 @dataclass(frozen=True)
+class ToolSummary:
+    """A configured tool's own correction (``[[tool]]``, :mod:`station.cell.tools`).
+
+    ``tcp_mm_deg``: x, y, z [mm], roll, pitch, yaw [deg] in the flange frame; ``kind``: "table"
+    (SCARA) or "targets" (compensated targets); ``flange_shift_um`` / ``flange_rotation_arcsec``:
+    the identified tool-mount frame against the nominal one (what K absorbed).
+    ``head_predicted_*``: what the head's correction would leave at the tool's targets, predicted
+    from the identified model. ``after_*`` / ``oracle_*`` / ``head_*`` (simulation only): the
+    real robot's error at the tool's ``n_targets`` verification targets with the tool's own
+    correction, the oracle's, and the head's; None without a truth."""
+
+    name: str
+    tcp_mm_deg: tuple[float, ...]
+    kind: str
+    n_targets: int
+    crc32: str | None = None
+    n_values: int | None = None
+    interpolation_bound_um: float | None = None
+    flange_shift_um: float = 0.0
+    flange_rotation_arcsec: float = 0.0
+    head_predicted_rms_um: float | None = None
+    head_predicted_max_um: float | None = None
+    after_rms_um: float | None = None
+    after_max_um: float | None = None
+    oracle_rms_um: float | None = None
+    oracle_max_um: float | None = None
+    head_rms_um: float | None = None
+    head_max_um: float | None = None
+    n_after: int = 0
+    n_head: int = 0
+
+    @property
+    def after_vs_oracle(self) -> float | None:
+        if self.after_rms_um is None or self.oracle_rms_um is None:
+            return None
+        return self.after_rms_um / max(self.oracle_rms_um, 1e-9)
+
+    @property
+    def head_vs_after(self) -> float | None:
+        """How much larger the head's correction leaves the error than the tool's own."""
+        if self.after_rms_um is None or self.head_rms_um is None:
+            return None
+        return self.head_rms_um / max(self.after_rms_um, 1e-9)
+
+
+@dataclass(frozen=True)
+class CompensationSummary:
+    """An articulated arm's correction: compensated targets, no table (``station/cell/pipeline.py``).
+
+    ``orientation_*_arcsec``: RMS orientation error of the verification before, after and with
+    the oracle (simulation) [″]. ``joint_offsets_*``: what joint-zero offsets alone reach on the
+    same targets, beside the full model's and the uncorrected robot's, predicted from the
+    identified model (``offsets_reference`` says against what: the simulator's truth in simulation)."""
+
+    method: str
+    n_targets: int
+    orientation_before_arcsec: float | None = None
+    orientation_after_arcsec: float | None = None
+    orientation_oracle_arcsec: float | None = None
+    joint_offsets_rms_um: float | None = None
+    joint_offsets_rms_arcsec: float | None = None
+    full_model_rms_um: float | None = None
+    full_model_rms_arcsec: float | None = None
+    uncorrected_rms_um: float | None = None
+    offsets_reference: str = ""
+
+
+@dataclass(frozen=True)
 class Failure:
     """Why a run stopped early: the error's type and message and what to do."""
 
@@ -130,6 +198,8 @@ class RunSummary:
     failure: Failure | None = None
     report: str | None = None
     notes: tuple[str, ...] = field(default=())
+    tools: tuple[ToolSummary, ...] = field(default=())  # [[tool]]: each tool's own correction
+    compensation: CompensationSummary | None = None  # an articulated arm's compensated targets
 
     @property
     def exit_code(self) -> int:
@@ -165,6 +235,8 @@ class RunSummary:
             ("improvement ratio", self.gain, "×", 1),
             ("oracle RMS after", self.oracle.rms_um if self.oracle else None, "µm", 1),
             ("after / oracle", self.after_vs_oracle, "×", 2),
+            ("orientation RMS after",
+             self.compensation.orientation_after_arcsec if self.compensation else None, "″", 1),
             ("AP max after (ISO 9283)", self.after.ap_max_um if self.after else None, "µm", 1),
             ("RP max after (ISO 9283)", self.after.rp_max_um if self.after else None, "µm", 1),
             ("identified parameters", self.identification.n_parameters if self.identification else None, "", 0),
@@ -181,7 +253,7 @@ class RunSummary:
                                "run_id": self.run_id, "cell": self.cell, "robot": self.robot}
         if self.db is not None:
             out["db"] = self.db
-        for key in ("identification", "correction", "before", "after", "oracle", "upload",
+        for key in ("identification", "correction", "compensation", "before", "after", "oracle", "upload",
                     "reversal", "failure"):
             value = getattr(self, key)
             if value is not None:
@@ -196,6 +268,9 @@ class RunSummary:
             out["report"] = self.report
         if self.notes:
             out["notes"] = list(self.notes)
+        if self.tools:
+            out["tools"] = [{**_plain(dataclasses.asdict(t)), "after_vs_oracle": t.after_vs_oracle}
+                            for t in self.tools]
         out["units"] = {"lengths": "µm (keys *_um)", "times": "s (keys *_s, seconds)",
                         "parameters": "mm and rad (identification.parameters)"}
         return out
@@ -215,7 +290,9 @@ class RunSummary:
             after=sub("after", ErrorStats), oracle=sub("oracle", ErrorStats),
             upload=sub("upload", UploadSummary), upload_skipped=bool(d.get("upload_skipped", False)),
             reversal=sub("reversal", ReversalSummary), failure=sub("failure", Failure),
-            report=d.get("report"), notes=tuple(d.get("notes", ())))
+            report=d.get("report"), notes=tuple(d.get("notes", ())),
+            tools=tuple(_build(ToolSummary, t) for t in d.get("tools", ())),
+            compensation=sub("compensation", CompensationSummary))
 
 
 def _plain(obj: Any) -> Any:

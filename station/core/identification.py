@@ -16,6 +16,11 @@ the returned parameters (MINPACK does not always evaluate last at its result). T
 covariance is the linear propagation of the measurement covariance: diag(σ²) for pose and
 position rows, and for distances the covariance built from the measured points, whose shared
 points correlate the distances (:func:`station.core.uncertainty.distance_sandwich`).
+
+With the calibration body's uncertainty in the data (``MeasurementSet.body_sigma``), every row is
+weighted by σ_meas² + σ_body² and the covariance is the sandwich that also holds the correlation
+of the measurements at one body point, which share its error
+(:func:`station.core.uncertainty.body_sandwich`); a note says so.
 """
 
 from __future__ import annotations
@@ -32,10 +37,19 @@ from station.core.measurements import MeasurementSet, residuals_and_jacobian
 from station.core.model import RobotModel
 from station.core.registration import DataInformation, Registration, data_information, likely_unit, register
 from station.core.transforms import pose_to_matrix
-from station.core.uncertainty import LinearUncertainty, distance_sandwich, linear_uncertainty
+from station.core.uncertainty import (
+    LinearUncertainty,
+    body_sandwich,
+    distance_sandwich,
+    linear_uncertainty,
+    pair_units,
+)
+from station.core.units import ARCSEC, UM
 from station.errors import ConfigError, IdentificationError
 
 OUTLIER_SIGMAS = 4.0
+#: the note of a fit that holds the calibration body's uncertainty starts with this
+BODY_NOTE_PREFIX = "body uncertainty included"
 REGISTRATION_START_ANGLE = np.radians(45.0)
 
 
@@ -82,6 +96,20 @@ class IdentificationResult:
         if self.kind == "distance":
             return float(np.sqrt(np.mean(self.residuals**2)))
         return float(np.sqrt(np.mean(np.sum(self.residuals[:, :3] ** 2, axis=1))))
+
+
+def body_note(data: MeasurementSet) -> str:
+    """The line that says the calibration body's uncertainty is in the fit and its σ."""
+    assert data.body_sigma is not None and data.body_point is not None
+    used = data.body_sigma[np.unique(data.body_point)]
+    pos, ang = used[:, 0] / UM, used[:, 1] / ARCSEC
+
+    def span(v: np.ndarray, unit: str) -> str:
+        lo, hi = float(v.min()), float(v.max())
+        return f"{lo:.3g} {unit}" if np.isclose(lo, hi) else f"{lo:.3g}–{hi:.3g} {unit}"
+
+    return (f"{BODY_NOTE_PREFIX}: {len(used)} points, σ {span(pos, 'µm')}, {span(ang, '″')} "
+            f"(weights and σ; measurements of one point share its error)")
 
 
 def _position_sigma(data: MeasurementSet) -> float:
@@ -188,7 +216,9 @@ def identify(model: RobotModel, data: MeasurementSet, start=None, prefer=None, f
         raise IdentificationError(
             f"{n_rows} residual rows cannot determine {len(idx)} parameters; measure more poses"
         )
-    w = 1.0 / data.sigma
+    # σ_meas² + σ_body² per row (the body's share, when given, weights every row by what its
+    # measuring point's CMM uncertainty adds to it); exactly data.sigma without body σ
+    w = 1.0 / data.fit_sigma(pair_units(model, data, p0) if data.has_body_sigma else None)
 
     def full(x):
         p = p0.copy()
@@ -215,12 +245,19 @@ def identify(model: RobotModel, data: MeasurementSet, start=None, prefer=None, f
         pr = data.distance_pairs()
         diff = pts[pr[:, 0]] - pts[pr[:, 1]]
         unit = diff / np.linalg.norm(diff, axis=1)[:, None]
-        unc = distance_sandwich(Jw, names, pr, unit, data.sigma, data.points_sigma(), data.joints.shape[0])
+        if data.has_body_sigma:
+            unc = body_sandwich(Jw, names, data, 1.0 / w, unit)
+        else:
+            unc = distance_sandwich(Jw, names, pr, unit, data.sigma, data.points_sigma(), data.joints.shape[0])
         if shares_points(pr):
             notes.append(f"{len(pr)} distances share measured points; their correlation is in the σ "
                          f"(sandwich from the points' covariance)")
+    elif data.has_body_sigma:
+        unc = body_sandwich(Jw, names, data, 1.0 / w)
     else:
         unc = linear_uncertainty(Jw, names)
+    if data.has_body_sigma:
+        notes.append(body_note(data))
     rn = (r * w).reshape(data.n_items, data.rows_per_item)
     per_item = np.sqrt(np.mean(rn**2, axis=1))
     rms = float(np.sqrt(np.mean(rn**2)))

@@ -25,6 +25,8 @@ __all__ = [
     "forward_with_jacobian",
     "joint_jacobian",
     "scara_ik",
+    "scara_reach_margin",
+    "scara_closed_form",
     "inverse_kinematics",
     "KinematicsResult",
 ]
@@ -40,6 +42,13 @@ class KinematicsResult:
     @property
     def positions(self) -> np.ndarray:
         return self.T[..., :3, 3]
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross`` of ``(..., 3)`` vectors without its axis handling (hot loops call it often)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 def _params(model: RobotModel, params) -> np.ndarray:
@@ -133,13 +142,62 @@ def joint_jacobian(model: RobotModel, joints, params=None, setup: bool = True) -
         axis = np.broadcast_to(F[..., :3, 2], p_tool.shape)
         if model.transforms[t].joint == "revolute":
             lever = p_tool - F[..., :3, 3]
-            cols.append(np.concatenate([np.cross(axis, lever), axis], axis=-1))
+            cols.append(np.concatenate([_cross(axis, lever), axis], axis=-1))
         else:
             cols.append(np.concatenate([axis, np.zeros(p_tool.shape)], axis=-1))
     return KinematicsResult(T, np.stack(cols, axis=-1))
 
 
 # --- inverse kinematics -------------------------------------------------------------------
+
+def _scara_lengths(p: np.ndarray) -> tuple[float, float]:
+    P = p.reshape(-1, 6)
+    c3, s3 = np.cos(P[3, 5]), np.sin(P[3, 5])
+    a3 = P[3, :2] + np.array([c3 * P[4, 0] - s3 * P[4, 1], s3 * P[4, 0] + c3 * P[4, 1]])
+    return float(np.hypot(*P[2, :2])), float(np.hypot(*a3))
+
+
+def scara_reach_margin(model: RobotModel, T_base, params=None) -> np.ndarray:
+    """``(n,)`` [mm] how far the wrist axis of a SCARA at the targets ``(n, 4, 4)`` (robot base
+    frame) lies inside its reach: the smaller of the distance to the stretched arm (outer
+    radius L1 + L2 about axis 1) and to the folded arm (inner radius |L1 − L2|); negative out
+    of reach. Axis tilts are ignored (a few µm)."""
+    p = _params(model, params)
+    L1, L2 = _scara_lengths(p)
+    _, c_beta = scara_closed_form(model, T_base, 1, p)
+    r = np.sqrt(np.maximum(L1**2 + L2**2 + 2 * L1 * L2 * c_beta, 0.0))
+    return np.minimum(L1 + L2 - r, r - abs(L1 - L2))
+
+
+def scara_closed_form(model: RobotModel, T_base, elbow: int, params=None) -> tuple[np.ndarray, np.ndarray]:
+    """Closed-form joints ``(n, 4)`` of the ideal SCARA for targets ``(n, 4, 4)`` in the robot
+    base frame, and ``cos β`` ``(n,)`` of the elbow angle: ``|cos β| > 1`` is out of reach (the
+    joints are then those of the stretched or folded arm, a start value only). Axis tilts are
+    ignored here; :func:`scara_ik` and :mod:`station.core.ik` refine on the full model.
+    """
+    p = _params(model, params)
+    P = p.reshape(-1, 6)  # rows: R, A1, A2, A3, A4, K
+    target = matrix_to_pose(np.asarray(T_base, dtype=float).reshape(-1, 4, 4))
+    x, y, z, psi = target[:, 0], target[:, 1], target[:, 2], target[:, 5]
+    # Planar geometry of the ideal SCARA read from the parameters.
+    a2 = P[2, :2]
+    c3, s3 = np.cos(P[3, 5]), np.sin(P[3, 5])
+    a3 = P[3, :2] + np.array([c3 * P[4, 0] - s3 * P[4, 1], s3 * P[4, 0] + c3 * P[4, 1]])
+    k = P[5, :2]
+    ck, sk = np.cos(psi - P[5, 5]), np.sin(psi - P[5, 5])
+    wx = x - P[1, 0] - (ck * k[0] - sk * k[1])
+    wy = y - P[1, 1] - (sk * k[0] + ck * k[1])
+    L1, L2 = np.hypot(*a2), np.hypot(*a3)
+    off1, off2 = np.arctan2(a2[1], a2[0]), np.arctan2(a3[1], a3[0])
+    c_beta = (wx**2 + wy**2 - L1**2 - L2**2) / (2 * L1 * L2)
+    beta = elbow * np.arccos(np.clip(c_beta, -1.0, 1.0))
+    alpha = np.arctan2(wy, wx) - np.arctan2(L2 * np.sin(beta), L1 + L2 * np.cos(beta))
+    q1 = wrap_angle(alpha - off1 - P[1, 5])
+    q2 = wrap_angle(beta - off2 + off1 - P[2, 5])
+    q4 = wrap_angle(psi - q1 - q2 - P[1:, 5].sum())
+    q3 = z - P[1:, 2].sum()
+    return np.stack([q1, q2, q3, q4], axis=-1), c_beta
+
 
 def scara_ik(model: RobotModel, T_target, elbow: int = 1, params=None, setup: bool = False,
              tol: float = 1e-10, max_iter: int = 20, check_limits: bool = True) -> np.ndarray:
@@ -157,35 +215,16 @@ def scara_ik(model: RobotModel, T_target, elbow: int = 1, params=None, setup: bo
         raise ValueError("elbow must be +1 or -1")
     p = _params(model, params)
     Tt = np.asarray(T_target, dtype=float).reshape(-1, 4, 4)
-    P = p.reshape(-1, 6)  # rows: R, A1, A2, A3, A4, K
-    T_base = invert(pose_to_matrix(P[0]))[None] @ Tt if setup else Tt
-    target = matrix_to_pose(T_base)
-    x, y, z, psi = target[:, 0], target[:, 1], target[:, 2], target[:, 5]
-    # Planar geometry of the ideal SCARA read from the parameters (tilts ignored here; the
-    # Newton step below puts them back).
-    a2 = P[2, :2]
-    c3, s3 = np.cos(P[3, 5]), np.sin(P[3, 5])
-    a3 = P[3, :2] + np.array([c3 * P[4, 0] - s3 * P[4, 1], s3 * P[4, 0] + c3 * P[4, 1]])
-    k = P[5, :2]
-    ck, sk = np.cos(psi - P[5, 5]), np.sin(psi - P[5, 5])
-    wx = x - P[1, 0] - (ck * k[0] - sk * k[1])
-    wy = y - P[1, 1] - (sk * k[0] + ck * k[1])
-    L1, L2 = np.hypot(*a2), np.hypot(*a3)
-    off1, off2 = np.arctan2(a2[1], a2[0]), np.arctan2(a3[1], a3[0])
-    c_beta = (wx**2 + wy**2 - L1**2 - L2**2) / (2 * L1 * L2)
+    T_base = invert(pose_to_matrix(p[0:6]))[None] @ Tt if setup else Tt
+    q, c_beta = scara_closed_form(model, T_base, elbow, p)
     if np.any(np.abs(c_beta) > 1.0):
         bad = int(np.argmax(np.abs(c_beta) > 1.0))
+        x, y = T_base[bad, 0, 3], T_base[bad, 1, 3]
+        L1, L2 = _scara_lengths(p)
         raise UnreachableError(
-            f"target {bad} at x={x[bad]:.1f} y={y[bad]:.1f} mm is outside the reach of "
+            f"target {bad} at x={x:.1f} y={y:.1f} mm is outside the reach of "
             f"{model.name!r} ({abs(L1 - L2):.0f}..{L1 + L2:.0f} mm from axis 1)"
         )
-    beta = elbow * np.arccos(c_beta)
-    alpha = np.arctan2(wy, wx) - np.arctan2(L2 * np.sin(beta), L1 + L2 * np.cos(beta))
-    q1 = wrap_angle(alpha - off1 - P[1, 5])
-    q2 = wrap_angle(beta - off2 + off1 - P[2, 5])
-    q4 = wrap_angle(psi - q1 - q2 - P[1:, 5].sum())
-    q3 = z - P[1:, 2].sum()
-    q = np.stack([q1, q2, q3, q4], axis=-1)
     # Newton refinement on x, y, z, yaw with the full model.
     for _ in range(max_iter):
         res = joint_jacobian(model, q, p, setup=setup)

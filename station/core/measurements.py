@@ -9,6 +9,16 @@ Three kinds (brief §4):
 
 Every set carries the standard deviation of each residual row, which normalises mm against rad
 in the objective (W = diag(σ⁻²), eq. 7.3) and feeds the uncertainty analysis.
+
+Calibration-body uncertainty (optional): a measurement at a body measuring point is the head
+pose body_point · M⁻¹, so an error of the point's pose in the CMM report (position δ, rotation ε
+about the point's origin) moves the measured frame by δ + ε × l (l: the lever from the point's
+origin to the measured frame's origin) and turns it by ε — the SAME error in every measurement
+of that point. ``body_point`` names each measurement's point, ``body_sigma`` gives each point's σ
+and ``body_lever`` the levers; :meth:`MeasurementSet.body_sensitivity` is the derivative B of
+the measured values by the point's error, the fit weights use σ_meas² + diag(B Σ_body Bᵀ)
+(:meth:`MeasurementSet.fit_sigma`), and the correlation between rows that share a point goes
+into the parameter covariance (:func:`station.core.uncertainty.body_sandwich`).
 """
 
 from __future__ import annotations
@@ -50,6 +60,12 @@ class MeasurementSet:
     measured *points* the distances were computed from (or a scalar / (3,) pattern). Distances
     that share a point are correlated through it; the uncertainty analysis builds their
     covariance from this. Default: ``sigma / √2`` (each distance from two equal points).
+
+    Calibration-body uncertainty (all optional; without it, or with every σ 0, nothing changes):
+    ``body_point``: ``(n,)`` index of the body measuring point each measurement (joints row) was
+    taken at. ``body_sigma``: ``(m, 2)`` σ of every body point: position [mm] (per coordinate)
+    and angle [rad] (per axis), m > max(body_point). ``body_lever``: ``(n, 3)`` [mm] vector from
+    the body point's origin to the measured frame's origin, in the measurement frame (default 0).
     """
 
     kind: Kind
@@ -58,6 +74,9 @@ class MeasurementSet:
     sigma: np.ndarray
     pairs: np.ndarray | None = None
     point_sigma: np.ndarray | None = None
+    body_point: np.ndarray | None = None
+    body_sigma: np.ndarray | None = None
+    body_lever: np.ndarray | None = None
 
     def __post_init__(self):
         if self.kind not in KINDS:
@@ -104,6 +123,88 @@ class MeasurementSet:
             object.__setattr__(self, "point_sigma", _ro(ps))
         elif self.point_sigma is not None:
             raise ConfigError("point_sigma belongs to distance data only")
+        self._check_body(n)
+
+    def _check_body(self, n: int) -> None:
+        if self.body_point is None and self.body_sigma is None:
+            if self.body_lever is not None:
+                raise ConfigError("body_lever needs body_point and body_sigma")
+            return
+        if self.body_point is None or self.body_sigma is None:
+            raise ConfigError("body uncertainty needs both body_point (n,) and body_sigma (m, 2)")
+        bp = np.asarray(self.body_point)
+        if bp.shape != (n,) or not np.issubdtype(bp.dtype, np.integer):
+            raise ConfigError(f"body_point must be ({n},) integer indices of the body points")
+        bs = np.asarray(self.body_sigma, dtype=float)
+        if bs.ndim != 2 or bs.shape[1] != 2 or not np.all(np.isfinite(bs)) or np.any(bs < 0):
+            raise ConfigError("body_sigma must be (m, 2) finite σ ≥ 0: position [mm], angle [rad]")
+        if bp.min(initial=0) < 0 or bp.max(initial=0) >= bs.shape[0]:
+            raise ConfigError(f"body_point indices must lie in 0 … {bs.shape[0] - 1} (one body_sigma row per point)")
+        lev = np.zeros((n, 3)) if self.body_lever is None else np.asarray(self.body_lever, dtype=float)
+        if lev.shape != (n, 3) or not np.all(np.isfinite(lev)):
+            raise ConfigError(f"body_lever must be ({n}, 3) finite lengths [mm]")
+        object.__setattr__(self, "body_point", _ro(bp, int))
+        object.__setattr__(self, "body_sigma", _ro(bs))
+        object.__setattr__(self, "body_lever", _ro(lev))
+
+    @property
+    def has_body_sigma(self) -> bool:
+        """Whether some body point has a σ > 0 (otherwise the body is taken as exact)."""
+        return self.body_sigma is not None and bool(np.any(self.body_sigma > 0))
+
+    def body_sigma6(self) -> np.ndarray:
+        """``(m, 6)`` σ of every body point's error (δx, δy, δz [mm], εx, εy, εz [rad])."""
+        if self.body_sigma is None:
+            raise ConfigError("this data set has no body uncertainty")
+        return np.repeat(self.body_sigma, 3, axis=1)
+
+    def body_sensitivity(self) -> np.ndarray:
+        """Derivative B of the measured values by the error of their body point: ``(n, 6, 6)``
+        for pose data (rows x, y, z, rx, ry, rz of the measured frame; columns δ, ε), ``(n, 3, 6)``
+        for position and distance data (the measured points). B = [[I, −[l]×], [0, I]]: a
+        rotation ε of the point about its origin moves the frame at lever l by ε × l = −[l]× ε.
+        The residual (model − measured) moves by −B."""
+        if self.body_lever is None:
+            raise ConfigError("this data set has no body uncertainty")
+        lev = self.body_lever
+        n = lev.shape[0]
+        B = np.zeros((n, 6, 6))
+        B[:, :3, :3] = np.eye(3)
+        lx, ly, lz = lev[:, 0], lev[:, 1], lev[:, 2]
+        # −[l]× = [[0, lz, −ly], [−lz, 0, lx], [ly, −lx, 0]]
+        B[:, 0, 4], B[:, 0, 5] = lz, -ly
+        B[:, 1, 3], B[:, 1, 5] = -lz, lx
+        B[:, 2, 3], B[:, 2, 4] = ly, -lx
+        B[:, 3:, 3:] = np.eye(3)
+        return B if self.kind == "pose" else B[:, :3]
+
+    def body_row_variance(self, unit: np.ndarray | None = None) -> np.ndarray:
+        """``(n_rows,)`` variance that the body points' σ adds to every residual row: the
+        diagonal of B Σ_body Bᵀ. Distance data need ``unit`` ``(k, 3)``, the unit vectors
+        p_i − p_j of the pairs; two measurements at the same point share its error."""
+        if not self.has_body_sigma:
+            return np.zeros(self.sigma.size)
+        bp = self.body_point
+        assert bp is not None  # has_body_sigma: checked together on creation
+        B = self.body_sensitivity()
+        s2 = self.body_sigma6()[bp] ** 2  # (n, 6)
+        if self.kind != "distance":
+            return np.einsum("nrc,nc->nr", B**2, s2).reshape(-1)
+        if unit is None:
+            raise ConfigError("the body variance of distances needs the pairs' unit vectors")
+        pr = self.distance_pairs()
+        i, j = pr[:, 0], pr[:, 1]
+        a_i = np.einsum("kr,krc->kc", unit, B[i])
+        a_j = np.einsum("kr,krc->kc", unit, B[j])
+        same = (bp[i] == bp[j])[:, None]
+        return np.sum(np.where(same, (a_i - a_j) ** 2 * s2[i], a_i**2 * s2[i] + a_j**2 * s2[j]), axis=1)
+
+    def fit_sigma(self, unit: np.ndarray | None = None) -> np.ndarray:
+        """``(n_rows,)`` σ the fit weights every row with: √(σ_meas² + σ_body²). Without body σ it
+        is :attr:`sigma` itself (the fit is then exactly the one without a body)."""
+        if not self.has_body_sigma:
+            return self.sigma
+        return np.sqrt(self.sigma**2 + self.body_row_variance(unit))
 
     @property
     def n_items(self) -> int:
@@ -125,7 +226,13 @@ class MeasurementSet:
         return self.pairs
 
     def with_measured(self, measured: np.ndarray) -> "MeasurementSet":
-        return MeasurementSet(self.kind, self.joints, measured, self.sigma, self.pairs, self.point_sigma)
+        return MeasurementSet(self.kind, self.joints, measured, self.sigma, self.pairs, self.point_sigma,
+                              self.body_point, self.body_sigma, self.body_lever)
+
+    def with_body(self, body_point, body_sigma, body_lever=None) -> "MeasurementSet":
+        """The same data with the uncertainty of the calibration body (see the class)."""
+        return MeasurementSet(self.kind, self.joints, self.measured, self.sigma, self.pairs, self.point_sigma,
+                              body_point, body_sigma, body_lever)
 
     def points_sigma(self) -> np.ndarray:
         """``(n, 3)`` σ [mm] of the measured points behind a distance set."""
@@ -139,8 +246,11 @@ class MeasurementSet:
         sig = self.sigma.reshape(self.n_items, -1)[idx]
         if self.kind == "distance":
             return MeasurementSet("distance", self.joints, self.measured[idx], sig, self.distance_pairs()[idx],
-                                  self.point_sigma)
-        return MeasurementSet(self.kind, self.joints[idx], self.measured[idx], sig)
+                                  self.point_sigma, self.body_point, self.body_sigma, self.body_lever)
+        if self.body_point is None:
+            return MeasurementSet(self.kind, self.joints[idx], self.measured[idx], sig)
+        return MeasurementSet(self.kind, self.joints[idx], self.measured[idx], sig, None, None,
+                              self.body_point[idx], self.body_sigma, None if self.body_lever is None else self.body_lever[idx])
 
 
 def model_outputs(model: RobotModel, data: MeasurementSet, params) -> np.ndarray:
@@ -237,6 +347,32 @@ def add_noise(data: MeasurementSet, exact: np.ndarray, rng: np.random.Generator)
         return out
     sig = sig[:, 0] if data.kind == "distance" else sig
     return exact + rng.standard_normal(exact.shape) * sig
+
+
+def add_body_error(data: MeasurementSet, exact: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Exact poses ``(B?, n, 4, 4)`` or points ``(B?, n, 3)`` (for distance data: the points
+    the distances are formed from) as a body whose points are off by their σ would give them:
+    one error (δ, ε) per body point and per data set (batch entry), shared by every measurement
+    at that point, applied as the rigid motion it is (turn by ε about the point's origin, shift
+    by δ). Without body σ the input is returned unchanged."""
+    if not data.has_body_sigma:
+        return exact
+    pose = data.kind == "pose"
+    batch = exact.shape[:-3] if pose else exact.shape[:-2]
+    assert data.body_point is not None and data.body_lever is not None
+    e = rng.standard_normal(batch + (data.body_sigma6().shape[0], 6)) * data.body_sigma6()
+    e = e[..., data.body_point, :]  # (B?, n, 6): every measurement takes its point's error
+    from station.core.transforms import rotation_exp
+
+    R = rotation_exp(e[..., 3:])
+    shift = e[..., :3] + np.einsum("...ij,...j->...i", R - np.eye(3), np.broadcast_to(data.body_lever, e[..., :3].shape))
+    out = np.array(exact, dtype=float)
+    if pose:
+        out[..., :3, 3] += shift
+        out[..., :3, :3] = R @ out[..., :3, :3]
+    else:
+        out += shift
+    return out
 
 
 def default_sigma(kind: Kind) -> np.ndarray:

@@ -170,6 +170,13 @@ class RobotModel:
         p[0:6] = pose
         return self.with_params(p)
 
+    def with_tool(self, pose: np.ndarray) -> "RobotModel":
+        """The same robot with the tool transform K (the last one) set to ``pose`` (6,) [mm, rad]
+        (a probe-head file's frame in the flange)."""
+        p = np.array(self.nominal)
+        p[-6:] = pose
+        return self.with_params(p)
+
     def check_joints(self, joints: np.ndarray) -> np.ndarray:
         """Validate a joint array ``(n, g)``: shape, finiteness. Returns it as float."""
         q = np.asarray(joints, dtype=float)

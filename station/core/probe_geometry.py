@@ -23,8 +23,13 @@ direction ``d_i`` pointing from the probe body towards the surface it touches (t
 the spring pushes the plunger out). A reading ``s_i`` [mm] puts the tip-sphere centre at
 ``c_i = b_i + s_i d_i``. So **a positive reading means the plunger is extended further** (the
 face is farther from the head); a face that comes closer pushes the plunger back and the
-reading decreases. Contact: ``n_M · c_i - h_M = rho`` with the face plane in MKKS and the tip
-radius ``rho``. Valid readings lie within ``[-stroke/2, +stroke/2]`` (reading 0 mid-stroke).
+reading decreases. Contact: ``n_M · c_i - h_M = rho_i`` with the face plane in MKKS and the tip
+radius ``rho_i``. Valid readings lie within ``[-stroke_i/2, +stroke_i/2]`` (reading 0 mid-stroke).
+Tip radius and stroke may differ from probe to probe; each probe also has an id, the channel it
+sits on at the interface unit and a certificate scale (a head file, ``docs/probe-head.md``,
+:mod:`station.io.head_file`). At the nominal touch a probe need not read 0, but inside its stroke
+with a margin (:data:`NOMINAL_STROKE_MARGIN`). With more than six probes the solver is least
+squares; :mod:`station.core.probe_check` tests the residual and finds a probe that disagrees.
 
 Default arrangement (``default_probe_head``)
 -------------------------------------------
@@ -66,6 +71,8 @@ __all__ = [
     "readings_from_poses",
     "solve_pose",
     "contact_pose_covariance",
+    "reading_jacobian",
+    "NOMINAL_STROKE_MARGIN",
 ]
 
 FACE_TOP, FACE_X, FACE_Y = 0, 1, 2
@@ -85,23 +92,42 @@ class PoseSolveError(ValueError):
     """The readings do not determine a valid cube pose; the measurement must be repeated."""
 
 
+#: The nominal readings must stay this fraction of the stroke away from either stroke end: the
+#: robot's positioning error before calibration (tenths of a mm) and the runner's re-centring
+#: margin need room on both sides.
+NOMINAL_STROKE_MARGIN = 0.2
+
+
 @dataclass(frozen=True, eq=False)
 class ProbeHeadGeometry:
     """Probe arrangement in MKKS. Arrays are read-only.
 
-    ``mount_points (n,3)`` mm, ``directions (n,3)`` unit vectors, ``faces (n,)`` int
-    (0 top, 1 x face, 2 y face); n = 6 for the 3-2-1 head (more probes are allowed: the solver
-    is least squares and the residual check then becomes meaningful).
+    ``mount_points (n,3)`` mm, ``directions (n,3)`` unit vectors (normalised here), ``faces (n,)``
+    int (0 top, 1 x face, 2 y face); n >= 6 (the 3-2-1 head has 6; more make the residual a test
+    of the touch). ``tip_radius_mm`` and ``stroke_mm``: one value for every probe or ``(n,)``
+    (:attr:`tip_radii` and :attr:`strokes` are always ``(n,)``). ``ids``, ``channels`` (1-based
+    channel on the interface unit, unique) and ``scales`` (certificate factor: displacement =
+    scale x displayed value) default to ``"1" … "n"``, ``1 … n`` and 1. ``reading_sigma_mm``: σ
+    of one reading, what the residual test of a redundant head compares against.
+    ``nominal_pose`` (4,4): the pose the head is designed to touch at (None: the identity); every
+    probe's reading there must lie inside its stroke with a margin of
+    :data:`NOMINAL_STROKE_MARGIN` x stroke at both ends (a probe does not have to read 0 there).
     """
 
     mount_points: np.ndarray
     directions: np.ndarray
     faces: np.ndarray
-    tip_radius_mm: float = 1.0
-    stroke_mm: float = 10.0
+    tip_radius_mm: float | np.ndarray = 1.0
+    stroke_mm: float | np.ndarray = 10.0
     cube_edge_mm: float = 40.0
-    #: (4,4) the pose every probe reads 0 at (checked); None means the identity
+    #: (4,4) the pose of MPKS in MKKS at the nominal touch; None means the identity
     nominal_pose: np.ndarray | None = None
+    ids: tuple[str, ...] | None = None
+    channels: np.ndarray | None = None
+    scales: np.ndarray | None = None
+    name: str = "probe head"
+    #: σ of one probe reading [mm] (certificate repeatability): the redundancy test's noise
+    reading_sigma_mm: float = 0.0005
 
     def __post_init__(self) -> None:
         b = np.array(self.mount_points, dtype=float)
@@ -109,34 +135,120 @@ class ProbeHeadGeometry:
         f = np.array(self.faces, dtype=int)
         if b.ndim != 2 or b.shape[1] != 3 or d.shape != b.shape or f.shape != (b.shape[0],):
             raise ValueError("mount_points and directions must be (n,3), faces (n,)")
-        if b.shape[0] < 6:
+        n = b.shape[0]
+        if n < 6:
             raise ValueError("a pose needs at least six probes")
         if np.any((f < 0) | (f > 2)):
             raise ValueError("faces must be 0 (top), 1 (x face) or 2 (y face)")
-        d = d / np.linalg.norm(d, axis=1, keepdims=True)
+        norms = np.linalg.norm(d, axis=1, keepdims=True)
+        if not np.all(np.isfinite(b)) or not np.all(np.isfinite(d)) or np.any(norms < 1e-9):
+            raise ValueError("mount points and directions must be finite, directions non-zero")
+        d = d / norms
         M0 = np.eye(4) if self.nominal_pose is None else np.array(self.nominal_pose, float)
         for name, arr in (("mount_points", b), ("directions", d), ("faces", f),
                           ("nominal_pose", M0)):
             arr.flags.writeable = False
             object.__setattr__(self, name, arr)
-        # A geometry whose probes do not all touch their faces at mid-stroke in the nominal
+        per_probe = {}
+        for key, value, default in (("tip_radius_mm", self.tip_radius_mm, None),
+                                    ("stroke_mm", self.stroke_mm, None),
+                                    ("channels", self.channels, np.arange(1, n + 1)),
+                                    ("scales", self.scales, np.ones(n))):
+            given = np.asarray(default if value is None else value, dtype=float)
+            if given.ndim != 0 and given.shape != (n,):
+                raise ValueError(f"{key} must be one value or one per probe ({n}), got shape {given.shape}")
+            a = np.array(np.broadcast_to(given, (n,)))
+            a.flags.writeable = False
+            per_probe[key] = a
+        if np.any(per_probe["tip_radius_mm"] < 0) or np.any(per_probe["stroke_mm"] <= 0):
+            raise ValueError("tip radii must be >= 0 and strokes > 0")
+        ch = per_probe["channels"]
+        if np.any(ch != np.round(ch)) or np.any(ch < 1) or len(set(ch.tolist())) != n:
+            raise ValueError(f"channels must be unique integers >= 1, got {ch.tolist()}")
+        if not (self.reading_sigma_mm > 0 and np.isfinite(self.reading_sigma_mm)):
+            raise ValueError("reading_sigma_mm must be a finite number > 0")
+        if not np.all(per_probe["scales"] > 0):
+            raise ValueError("scale factors must be > 0")
+        ids = tuple(str(i + 1) for i in range(n)) if self.ids is None else tuple(str(i) for i in self.ids)
+        if len(ids) != n or len(set(ids)) != n:
+            raise ValueError(f"ids must name each of the {n} probes once, got {list(ids)}")
+        object.__setattr__(self, "_tip", per_probe["tip_radius_mm"])
+        object.__setattr__(self, "_stroke", per_probe["stroke_mm"])
+        object.__setattr__(self, "_channels", per_probe["channels"].astype(int))
+        object.__setattr__(self, "_scales", per_probe["scales"])
+        object.__setattr__(self, "_ids", ids)
+        # A geometry whose probes do not touch their faces inside their stroke at the nominal
         # pose is a wrong geometry file; better to fail here than in every solve.
-        zero = readings_from_poses(self, M0)
-        if not np.all(np.abs(zero) < 1e-6):
+        s0, _, incidence = _contact(self, M0)
+        limit = self.strokes * (0.5 - NOMINAL_STROKE_MARGIN)
+        bad = [i for i in range(n) if not (np.isfinite(s0[i]) and abs(s0[i]) <= limit[i]
+                                           and incidence[i] < -_MIN_INCIDENCE)]
+        if bad:
+            what = "; ".join(
+                f"probe {self.label(i)} reads {s0[i]:.3f} mm, allowed ±{limit[i]:.3f} mm"
+                if np.isfinite(s0[i]) and incidence[i] < -_MIN_INCIDENCE
+                else f"probe {self.label(i)} does not point into its face" for i in bad)
             raise ValueError(
-                f"probes do not read 0 at the nominal pose (readings {np.round(zero, 4)}): "
-                "check mount points, directions, faces and nominal_pose of the head geometry"
-            )
+                f"at the nominal touch {what} (the nominal readings must stay "
+                f"{NOMINAL_STROKE_MARGIN:.0%} of the stroke away from its ends): check mount point, "
+                "direction and face of these probes and the nominal contact pose of the head")
+        # faces the nominal contacts must land on (a contact outside its face: a wrong file)
+        nominal = readings_from_poses(self, M0)
+        off = [self.label(i) for i in range(n) if np.isnan(nominal[i])]
+        if off:
+            raise ValueError(f"at the nominal touch probes {', '.join(off)} land outside their cube face: "
+                             "check their mount points against the cube edge")
 
     @property
     def n_probes(self) -> int:
         return self.mount_points.shape[0]
 
+    @property
+    def tip_radii(self) -> np.ndarray:
+        """``(n,)`` tip-sphere radii [mm]."""
+        return self._tip  # type: ignore[attr-defined]
+
+    @property
+    def strokes(self) -> np.ndarray:
+        """``(n,)`` strokes [mm]: valid readings lie within ±stroke/2."""
+        return self._stroke  # type: ignore[attr-defined]
+
+    @property
+    def probe_channels(self) -> np.ndarray:
+        """``(n,)`` int: the channel (1-based) of each probe on the interface unit."""
+        return self._channels  # type: ignore[attr-defined]
+
+    @property
+    def probe_scales(self) -> np.ndarray:
+        """``(n,)`` certificate factors: displacement [mm] = scale x displayed value."""
+        return self._scales  # type: ignore[attr-defined]
+
+    @property
+    def probe_ids(self) -> tuple[str, ...]:
+        return self._ids  # type: ignore[attr-defined]
+
+    def label(self, i: int) -> str:
+        """``P3 (channel 4)``: how the messages name probe ``i`` (0-based index)."""
+        return f"{self._ids[i]} (channel {int(self._channels[i])})"  # type: ignore[attr-defined]
+
     def nominal_contact_pose(self) -> np.ndarray:
-        """(4,4) pose of MPKS in MKKS at which every probe reads 0 (mid-stroke)."""
+        """(4,4) pose of MPKS in MKKS at the nominal touch."""
         if self.nominal_pose is None:  # not after __post_init__, which stores the identity for None
             return np.eye(4)
         return self.nominal_pose.copy()
+
+    def nominal_readings(self) -> np.ndarray:
+        """``(n,)`` readings [mm] at the nominal touch (not all 0 for a real head)."""
+        return readings_from_poses(self, self.nominal_contact_pose())
+
+    def subset(self, keep) -> "ProbeHeadGeometry":
+        """The head with only the probes ``keep`` (indices or a boolean mask), in their order."""
+        idx = np.arange(self.n_probes)[np.asarray(keep)]
+        return ProbeHeadGeometry(
+            self.mount_points[idx], self.directions[idx], self.faces[idx], self.tip_radii[idx],
+            self.strokes[idx], self.cube_edge_mm, self.nominal_pose,
+            tuple(self.probe_ids[i] for i in idx), self.probe_channels[idx], self.probe_scales[idx], self.name,
+            self.reading_sigma_mm)
 
 
 @dataclass(frozen=True, eq=False)
@@ -168,7 +280,7 @@ def default_probe_head(cube_edge_mm: float = 40.0, tip_radius_mm: float = 1.0,
     b = np.asarray(centres, float) @ M0[:3, :3].T + M0[:3, 3]
     return ProbeHeadGeometry(b, np.asarray(dirs, float), np.array([0, 0, 0, 1, 1, 2]),
                              tip_radius_mm=rho, stroke_mm=stroke_mm, cube_edge_mm=E,
-                             nominal_pose=M0)
+                             nominal_pose=M0, name="reference 3-2-1 head")
 
 
 def _contact(geom: ProbeHeadGeometry, M: np.ndarray):
@@ -176,16 +288,17 @@ def _contact(geom: ProbeHeadGeometry, M: np.ndarray):
     incidence ``n_M·d`` ``(..., n)`` (negative when the probe points into its face)."""
     M = np.asarray(M, dtype=float)
     R, t = M[..., :3, :3], M[..., :3, 3]
+    rho = geom.tip_radii                                            # (n,)
     n_f = FACE_NORMALS[geom.faces]                                  # (n,3) in MPKS
     nM = np.einsum("...ij,nj->...ni", R, n_f)                      # (...,n,3) in MKKS
     hM = np.einsum("...ni,...i->...n", nM, t)                       # face planes pass the origin
     incidence = np.einsum("...ni,ni->...n", nM, geom.directions)
     nb = np.einsum("...ni,ni->...n", nM, geom.mount_points)
     with np.errstate(divide="ignore", invalid="ignore"):
-        s = (geom.tip_radius_mm + hM - nb) / incidence
+        s = (rho + hM - nb) / incidence
     c = geom.mount_points + s[..., None] * geom.directions          # tip centres in MKKS
     q = np.einsum("...ji,...nj->...ni", R, c - t[..., None, :])     # ... in MPKS
-    contact = q - geom.tip_radius_mm * n_f
+    contact = q - rho[:, None] * n_f
     return s, contact, incidence
 
 
@@ -198,7 +311,7 @@ def readings_from_poses(geom: ProbeHeadGeometry, M: np.ndarray) -> np.ndarray:
     lo, hi = _FACE_LO[geom.faces] * E, _FACE_HI[geom.faces] * E
     on_face = np.all((uv >= lo) & (uv <= hi), axis=-1)
     hit = on_face & (incidence < -_MIN_INCIDENCE) & np.isfinite(s)
-    half = geom.stroke_mm / 2.0
+    half = geom.strokes / 2.0
     out = np.where(s > half, np.inf, np.where(s < -half, -np.inf, s))
     return np.where(hit, out, np.nan)
 
@@ -225,19 +338,22 @@ def _residuals_and_jacobian(geom: ProbeHeadGeometry, M: np.ndarray, s: np.ndarra
     c = geom.mount_points + s[:, None] * geom.directions
     q = (c - t) @ R
     n_f = FACE_NORMALS[geom.faces]
-    f = np.einsum("ni,ni->n", n_f, q) - geom.tip_radius_mm
+    f = np.einsum("ni,ni->n", n_f, q) - geom.tip_radii
     J = np.hstack([-n_f, -np.cross(q, n_f)])
     return f, J, q
 
 
 def solve_pose(geom: ProbeHeadGeometry, readings: np.ndarray, M0: np.ndarray | None = None,
-               noise_mm: float = 0.0005, max_iterations: int = 30) -> PoseSolution:
-    """Pose of MPKS in MKKS from the probe readings ``(n,)`` [mm], by Gauss-Newton.
+               noise_mm: float = 0.0005, max_iterations: int = 30,
+               check_residuals: bool = True) -> PoseSolution:
+    """Pose of MPKS in MKKS from the probe readings ``(n,)`` [mm], by Gauss-Newton (least
+    squares when there are more than six probes).
 
     Starts at ``M0`` (default: the nominal contact pose). Raises :class:`PoseSolveError` for
     non-finite readings, a singular arrangement, no convergence, plane residuals above
-    ``5·noise_mm`` (only possible with more than six probes), or a solution whose contact
-    points fall outside the cube faces (the probes touched something else).
+    ``5·noise_mm`` (only possible with more than six probes; ``check_residuals=False`` leaves
+    that test to the caller, :func:`station.core.probe_check.residual_test`), or a solution whose
+    contact points fall outside the cube faces (the probes touched something else).
     """
     s = np.asarray(readings, dtype=float)
     if s.shape != (geom.n_probes,):
@@ -278,7 +394,7 @@ def solve_pose(geom: ProbeHeadGeometry, readings: np.ndarray, M0: np.ndarray | N
     if condition > 1e6:
         raise PoseSolveError(f"probe arrangement is singular (condition {condition:.3g})")
     bound = 5.0 * noise_mm + 1e-9
-    if np.max(np.abs(f)) > bound:
+    if check_residuals and np.max(np.abs(f)) > bound:
         raise PoseSolveError(
             f"plane residuals up to {np.max(np.abs(f)) * 1000:.2f} µm exceed {bound * 1000:.2f} µm "
             "(5 x probe noise): a probe is dirty, loose or touched the wrong surface; clean and "
@@ -302,12 +418,17 @@ def contact_pose_covariance(geom: ProbeHeadGeometry, M: np.ndarray,
     (x, y, z [mm], roll, pitch, yaw [rad]) from independent reading noise ``sigma_mm``
     (scalar or ``(n,)``): ``Σ = (Gᵀ W G)⁻¹`` with ``G = ds/dpose``, ``W = diag(σ⁻²)``.
     """
-    p0 = matrix_to_pose(np.asarray(M, dtype=float))
-    h = 1e-6
-    # Central differences of the unclipped readings w.r.t. each pose component.
-    P = p0 + np.concatenate([np.eye(6) * h, -np.eye(6) * h])
-    s, _, _ = _contact(geom, pose_to_matrix(P))
-    G = ((s[:6] - s[6:]) / (2 * h)).T                                # (n,6)
+    G = reading_jacobian(geom, M)                                    # (n,6)
     sigma = np.broadcast_to(np.asarray(sigma_mm, dtype=float), (geom.n_probes,))
     Gw = G / sigma[:, None]
     return np.linalg.pinv(Gw.T @ Gw)
+
+
+def reading_jacobian(geom: ProbeHeadGeometry, M: np.ndarray) -> np.ndarray:
+    """``G (n,6)``: derivative of the unclipped readings [mm] w.r.t. the pose vector
+    ``matrix_to_pose(M)`` (x, y, z [mm], roll, pitch, yaw [rad]), by central differences."""
+    p0 = matrix_to_pose(np.asarray(M, dtype=float))
+    h = 1e-6
+    P = p0 + np.concatenate([np.eye(6) * h, -np.eye(6) * h])
+    s, _, _ = _contact(geom, pose_to_matrix(P))
+    return np.asarray(((s[:6] - s[6:]) / (2 * h)).T)

@@ -9,6 +9,10 @@
   plain (unweighted) least squares of eq. 7.6, so its covariance is the sandwich
   (JᵀJ)⁻¹ Jᵀ C J (JᵀJ)⁻¹; Jᵀ C J = (DᵀJ)ᵀ Σ_points (DᵀJ) is formed point by point, never as a
   (k, k) matrix, so it costs O(k·p) for k pairs.
+* :func:`body_sandwich` — the same when rows share the error of a calibration-body point
+  (every measurement at that point: repeats, both elbows, all cycles): the fit weights rows with
+  σ_meas² + σ_body², and the covariance is the sandwich (JᵀWJ)⁻¹ Jᵀ W (Σ_meas + B Σ_body Bᵀ) W J
+  (JᵀWJ)⁻¹, B the derivative of the measured values by the points' errors.
 * :func:`monte_carlo` — many synthetic data sets drawn from the input distributions of what is
   actually measured (the measured points or poses, the joints through the robot's
   repeatability, the calibration-body geometry per measuring point; distances are then computed
@@ -24,7 +28,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from station.core.kinematics import forward, forward_with_jacobian
-from station.core.measurements import MeasurementSet, add_noise, model_outputs, residuals_and_jacobian
+from station.core.measurements import (
+    MeasurementSet,
+    add_body_error,
+    add_noise,
+    model_outputs,
+    residuals_and_jacobian,
+)
 from station.core.model import RobotModel
 from station.core.transforms import rotation_exp
 
@@ -78,21 +88,86 @@ def distance_sandwich(Jw: np.ndarray, names: tuple[str, ...], pairs: np.ndarray,
     base = linear_uncertainty(Jw, names)
     if base.rank < Jw.shape[1]:
         return base
+    return _sandwich(base, _distance_point_meat(Jw / row_sigma[:, None], pairs, unit, point_sigma, n_points))
+
+
+def _distance_point_meat(JW: np.ndarray, pairs: np.ndarray, unit: np.ndarray, point_sigma: np.ndarray,
+                         n_points: int) -> np.ndarray:
+    """Jᵀ W C W J of distances from measured points: ``JW`` ``(k, p)`` is W J (rows of J divided
+    by σ²); C = D Σ_points Dᵀ is never formed."""
     pr = np.asarray(pairs, dtype=int)
     # G = Dᵀ W J: for every point and coordinate, the sum over its pairs of ±u·(weighted row).
-    contrib = unit[:, :, None] * (Jw / row_sigma[:, None])[:, None, :]  # (k, 3, p)
-    G = np.zeros((n_points, 3, Jw.shape[1]))
+    contrib = unit[:, :, None] * JW[:, None, :]  # (k, 3, p)
+    G = np.zeros((n_points, 3, JW.shape[1]))
     np.add.at(G, pr[:, 0], contrib)
     np.add.at(G, pr[:, 1], -contrib)
-    Gs = (G * np.asarray(point_sigma)[:, :, None]).reshape(-1, Jw.shape[1])
-    meat = Gs.T @ Gs
+    Gs = (G * np.asarray(point_sigma)[:, :, None]).reshape(-1, JW.shape[1])
+    return Gs.T @ Gs
+
+
+def _sandwich(base: LinearUncertainty, meat: np.ndarray) -> LinearUncertainty:
+    """bread · meat · bread with the bread (JᵀWJ)⁻¹ of ``base``."""
     bread = base.covariance
     cov = bread @ meat @ bread
     cov = 0.5 * (cov + cov.T)
     sig = np.sqrt(np.diag(cov))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(sig, sig)
-    return LinearUncertainty(tuple(names), _ro(sig), _ro(cov), _ro(corr), base.singular_values, base.rank)
+    return LinearUncertainty(base.names, _ro(sig), _ro(cov), _ro(corr), base.singular_values, base.rank)
+
+
+def _add_by_group(G: np.ndarray, groups: np.ndarray, values: np.ndarray) -> None:
+    """``G[g] += Σ values[i]`` over the ``i`` with ``groups[i] == g`` (sorted sums: far faster
+    than ``np.add.at`` for many rows)."""
+    order = np.argsort(groups, kind="stable")
+    g = groups[order]
+    starts = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
+    G[g[starts]] += np.add.reduceat(values[order], starts, axis=0)
+
+
+def body_sandwich(Jw: np.ndarray, names: tuple[str, ...], data: MeasurementSet, fit_sigma: np.ndarray,
+                  unit: np.ndarray | None = None) -> LinearUncertainty:
+    """Parameter covariance of a fit whose rows share the errors of the calibration body's points.
+
+    ``Jw``: ``(n_rows, p)`` Jacobian of the residuals divided by ``fit_sigma`` ``(n_rows,)``, the
+    σ the fit weighted every row with (W = diag(fit_sigma⁻²), σ_meas² + σ_body² per row:
+    :meth:`MeasurementSet.fit_sigma`). ``unit``: ``(k, 3)`` pair unit vectors (distance data).
+
+    Cov = (JᵀWJ)⁻¹ Jᵀ W (Σ_meas + B Σ_body Bᵀ) W J (JᵀWJ)⁻¹. Σ_meas is diag(σ_meas²) for pose and
+    position rows and the points' covariance for distances (as :func:`distance_sandwich`). B
+    (:meth:`MeasurementSet.body_sensitivity`) maps each body point's error (δ, ε) [mm, rad] to the
+    rows of every measurement at that point, so rows that share a point are correlated; Jᵀ W B
+    is summed point by point, never formed as an (n_rows, n_rows) matrix: O(n_rows · p).
+    """
+    base = linear_uncertainty(Jw, names)
+    p = Jw.shape[1]
+    if base.rank < p:
+        return base
+    JW = Jw / np.asarray(fit_sigma)[:, None]  # W J
+    if data.kind == "distance":
+        if unit is None:
+            raise ValueError("distance data need the pairs' unit vectors")
+        meat = _distance_point_meat(JW, data.distance_pairs(), unit, data.points_sigma(), data.joints.shape[0])
+    else:
+        A = JW * data.sigma[:, None]
+        meat = A.T @ A
+    if not data.has_body_sigma:
+        return _sandwich(base, meat)
+    assert data.body_point is not None
+    B = data.body_sensitivity()  # (n, r, 6)
+    sig6 = data.body_sigma6()
+    G = np.zeros((sig6.shape[0], 6, p))  # Bᵀ W J, per body point
+    if data.kind == "distance":
+        assert unit is not None
+        pr = data.distance_pairs()
+        for col, sign in ((0, 1.0), (1, -1.0)):
+            a = (unit[:, None, :] @ B[pr[:, col]])[:, 0, :]  # (k, 6): uᵀ B of the pair's point
+            _add_by_group(G, data.body_point[pr[:, col]], sign * a[:, :, None] * JW[:, None, :])
+    else:
+        contrib = np.swapaxes(B, 1, 2) @ JW.reshape(B.shape[0], B.shape[1], p)  # (n, 6, p)
+        _add_by_group(G, data.body_point, contrib)
+    Gs = (G * sig6[:, :, None]).reshape(-1, p)
+    return _sandwich(base, meat + Gs.T @ Gs)
 
 
 @dataclass(frozen=True)
@@ -142,7 +217,10 @@ def monte_carlo(model: RobotModel, data: MeasurementSet, true_params, chosen_ind
     Gaussian joint noise ``sigma_joints`` ``(g,)`` (the robot reports the commanded joints but
     stands slightly elsewhere); calibration-body geometry as one pose error of σ
     ``sigma_point`` ``(6,)`` per measuring point ``point_ids`` ``(n,)`` shared by all
-    measurements at that point (pose and position data). Every set is solved by Gauss–Newton
+    measurements at that point (pose and position data), and, when ``data`` carries the body's
+    uncertainty (``body_point``, ``body_sigma``, ``body_lever``), one error per body point and
+    data set turning the point about its origin (:func:`station.core.measurements.add_body_error`),
+    with the fit weighted as :func:`station.core.identification.identify` weights it. Every set is solved by Gauss–Newton
     from ``start`` (default nominal), all sets at once.
     """
     idx = np.asarray(chosen_index, dtype=int)
@@ -151,7 +229,7 @@ def monte_carlo(model: RobotModel, data: MeasurementSet, true_params, chosen_ind
              data.joints + rng.standard_normal((n_sets,) + data.joints.shape) * np.asarray(sigma_joints))
     if data.kind == "distance":
         # What is measured are points: perturb them (instrument, body geometry), then form the distances.
-        pts = forward(model, q_act, p_true, setup=False)[..., :3, 3]
+        pts = add_body_error(data, forward(model, q_act, p_true, setup=False)[..., :3, 3], rng)
         pts = pts + rng.standard_normal(pts.shape) * data.points_sigma()
         if point_ids is not None and sigma_point is not None:
             pts = _perturb_points("position", pts, np.asarray(point_ids), np.asarray(sigma_point), rng)
@@ -160,12 +238,12 @@ def monte_carlo(model: RobotModel, data: MeasurementSet, true_params, chosen_ind
     else:
         exact = (np.broadcast_to(model_outputs(model, data, p_true), (n_sets,) + data.measured.shape)
                  if sigma_joints is None else _outputs_at(model, data, p_true, q_act))
-        measured = add_noise(data, exact, rng)
+        measured = add_noise(data, add_body_error(data, exact, rng), rng)
         if point_ids is not None and sigma_point is not None:
             measured = _perturb_points(data.kind, measured, np.asarray(point_ids), np.asarray(sigma_point), rng)
     p0 = np.array(model.nominal if start is None else start, dtype=float)
     P = np.broadcast_to(p0, (n_sets, p0.size)).copy()
-    w = 1.0 / data.sigma
+    w = 1.0 / data.fit_sigma(pair_units(model, data, p_true) if data.has_body_sigma else None)
     it = 0
     for it in range(1, max_iter + 1):  # noqa: B007 - the count is reported after the loop
         r, J = residuals_and_jacobian(model, data, P, joints=data.joints, measured=measured)
@@ -188,6 +266,17 @@ def monte_carlo(model: RobotModel, data: MeasurementSet, true_params, chosen_ind
         bias=_ro(est_ok.mean(axis=0) - p_true[idx]), correlation=_ro(np.atleast_2d(corr)),
         iterations=it, n_failed=int((~ok).sum()),
     )
+
+
+def pair_units(model: RobotModel, data: MeasurementSet, params) -> np.ndarray | None:
+    """``(k, 3)`` unit vectors p_i − p_j of a distance set's pairs at ``params`` (None for
+    other kinds): what the body variance of a distance needs."""
+    if data.kind != "distance":
+        return None
+    pts = forward(model, data.joints, params, setup=False)[:, :3, 3]
+    pr = data.distance_pairs()
+    diff = pts[pr[:, 0]] - pts[pr[:, 1]]
+    return diff / np.linalg.norm(diff, axis=1)[:, None]
 
 
 def _outputs_at(model: RobotModel, data: MeasurementSet, p_true: np.ndarray, q_act: np.ndarray) -> np.ndarray:

@@ -25,6 +25,7 @@ from station.ui.commands_cell import (
     cmd_runs,
     cmd_tui,
 )
+from station.ui.commands_compensate import cmd_compensate
 from station.ui.commands_conformance import cmd_conformance
 from station.ui.commands_core import (
     cmd_analyze,
@@ -102,6 +103,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_predict)
 
+    p = sub.add_parser("compensate", help="compensated targets: filter a target list through the identified model "
+                       "(robots without a correction table)")
+    p.add_argument("model", help="identified robot file (station identify --output)")
+    p.add_argument("targets", help="target CSV: x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg[,shoulder,elbow,wrist]")
+    p.add_argument("--output", "-o", required=True, help="CSV to write: every row, compensated or marked failed")
+    p.add_argument("--robot", default=None, help="the controller's nominal robot (default: the model's name)")
+    p.add_argument("--setup", action="store_true", help="targets in the measurement frame (default: robot base)")
+    p.add_argument("--allow-singular", action="store_true", help="compensate targets near a singularity too")
+    p.add_argument("--joint-offsets", action="store_true",
+                   help="also fit joint-zero offsets only and show their accuracy beside the full model's")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_compensate)
+
     p = sub.add_parser("study", help="re-run the chapter's simulation studies (§7.5)")
     _add_robot(p)
     p.add_argument("--seed", type=int, default=0)
@@ -127,10 +141,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_conformance)
 
     p = sub.add_parser("calibrate", help="measure, identify, correct, upload, verify")
-    p.add_argument("config", nargs="?")
-    p.add_argument("--simulated", action="store_true", help="run against the built-in simulated cell")
-    p.add_argument("--seed", type=int, default=1, help="simulated cell seed (default 1)")
+    p.add_argument("config", nargs="?", help="cell configuration; with --simulated: the cell to rehearse "
+                   "(a file with only [simulation], [recheck], [warmup]: the built-in cell with those)")
+    p.add_argument("--simulated", action="store_true", help="run against a simulated cell: CONFIG's (rehearse "
+                   "your cell), or the built-in one")
+    p.add_argument("--seed", type=int, default=None, help="simulated cell seed (default [simulation].seed, else 1)")
     p.add_argument("--time-scale", type=float, default=0.0, help="simulated motion time scale (0 = instant)")
+    p.add_argument("--robot", metavar="NAME", help="with --simulated: the built-in simulated cell of this robot "
+                   "(sr800, the default; irb2600: a six-axis arm)")
     p.add_argument("--db", default="runs.sqlite", help="run database (default runs.sqlite)")
     p.add_argument("--resume", type=int, metavar="RUN", help="continue an interrupted run")
     p.add_argument("--no-upload", action="store_true", help="identify and verify 'before' only")
@@ -139,9 +157,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_calibrate)
 
     p = sub.add_parser("recheck", help="a short accuracy check against the last calibration (drift)")
-    p.add_argument("config", nargs="?", help="cell configuration; with --simulated: its [simulation], [recheck], [warmup]")
-    p.add_argument("--simulated", action="store_true", help="run against the built-in simulated cell")
-    p.add_argument("--seed", type=int, default=1, help="simulated cell seed (default 1)")
+    p.add_argument("config", nargs="?", help="cell configuration; with --simulated: the cell to rehearse "
+                   "(a file with only [simulation], [recheck], [warmup]: the built-in cell with those)")
+    p.add_argument("--simulated", action="store_true", help="run against a simulated cell: CONFIG's (rehearse "
+                   "your cell), or the built-in one")
+    p.add_argument("--seed", type=int, default=None, help="simulated cell seed (default [simulation].seed, else 1)")
     p.add_argument("--time-scale", type=float, default=0.0, help="simulated motion time scale (0 = instant)")
     p.add_argument("--db", default="runs.sqlite", help="run database (default runs.sqlite)")
     p.add_argument("--baseline", type=int, metavar="RUN", help="calibration to compare with (default: the latest "
@@ -176,13 +196,14 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("export", help="export a run's measurements to CSV")
     p.add_argument("--db", default="runs.sqlite")
     p.add_argument("--run", type=int)
+    p.add_argument("--tool", metavar="NAME", help="instead: the correction of the [[tool]] NAME (JSON, for its controller)")
     p.add_argument("output")
     p.set_defaults(func=cmd_export)
 
     p = sub.add_parser("tui", help="terminal UI for the operator")
     p.add_argument("config", nargs="?")
-    p.add_argument("--simulated", action="store_true")
-    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--simulated", action="store_true", help="a simulated cell: CONFIG's, or the built-in one")
+    p.add_argument("--seed", type=int, default=None, help="simulated cell seed (default [simulation].seed, else 1)")
     p.add_argument("--db", default="runs.sqlite")
     p.add_argument("--recheck", action="store_true", help="run a recheck against the last calibration (drift)")
     p.add_argument("--baseline", type=int, metavar="RUN", help="with --recheck: the calibration run to compare with")

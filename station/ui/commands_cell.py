@@ -26,6 +26,7 @@ from station.cell.rundb import RunDB
 from station.cell.runs import list_runs
 from station.cell.session import CellRequest, check_cell, reset_controller, run_calibration_session
 from station.cell.summary import RunSummary
+from station.core.probe_check import check_head
 from station.errors import ConfigError, Outcome, StationError
 
 
@@ -33,7 +34,8 @@ def request_from(args: argparse.Namespace) -> CellRequest:
     """The cell request of a ``calibrate`` or ``tui`` command line."""
     return CellRequest(config=args.config, simulated=args.simulated, seed=args.seed,
                        time_scale=getattr(args, "time_scale", 0.0), db=args.db,
-                       resume=getattr(args, "resume", None), upload=not getattr(args, "no_upload", False))
+                       resume=getattr(args, "resume", None), upload=not getattr(args, "no_upload", False),
+                       robot=getattr(args, "robot", None))
 
 
 def progress_printer(stream: TextIO) -> Callable[[ev.Event], None]:
@@ -119,6 +121,7 @@ def cmd_init(args: argparse.Namespace) -> int:
 def cmd_check(args: argparse.Namespace) -> int:
     cfg = load_config(args.config)
     print(f"configuration {args.config}: valid ({len(cfg.point_ids)} measuring points, robot {cfg.model.name})")
+    print("\n".join(check_head(cfg.head).lines()))  # the probe head (docs/probe-head.md)
     report = check_cell(cfg)
     for line in report.lines:
         print(line)
@@ -213,11 +216,13 @@ def cmd_plan(args: argparse.Namespace) -> int:
     """The plan preview: nothing moves."""
     from station.cell.preview import describe, preview
 
-    p = preview(load_config(args.config), with_upload=not args.no_upload)
+    cfg = load_config(args.config)
+    p = preview(cfg, with_upload=not args.no_upload)
+    head = check_head(cfg.head)  # the probe head's arrangement and sensitivity (docs/probe-head.md)
     if args.json:
-        print(json.dumps(p.to_json()))
+        print(json.dumps({**p.to_json(), "head": head.to_json()}))
     else:
-        print("\n".join(describe(p)))
+        print("\n".join([*describe(p), *head.lines()]))
     return 0
 
 
@@ -266,6 +271,17 @@ def cmd_export(args: argparse.Namespace) -> int:
         run = db.run(args.run) if args.run else db.latest_run()
         if run is None:
             raise ConfigError(f"{args.db} holds no runs")
+        if getattr(args, "tool", None):  # a [[tool]]'s own correction (docs/correction.md, "Tools after the head")
+            from station.cell.tools import tool_export
+
+            out = tool_export(db, run.id, args.tool)
+            try:
+                Path(args.output).write_text(json.dumps(out), encoding="utf-8")
+            except OSError as exc:
+                raise ConfigError(f"cannot write {args.output}: {exc.strerror or exc}; choose another path") from None
+            what = f"table CRC-32 {out['table']['crc32']}" if "table" in out else "compensated targets"
+            print(f"run {run.id}: tool {args.tool!r} correction ({what}) written to {args.output}")
+            return 0
         db.export_csv(run.id, args.output)
     print(f"run {run.id} exported to {args.output}")
     return 0

@@ -59,7 +59,8 @@ def print_recheck(s: RecheckSummary, stream: TextIO) -> None:
 
 def cmd_recheck(args: argparse.Namespace) -> int:
     request = CellRequest(config=args.config, simulated=args.simulated, seed=args.seed,
-                          time_scale=args.time_scale, db=args.db, resume=args.resume)
+                          time_scale=args.time_scale, db=args.db,
+                          resume=args.resume)
     if not request.simulated and not request.config:
         raise ConfigError("give a configuration file, or --simulated for the built-in simulated cell")
     if args.poses is not None and not 3 <= args.poses <= 100:

@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from station.cell.config import CellConfig, parse_text
-from station.cell.pipeline import build_table_for, identify_run, stored_plan, verification_errors
+from station.cell.config import CellConfig
+from station.cell.pipeline import build_table_for, identify_run, stored_config, stored_plan, verification_errors
 from station.cell.plan import build_plan
 from station.cell.run_records import MeasurementRecord
 from station.cell.rundb import RunDB
@@ -206,7 +206,7 @@ def report_data_for_run(db: RunDB, run_id: int) -> ReportData:
     run = db.run(run_id)
     summary = _stored_summary(db, run_id)
     try:
-        cfg = parse_text(run.config_toml, f"run {run_id}")
+        cfg = stored_config(db, run_id)
     except ConfigError as exc:
         raise ConfigError(f"no report for run {run_id}: its stored configuration does not read with this "
                           f"station version ({exc})") from None
@@ -214,10 +214,11 @@ def report_data_for_run(db: RunDB, run_id: int) -> ReportData:
     res = _identify(cfg, db, run_id, run.status, summary)
     notes: list[str] = []
     table = None
-    try:
-        table = build_table_for(cfg, res.params)
-    except StationError as exc:
-        notes.append(f"the correction table could not be rebuilt for the report ({exc})")
+    if cfg.model.is_scara:  # an articulated arm gets compensated targets, no table
+        try:
+            table = build_table_for(cfg, res.params)
+        except StationError as exc:
+            notes.append(f"the correction table could not be rebuilt for the report ({exc})")
     try:
         if table is None:
             raise ConfigError("no table")

@@ -70,6 +70,7 @@ SECTIONS = (
     ("accuracy", "Predicted accuracy over the workspace"),
     ("table", "Correction table and its bound"),
     ("reversal", "Reversal error"),
+    ("tools", "Tools after the head"),
     ("trend", "Trend: this robot's calibrations and rechecks"),
 )
 
@@ -282,6 +283,13 @@ def _reversal(d: ReportData) -> str:
             + _kv(rows, table_id="reversal-table"))
 
 
+def _tools(d: ReportData) -> str:
+    check = t.tool_check_rows(d)
+    return (f'<p class="note">{_e(t.TOOL_NOTE)}</p>' + _table(t.TOOL_HEAD, t.tool_rows(d), table_id="tools-table", num_from=3)
+            + ((f'<p class="note">{_e(t.TOOL_CHECK_NOTE)}</p>'
+                + _table(t.TOOL_CHECK_HEAD, check, table_id="tools-check-table")) if check else ""))
+
+
 def _trend(d: ReportData) -> str:
     this = str(d.run_id)
     rows = t.trend_rows(d)
@@ -299,6 +307,8 @@ def render_html(d: ReportData) -> str:
         ("residuals", _residuals(d)), ("verification", _verification(d)), ("accuracy", _accuracy(d)),
         ("table", _table_section(d)), ("reversal", _reversal(d)),
     ]
+    if t.has_tools(d):  # [[tool]]: each tool's own correction
+        parts.append(("tools", _tools(d)))
     if t.has_trend(d):  # one run has no history: no section
         parts.append(("trend", _trend(d)))
     shown = {k for k, _ in parts}

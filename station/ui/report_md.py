@@ -93,6 +93,13 @@ def render_markdown(d: ReportData) -> str:
     rows_r = t.reversal_rows(d)
     L += _table(("item", "value"), rows_r, num_from=9) if rows_r else ["Not measured in this run.", ""]
 
+    if t.has_tools(d):  # [[tool]]: each tool's own correction
+        L += ["## Tools after the head", "", t.TOOL_NOTE, ""]
+        L += _table(t.TOOL_HEAD, t.tool_rows(d), num_from=3)
+        if t.tool_check_rows(d):
+            L += [t.TOOL_CHECK_NOTE, ""]
+            L += _table(t.TOOL_CHECK_HEAD, t.tool_check_rows(d))
+
     if t.has_trend(d):  # one run has no history: no section
         L += ["## Trend: this robot's calibrations and rechecks", "", t.trend_line(d), ""]
         this = str(d.run_id)

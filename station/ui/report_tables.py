@@ -431,3 +431,49 @@ def trend_line(d: ReportData) -> str:
             "A calibration's figure is the RMS position error at the held-out poses after correction (none "
             "when nothing was uploaded); a recheck's is the RMS position drift against its baseline "
             "calibration, beside the tolerance it was judged by.")
+
+
+# -- tools after the head ([[tool]], station/cell/tools.py) ----------------------------------------
+
+TOOL_HEAD = ("tool", "TCP x, y, z mm", "correction", "bound µm", "flange shift µm", "flange rotation ″",
+             "head's correction, predicted RMS µm", "max µm")
+TOOL_CHECK_HEAD = ("tool", "targets", "own RMS µm", "own max µm", "oracle RMS µm", "oracle max µm",
+                   "head's RMS µm", "head's max µm", "own / oracle")
+
+
+def has_tools(d: ReportData) -> bool:
+    return d.summary is not None and bool(d.summary.tools)
+
+
+def tool_rows(d: ReportData) -> list[tuple[str, ...]]:
+    """Per configured tool: its TCP, its own correction (table CRC or compensated targets), the
+    identified tool-mount frame against the nominal, and what the head's correction would leave."""
+    if d.summary is None:
+        return []
+    out: list[tuple[str, ...]] = []
+    for s in d.summary.tools:
+        x, y, z = s.tcp_mm_deg[:3]
+        corr = f"table {s.crc32}" if s.crc32 else f"{s.n_targets} compensated targets"
+        out.append((s.name, f"{x:g}, {y:g}, {z:g}", corr, fmt(s.interpolation_bound_um), fmt(s.flange_shift_um),
+                    fmt(s.flange_rotation_arcsec), fmt(s.head_predicted_rms_um), fmt(s.head_predicted_max_um)))
+    return out
+
+
+def tool_check_rows(d: ReportData) -> list[tuple[str, ...]]:
+    """Simulation only: per tool, the real robot's error over the tool's verification targets
+    with its own correction, the oracle's and the head's (empty without a truth)."""
+    if d.summary is None:
+        return []
+    return [(s.name, str(s.n_after), fmt(s.after_rms_um), fmt(s.after_max_um), fmt(s.oracle_rms_um),
+             fmt(s.oracle_max_um), fmt(s.head_rms_um), fmt(s.head_max_um), fmt(s.after_vs_oracle, 2))
+            for s in d.summary.tools if s.after_rms_um is not None]
+
+
+TOOL_NOTE = ("Each tool's correction is built for the controller's nominal model with that tool "
+             "(K·H⁻¹·T, K the head transform, H the head in the flange frame, T the tool's TCP), from the "
+             "identified K: the identified flange differs from the nominal one by what K absorbed. The head's "
+             "table stays the uploaded one; when a tool goes on, upload its own table "
+             "('station export --tool NAME'). The head's correction used for a tool leaves the error shown.")
+TOOL_CHECK_NOTE = ("Simulated check over the held-out verification poses re-expressed as the tool's TCP: the "
+                   "simulator's true robot with the true tool, its joints scattering with the robot's "
+                   "repeatability, driven with each correction.")

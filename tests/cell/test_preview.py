@@ -79,3 +79,39 @@ def test_preview_estimates_the_motion_time_from_the_robot_files_speeds(text):
     path = np.array([*all_motion_poses(cfg, q, 1), retracted(cfg, q)])
     expect = np.sum(np.max(np.abs(np.diff(path, axis=0)) / (cfg.model.max_speed * cfg.plan.speed), axis=1))
     assert motion_seconds(cfg, one) == pytest.approx(expect)
+
+
+def test_the_bodys_cmm_uncertainty_widens_the_predicted_accuracy():
+    import dataclasses
+    from pathlib import Path
+
+    import numpy as np
+
+    from station.cell.config import load_config
+
+    cfg = load_config(Path(__file__).resolve().parents[2] / "examples" / "scara600" / "cell.toml")
+    assert cfg.body_sigma is not None and np.all(cfg.body_sigma > 0)
+    with_body = preview(cfg).sigma_position_um
+    exact = preview(dataclasses.replace(cfg, body_sigma=np.zeros_like(cfg.body_sigma))).sigma_position_um
+    assert with_body[1] > 1.1 * exact[1]
+
+
+def test_reach_margin_of_each_step_against_the_arm_lengths(text):
+    """The reach margin is the wrist axis's distance inside the stretched (L1 + L2) or folded
+    (|L1 - L2|) arm: checked against the planar geometry of the SR 800 (445 mm + 355 mm)."""
+    import numpy as np
+
+    from station.core.kinematics import forward
+
+    cfg = parse_text(text)
+    p = preview(cfg)
+    s = p.steps[0]
+    T = forward(cfg.model, np.array([s.step.q]), setup=False)[0]
+    K = cfg.model.nominal[-6:]
+    # the wrist axis: the tool point less K's xy offset turned by the tool's yaw
+    yaw = np.arctan2(T[1, 0], T[0, 0]) - K[5]
+    w = T[:2, 3] - np.array([[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]]) @ K[:2]
+    r = np.hypot(*w)
+    assert s.reach_margin_mm == pytest.approx(min(800.0 - r, r - 90.0), abs=0.5)
+    assert all(x.reach_margin_mm is not None and x.reach_margin_mm > 0 for x in p.steps)
+    assert "smallest reach margin" in "\n".join(describe(p))

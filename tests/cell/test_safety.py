@@ -86,3 +86,33 @@ def test_a_cartesian_target_outside_the_table_or_not_finite_is_refused():
     guard.table = None  # without a table the nominal joints are what the controller commands
     np.testing.assert_array_equal(guard.check_cartesian(np.array([500.0, 0, 0, 0, 0, 0]), 1,
                                                         np.array([0.0, 0, -50, 0]), "t"), [0, 0, -50, 0])
+
+
+def test_plan_refuses_a_point_whose_later_repetitions_would_leave_the_soft_limits():
+    """A run approaches each point a little differently in each repetition and re-measure; the
+    widest of those approaches must be inside the soft limits before anything moves, not only
+    the first (the runner's motion guard would otherwise stop the run half way)."""
+    import dataclasses
+
+    from simulators import start_simulated_cell
+    from simulators.reference_cell import cell_config_text
+    from station.cell.config import parse_text
+    from station.cell.plan import all_motion_poses, approach_pose, build_plan, widest_motion_poses
+
+    with start_simulated_cell(seed=1) as sim:
+        cfg = parse_text(cell_config_text(sim, 1))
+    plan = build_plan(cfg)
+    t = plan.verification[0]
+    q = t.joints
+    widest = widest_motion_poses(cfg, q)[0]
+    last = max(cfg.plan.repeats, cfg.plan.verification_cycles) - 1
+    assert np.all(np.abs(widest - q) >= np.abs(approach_pose(cfg, q, 1, last) - q) - 1e-12)
+    # soft limits that admit the first approach of that point, not its widest one
+    first = all_motion_poses(cfg, q)[0]
+    j = 0  # joint 1 approaches from below: its widest approach is its lowest value
+    assert widest[j] < first[j]
+    soft = cfg.soft_limits.copy()
+    soft[j, 0] = 0.5 * (widest[j] + first[j])
+    tight = dataclasses.replace(cfg, soft_limits=soft)
+    rejected = {(pid, e) for pid, e, _ in build_plan(tight).rejected}
+    assert (t.point_id, t.elbow) in rejected

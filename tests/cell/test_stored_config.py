@@ -1,0 +1,39 @@
+"""A run's configuration read back from the run database resolves its relative robot, head and
+body files beside the configuration it was read from, whatever the current directory."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from station.cell.config import load_config
+from station.cell.pipeline import config_source, stored_config
+from station.cell.rundb import RunDB
+from station.errors import ConfigError
+
+EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "scara600" / "cell.toml"
+
+
+def test_stored_config_reads_relative_files_beside_the_original(tmp_path, monkeypatch):
+    monkeypatch.chdir(EXAMPLE.parent.parent)  # read as 'scara600/cell.toml', a relative path
+    cfg = load_config("scara600/cell.toml")
+    with RunDB(str(tmp_path / "runs.sqlite")) as db:
+        run_id = db.create_run(cfg.source_text, [], seed=None)
+        db.save_result(run_id, "config_source", config_source(cfg))
+        bare = db.create_run(cfg.source_text, [], seed=None)  # a run from before the source was stored
+        monkeypatch.chdir(tmp_path)  # a report made elsewhere
+        back = stored_config(db, run_id)
+        assert back.model.name == "scara600"
+        np.testing.assert_array_equal(back.body_points, cfg.body_points)
+        with pytest.raises(ConfigError, match="robot"):
+            stored_config(db, bare)
+
+
+def test_a_label_is_stored_as_it_is():
+    import dataclasses
+
+    cfg = load_config(EXAMPLE)
+    assert config_source(cfg) == str(EXAMPLE)
+    assert config_source(dataclasses.replace(cfg, source="<simulated cell>")) == "<simulated cell>"
