@@ -111,9 +111,11 @@ def check_baseline_cell(db: RunDB, run_id: int, cfg: CellConfig) -> None:
     stored = baseline_fingerprint(run.config_toml)
     current = baseline_fingerprint(cfg.source_text)
     fp = db.load_result(run_id, "fingerprint", default=None)
-    if fp is not None and "robot model" in fp:
-        stored["robot model"] = fp["robot model"]
-        current["robot model"] = fingerprint(cfg)["robot model"]
+    if fp is not None:  # what the files the configuration names held (robot, body report, head)
+        now = fingerprint(cfg)
+        for key in ("robot model", "body points", "probe head"):
+            if key in fp or key in now:
+                stored[key], current[key] = fp.get(key, ""), now.get(key, "")
     changed = sorted(k for k in stored.keys() | current.keys() if stored.get(k) != current.get(k))
     if changed:
         raise ConfigError(f"baseline run {run_id} was calibrated on a different cell: {', '.join(changed)} changed "

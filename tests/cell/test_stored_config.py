@@ -37,3 +37,27 @@ def test_a_label_is_stored_as_it_is():
     cfg = load_config(EXAMPLE)
     assert config_source(cfg) == str(EXAMPLE)
     assert config_source(dataclasses.replace(cfg, source="<simulated cell>")) == "<simulated cell>"
+
+
+def test_a_recheck_refuses_a_baseline_whose_body_report_was_edited_since(tmp_path):
+    """The body report and the head file are files of their own: a recheck compares what they
+    held, not only the configuration's text (which names them and does not change)."""
+    import shutil
+
+    from station.cell.fingerprint import fingerprint
+    from station.cell.recheck import check_baseline_cell
+
+    cell = tmp_path / "cell"
+    shutil.copytree(EXAMPLE.parent, cell)
+    cfg = load_config(cell / "cell.toml")
+    with RunDB(str(tmp_path / "runs.sqlite")) as db:
+        run_id = db.create_run(cfg.source_text, [], seed=None)
+        db.save_result(run_id, "fingerprint", fingerprint(cfg))
+        check_baseline_cell(db, run_id, cfg)  # the same cell: accepted
+        rows = (cell / "body.csv").read_text().splitlines()
+        first = rows[1].split(",")
+        first[1] = f"{float(first[1]) + 0.5:g}"  # the CMM re-measured one corner 0.5 mm off
+        rows[1] = ",".join(first)
+        (cell / "body.csv").write_text("\n".join(rows) + "\n")
+        with pytest.raises(ConfigError, match="body points"):
+            check_baseline_cell(db, run_id, load_config(cell / "cell.toml"))
