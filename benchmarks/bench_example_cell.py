@@ -3,7 +3,8 @@ and ends with after/oracle ≤ 1.2 on three seeds).
 
 Runs ``station calibrate --simulated CONFIG`` in-process for each seed (a fresh run database
 each) and prints the RMS before/after, the gain, after/oracle and the wall time per seed, then
-the median and the worst. Asserts nothing about time.
+the median and the worst; per ``[[tool]]`` its own correction's error, its oracle's and what the
+head's table would leave it. Asserts nothing about time.
 
     .venv/bin/python benchmarks/bench_example_cell.py [--config examples/scara600/cell.toml] [--seeds 1 2 3]
 """
@@ -30,7 +31,7 @@ def one(config: str, seed: int) -> dict:
     return {"seed": seed, "outcome": s.outcome.name, "before_um": s.before.rms_um if s.before else None,
             "after_um": s.after.rms_um if s.after else None, "gain": s.gain, "after_vs_oracle": s.after_vs_oracle,
             "wall_s": wall, "failure": s.failure.message if s.failure else None,
-            "tools": [(t.name, t.after_vs_oracle) for t in getattr(s, "tools", ())]}
+            "tools": [(t.name, t.after_rms_um, t.oracle_rms_um, t.head_rms_um) for t in s.tools]}
 
 
 def main() -> None:
@@ -48,8 +49,10 @@ def main() -> None:
               f"{f(r['gain'], '7.1f')}  {f(r['after_vs_oracle'], '12.2f')}  {r['wall_s']:6.1f}")
         if r["failure"]:
             print(f"      {r['failure']}")
-        for name, ratio in r["tools"]:
-            print(f"      tool {name}: after/oracle {f(ratio, '.2f')}")
+        for name, own, oracle, head in r["tools"]:
+            ratio = own / oracle if own is not None and oracle else None
+            print(f"      tool {name}: own correction {f(own, '.1f')} µm, oracle {f(oracle, '.1f')} µm "
+                  f"(after/oracle {f(ratio, '.2f')}); the head's table would leave {f(head, '.1f')} µm")
     gains = [r["gain"] for r in rows if r["gain"] is not None]
     ratios = [r["after_vs_oracle"] for r in rows if r["after_vs_oracle"] is not None]
     if gains and ratios:

@@ -160,7 +160,12 @@ def simulated_cell_for(cfg: Any, seed: int) -> SimulatedCell:
     tool = tuple(float(v) for v in drift.get("step_tool_um", (0.0, 0.0, 0.0)))
     step = step_change(truth.model, int(drift.get("step_joint", 0)), float(drift.get("step_offset_deg", 0.0)),
                        (tool[0], tool[1], tool[2]))
-    return SimulatedCell(truth=truth, body=body, probe=probe, seed=seed, thermal=thermal, step=step, **cell_kw)
+    # a cell prepared for 'station conformance' has its robot parked where [conformance] says (the
+    # operator jogs it there); otherwise the simulator's own start position
+    conformance = getattr(cfg, "conformance", None)
+    park = None if conformance is None else np.asarray(conformance.park_joints, dtype=float)
+    return SimulatedCell(truth=truth, body=body, probe=probe, seed=seed, thermal=thermal, step=step,
+                         initial_joints=park, **cell_kw)
 
 
 def _absolute_paths(value: Any, base: Path) -> Any:
