@@ -72,3 +72,35 @@ def test_the_rehearsed_example_cell_passes_the_conformance_kit(tmp_path, capsys)
     results = {r["id"]: r["status"] for r in out["requirements"]}
     assert results and set(results.values()) == {"passed"}, results
     assert "soft_limit" in results  # the quill parked near its soft limit: the refusal is checked
+
+
+def test_a_head_wired_to_channels_the_interface_lacks_is_refused_before_anything_moves(tmp_path, capsys):
+    """The example head uses channels 1-3 and 5-8; an interface unit with six channels cannot
+    serve probes Y1 and Y2: 'station check' and 'station calibrate' say so, exit 2, nothing moves."""
+    from drivers.controller_map import WordOrder
+    from simulators import start_simulated_cell
+    from simulators.from_config import simulated_cell_for
+    from simulators.probe_head_sim import ProbeHeadServer
+
+    cfg = load_config(CELL)
+    cell = simulated_cell_for(cfg, 1)
+    with start_simulated_cell(cell=cell, word_order=WordOrder.LITTLE) as sim:
+        six = ProbeHeadServer(snapshot_source=lambda: cell.probe_values()[:6], n_channels=6).start()
+        try:
+            text = CELL.read_text().replace('probe_head = "/dev/ttyUSB0"', f'probe_head = "{six.port}"').replace(
+                'controller = "127.0.0.1:502"', f'controller = "{sim.controller_host}:{sim.controller_port}"')
+            text = text.replace('"robot.toml"', json.dumps(str(CELL.parent / "robot.toml"))).replace(
+                '"head.toml"', json.dumps(str(CELL.parent / "head.toml"))).replace(
+                '"body.csv"', json.dumps(str(CELL.parent / "body.csv")))
+            path = tmp_path / "cell.toml"
+            path.write_text(text)
+            assert main(["check", str(path)]) == 2
+            out = capsys.readouterr().out
+            assert "has 6 channels" in out and "Y1 on channel 7, Y2 on channel 8" in out
+            q0 = sim.cell.joints_commanded
+            db = tmp_path / "runs.sqlite"
+            assert main(["calibrate", str(path), "--db", str(db), "--json"]) == 2
+            assert "has 6 channels" in json.loads(capsys.readouterr().out)["failure"]["message"]
+            np.testing.assert_array_equal(sim.cell.joints_commanded, q0)  # nothing moved
+        finally:
+            six.stop()

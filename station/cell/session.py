@@ -229,6 +229,7 @@ def run_calibration_session(request: CellRequest, emit: Callable[[Event], None],
             db = stack.enter_context(RunDB(request.db))
             emit(PhaseChanged("connect", "connecting the probe head and the controller"))
             devices = open_cell(cfg, stack)
+            check_head_channels(cfg, probe_channel_count(devices.probe))  # before anything moves
             seed = loaded.endpoints.get("seed", request.seed) if request.simulated else None
             summary = run_calibration(cfg, devices.probe, devices.controller, db, tracker, control,
                                       Options(upload=request.upload, oracle_truth=loaded.truth, confirm=confirm),
@@ -288,6 +289,27 @@ class CheckReport:
     outcome: Outcome
 
 
+def check_head_channels(cfg: CellConfig, n_channels: int) -> None:
+    """Refuse (ConfigError) a probe interface with fewer channels than the head file wires, before
+    the first motion: otherwise the first touch would find a probe without a reading."""
+    head = cfg.head
+    if head is None or n_channels <= 0:
+        return
+    channels = np.asarray(head.probe_channels, dtype=int)
+    missing = [(head.probe_ids[i], int(c)) for i, c in enumerate(channels) if c > n_channels]
+    if missing:
+        named = ", ".join(f"{label} on channel {c}" for label, c in missing)
+        raise ConfigError(f"the probe interface at {cfg.devices.probe_head} has {n_channels} channels, but the head "
+                          f"file wires {named}: check the channel numbers in the head file ([head] file) and the "
+                          f"interface unit's channel count")
+
+
+def probe_channel_count(probe: ProbeHead) -> int:
+    """Channels of the probe interface: from its identification, else from one snapshot."""
+    n = getattr(probe.identify(), "channels", None)
+    return int(n) if isinstance(n, int) else len(probe.read_all().status)
+
+
 def check_cell(cfg: CellConfig) -> CheckReport:
     """Connect to every device of ``cfg``, read its identification and state, and compare the
     controller's soft limits with the configured ones. Every device is tried; the first
@@ -301,6 +323,7 @@ def check_cell(cfg: CellConfig) -> CheckReport:
             info = probe.identify()
             snap = probe.read_all()
             lines.append(f"probe head {d.probe_head}: {info}; channels {[str(s) for s in snap.status]}")
+            check_head_channels(cfg, len(snap.status))
         except Exception as exc:  # report every device, then fail
             outcome = classify(exc) if outcome is Outcome.SUCCESS else outcome
             lines.append(f"probe head {d.probe_head}: FAILED: {type(exc).__name__}: {exc}")
