@@ -177,11 +177,11 @@ def _absolute_paths(value: Any, base: Path) -> Any:
         return [_absolute_paths(v, base) for v in value]
     if isinstance(value, str) and value and not Path(value).is_absolute():
         try:
-            beside = base / value
-            if beside.is_file():
-                return str(beside.resolve())
-        except (OSError, ValueError):
-            pass
+            is_file = (base / value).is_file()
+        except (OSError, ValueError):  # no usable file name (too long, a NUL): a plain string, kept
+            is_file = False
+        if is_file:
+            return str((base / value).resolve())
     return value
 
 

@@ -38,6 +38,16 @@ from station.ui.commands_core import (
 from station.ui.commands_recheck import cmd_recheck
 
 
+def _add_cell(p):
+    """The cell a session runs on: a configuration, or a simulated cell (CONFIG's or the built-in)."""
+    p.add_argument("config", nargs="?", help="cell configuration; with --simulated: the cell to rehearse "
+                   "(a file with only [simulation], [recheck], [warmup]: the built-in cell with those)")
+    p.add_argument("--simulated", action="store_true", help="run against a simulated cell: CONFIG's (rehearse "
+                   "your cell), or the built-in one")
+    p.add_argument("--seed", type=int, default=None, help="simulated cell seed (default [simulation].seed, else 1)")
+    p.add_argument("--time-scale", type=float, default=0.0, help="simulated motion time scale (0 = instant)")
+
+
 def _add_robot(p):
     p.add_argument("--robot", default="sr800", help="built-in robot name or robot file (default sr800)")
 
@@ -141,12 +151,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_conformance)
 
     p = sub.add_parser("calibrate", help="measure, identify, correct, upload, verify")
-    p.add_argument("config", nargs="?", help="cell configuration; with --simulated: the cell to rehearse "
-                   "(a file with only [simulation], [recheck], [warmup]: the built-in cell with those)")
-    p.add_argument("--simulated", action="store_true", help="run against a simulated cell: CONFIG's (rehearse "
-                   "your cell), or the built-in one")
-    p.add_argument("--seed", type=int, default=None, help="simulated cell seed (default [simulation].seed, else 1)")
-    p.add_argument("--time-scale", type=float, default=0.0, help="simulated motion time scale (0 = instant)")
+    _add_cell(p)
     p.add_argument("--robot", metavar="NAME", help="with --simulated: the built-in simulated cell of this robot "
                    "(sr800, the default; irb2600: a six-axis arm)")
     p.add_argument("--db", default="runs.sqlite", help="run database (default runs.sqlite)")
@@ -157,12 +162,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_calibrate)
 
     p = sub.add_parser("recheck", help="a short accuracy check against the last calibration (drift)")
-    p.add_argument("config", nargs="?", help="cell configuration; with --simulated: the cell to rehearse "
-                   "(a file with only [simulation], [recheck], [warmup]: the built-in cell with those)")
-    p.add_argument("--simulated", action="store_true", help="run against a simulated cell: CONFIG's (rehearse "
-                   "your cell), or the built-in one")
-    p.add_argument("--seed", type=int, default=None, help="simulated cell seed (default [simulation].seed, else 1)")
-    p.add_argument("--time-scale", type=float, default=0.0, help="simulated motion time scale (0 = instant)")
+    _add_cell(p)
     p.add_argument("--db", default="runs.sqlite", help="run database (default runs.sqlite)")
     p.add_argument("--baseline", type=int, metavar="RUN", help="calibration to compare with (default: the latest "
                    "successful calibration of this cell)")

@@ -256,7 +256,10 @@ class StationApp(SideActions):
         self.sub_title = f"run {self.run_id} — {state}" if self.run_id is not None else state
 
     def _show_eta(self) -> None:
-        self.query_one("#eta", Static).update(self.eta.text() if self.run_id is not None else "")
+        # the 1 s timer can fire once more while the app shuts down and its widgets are already
+        # gone: then there is nothing to update (query, not query_one, which would raise)
+        for eta in self.query("#eta").results(Static):
+            eta.update(self.eta.text() if self.run_id is not None else "")
 
     def _note(self, *parts: str | tuple[str, str]) -> None:
         """Append a line to the notices log; parts are plain text or (text, rich style)."""

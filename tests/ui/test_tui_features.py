@@ -379,3 +379,20 @@ def test_no_tui_module_reaches_a_device(path):
     imported = [a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names]
     imported += [n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)]
     assert not [m for m in imported if any(m == f or m.startswith(f + ".") for f in FORBIDDEN)]
+
+
+async def test_the_eta_timer_firing_during_shutdown_is_harmless():
+    """The ETA is refreshed by a 1 s timer, which can fire once more while the app shuts down and
+    its widgets are already removed (a CI run caught it at the end of a full simulated run): that
+    must not raise; while the widget is there, it shows the ETA."""
+    from textual.widgets import Static
+
+    app = make_app(FakeSession(gated=False, ask=False))
+    async with app.run_test(size=(80, 24)) as pilot:
+        app.run_id = 7
+        app._show_eta()
+        eta = app.query_one("#eta", Static)
+        assert str(eta.render()) == app.eta.text()
+        await eta.remove()
+        await pilot.pause()
+        app._show_eta()  # the widget is gone, as during shutdown: nothing to update, no error
