@@ -69,6 +69,8 @@ class SideActions(App[RunSummary | None]):
     question: QuestionMessage | None
     report_path: Path | None
 
+    # Implemented by station.ui.tui.StationApp (the only subclass); declared here so that the side
+    # actions type-check against them. Not abc.abstractmethod: Textual's App has its own metaclass.
     @property
     def running(self) -> bool:
         raise NotImplementedError

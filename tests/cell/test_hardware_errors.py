@@ -61,7 +61,7 @@ def test_a_peer_that_does_not_speak_modbus(sim):
                 try:
                     conn.recv(256)
                     conn.sendall(b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\n\r\n")
-                except OSError:
+                except OSError:  # the station already hung up on the non-Modbus answer: that is the test
                     pass
 
     t = threading.Thread(target=answer_http, daemon=True)
