@@ -18,6 +18,7 @@ import time
 from pathlib import Path
 
 from station.cell.session import CellRequest, run_calibration_session
+from station.ui.simulated_cell import load_cell
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -26,7 +27,7 @@ def one(config: str, seed: int) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
         s = run_calibration_session(CellRequest(config=config, simulated=True, seed=seed,
-                                                db=str(Path(tmp) / "runs.sqlite")), lambda e: None)
+                                                db=str(Path(tmp) / "runs.sqlite")), lambda e: None, load=load_cell)
         wall = time.perf_counter() - t0
     return {"seed": seed, "outcome": s.outcome.name, "before_um": s.before.rms_um if s.before else None,
             "after_um": s.after.rms_um if s.after else None, "gain": s.gain, "after_vs_oracle": s.after_vs_oracle,

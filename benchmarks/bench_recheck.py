@@ -21,6 +21,7 @@ from station.cell.recheck import RecheckOptions
 from station.cell.recheck_session import run_recheck_session
 from station.cell.runner import Runner
 from station.cell.session import CellRequest, run_calibration_session
+from station.ui.simulated_cell import load_cell
 
 _RUNNERS: list[Runner] = []
 
@@ -40,10 +41,10 @@ def robot_time() -> float:
 def one_pair(poses: int, time_scale: float) -> tuple[float, float]:
     with tempfile.TemporaryDirectory() as d:
         req = CellRequest(simulated=True, seed=1, time_scale=time_scale, db=str(Path(d) / "b.sqlite"))
-        s = run_calibration_session(req, lambda e: None)
+        s = run_calibration_session(req, lambda e: None, load=load_cell)
         assert s.outcome.name == "SUCCESS", s
         cal = robot_time()
-        r = run_recheck_session(req, lambda e: None, options=RecheckOptions(poses=poses))
+        r = run_recheck_session(req, lambda e: None, options=RecheckOptions(poses=poses), load=load_cell)
         assert r.outcome.name == "SUCCESS", r
         return cal, robot_time()
 

@@ -22,10 +22,12 @@ from pathlib import Path
 def run_seed(seed: int, folder: Path) -> dict:
     from station.cell.rundb import RunDB
     from station.cell.session import CellRequest, run_calibration_session
+    from station.ui.simulated_cell import load_cell
 
     db = str(folder / f"six-{seed}.sqlite")
     t0 = time.perf_counter()
-    s = run_calibration_session(CellRequest(simulated=True, robot="irb2600", seed=seed, db=db), lambda e: None)
+    s = run_calibration_session(CellRequest(simulated=True, robot="irb2600", seed=seed, db=db), lambda e: None,
+                                load=load_cell)
     wall = time.perf_counter() - t0
     if s.failure is not None:
         return {"seed": seed, "outcome": s.outcome.name, "failure": s.failure.message}

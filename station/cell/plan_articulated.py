@@ -23,7 +23,7 @@ passes the :class:`~station.cell.safety.MotionGuard` before anything moves.
 
 Candidates with the nominal head orientation are the verification pool (every k-th held out, per
 configuration); the others are identification candidates, optionally reduced by the greedy
-D-optimal :func:`station.cell.plan.select_d_optimal`, then ordered to keep travel short
+D-optimal :func:`station.cell.plan_common.select_d_optimal`, then ordered to keep travel short
 (nearest neighbour in joint space, configuration changes last).
 
 The step's ``elbow`` field holds the configuration code (:func:`configuration_code`): its sign is
@@ -37,6 +37,7 @@ from __future__ import annotations
 import numpy as np
 
 from station.cell.config import CellConfig
+from station.cell.plan_common import Target, assemble_plan, head_targets_world, hold_out, nominal_contact
 from station.cell.safety import MotionGuard
 from station.core.kinematics import forward, joint_jacobian
 from station.core.model import RobotModel
@@ -61,8 +62,6 @@ LIMIT_MARGIN_RAD = np.deg2rad(3.0)
 def head_orientations(cfg: CellConfig) -> np.ndarray:
     """``(m, 4, 4)`` pose of MPKS in MKKS for every head orientation the plan visits at a corner
     (rotations about the corner itself); index 0 is the nominal contact."""
-    from station.cell.plan import nominal_contact
-
     M0 = nominal_contact(cfg)
     d = OUTWARD_DIAGONAL
     n1 = np.cross(d, [0.0, 0.0, 1.0])
@@ -136,8 +135,6 @@ def _configurations(model: RobotModel) -> tuple:
 def retract_poses(cfg: CellConfig, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """:func:`retract_pose` of every row of ``q (n, g)``: the joints ``(n, g)`` and a mask ``(n,)``
     of the rows the IK reached."""
-    from station.cell.plan import nominal_contact
-
     q = np.asarray(q, dtype=float).reshape(-1, cfg.model.n_joints)
     T = forward(cfg.model, q, setup=False)
     M = nominal_contact(cfg)
@@ -162,8 +159,6 @@ def retract_from(cfg: CellConfig, q: np.ndarray) -> np.ndarray:
     """Retract from where the robot stands: :func:`retract_pose` when the head at ``q`` touches a
     measuring point (its contact within half the clearance of one), else ``q`` unchanged (so a
     second retract, or one from a travel pose, does not move)."""
-    from station.cell.plan import nominal_contact
-
     q = np.asarray(q, dtype=float)
     contact = forward(cfg.model, q[None], setup=True)[0] @ nominal_contact(cfg)
     d = np.linalg.norm(cfg.body_points[:, :3, 3] - contact[:3, 3], axis=1)
@@ -176,8 +171,6 @@ def recentred(cfg: CellConfig, q: np.ndarray, M_measured: np.ndarray) -> tuple[n
     """Re-centring: the joints ``(g,)`` and base←head ``(4, 4)`` that bring the measured contact
     ``M_measured`` (MPKS in MKKS) back to the one planned at ``q`` (the nearest measuring point
     seen from the nominal head at ``q``, its orientation kept), by IK from ``q``."""
-    from station.cell.plan import nominal_contact
-
     q = np.asarray(q, dtype=float)
     T_world = forward(cfg.model, q[None], setup=True)[0]
     contact = T_world @ nominal_contact(cfg)
@@ -210,12 +203,11 @@ def motion_poses(cfg: CellConfig, q: np.ndarray, direction: int = 1, retract: np
 # --- the plan ---------------------------------------------------------------------------------
 
 def articulated_candidates(cfg: CellConfig):
-    """(candidates, orientations, rejected): a :class:`station.cell.plan.Target` for every point ×
+    """(candidates, orientations, rejected): a :class:`station.cell.plan_common.Target` for every point ×
     head orientation × configuration whose every motion pose passes the guard, the orientation
     index of each (0 = nominal), and (point id, configuration code, reason) of those rejected.
     Inverse kinematics: :func:`station.core.ik.solve_ik` on the nominal model per configuration
     (its deterministic choice), the turned heads near the nominal head's solution."""
-    from station.cell.plan import Target, head_targets_world
     from station.core.ik import solve_ik
 
     model = cfg.model
@@ -281,9 +273,7 @@ def order_by_travel(targets: list, weight_mm_per_rad: float = 500.0) -> list:
 
 
 def build_articulated_plan(cfg: CellConfig):
-    """The :class:`station.cell.plan.Plan` of an articulated arm (see the module docstring)."""
-    from station.cell.plan import assemble_plan, hold_out
-
+    """The :class:`station.cell.plan_common.Plan` of an articulated arm (see the module docstring)."""
     if cfg.plan.both_directions:
         raise ConfigError("plan.both_directions: the reversal measurement is planned for SCARA robots only; "
                           "set it to false for an articulated arm")

@@ -32,12 +32,12 @@ from station.cell.config import CellConfig
 from station.cell.devices import CellController, ProbeHead
 from station.cell.events import Event, Notice, PhaseChanged, RunFinished, RunStarted
 from station.cell.fingerprint import baseline_fingerprint, check_same_cell, fingerprint
-from station.cell.pipeline import stored_config
 from station.cell.plan import Target, build_plan, order_by_travel
 from station.cell.runcontrol import RunControl
 from station.cell.rundb import MeasurementRecord, RunDatabaseError, RunDB
 from station.cell.runner import Runner, approach_and_read
 from station.cell.steps import PlannedStep, StepKind
+from station.cell.stored_config import stored_config
 from station.cell.summary import RunSummary
 from station.cell.warmup import run_warmup
 from station.core.kinematics import forward

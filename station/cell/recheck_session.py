@@ -1,27 +1,24 @@
-"""Opening a cell for ``station recheck`` (and the simulated cell with drift): what
-:mod:`station.cell.session` does for ``calibrate``, for a recheck.
+"""Running ``station recheck`` on a cell: what :mod:`station.cell.session` does for
+``calibrate``, for a recheck.
 
-``--simulated [CONFIG]``: the built-in simulated cell; from CONFIG (when given) its
-``[simulation]`` table (seed, thermal model, step change: ``simulators/thermal.py``) starts the
-simulator, and its ``[recheck]`` and ``[warmup]`` tables are added to the simulated cell's
-configuration.
+The cell is loaded like a calibration's (``load``; simulated: ``station.ui.simulated_cell``
+composes the same cells as for ``calibrate``, the rehearsal or the built-in one, with the
+``[simulation]``, ``[recheck]`` and ``[warmup]`` of a CONFIG given with it).
 """
 
 from __future__ import annotations
 
-import tomllib
 from collections.abc import Callable
 from contextlib import ExitStack
 from pathlib import Path
-from typing import Any
 
-from station.cell.config import MAX_CONFIG_BYTES, parse_text, simulation_settings
 from station.cell.events import Event, PhaseChanged, RunFailed
 from station.cell.outcomes import failure_summary
 from station.cell.recheck import RecheckOptions, RecheckSummary, run_recheck
 from station.cell.runcontrol import RunControl
 from station.cell.rundb import RunDB
 from station.cell.session import (
+    CellLoader,
     CellRequest,
     LoadedCell,
     RunTracker,
@@ -31,60 +28,22 @@ from station.cell.session import (
     store_failure,
 )
 from station.cell.summary import RunSummary
-from station.io.robot_files import read_user_text
-
-#: the tables of a CONFIG given with --simulated that the simulated cell's configuration takes over
-_TAKEN = ("recheck", "warmup")
-
-
-def _toml_value(v: Any) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (int, float)):
-        return repr(v)
-    if isinstance(v, str):
-        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    raise TypeError(f"cannot write {v!r} as TOML")
-
-
-def load_simulated(config: str | None, seed: int, time_scale: float, stack: ExitStack) -> LoadedCell:
-    """The built-in simulated cell, with the drift, recheck and warm-up settings of ``config``."""
-    from simulators import start_simulated_cell
-    from simulators.reference_cell import cell_config_text
-
-    data: dict[str, Any] = {}
-    sim: dict[str, Any] = {}
-    if config:
-        text = read_user_text(Path(config), MAX_CONFIG_BYTES, "configuration file",
-                              missing=f"no such configuration file: {config}")
-        sim = simulation_settings(text, config)
-        data = tomllib.loads(text)
-    given = sim.pop("seed", None)
-    seed = seed if given is None else int(given)
-    servers = start_simulated_cell(seed=seed, time_scale=time_scale, **sim)
-    stack.callback(servers.stop)
-    text = cell_config_text(servers, seed)
-    for table in _TAKEN:
-        if isinstance(data.get(table), dict):
-            text += f"\n[{table}]\n" + "".join(f"{k} = {_toml_value(v)}\n" for k, v in data[table].items())
-    cfg = parse_text(text, f"<simulated cell{' with ' + config if config else ''}>")
-    return LoadedCell(cfg, servers.cell.truth, servers.endpoints())
 
 
 def run_recheck_session(request: CellRequest, emit: Callable[[Event], None], control: RunControl | None = None,
                         options: RecheckOptions | None = None,
-                        on_cell: Callable[[LoadedCell], None] | None = None) -> RecheckSummary | RunSummary:
-    """Load the cell, open its devices and run (or resume) a recheck. Never raises: a failure
-    is classified, emitted as ``RunFailed`` and returned as a :class:`RunSummary`.
+                        on_cell: Callable[[LoadedCell], None] | None = None,
+                        load: CellLoader | None = None) -> RecheckSummary | RunSummary:
+    """Load the cell (``load``, default :func:`~station.cell.session.load_cell`), open its devices
+    and run (or resume) a recheck. Never raises: a failure is classified, emitted as
+    ``RunFailed`` and returned as a :class:`RunSummary`.
     ``on_cell``: called with the loaded cell (a test reaches the simulator's state through it)."""
     tracker = RunTracker(emit)
     cell_name = robot = ""
 
     try:
         with ExitStack() as stack:
-            loaded = load_cell(request, stack)  # simulated: the same cells as calibrate (rehearsal or built-in)
+            loaded = (load or load_cell)(request, stack)  # simulated: the same cells as calibrate
             if on_cell is not None:
                 on_cell(loaded)
             cfg = loaded.cfg

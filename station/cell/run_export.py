@@ -1,5 +1,5 @@
 """CSV export of a run's measurements (docs/run-database.md, "Export"): one row per
-measurement, units in the header."""
+measurement, units in the header. It reads the run database; the database knows nothing of it."""
 
 from __future__ import annotations
 
@@ -7,16 +7,13 @@ import csv
 import tomllib
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from station.cell.run_records import RunDatabaseError, _num
+from station.cell.rundb import RunDB
 from station.core.transforms import matrix_to_pose
-
-if TYPE_CHECKING:
-    from station.cell.rundb import RunDB
-
 
 #: a cell that starts with one of these is read as a formula by spreadsheet programs
 _FORMULA_START = ("=", "+", "-", "@", "\t", "\r")

@@ -538,11 +538,3 @@ class RunDB:
             rows = self._c().execute("SELECT run_id, t_utc, level, message FROM events WHERE "
                                      "run_id = ? ORDER BY id", (int(run_id),)).fetchall()
         return [EventRecord(*r) for r in rows]
-
-    # -- export --------------------------------------------------------------------------------
-
-    def export_csv(self, run_id: int, path: str | Path, joint_units: Sequence[str] | None = None) -> Path:
-        """Write one CSV row per measurement (:func:`station.cell.run_export.export_csv`)."""
-        from station.cell.run_export import export_csv
-
-        return export_csv(self, run_id, path, joint_units)

@@ -2,18 +2,17 @@
 configuration, for ``calibrate``, ``tui``, ``check`` and the tests.
 
 :func:`open_cell` connects the probe head and the controller the configuration names (word
-order, device id, timeouts included). :func:`load_cell` reads the configuration, or, simulated,
-starts the simulators: on the cell a full configuration describes (its robot, body, head, limits,
-word order; the true errors from its ``[simulation]``: ``simulators/from_config.py``), or on the
-built-in cell, whose configuration the simulators write. :func:`run_calibration_session`
-is what the CLI and the TUI call: it never raises for a run that ends badly; it returns the
-:class:`~station.cell.summary.RunSummary` of whatever ended it, and emits ``RunFailed``.
+order, device id, timeouts included). :func:`load_cell` reads the configuration; a simulated
+cell is composed above the cell (``station.ui.simulated_cell``, which starts the simulators) and
+handed in as the session's ``load``: the cell layer never imports the simulators.
+:func:`run_calibration_session` is what the CLI and the TUI call: it never raises for a run that
+ends badly; it returns the :class:`~station.cell.summary.RunSummary` of whatever ended it, and
+emits ``RunFailed``.
 """
 
 from __future__ import annotations
 
 import logging
-import tomllib
 from collections.abc import Callable
 from contextlib import ExitStack
 from dataclasses import dataclass, field
@@ -21,12 +20,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import tomli_w
 
 from drivers.controller import ModbusController
 from drivers.controller_map import WordOrder
 from drivers.probe_head import ProbeHead as SerialProbeHead
-from station.cell.config import MAX_CONFIG_BYTES, CellConfig, load_config, parse_text, simulation_settings
+from station.cell.config import CellConfig, load_config
 from station.cell.devices import CellController, ProbeHead
 from station.cell.events import Event, PhaseChanged, RunFailed, RunStarted
 from station.cell.outcomes import classify, failure_summary, hint_for
@@ -36,11 +34,10 @@ from station.cell.runcontrol import RunControl
 from station.cell.rundb import RunDB
 from station.cell.summary import RunSummary
 from station.errors import ConfigError, Outcome, RunAborted
-from station.io.robot_files import read_user_text
 
 log = logging.getLogger(__name__)
 
-__all__ = ["CellRequest", "Devices", "LoadedCell", "open_cell", "open_probe", "open_controller", "load_cell", "check_cell", "CheckReport",
+__all__ = ["CellRequest", "CellLoader", "Devices", "LoadedCell", "open_cell", "open_probe", "open_controller", "load_cell", "check_cell", "CheckReport",
            "run_calibration_session", "reset_controller", "RunTracker", "store_failure"]
 
 
@@ -115,86 +112,21 @@ def describe_devices(devices: Devices) -> dict[str, str]:
     return info
 
 
-#: the tables of a ``--simulated`` CONFIG without [robot] and [body] that the built-in simulated
-#: cell's configuration takes over (besides its [simulation], which the simulators take)
-_TAKEN = ("recheck", "warmup")
+#: what builds the cell a request names (``station.ui.simulated_cell.load_cell`` composes the
+#: simulated ones; :func:`load_cell` reads a real cell's configuration)
+CellLoader = Callable[[CellRequest, ExitStack], LoadedCell]
 
 
 def load_cell(request: CellRequest, stack: ExitStack) -> LoadedCell:
-    """The request's configuration. With ``simulated`` the simulators are started (stopped when
-    ``stack`` closes) and the configuration is theirs: a CONFIG that describes a cell ([robot],
-    [body]) is rehearsed, the station's configuration being CONFIG with [devices] pointing at the
-    simulators; without CONFIG, or with one holding only [simulation], [recheck] and [warmup], the
-    built-in cell is started with those. The seed: ``request.seed`` (``--seed``) when given, else
-    ``[simulation].seed``, else 1. ``LoadedCell.truth`` is the oracle."""
-    if request.simulated and request.robot not in (None, "sr800"):  # another robot's built-in cell (issue 9)
-        return _load_builtin_robot_cell(request, stack)
+    """The request's configuration file. A simulated cell is composed above the cell layer (the
+    cell never imports the simulators): the UI passes ``station.ui.simulated_cell.load_cell`` to
+    the session functions as their ``load``."""
     if request.simulated:
-        return _load_simulated(request, stack)
+        raise ConfigError("a simulated cell is started by the command that asks for it: pass "
+                          "load=station.ui.simulated_cell.load_cell to the session")
     if not request.config:
         raise ConfigError("give a configuration file, or --simulated for the built-in simulated cell")
     return LoadedCell(load_config(request.config))
-
-
-def _read_toml(path: str) -> tuple[str, dict[str, Any]]:
-    text = read_user_text(Path(path), MAX_CONFIG_BYTES, "configuration file",
-                          missing=f"no such configuration file: {path}")
-    try:
-        return text, tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML ({exc}); fix the syntax there") from None
-
-
-def _load_simulated(request: CellRequest, stack: ExitStack) -> LoadedCell:
-    from simulators import start_simulated_cell
-    from simulators.reference_cell import cell_config_text
-
-    text, data = _read_toml(request.config) if request.config else ("", {})
-    if "robot" in data or "body" in data:  # the user's cell: rehearse it
-        from simulators.from_config import simulate_config
-
-        cfg = parse_text(text, str(request.config))
-        try:
-            rehearsal = simulate_config(cfg, seed=request.seed, source=request.config,
-                                        time_scale=request.time_scale)
-        except ValueError as exc:  # e.g. a step change on a prismatic joint
-            raise ConfigError(f"{request.config}: [simulation]: {exc}") from None
-        stack.callback(rehearsal.stop)
-        return LoadedCell(rehearsal.cfg, rehearsal.servers.cell.truth, rehearsal.endpoints())
-    sim = simulation_settings(text, str(request.config)) if request.config else {}
-    given = sim.pop("seed", None)
-    seed = request.seed if request.seed is not None else (1 if given is None else int(given))
-    servers = start_simulated_cell(seed=seed, time_scale=request.time_scale, **sim)
-    stack.callback(servers.stop)
-    cell_text = cell_config_text(servers, seed)
-    taken = {t: data[t] for t in _TAKEN if isinstance(data.get(t), dict)}
-    if taken:
-        cell_text += "\n" + tomli_w.dumps(taken)
-    cfg = parse_text(cell_text, f"<simulated cell{' with ' + request.config if request.config else ''}>")
-    return LoadedCell(cfg, servers.cell.truth, servers.endpoints())
-
-
-#: the built-in simulated cells besides the SCARA's: robot name -> (start servers, config text)
-BUILTIN_ROBOT_CELLS = ("irb2600",)
-
-
-def _load_builtin_robot_cell(request: CellRequest, stack: ExitStack) -> LoadedCell:
-    """``--simulated --robot NAME``: the built-in simulated cell of that robot (the six-axis cell
-    for ``irb2600``, :mod:`simulators.six_axis_cell`); a CONFIG is not combined with it."""
-    if request.robot not in BUILTIN_ROBOT_CELLS:
-        raise ConfigError(f"--robot {request.robot}: no built-in simulated cell for this robot; the built-in cells "
-                          f"are sr800 (the default) and {', '.join(BUILTIN_ROBOT_CELLS)}. Rehearse your own cell "
-                          f"with --simulated CONFIG")
-    if request.config:
-        raise ConfigError(f"--robot {request.robot} starts a built-in simulated cell; give either it or a CONFIG "
-                          f"to rehearse, not both")
-    from simulators.six_axis_cell import six_axis_config_text, start_six_axis_cell
-
-    seed = 1 if request.seed is None else request.seed
-    servers = start_six_axis_cell(seed=seed, time_scale=request.time_scale)
-    stack.callback(servers.stop)
-    cfg = parse_text(six_axis_config_text(servers, seed), "<simulated six-axis cell>")
-    return LoadedCell(cfg, servers.cell.truth, servers.endpoints())
 
 
 class RunTracker:
@@ -211,8 +143,10 @@ class RunTracker:
 
 
 def run_calibration_session(request: CellRequest, emit: Callable[[Event], None],
-                            control: RunControl | None = None, confirm: Confirm | None = None) -> RunSummary:
-    """Load the cell, open its devices and run (or resume) a calibration.
+                            control: RunControl | None = None, confirm: Confirm | None = None,
+                            load: CellLoader | None = None) -> RunSummary:
+    """Load the cell (``load``: :func:`load_cell` when not given; a simulated cell's loader is
+    ``station.ui.simulated_cell.load_cell``), open its devices and run (or resume) a calibration.
 
     Returns the run's summary whatever happened; a failure is classified by type
     (:func:`station.cell.outcomes.classify`), emitted as ``RunFailed`` and returned with its
@@ -223,7 +157,7 @@ def run_calibration_session(request: CellRequest, emit: Callable[[Event], None],
 
     try:
         with ExitStack() as stack:
-            loaded = load_cell(request, stack)
+            loaded = (load or load_cell)(request, stack)  # the module's load_cell at call time
             cfg = loaded.cfg
             cell_name, robot = cfg.name, cfg.model.name
             db = stack.enter_context(RunDB(request.db))

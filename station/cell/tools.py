@@ -43,6 +43,7 @@ from station.cell.config import CellConfig, ToolConfig, correction_grid
 from station.cell.events import Event, Notice
 from station.cell.rundb import RunDB
 from station.cell.steps import PlannedStep
+from station.cell.stored_config import stored_config
 from station.cell.summary import ToolSummary
 from station.core.compensation import compensated_targets
 from station.core.correction_table import CorrectionTable, build_correction_table
@@ -510,8 +511,6 @@ def tool_export(db: RunDB, run_id: int, name: str) -> dict[str, Any]:
     the run's configuration snapshot and identification and checked against the CRC-32 the run
     stored; for other robots the compensated targets the run stored. :class:`ConfigError` when the
     run has no such tool or no identification."""
-    from station.cell.pipeline import stored_config  # the pipeline imports this module
-
     stored = db.load_result(run_id, result_key(name), default=None)
     ident = db.load_result(run_id, "identification", default=None)
     cfg = stored_config(db, run_id)

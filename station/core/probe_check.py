@@ -36,7 +36,6 @@ from dataclasses import dataclass
 from types import SimpleNamespace
 
 import numpy as np
-from scipy.stats import chi2
 
 from station.core.probe_geometry import (
     FACE_NORMALS,
@@ -267,6 +266,8 @@ def _hat_diag(G: np.ndarray) -> np.ndarray:
 def residual_test(geom: ProbeHeadGeometry, readings: np.ndarray, M: np.ndarray,
                   alpha: float = ALPHA, sigma_mm: float | None = None) -> ResidualTest:
     """χ² test of the readings ``(n,)`` against the pose ``M`` solved from them."""
+    from scipy.stats import chi2  # scipy.stats nearly doubles start-up: loaded only where a test runs
+
     sigma = geom.reading_sigma_mm if sigma_mm is None else float(sigma_mm)
     s_pred, _, incidence = _contact(geom, np.asarray(M, dtype=float))
     e = np.asarray(readings, dtype=float) - s_pred

@@ -3,39 +3,28 @@
 Every error ends the program with its message and the exit code of its
 :class:`~station.errors.Outcome`, never with a traceback; an unexpected error (a bug) writes its
 traceback to a log file the message names and exits 1.
+
+Each subcommand names its function as ``"module:function"``, imported only when that command
+runs: ``station --help`` or ``station identify`` must not pay for the cell layer, its drivers,
+pymodbus, serial or textual (tests/ui/test_import_set.py checks the import set).
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
-from station.cell.outcomes import failure_summary
 from station.errors import Outcome, StationError
-from station.ui.commands_cell import (
-    cmd_calibrate,
-    cmd_check,
-    cmd_export,
-    cmd_init,
-    cmd_plan,
-    cmd_report,
-    cmd_reset,
-    cmd_runs,
-    cmd_tui,
-)
-from station.ui.commands_compensate import cmd_compensate
-from station.ui.commands_conformance import cmd_conformance
-from station.ui.commands_core import (
-    cmd_analyze,
-    cmd_export_model,
-    cmd_identify,
-    cmd_predict,
-    cmd_study,
-    cmd_validate,
-)
-from station.ui.commands_recheck import cmd_recheck
+
+
+def _command(spec: str) -> Callable[[argparse.Namespace], int | None]:
+    """The function a ``"module:function"`` spec names, its module imported now."""
+    module, _, name = spec.partition(":")
+    func: Callable[[argparse.Namespace], int | None] = getattr(importlib.import_module(module), name)
+    return func
 
 
 def _add_cell(p):
@@ -74,7 +63,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     _add_prefs(p)
     p.add_argument("--json", action="store_true")
-    p.set_defaults(func=cmd_analyze)
+    p.set_defaults(func="station.ui.commands_core:cmd_analyze")
 
     p = sub.add_parser("identify", help="identify a robot from a measurement file")
     p.add_argument("data", help="measurement CSV (docs/data-files.md)")
@@ -88,7 +77,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--output", "-o", help="write the identified robot file here")
     _add_prefs(p)
     p.add_argument("--json", action="store_true")
-    p.set_defaults(func=cmd_identify)
+    p.set_defaults(func="station.ui.commands_core:cmd_identify")
 
     p = sub.add_parser("validate", help="held-out errors of a model on measurements it was not fitted on")
     p.add_argument("model", help="identified robot file (or built-in robot)")
@@ -96,7 +85,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--robot", default=None, help="nominal robot shown beside (default: the model's name)")
     p.add_argument("--sigma-position", type=float, default=15.0, help="µm (default 15), for the registration check")
     p.add_argument("--json", action="store_true")
-    p.set_defaults(func=cmd_validate)
+    p.set_defaults(func="station.ui.commands_core:cmd_validate")
 
     p = sub.add_parser("export-model", help="a model as MDH, DH, URDF or TOML")
     p.add_argument("model", help="identified robot file (or built-in robot)")
@@ -104,14 +93,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--output", "-o", required=True, help="file to write")
     p.add_argument("--base", action="store_true", help="robot base frame (leave out the set-up R)")
     p.add_argument("--json", action="store_true")
-    p.set_defaults(func=cmd_export_model)
+    p.set_defaults(func="station.ui.commands_core:cmd_export_model")
 
     p = sub.add_parser("predict", help="poses of a model for given joint values")
     p.add_argument("model", help="built-in robot name or robot file")
     p.add_argument("joints", help="joint CSV with units")
     p.add_argument("--base", action="store_true", help="robot base frame (leave out the set-up R)")
     p.add_argument("--json", action="store_true")
-    p.set_defaults(func=cmd_predict)
+    p.set_defaults(func="station.ui.commands_core:cmd_predict")
 
     p = sub.add_parser("compensate", help="compensated targets: filter a target list through the identified model "
                        "(robots without a correction table)")
@@ -124,7 +113,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--joint-offsets", action="store_true",
                    help="also fit joint-zero offsets only and show their accuracy beside the full model's")
     p.add_argument("--json", action="store_true")
-    p.set_defaults(func=cmd_compensate)
+    p.set_defaults(func="station.ui.commands_compensate:cmd_compensate")
 
     p = sub.add_parser("study", help="re-run the chapter's simulation studies (§7.5)")
     _add_robot(p)
@@ -132,23 +121,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sets", type=int, default=1000, help="Monte Carlo data sets for pose studies")
     p.add_argument("--quick", action="store_true", help="fewer Monte Carlo sets and seeds (a smoke run)")
     p.add_argument("--json", action="store_true")
-    p.set_defaults(func=cmd_study)
+    p.set_defaults(func="station.ui.commands_core:cmd_study")
 
 
     p = sub.add_parser("init", help="write a commented cell configuration template")
     p.add_argument("path")
     p.add_argument("--force", action="store_true")
-    p.set_defaults(func=cmd_init)
+    p.set_defaults(func="station.ui.commands_cell:cmd_init")
 
     p = sub.add_parser("check", help="validate a configuration and connect to every device")
     p.add_argument("config")
-    p.set_defaults(func=cmd_check)
+    p.set_defaults(func="station.ui.commands_cell:cmd_check")
 
     p = sub.add_parser("conformance", help="check the robot program against the register map and handshake "
                        "(the robot parked at [conformance].park_joints)")
     p.add_argument("config")
     p.add_argument("--json", action="store_true", help="one JSON object on stdout")
-    p.set_defaults(func=cmd_conformance)
+    p.set_defaults(func="station.ui.commands_conformance:cmd_conformance")
 
     p = sub.add_parser("calibrate", help="measure, identify, correct, upload, verify")
     _add_cell(p)
@@ -159,7 +148,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-upload", action="store_true", help="identify and verify 'before' only")
     p.add_argument("--report", metavar="DIR", help="write the run's report here: one self-contained report.html (printable), report.md beside it")
     p.add_argument("--json", action="store_true", help="JSON summary on stdout")
-    p.set_defaults(func=cmd_calibrate)
+    p.set_defaults(func="station.ui.commands_cell:cmd_calibrate")
 
     p = sub.add_parser("recheck", help="a short accuracy check against the last calibration (drift)")
     _add_cell(p)
@@ -169,36 +158,36 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--poses", type=int, metavar="N", help="poses to measure (default [recheck].poses, 10)")
     p.add_argument("--resume", type=int, metavar="RUN", help="continue an interrupted recheck")
     p.add_argument("--json", action="store_true", help="JSON summary on stdout")
-    p.set_defaults(func=cmd_recheck)
+    p.set_defaults(func="station.ui.commands_recheck:cmd_recheck")
 
     p = sub.add_parser("reset", help="clear the controller's latched e-stop or fault (asks for confirmation)")
     p.add_argument("config")
     p.add_argument("--yes", action="store_true", help="confirm without asking: the e-stop is released, the cell clear")
-    p.set_defaults(func=cmd_reset)
+    p.set_defaults(func="station.ui.commands_cell:cmd_reset")
 
     p = sub.add_parser("plan", help="preview a calibration's plan: steps, margins, expected accuracy (nothing moves)")
     p.add_argument("config")
     p.add_argument("--no-upload", action="store_true", help="the plan of a run without the upload")
     p.add_argument("--json", action="store_true")
-    p.set_defaults(func=cmd_plan)
+    p.set_defaults(func="station.ui.commands_cell:cmd_plan")
 
     p = sub.add_parser("runs", help="list the runs of a run database (status, outcome, figures, resumable)")
     p.add_argument("--db", default="runs.sqlite")
     p.add_argument("--json", action="store_true")
-    p.set_defaults(func=cmd_runs)
+    p.set_defaults(func="station.ui.commands_cell:cmd_runs")
 
     p = sub.add_parser("report", help="rebuild a run's report from the run database")
     p.add_argument("run", type=int)
     p.add_argument("--db", default="runs.sqlite")
     p.add_argument("--output", "-o", metavar="DIR", help="report folder (default report-run-RUN)")
-    p.set_defaults(func=cmd_report)
+    p.set_defaults(func="station.ui.commands_cell:cmd_report")
 
     p = sub.add_parser("export", help="export a run's measurements to CSV")
     p.add_argument("--db", default="runs.sqlite")
     p.add_argument("--run", type=int)
     p.add_argument("--tool", metavar="NAME", help="instead: the correction of the [[tool]] NAME (JSON, for its controller)")
     p.add_argument("output")
-    p.set_defaults(func=cmd_export)
+    p.set_defaults(func="station.ui.commands_cell:cmd_export")
 
     p = sub.add_parser("tui", help="terminal UI for the operator")
     p.add_argument("config", nargs="?")
@@ -208,7 +197,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--recheck", action="store_true", help="run a recheck against the last calibration (drift)")
     p.add_argument("--baseline", type=int, metavar="RUN", help="with --recheck: the calibration run to compare with")
     p.add_argument("--poses", type=int, metavar="N", help="with --recheck: poses to measure (default [recheck].poses)")
-    p.set_defaults(func=cmd_tui)
+    p.set_defaults(func="station.ui.commands_cell:cmd_tui")
     return ap
 
 
@@ -216,10 +205,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        return int(_command(args.func)(args) or 0)
     except StationError as exc:
         print(f"station: error: {exc}", file=sys.stderr)
         if getattr(args, "json", False):  # a script still gets one JSON object with the reason
+            # the mapping knows the drivers' errors: imported only when there is an error to map
+            from station.cell.outcomes import failure_summary
+
             print(json.dumps(failure_summary(exc, run_id=None, log_dir=".").to_json()))
         return exc.exit_code
     except OSError as exc:
@@ -236,6 +228,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _internal_error(exc: Exception, args: argparse.Namespace) -> int:
+    from station.cell.outcomes import failure_summary
+
     summary = failure_summary(exc, run_id=None, log_dir=".")
     print(f"station: internal error {type(exc).__name__}: {exc}\n  the traceback is in "
           f"{summary.failure.log_file if summary.failure else '?'}; please report it with that file", file=sys.stderr)

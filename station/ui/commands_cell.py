@@ -2,7 +2,8 @@
 
 ``station calibrate`` prints progress on stderr and (with ``--json``) one JSON summary on
 stdout; its exit code is the run's :class:`~station.errors.Outcome`. Devices are opened by
-:mod:`station.cell.session`, never here; the parser is :mod:`station.ui.cli`.
+:mod:`station.cell.session`, never here; a simulated cell is composed by
+:mod:`station.ui.simulated_cell`; the parser is :mod:`station.ui.cli`.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from station.cell.session import CellRequest, check_cell, reset_controller, run_
 from station.cell.summary import RunSummary
 from station.core.probe_check import check_head
 from station.errors import ConfigError, Outcome, StationError
+from station.ui.simulated_cell import load_cell
 
 
 def request_from(args: argparse.Namespace) -> CellRequest:
@@ -136,9 +138,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         _check_report_dir(Path(args.report))
     control = RunControl()
     with safe_stop_on_signals(control):
-        summary = run_calibration_session(request, progress_printer(sys.stderr), control)
+        summary = run_calibration_session(request, progress_printer(sys.stderr), control, load=load_cell)
     if args.report and summary.run_id is not None and summary.outcome is not Outcome.ABORTED:
-        from station.ui.report_data import report_for_run
+        from station.ui.report_run import report_for_run
 
         try:
             path = report_for_run(args.db, summary.run_id, Path(args.report))
@@ -255,7 +257,7 @@ def cmd_runs(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     """Rebuild a run's report from the run database."""
-    from station.ui.report_data import report_for_run
+    from station.ui.report_run import report_for_run
 
     out = Path(args.output or f"report-run-{args.run}")
     _check_report_dir(out)
@@ -282,7 +284,9 @@ def cmd_export(args: argparse.Namespace) -> int:
             what = f"table CRC-32 {out['table']['crc32']}" if "table" in out else "compensated targets"
             print(f"run {run.id}: tool {args.tool!r} correction ({what}) written to {args.output}")
             return 0
-        db.export_csv(run.id, args.output)
+        from station.cell.run_export import export_csv
+
+        export_csv(db, run.id, args.output)
     print(f"run {run.id} exported to {args.output}")
     return 0
 

@@ -19,6 +19,7 @@ from station.cell.session import CellRequest
 from station.cell.summary import RunSummary
 from station.errors import ConfigError
 from station.ui.commands_cell import print_summary, progress_printer, safe_stop_on_signals
+from station.ui.simulated_cell import load_cell
 
 
 def print_recheck(s: RecheckSummary, stream: TextIO) -> None:
@@ -68,7 +69,7 @@ def cmd_recheck(args: argparse.Namespace) -> int:
     control = RunControl()
     with safe_stop_on_signals(control):
         summary = run_recheck_session(request, progress_printer(sys.stderr), control,
-                                      RecheckOptions(baseline=args.baseline, poses=args.poses))
+                                      RecheckOptions(baseline=args.baseline, poses=args.poses), load=load_cell)
     if isinstance(summary, RunSummary):
         print_summary(summary, sys.stderr)
         out = summary.to_json()

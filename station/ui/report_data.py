@@ -1,259 +1,212 @@
-"""Build a run's report (station.ui.report) from what the run database holds.
+"""What a calibration report shows: :class:`ReportData` (the run's figures as plain arrays and
+strings, checked on construction) and :class:`TrendRun` (one run of the robot's history).
 
-The identification is recomputed from the stored measurements (it is deterministic and cheap),
-so the report shows exactly what the run identified, with the full covariance; the correction
-table is rebuilt the same way (its CRC-32 is compared with the uploaded one).
+The bottom of the report's modules: :mod:`~station.ui.report_tables` and
+:mod:`~station.ui.report_plots` read it, :mod:`~station.ui.report_html` and
+:mod:`~station.ui.report_md` format it, :mod:`station.ui.report` writes the files, and
+:mod:`station.ui.report_run` fills it from a stored run. It imports none of them.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
-from pathlib import Path
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from station.cell.config import CellConfig
-from station.cell.pipeline import build_table_for, identify_run, stored_config, stored_plan, verification_errors
-from station.cell.plan import build_plan
-from station.cell.run_records import MeasurementRecord
-from station.cell.rundb import RunDB
-from station.cell.runs import RunInfo, list_runs
-from station.cell.steps import PlannedStep, StepKind
 from station.cell.summary import RunSummary
-from station.core.identification import IdentificationResult
-from station.core.kinematics import forward, scara_ik
-from station.core.transforms import pose_to_matrix
-from station.core.uncertainty import pose_accuracy
 from station.core.units import ARCSEC, UM
-from station.errors import ConfigError, IdentificationError, StationError
-from station.ui.report import ReportData, TrendRun, write_report
+from station.errors import ConfigError
 
-__all__ = ["report_data_for_run", "report_for_run", "correlation_from_covariance"]
+__all__ = ["ReportData", "TrendRun", "HTML_NAME", "MARKDOWN_NAME"]
 
-
-def _errors_um(cfg: CellConfig, steps: Sequence[PlannedStep], db: RunDB, run_id: int,
-               kind: StepKind) -> tuple[np.ndarray, list[str]]:
-    """Per verification pose and cycle: the position error [µm] and its label
-    (``"<point> elbow <±1> #<cycle>"``)."""
-    errs = verification_errors(cfg, steps, db.measurements(run_id, kind=kind.value))
-    labels: list[str] = []
-    vals: list[float] = []
-    for (pid, elbow), e in errs.items():
-        for k, v in enumerate(e):
-            labels.append(f"{pid} elbow {elbow:+d} #{k + 1}")
-            vals.append(float(np.linalg.norm(v) * 1e3))
-    return np.array(vals), labels
+HTML_NAME = "report.html"
+MARKDOWN_NAME = "report.md"
 
 
-def _aligned(base: tuple[np.ndarray, list[str]], *others: tuple[np.ndarray, list[str]]) -> tuple[list[str], list[np.ndarray]]:
-    """The union of the labels (``base``'s order first) and each series on it, NaN where a
-    series has no value (a cycle that gave no valid measurement)."""
-    labels = list(base[1])
-    seen = set(labels)
-    for _, lab in others:
-        for x in lab:
-            if x not in seen:
-                labels.append(x)
-                seen.add(x)
-    index = {lab: i for i, lab in enumerate(labels)}
-    out = []
-    for vals, lab in (base, *others):
-        a = np.full(len(labels), np.nan)
-        for v, x in zip(vals, lab):
-            a[index[x]] = v
-        out.append(a)
-    return labels, out
-
-
-def _pose_labels(records: Sequence[MeasurementRecord]) -> list[str]:
-    """Labels of the identification rows, as :func:`identify_run` takes the records (valid ones
-    with a pose and joints), repeats numbered."""
-    count: dict[str, int] = {}
-    out = []
-    for r in records:
-        if not r.ok or r.pose is None or r.joints_read is None:
-            continue
-        count[r.label] = count.get(r.label, 0) + 1
-        out.append(f"{r.label} #{count[r.label]}")
+def _arr(a: Any, ndim: int | None = None, name: str = "") -> np.ndarray:
+    out = np.array(a, dtype=float)
+    if ndim is not None and out.ndim != ndim:
+        raise ConfigError(f"report: {name} must be {ndim}-dimensional, got shape {out.shape}")
+    out.setflags(write=False)
     return out
 
 
-def correlation_from_covariance(cov: Any) -> np.ndarray:
-    """(p, p) correlation coefficients; NaN in the rows of a parameter with σ = 0."""
-    c = np.asarray(cov, dtype=float)
-    s = np.sqrt(np.clip(np.diag(c), 0.0, None))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        r = c / np.outer(s, s)
-    r = np.where(np.outer(s, s) > 0, np.clip(r, -1.0, 1.0), np.nan)
-    np.fill_diagonal(r, 1.0)
-    return r
-
-
-def _grid_text(table: Any) -> str:
-    names = ("x", "y", "z")
-    parts = []
-    for name, ax in zip(names, table.data.axes[:3]):
-        nodes = ax.nodes
-        parts.append(f"{name} {nodes[0]:g} … {nodes[-1]:g} mm step {ax.step:g}" if ax.count > 1
-                     else f"{name} {nodes[0]:g} mm")
-    yaw = table.data.axes[3]
-    parts.append(f"yaw every {math.degrees(yaw.step):g}°")
-    return ", ".join(parts)
-
-
-def _table_info(cfg: CellConfig, table: Any) -> dict[str, Any]:
-    corr = []
-    for k, (v, kind) in enumerate(zip(table.max_correction, cfg.model.joint_types)):
-        corr.append(f"J{k + 1} {v / ARCSEC:.1f} ″" if kind == "revolute" else f"J{k + 1} {v / UM:.1f} µm")
-    return {"grid": _grid_text(table), "grid_shape": list(table.data.grid_shape),
-            "elbows": ", ".join(f"{e:+d}" for e in table.elbows),
-            "unreachable_nodes": int(table.unreachable_nodes),
-            "interpolation_bound_arcsec": float(table.interpolation_bound_arcsec),
-            "max_correction": ", ".join(corr), "crc32": f"{table.data.crc32():08x}"}
-
-
-def _accuracy_on_grid(cfg: CellConfig, res: IdentificationResult, table: Any) -> tuple[np.ndarray, np.ndarray, list[int], str]:
-    """Predicted σ at the table's grid nodes that both models reach within the joint limits,
-    per elbow, in the robot base frame (no set-up)."""
-    axes = table.data.axes
-    grids = np.meshgrid(*[a.nodes for a in axes], indexing="ij")
-    pts = np.stack([g.ravel() for g in grids], axis=-1)
-    xy, sig, elbows = [], [], []
-    per = []
-    for c, elbow in enumerate(table.elbows):
-        p = pts[np.asarray(table.reachable[c]).ravel()]
-        pose = np.zeros((p.shape[0], 6))
-        pose[:, :3], pose[:, 5] = p[:, :3], p[:, 3]
-        q = scara_ik(cfg.model, pose_to_matrix(pose), elbow=int(elbow), params=res.params, setup=False,
-                     check_limits=False)
-        ok = np.all(np.isfinite(q), axis=1)
-        ok[ok] = cfg.model.within_limits(q[ok])
-        q = q[ok]
-        acc = pose_accuracy(cfg.model, res.params, res.chosen_index, res.uncertainty.covariance, q, setup=False)
-        xy.append(p[ok, :2])
-        sig.append(np.linalg.norm(acc.sigma[:, :3], axis=1))
-        elbows += [int(elbow)] * q.shape[0]
-        per.append(f"{q.shape[0]} with elbow {int(elbow):+d}")
-    where = (f"the correction table's grid ({_grid_text(table)}), the nodes both models reach within the "
-             f"joint limits: {', '.join(per)}; robot base frame, without the set-up R (this cell's mounting)")
-    return np.concatenate(xy), np.concatenate(sig), elbows, where
-
-
-def _accuracy_on_plan(cfg: CellConfig, res: IdentificationResult) -> tuple[np.ndarray, np.ndarray, list[int], str]:
-    """Fallback without a table: the plan's identification and verification poses."""
-    plan = build_plan(cfg)
-    q = np.array([s.q for s in plan.identification] + [t.joints for t in plan.verification])
-    elbows = [int(s.elbow) for s in plan.identification] + [int(t.elbow) for t in plan.verification]
-    acc = pose_accuracy(cfg.model, res.params, res.chosen_index, res.uncertainty.covariance, q, setup=False)
-    xy = forward(cfg.model, q, res.params, setup=False)[:, :2, 3]
-    where = (f"the plan's {len(q)} identification and verification poses (several per body point: repeats, "
-             f"elbows, orientations); robot base frame, without the set-up R")
-    return xy, np.linalg.norm(acc.sigma[:, :3], axis=1), elbows, where
-
-
-def _stored_summary(db: RunDB, run_id: int) -> RunSummary | None:
-    stored = db.load_result(run_id, "summary", default=None)
-    if not stored:
+def _labels(value: Any, n: int, name: str) -> tuple[str, ...] | None:
+    if value is None:
         return None
-    try:
-        return RunSummary.from_json(stored)
-    except (KeyError, TypeError, ValueError):
-        return None
+    labels = tuple(str(x) for x in value)
+    if len(labels) != n:
+        raise ConfigError(f"report: {name} has {len(labels)} entries, expected {n}")
+    return labels
 
 
-def _identify(cfg: CellConfig, db: RunDB, run_id: int, status: str, summary: RunSummary | None) -> IdentificationResult:
-    records = db.measurements(run_id, kind=StepKind.IDENTIFICATION.value)
-    try:
-        return identify_run(cfg, records)
-    except IdentificationError as exc:
-        n_valid = sum(1 for r in records if r.ok and r.pose is not None and r.joints_read is not None)
-        ended = summary.outcome.name if summary is not None else f"status '{status}'"
-        if summary is not None and summary.failure is not None:
-            ended += f": {summary.failure.message}"
-        if n_valid < 5:  # identify_run's own minimum
-            raise IdentificationError(
-                f"no report for run {run_id}: it stopped before the identification ({ended}) with {n_valid} "
-                f"valid identification measurements on disk, so there is nothing to identify from. Finish it with "
-                f"'station calibrate CONFIG --resume {run_id}', then 'station report {run_id}'") from None
-        raise IdentificationError(f"no report for run {run_id} ({ended}): the identification from its stored "
-                                  f"measurements fails: {exc}") from None
+@dataclass(frozen=True)
+class TrendRun:
+    """One run of the robot's history (the report's trend): a calibration with its RMS after
+    correction [µm] (None when nothing was uploaded or it did not finish), or a recheck with its
+    RMS position drift against its baseline and the tolerance [µm]."""
+
+    run_id: int
+    created: str = ""  # the run database's created_utc
+    kind: str = "calibration"  # or "recheck"
+    outcome: str = ""  # the stored outcome's name; "" while unfinished
+    status: str = ""  # the run database's status (shown while there is no outcome)
+    rms_after_um: float | None = None
+    drift_rms_um: float | None = None
+    drift_tolerance_um: float | None = None
+    moved: Sequence[str] = ()
+    baseline: int | None = None  # a recheck's baseline calibration
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "run_id", int(self.run_id))
+        object.__setattr__(self, "moved", tuple(str(m) for m in self.moved))
+        for attr in ("rms_after_um", "drift_rms_um", "drift_tolerance_um"):
+            v = getattr(self, attr)
+            object.__setattr__(self, attr, None if v is None else float(v))
+
+    @property
+    def is_recheck(self) -> bool:
+        return self.kind == "recheck"
+
+    @property
+    def figure_um(self) -> float | None:
+        """The run's accuracy figure: the drift RMS of a recheck, the RMS after correction of a
+        calibration."""
+        return self.drift_rms_um if self.is_recheck else self.rms_after_um
 
 
-def _trend_run(r: RunInfo) -> TrendRun:
-    return TrendRun(run_id=r.id, created=r.created_utc, kind=r.kind, outcome=r.outcome or "", status=r.status,
-                    rms_after_um=r.rms_after_um, drift_rms_um=r.drift_rms_um,
-                    drift_tolerance_um=r.drift_tolerance_um, moved=r.moved, baseline=r.baseline)
+@dataclass(frozen=True)
+class ReportData:
+    """Everything a report shows, as plain arrays and strings.
 
+    Units (inputs): parameters, residuals, accuracy in the station's internal **mm and rad**;
+    verification errors in **µm**.
 
-def _trend(db: RunDB, run_id: int, notes: list[str]) -> list[TrendRun]:
-    """The runs of this run's cell and robot up to and including it, oldest first (the report's
-    trend); empty when the run database cannot list them (the report goes on without)."""
-    try:
-        runs = list_runs(db)
-    except (StationError, KeyError, TypeError, ValueError) as exc:
-        notes.append(f"the run history could not be read for the trend ({exc})")
-        return []
-    this = next((r for r in runs if r.id == run_id), None)
-    if this is None:
-        return []
-    same = [r for r in runs if r.id <= run_id and r.cell == this.cell and r.robot == this.robot]
-    return [_trend_run(r) for r in sorted(same, key=lambda r: r.id)]
+    * ``param_names`` (p,), ``param_nominal`` / ``param_identified`` / ``param_sigma`` (p,),
+      ``param_is_angle`` (p,) bool: angle parameters are rad, the others mm.  ``param_sigma``
+      may hold NaN for parameters that were held (not identified). Names ``R.*`` are the set-up
+      (the calibration body in the robot base frame), ``K.*`` the head / tool, the others the
+      robot's own geometry; the report shows the three apart.
+    * ``param_correlation`` (p, p) or None: correlation coefficients of the estimates (from the
+      identification's covariance); |r| > 0.9 is marked.
+    * ``residuals`` (n, 6) [mm, mm, mm, rad, rad, rad] or (n, 3) [mm] — model − measured per
+      identification pose (or per distance: (n, 1) [mm]); ``pose_labels`` (n,) name each row,
+      ``outliers`` are row indices the identification flagged.
+    * ``accuracy_xy_mm`` (m, 2) evaluation points over the workspace, ``accuracy_sigma_mm`` (m,)
+      predicted position σ of the TCP there (parameter uncertainty only); ``accuracy_elbows``
+      (m,) the elbow of each point or None; ``accuracy_where`` says what the points are.
+    * ``errors_before_um`` / ``errors_after_um`` (k,) position error per verification pose and
+      cycle (NaN: that cycle gave no valid measurement; ``errors_after_um`` empty when nothing
+      was uploaded), ``oracle_after_um`` (k,) or None: the error after correction as the
+      simulator's ground truth sees it (simulated runs only). ``verify_labels`` (k,) read
+      ``"<point> elbow <±1> #<cycle>"``; the report shows point and elbow per row from them.
+    * ``summary``: the run's :class:`~station.cell.summary.RunSummary` (shown first).
+    * The record: ``config_toml`` (the run's configuration snapshot), ``station_version``,
+      ``devices`` (``probe_interface``, ``controller_map_version``; None for runs from before it
+      was stored), ``run_status`` (the run database's status), ``table_info`` (facts about the
+      correction table rebuilt from the identification: ``grid``, ``unreachable_nodes``,
+      ``max_correction``, ``crc32``, ...), ``notes`` (what the report builder wants said).
+    * ``trend``: the robot's history, :class:`TrendRun` per run of the same cell and robot up to
+      and including this one (kept in run order); the report shows it from two runs on.
+    """
 
+    robot_name: str
+    run_id: str | int
+    param_names: Sequence[str]
+    param_nominal: np.ndarray
+    param_identified: np.ndarray
+    param_sigma: np.ndarray
+    param_is_angle: np.ndarray
+    residuals: np.ndarray
+    accuracy_xy_mm: np.ndarray
+    accuracy_sigma_mm: np.ndarray
+    errors_before_um: np.ndarray
+    errors_after_um: np.ndarray
+    oracle_after_um: np.ndarray | None = None
+    summary: RunSummary | None = None
+    pose_labels: Sequence[str] | None = None  # (n,) labels of the identification poses
+    verify_labels: Sequence[str] | None = None  # (k,) labels of the verification poses
+    created: str = ""  # timestamp text, set by the caller (kept out for reproducible files)
+    param_correlation: np.ndarray | None = None
+    outliers: Sequence[int] = ()
+    accuracy_elbows: Sequence[int] | None = None
+    accuracy_where: str = ""
+    config_toml: str = ""
+    station_version: str = ""
+    devices: Mapping[str, str] | None = None
+    run_status: str = ""
+    table_info: Mapping[str, Any] | None = None
+    notes: Sequence[str] = ()
+    trend: Sequence[TrendRun] = ()
 
-def report_data_for_run(db: RunDB, run_id: int) -> ReportData:
-    run = db.run(run_id)
-    summary = _stored_summary(db, run_id)
-    try:
-        cfg = stored_config(db, run_id)
-    except ConfigError as exc:
-        raise ConfigError(f"no report for run {run_id}: its stored configuration does not read with this "
-                          f"station version ({exc})") from None
-    steps = stored_plan(db, run_id)
-    res = _identify(cfg, db, run_id, run.status, summary)
-    notes: list[str] = []
-    table = None
-    if cfg.model.is_scara:  # an articulated arm gets compensated targets, no table
-        try:
-            table = build_table_for(cfg, res.params)
-        except StationError as exc:
-            notes.append(f"the correction table could not be rebuilt for the report ({exc})")
-    try:
-        if table is None:
-            raise ConfigError("no table")
-        xy, sig, acc_elbows, where = _accuracy_on_grid(cfg, res, table)
-    except (StationError, ValueError, np.linalg.LinAlgError):
-        xy, sig, acc_elbows, where = _accuracy_on_plan(cfg, res)
-    before = _errors_um(cfg, steps, db, run_id, StepKind.VERIFY_BEFORE)
-    after = _errors_um(cfg, steps, db, run_id, StepKind.VERIFY_AFTER)
-    oracle = _errors_um(cfg, steps, db, run_id, StepKind.ORACLE)
-    labels, (b, a, o) = _aligned(before, after, oracle)
-    pose_labels = _pose_labels(db.measurements(run_id, kind=StepKind.IDENTIFICATION.value))
-    devices = db.load_result(run_id, "devices", default=None)
-    idx = res.chosen_index
-    return ReportData(
-        robot_name=cfg.model.name, run_id=run_id,
-        param_names=list(res.chosen), param_nominal=np.asarray(cfg.model.nominal)[idx],
-        param_identified=res.estimates, param_sigma=res.uncertainty.sigma,
-        param_is_angle=cfg.model.is_angle()[idx], residuals=res.residuals,
-        param_correlation=correlation_from_covariance(res.uncertainty.covariance),
-        outliers=tuple(res.outliers),
-        accuracy_xy_mm=xy, accuracy_sigma_mm=sig, accuracy_elbows=acc_elbows, accuracy_where=where,
-        errors_before_um=b, errors_after_um=a if after[0].size else np.zeros(0),
-        oracle_after_um=o if oracle[0].size and after[0].size else None, summary=summary,
-        pose_labels=pose_labels if len(pose_labels) == res.residuals.shape[0] else None,
-        verify_labels=labels, created=run.created_utc,
-        config_toml=run.config_toml, station_version=run.station_version,
-        devices=devices if isinstance(devices, Mapping) else None, run_status=run.status,
-        table_info=_table_info(cfg, table) if table is not None else None, notes=notes,
-        trend=_trend(db, run_id, notes))
+    def __post_init__(self) -> None:
+        names = tuple(str(n) for n in self.param_names)
+        object.__setattr__(self, "param_names", names)
+        p = len(names)
+        for attr in ("param_nominal", "param_identified", "param_sigma"):
+            a = _arr(getattr(self, attr), 1, attr)
+            if a.shape != (p,):
+                raise ConfigError(f"report: {attr} has {a.shape[0]} entries, param_names has {p}")
+            object.__setattr__(self, attr, a)
+        mask = np.array(self.param_is_angle, dtype=bool).reshape(-1)
+        if mask.shape != (p,):
+            raise ConfigError(f"report: param_is_angle has {mask.shape[0]} entries, param_names has {p}")
+        mask.setflags(write=False)
+        object.__setattr__(self, "param_is_angle", mask)
+        if self.param_correlation is not None:
+            corr = _arr(self.param_correlation, 2, "param_correlation")
+            if corr.shape != (p, p):
+                raise ConfigError(f"report: param_correlation must be ({p}, {p}), got {corr.shape}")
+            object.__setattr__(self, "param_correlation", corr)
 
+        res = _arr(self.residuals, None, "residuals")
+        if res.ndim == 1:
+            res = _arr(res.reshape(-1, 1))
+        if res.ndim != 2 or res.shape[1] not in (1, 3, 6):
+            raise ConfigError(f"report: residuals must be (n, 6), (n, 3) or (n, 1), got {res.shape}")
+        object.__setattr__(self, "residuals", res)
+        object.__setattr__(self, "outliers", tuple(int(i) for i in self.outliers))
 
-def report_for_run(db_path: str | Path, run_id: int, out_dir: Path) -> Path:
-    """Write the run's report into ``out_dir``: ``report.html`` (returned) and ``report.md``."""
-    with RunDB(db_path) as db:
-        data = report_data_for_run(db, run_id)
-    return write_report(Path(out_dir), data)
+        xy = _arr(self.accuracy_xy_mm, 2, "accuracy_xy_mm")
+        sig = _arr(self.accuracy_sigma_mm, 1, "accuracy_sigma_mm")
+        if xy.shape[1:] != (2,) or sig.shape[0] != xy.shape[0]:
+            raise ConfigError(f"report: accuracy_xy_mm {xy.shape} and accuracy_sigma_mm {sig.shape} do not match")
+        object.__setattr__(self, "accuracy_xy_mm", xy)
+        object.__setattr__(self, "accuracy_sigma_mm", sig)
+        if self.accuracy_elbows is not None:
+            elbows = tuple(int(e) for e in self.accuracy_elbows)
+            if len(elbows) != sig.shape[0]:
+                raise ConfigError(f"report: accuracy_elbows has {len(elbows)} entries, expected {sig.shape[0]}")
+            object.__setattr__(self, "accuracy_elbows", elbows)
 
+        before = _arr(self.errors_before_um, 1, "errors_before_um")
+        after = _arr(self.errors_after_um, 1, "errors_after_um")
+        if after.size and before.shape != after.shape:  # no 'after' when the upload was skipped
+            raise ConfigError(f"report: errors_before_um {before.shape} and errors_after_um {after.shape} differ")
+        object.__setattr__(self, "errors_before_um", before)
+        object.__setattr__(self, "errors_after_um", after)
+        if self.oracle_after_um is not None:
+            oracle = _arr(self.oracle_after_um, 1, "oracle_after_um")
+            if oracle.shape != after.shape:
+                raise ConfigError(f"report: oracle_after_um {oracle.shape} and errors_after_um {after.shape} differ")
+            object.__setattr__(self, "oracle_after_um", oracle)
+        object.__setattr__(self, "pose_labels", _labels(self.pose_labels, res.shape[0], "pose_labels"))
+        object.__setattr__(self, "verify_labels", _labels(self.verify_labels, before.shape[0], "verify_labels"))
+        if self.devices is not None:
+            object.__setattr__(self, "devices", {str(k): str(v) for k, v in self.devices.items()})
+        object.__setattr__(self, "notes", tuple(str(n) for n in self.notes))
+        object.__setattr__(self, "trend", tuple(sorted(self.trend, key=lambda r: r.run_id)))
 
+    # --- derived figures, in people units --------------------------------------------------
+    @property
+    def position_residuals_um(self) -> np.ndarray:
+        """(n, c) position residual components [µm] (c = 3, or 1 for distances)."""
+        r = self.residuals
+        return r[:, :3] * (1 / UM) if r.shape[1] >= 3 else r * (1 / UM)
+
+    @property
+    def orientation_residuals_arcsec(self) -> np.ndarray | None:
+        r = self.residuals
+        return r[:, 3:6] * (1 / ARCSEC) if r.shape[1] == 6 else None

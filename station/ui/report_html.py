@@ -11,7 +11,7 @@ from html import escape
 
 from station.ui import report_plots as plots
 from station.ui import report_tables as t
-from station.ui.report import ReportData
+from station.ui.report_data import ReportData
 
 _CSS = """
 :root { --ok: #1b7f3b; --bad: #b3261e; --warn: #8a5a00; --line: #c8c8c8; --muted: #555; }

@@ -6,7 +6,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from station.ui import report_tables as t
-from station.ui.report import HTML_NAME, ReportData
+from station.ui.report_data import HTML_NAME, ReportData
 
 
 def _cell(v: object) -> str:

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from station.core.units import ARCSEC, UM
-from station.ui.report import ReportData
+from station.ui.report_data import ReportData
 from station.ui.report_tables import (
     ACCURACY_SCOPE,
     elbow_text,

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from station.core.units import ARCSEC, DEG, UM
-from station.ui.report import ReportData
+from station.ui.report_data import ReportData
 
 #: |r| above this marks a strong correlation
 STRONG_CORRELATION = 0.9

@@ -24,6 +24,7 @@ from station.cell.runs import RunInfo, list_runs
 from station.cell.session import CellRequest, run_calibration_session
 from station.cell.summary import RunSummary
 from station.ui.report import ReportData
+from station.ui.simulated_cell import load_cell
 from station.ui.tui import StationApp
 
 __all__ = ["launch", "make_app", "recheck_run_summary", "report_dir"]
@@ -74,8 +75,8 @@ def make_app(request: CellRequest, title: str | None = None, app_class: type[Sta
                   resume: int | None = None) -> RunSummary:
         req = dataclasses.replace(request, resume=resume) if resume is not None else request
         if recheck is None:
-            return run_calibration_session(req, emit, control, confirm)
-        summary = run_recheck_session(req, emit, control, recheck)
+            return run_calibration_session(req, emit, control, confirm, load=load_cell)
+        summary = run_recheck_session(req, emit, control, recheck, load=load_cell)
         return summary if isinstance(summary, RunSummary) else recheck_run_summary(summary)
 
     def runs() -> list[RunInfo]:
@@ -86,13 +87,13 @@ def make_app(request: CellRequest, title: str | None = None, app_class: type[Sta
         return [r for r in found if r.kind == "recheck"] if recheck is not None else found
 
     def load_results(run_id: int) -> ReportData:
-        from station.ui.report_data import report_data_for_run
+        from station.ui.report_run import report_data_for_run
 
         with RunDB(db) as rdb:
             return report_data_for_run(rdb, run_id)
 
     def write_report(run_id: int) -> Path:
-        from station.ui.report_data import report_for_run
+        from station.ui.report_run import report_for_run
 
         return Path(report_for_run(db, run_id, report_dir(db, run_id)))
 

@@ -14,7 +14,7 @@ import pytest
 
 from station.cell import config as cfgmod
 from station.cell.config import TEMPLATE, correction_grid, load_config, parse_config, parse_text
-from station.cell.run_export import csv_text
+from station.cell.run_export import csv_text, export_csv
 from station.cell.rundb import RunDB
 from station.errors import ConfigError
 from station.io.robot_files import load_robot
@@ -317,7 +317,7 @@ def test_export_escapes_formula_point_ids(tmp_path):
         db.record_measurement(rid, 0, kind="identification", joints_commanded=[0.0, 0.1, -1.0, 0.2],
                               point_id='=HYPERLINK("http://evil","C1")', label="@cmd", message="-2+3",
                               readings_mm=[-0.5] * 6, ok=False)
-        out = db.export_csv(rid, tmp_path / "m.csv")
+        out = export_csv(db, rid, tmp_path / "m.csv")
     with open(out, newline="", encoding="utf-8") as f:
         rows = list(csv.DictReader(f))
     assert rows[0]["point_id"] == '\'=HYPERLINK("http://evil","C1")'

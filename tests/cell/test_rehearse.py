@@ -14,10 +14,11 @@ import pytest
 
 from simulators.cell import CalibrationBody, CellTruth, CubeSpec
 from station.cell.rundb import RunDB
-from station.cell.session import CellRequest, load_cell, run_calibration_session
+from station.cell.session import CellRequest, run_calibration_session
 from station.core.transforms import matrix_to_pose
 from station.errors import ConfigError, Outcome
 from station.ui.cli import main
+from station.ui.simulated_cell import load_cell
 
 # five 40 mm cubes in a layout of their own (not the built-in body), 20 corners
 CUBES = (CubeSpec(20.0, -280.0, 0.0, np.deg2rad(25.0)), CubeSpec(160.0, -120.0, 50.0, np.deg2rad(-10.0)),
@@ -71,7 +72,8 @@ def test_a_user_cell_is_rehearsed_end_to_end(tmp_path, capsys):
     path, db = tmp_path / "cell.toml", str(tmp_path / "runs.sqlite")
     path.write_text(user_cell())
     events: list = []
-    summary = run_calibration_session(CellRequest(config=str(path), simulated=True, db=db), events.append)
+    summary = run_calibration_session(CellRequest(config=str(path), simulated=True, db=db), events.append,
+                                      load=load_cell)
     assert summary.outcome is Outcome.SUCCESS, summary.failure
     assert summary.cell == "rehearsal cell"
     assert summary.gain is not None and summary.gain >= 20.0

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from station.cell.run_export import export_csv
 from station.cell.rundb import (
     SCHEMA_VERSION,
     DuplicateMeasurementError,
@@ -381,7 +382,7 @@ def test_export_csv_parses_back(db, tmp_path):
         db.record_measurement(rid, i, **fields(i))
     db.record_measurement(rid, 3, kind="identification", joints_commanded=[0.1, 0.2, -5.0, 0.3],
                           message='comma, "quoted"', ok=False)
-    out = db.export_csv(rid, tmp_path / "run.csv")
+    out = export_csv(db, rid, tmp_path / "run.csv")
     with open(out, newline="", encoding="utf-8") as f:
         rows = list(csv.reader(f))
     header = rows[0]
@@ -412,9 +413,9 @@ def test_export_joint_units_given_or_unknown(db, tmp_path):
     rid = db.create_run("[cell]\nname = 'x'\n", plan(1))
     T = pose_to_matrix(np.array([1.0, 2.0, 3.0, 0.1, -0.2, 0.3]))
     db.record_measurement(rid, 0, kind="identification", joints_commanded=[0.0, 1.0], pose=T)
-    with open(db.export_csv(rid, tmp_path / "a.csv"), newline="") as f:
+    with open(export_csv(db, rid, tmp_path / "a.csv"), newline="") as f:
         assert next(csv.reader(f))[5:7] == ["q1 [rad|mm]", "q2 [rad|mm]"]
-    with open(db.export_csv(rid, tmp_path / "b.csv", joint_units=["rad", "mm"]), newline="") as f:
+    with open(export_csv(db, rid, tmp_path / "b.csv", joint_units=["rad", "mm"]), newline="") as f:
         rows = list(csv.reader(f))
     assert rows[0][5:7] == ["q1 [rad]", "q2 [mm]"]
     np.testing.assert_allclose([float(v) for v in rows[1][9:15]], [1, 2, 3, 0.1, -0.2, 0.3], atol=1e-12)

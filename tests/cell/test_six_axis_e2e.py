@@ -8,11 +8,13 @@ from station.cell.rundb import RunDB
 from station.cell.session import CellRequest, run_calibration_session
 from station.cell.steps import StepKind
 from station.errors import Outcome
+from station.ui.simulated_cell import load_cell
 
 
 def test_six_axis_cell_calibrates_through_compensated_targets(tmp_path):
     db = str(tmp_path / "six.sqlite")
-    s = run_calibration_session(CellRequest(simulated=True, robot="irb2600", seed=1, db=db), lambda e: None)
+    s = run_calibration_session(CellRequest(simulated=True, robot="irb2600", seed=1, db=db), lambda e: None,
+                                load=load_cell)
     assert s.outcome is Outcome.SUCCESS, s.failure
     assert s.robot == "irb2600" and s.identification is not None and s.run_id is not None
     assert s.identification.n_parameters == 30
@@ -49,7 +51,7 @@ def test_six_axis_cell_calibrates_through_compensated_targets(tmp_path):
 
 def test_simulated_robot_without_a_built_in_cell_is_refused(tmp_path):
     s = run_calibration_session(CellRequest(simulated=True, robot="puma560", db=str(tmp_path / "x.sqlite")),
-                                lambda e: None)
+                                lambda e: None, load=load_cell)
     assert s.outcome is Outcome.CONFIG_ERROR and s.exit_code == 2
     assert s.failure is not None and "irb2600" in s.failure.message
 

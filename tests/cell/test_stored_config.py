@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from station.cell.config import load_config
-from station.cell.pipeline import config_source, stored_config
 from station.cell.rundb import RunDB
+from station.cell.stored_config import config_source, stored_config
 from station.errors import ConfigError
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "scara600" / "cell.toml"

@@ -35,9 +35,9 @@ from station.core.tool_frame import tool_params
 from station.core.transforms import matrix_to_pose, pose_to_matrix, rot_z
 from station.errors import ConfigError, Outcome
 from station.ui.cli import main as station_main
-from station.ui.report_data import report_data_for_run
 from station.ui.report_html import render_html
 from station.ui.report_md import render_markdown
+from station.ui.report_run import report_data_for_run
 
 GRIPPER = """
 [[tool]]

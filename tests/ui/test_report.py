@@ -18,7 +18,7 @@ from station.cell.summary import (
 from station.core.units import ARCSEC
 from station.errors import ConfigError, Outcome
 from station.ui.report import ReportData, write_report
-from station.ui.report_data import correlation_from_covariance
+from station.ui.report_run import correlation_from_covariance
 from station.ui.report_tables import split_label
 
 

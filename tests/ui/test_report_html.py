@@ -17,7 +17,7 @@ from station.cell.summary import ReversalSummary
 from station.errors import IdentificationError
 from station.ui.cli import main
 from station.ui.report import write_report
-from station.ui.report_data import report_data_for_run, report_for_run
+from station.ui.report_run import report_data_for_run, report_for_run
 
 SECTIONS = ["summary", "record", "parameters", "residuals", "verification", "accuracy", "table", "reversal"]
 

@@ -14,7 +14,7 @@ from station.cell.rundb import RunDB
 from station.ui import report_plots
 from station.ui.cli import main
 from station.ui.report import ReportData, TrendRun, write_report
-from station.ui.report_data import report_data_for_run
+from station.ui.report_run import report_data_for_run
 from station.ui.report_tables import has_trend
 
 HISTORY = (

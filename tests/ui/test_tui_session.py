@@ -14,6 +14,7 @@ from station.cell.config import TEMPLATE
 from station.cell.session import CellRequest, run_calibration_session
 from station.errors import Outcome
 from station.ui import tui_launch
+from station.ui.simulated_cell import load_cell
 from station.ui.tui import ConfirmScreen, StationApp
 
 # the template's example controller is on a private network: tests never reach out to it
@@ -94,7 +95,8 @@ def test_launch_returns_the_sessions_exit_code(missing_probe_request, monkeypatc
 
 async def test_simulated_calibration_through_the_ui(tmp_path):
     request = CellRequest(simulated=True, db=str(tmp_path / "runs.sqlite"))
-    app = StationApp(lambda emit, control: run_calibration_session(request, emit, control), log_dir=tmp_path)
+    app = StationApp(lambda emit, control: run_calibration_session(request, emit, control, load=load_cell),
+                     log_dir=tmp_path)
     async with app.run_test(size=(120, 32)) as pilot:
         await pilot.press("s")
         await wait_until(pilot, lambda: app.worker is not None and app.worker.is_finished, "run ended", 12000)
@@ -117,7 +119,8 @@ async def test_simulated_calibration_through_the_ui(tmp_path):
 
 async def test_operator_abort_of_the_simulated_cell_is_exit_code_6(tmp_path):
     request = CellRequest(simulated=True, db=str(tmp_path / "runs.sqlite"))
-    app = StationApp(lambda emit, control: run_calibration_session(request, emit, control), log_dir=tmp_path)
+    app = StationApp(lambda emit, control: run_calibration_session(request, emit, control, load=load_cell),
+                     log_dir=tmp_path)
     async with app.run_test(size=(120, 32)) as pilot:
         await pilot.press("s")
         await wait_until(pilot, lambda: app.query_one("#measurements", DataTable).row_count >= 2, "2 rows")

@@ -1,0 +1,109 @@
+"""The cell a command asked for, composed above the cell layer: a real cell's configuration is
+read by :func:`station.cell.session.load_cell`; ``--simulated`` starts the simulators here and
+hands the session a :class:`~station.cell.session.LoadedCell` whose ``[devices]`` point at them
+(the configuration, the simulator's truth for the oracle, its endpoints).
+
+The session functions take :func:`load_cell` as their ``load`` argument, so the cell layer
+never imports the simulators (an import contract in ``pyproject.toml`` keeps it so).
+
+Simulated, on the cell a full configuration describes (its robot, body, head, limits, word
+order; the true errors from its ``[simulation]``: ``simulators/from_config.py``), or on a
+built-in cell, whose configuration the simulators write. The simulators are imported only when
+a simulated cell is started: a real run never loads them.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from contextlib import ExitStack
+from pathlib import Path
+from typing import Any
+
+import tomli_w
+
+from station.cell import session
+from station.cell.config import MAX_CONFIG_BYTES, parse_text, simulation_settings
+from station.cell.session import CellRequest, LoadedCell
+from station.errors import ConfigError
+from station.io.robot_files import read_user_text
+
+__all__ = ["BUILTIN_ROBOT_CELLS", "load_cell"]
+
+#: the tables of a ``--simulated`` CONFIG without [robot] and [body] that the built-in simulated
+#: cell's configuration takes over (besides its [simulation], which the simulators take)
+_TAKEN = ("recheck", "warmup")
+
+#: the built-in simulated cells besides the SCARA's: robot name -> (start servers, config text)
+BUILTIN_ROBOT_CELLS = ("irb2600",)
+
+
+def load_cell(request: CellRequest, stack: ExitStack) -> LoadedCell:
+    """The request's cell. With ``simulated`` the simulators are started (stopped when ``stack``
+    closes) and the configuration is theirs: a CONFIG that describes a cell ([robot], [body]) is
+    rehearsed, the station's configuration being CONFIG with [devices] pointing at the
+    simulators; without CONFIG, or with one holding only [simulation], [recheck] and [warmup],
+    the built-in cell is started with those. The seed: ``request.seed`` (``--seed``) when given,
+    else ``[simulation].seed``, else 1. ``LoadedCell.truth`` is the oracle. Without
+    ``simulated``: the configuration file (:func:`station.cell.session.load_cell`)."""
+    if request.simulated and request.robot not in (None, "sr800"):  # another robot's built-in cell (issue 9)
+        return _load_builtin_robot_cell(request, stack)
+    if request.simulated:
+        return _load_simulated(request, stack)
+    return session.load_cell(request, stack)
+
+
+def _read_toml(path: str) -> tuple[str, dict[str, Any]]:
+    text = read_user_text(Path(path), MAX_CONFIG_BYTES, "configuration file",
+                          missing=f"no such configuration file: {path}")
+    try:
+        return text, tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML ({exc}); fix the syntax there") from None
+
+
+def _load_simulated(request: CellRequest, stack: ExitStack) -> LoadedCell:
+    from simulators import start_simulated_cell
+    from simulators.reference_cell import cell_config_text
+
+    text, data = _read_toml(request.config) if request.config else ("", {})
+    if "robot" in data or "body" in data:  # the user's cell: rehearse it
+        from simulators.from_config import simulate_config
+
+        cfg = parse_text(text, str(request.config))
+        try:
+            rehearsal = simulate_config(cfg, seed=request.seed, source=request.config,
+                                        time_scale=request.time_scale)
+        except ValueError as exc:  # e.g. a step change on a prismatic joint
+            raise ConfigError(f"{request.config}: [simulation]: {exc}") from None
+        stack.callback(rehearsal.stop)
+        return LoadedCell(rehearsal.cfg, rehearsal.servers.cell.truth, rehearsal.endpoints())
+    sim = simulation_settings(text, str(request.config)) if request.config else {}
+    given = sim.pop("seed", None)
+    seed = request.seed if request.seed is not None else (1 if given is None else int(given))
+    servers = start_simulated_cell(seed=seed, time_scale=request.time_scale, **sim)
+    stack.callback(servers.stop)
+    cell_text = cell_config_text(servers, seed)
+    taken = {t: data[t] for t in _TAKEN if isinstance(data.get(t), dict)}
+    if taken:
+        cell_text += "\n" + tomli_w.dumps(taken)
+    cfg = parse_text(cell_text, f"<simulated cell{' with ' + request.config if request.config else ''}>")
+    return LoadedCell(cfg, servers.cell.truth, servers.endpoints())
+
+
+def _load_builtin_robot_cell(request: CellRequest, stack: ExitStack) -> LoadedCell:
+    """``--simulated --robot NAME``: the built-in simulated cell of that robot (the six-axis cell
+    for ``irb2600``, :mod:`simulators.six_axis_cell`); a CONFIG is not combined with it."""
+    if request.robot not in BUILTIN_ROBOT_CELLS:
+        raise ConfigError(f"--robot {request.robot}: no built-in simulated cell for this robot; the built-in cells "
+                          f"are sr800 (the default) and {', '.join(BUILTIN_ROBOT_CELLS)}. Rehearse your own cell "
+                          f"with --simulated CONFIG")
+    if request.config:
+        raise ConfigError(f"--robot {request.robot} starts a built-in simulated cell; give either it or a CONFIG "
+                          f"to rehearse, not both")
+    from simulators.six_axis_cell import six_axis_config_text, start_six_axis_cell
+
+    seed = 1 if request.seed is None else request.seed
+    servers = start_six_axis_cell(seed=seed, time_scale=request.time_scale)
+    stack.callback(servers.stop)
+    cfg = parse_text(six_axis_config_text(servers, seed), "<simulated six-axis cell>")
+    return LoadedCell(cfg, servers.cell.truth, servers.endpoints())
