@@ -1,9 +1,12 @@
 """Driver for the robot controller over Modbus TCP (pymodbus synchronous client).
 
-The wire protocol is defined in :mod:`drivers.controller_map` and documented in
-``docs/protocols.md``. Summary of the handshake: the PC writes the whole command block (target,
-command code, sequence number) in ONE request; the robot program acknowledges (``ack_seq``),
-moves, and reports ``done_seq`` or ``error_seq`` + ``error_code`` with the same number.
+The wire protocol is register map 2, defined in :mod:`drivers.controller_map` and documented in
+``docs/protocols.md``: one window of 128 holding registers from ``register_base`` (every address
+here is an offset into it), function codes 3 and 16 (the simulator also serves 4 and 6).
+Summary of the handshake: the PC writes the whole command block (target, command code, sequence
+number) in ONE request; the robot program acknowledges (``ack_seq``), moves, and reports
+``done_seq`` or ``error_seq`` + ``error_code`` with the same number. The correction table and the
+soft limits travel through the window's transfer block (:mod:`drivers.controller_transfer`).
 
 Safety rules implemented here:
 
@@ -14,8 +17,9 @@ Safety rules implemented here:
   longer than ``link_timeout`` the link is declared lost and every later call (and every pending
   motion) raises :class:`ControllerLinkLost` until :meth:`ModbusController.connect` is called
   again.
-* A correction table is only activated after it was uploaded, read back and compared value by
-  value, staged, and the controller's staged CRC-32 equals the uploaded one.
+* A correction table is only staged after every page was acknowledged and read back with its
+  page CRC, and the whole table compared value by value with its CRC-32; it is only activated
+  once the controller's staged CRC-32 equals the uploaded one.
 
 This module knows nothing of the station (no ``station`` import). Units: mm and rad. The errors
 (:mod:`drivers.controller_errors`), the status objects (:mod:`drivers.controller_status`) and the
@@ -46,60 +50,54 @@ from .controller_errors import (
     MotionAborted,
     MotionRejected,
     MotionTimeout,
+    RegisterWindowError,
     SequenceError,
     WordOrderError,
+    checked_soft_limits,
     error_for,
+    word_order_problem,
 )
 from .controller_map import (
     MAX_JOINTS,
     REG,
     SUPPORTED_MAP_VERSIONS,
-    TABLE_DATA_ADDRESS,
+    WINDOW_SIZE,
     Command,
     ControllerError,
+    CorrectionState,
     RegisterDecodeError,
     WordOrder,
     decode,
     encode,
-    implausible_limits,
     register_span,
 )
 from .controller_status import CommandStatus, ControllerStatus, MotionStatus
-from .correction_table import CorrectionTableData, TableAxis, TableError, TableRangeError, TableVerifyError
+from .controller_transfer import TablePager
+from .correction_table import (
+    CorrectionTableData,
+    TableAxis,
+    TableError,
+    TablePageError,
+    TableRangeError,
+    TableVerifyError,
+)
 
 __all__ = [
-    "ModbusController",
-    "ControllerStatus",
-    "MotionStatus",
-    "CommandStatus",
-    "TableAxis",
-    "CorrectionTableData",
-    "ControllerError",
-    "RegisterDecodeError",
-    "ModbusExceptionError",
-    "ModbusResponseError",
-    "MapVersionError",
-    "WordOrderError",
-    "ControllerConnectionError",
-    "ControllerLinkLost",
-    "CommandRejected",
-    "MotionRejected",
-    "MotionAborted",
-    "EmergencyStop",
-    "DriveFault",
-    "SequenceError",
-    "HandshakeTimeout",
-    "MotionTimeout",
-    "TableError",
-    "TableVerifyError",
-    "TableRangeError",
-    "WordOrder",
+    "ModbusController", "ControllerStatus", "MotionStatus", "CommandStatus", "TableAxis",
+    "CorrectionTableData", "ControllerError", "RegisterDecodeError", "ModbusExceptionError",
+    "RegisterWindowError", "ModbusResponseError", "MapVersionError", "WordOrderError",
+    "ControllerConnectionError", "ControllerLinkLost", "CommandRejected", "MotionRejected",
+    "MotionAborted", "EmergencyStop", "DriveFault", "SequenceError", "HandshakeTimeout",
+    "MotionTimeout", "TableError", "TableVerifyError", "TableRangeError", "TablePageError",
+    "CorrectionState", "WordOrder",
 ]
 
 log = logging.getLogger(__name__)
 
 _STATUS_FIRST, _STATUS_COUNT = register_span("ack_seq", "error_bound")
-_HDR_FIRST, _HDR_COUNT = register_span("table_format", "table_crc")
+#: connect() reads the whole window in these two requests: the identification, and the proof
+#: that the controller offers every register of the map
+_HALF = WINDOW_SIZE // 2
 
 
 # --------------------------------------------------------------------------------------------
@@ -107,21 +105,27 @@ _HDR_FIRST, _HDR_COUNT = register_span("table_format", "table_crc")
 # --------------------------------------------------------------------------------------------
 
 
-class ModbusController:
+class ModbusController(TablePager):
     """Robot controller on Modbus TCP.
 
-    ``client`` may inject a pymodbus-compatible client (tests); otherwise a
+    ``register_base``: the wire address of the map's first register (``[devices]
+    controller_register_base``; 128 on a Universal Robots controller). ``client`` may inject a
+    pymodbus-compatible client (tests); otherwise a
     ``ModbusTcpClient(host, port=port, timeout=timeout, retries=0)`` is created.
     """
 
     poll_interval = 0.002
 
     def __init__(self, host: str, port: int, device_id: int = 1,
-                 word_order: WordOrder = WordOrder.BIG, timeout: float = 1.0,
+                 word_order: WordOrder = WordOrder.BIG, timeout: float = 1.0, register_base: int = 0,
                  heartbeat_period: float | None = 0.2, link_timeout: float | None = None,
                  ack_timeout: float = 1.0, command_timeout: float = 5.0, client: Any = None):
         if not isinstance(word_order, WordOrder):
             raise ValueError(f"word_order must be WordOrder.BIG or WordOrder.LITTLE, got {word_order!r}")
+        if not 0 <= int(register_base) <= 65536 - WINDOW_SIZE:
+            raise ValueError(f"register_base must be 0..{65536 - WINDOW_SIZE} (the map's {WINDOW_SIZE} "
+                             f"registers follow it), got {register_base!r}")
+        self.register_base = int(register_base)
         self.host, self.port, self.device_id = host, int(port), int(device_id)
         self.word_order = word_order
         self.timeout = float(timeout)
@@ -134,7 +138,11 @@ class ModbusController:
             host, port=self.port, timeout=self.timeout, retries=0, reconnect_delay=0.0)
         self._io_lock = threading.RLock()
         self._cmd_lock = threading.Lock()
+        self._xfer_lock = threading.RLock()
+        self._xfer_seq = 0
         self._seq = 0
+        #: what the robot program reports about the controller's own correction (at connect)
+        self.correction_state: CorrectionState | None = None
         self._n_joints = 0
         self.map_version: int | None = None
         self._hb_robot_seen: float | None = None
@@ -146,6 +154,7 @@ class ModbusController:
         self._hb_counter = 0
         self._hb_last_error: BaseException | None = None
         self._uploaded: CorrectionTableData | None = None
+        self._upload_failed: str | None = None
         self._readback_ok = False
         self._readback_problem = "the uploaded table was not read back yet: call read_table()"
         self._connected = False
@@ -178,14 +187,19 @@ class ModbusController:
         if got is not None and int(got) != (fc | 0x80 if error else fc):
             raise ModbusResponseError(fc, int(got), address, n_regs)
         if error:
-            raise ModbusExceptionError(getattr(rr, "exception_code", 0), fc, address, n_regs)
+            code = getattr(rr, "exception_code", 0)
+            if code == 2:  # every register of map 2 is in the window: the window is wrong
+                raise RegisterWindowError(code, fc, address, n_regs, self.register_base, WINDOW_SIZE)
+            raise ModbusExceptionError(code, fc, address, n_regs)
         return rr
 
     def _read(self, address: int, count: int) -> list[int]:
+        """``count`` registers from window offset ``address`` (FC 3)."""
         out: list[int] = []
         step = 124  # even, <= 125
-        for a in range(address, address + count, step):
-            n = min(step, address + count - a)
+        first = self.register_base + address
+        for a in range(first, first + count, step):
+            n = min(step, first + count - a)
             rr = self._call(self._client.read_holding_registers, 3, a, n, count=n)
             regs = list(rr.registers)
             if len(regs) != n:
@@ -194,11 +208,13 @@ class ModbusController:
         return out
 
     def _write(self, address: int, values: Sequence[int]) -> None:
+        """``values`` from window offset ``address`` (FC 16)."""
         values = list(values)
         step = 122  # even, <= 123
+        first = self.register_base + address
         for i in range(0, len(values), step):
             chunk = values[i:i + step]
-            self._call(self._client.write_registers, 16, address + i, len(chunk), values=chunk)
+            self._call(self._client.write_registers, 16, first + i, len(chunk), values=chunk)
 
     def _read_entry(self, name: str):
         r = REG[name]
@@ -218,14 +234,34 @@ class ModbusController:
             raise ControllerConnectionError(
                 f"cannot connect to the controller at {self.host}:{self.port}: check that it is "
                 f"powered, the IP address and port, and that the robot program is running")
-        version = self._read_entry("map_version")
+        try:
+            ident = self._read(0, _HALF)
+        except RegisterWindowError as exc:
+            raise RegisterWindowError(exc.code, exc.function_code, exc.address, exc.count, self.register_base,
+                                      WINDOW_SIZE, " on the first read") from exc
+
+        def field(name: str) -> Any:
+            r = REG[name]
+            return decode(r, ident[r.address:r.end], self.word_order)
+
+        version = field("map_version")
         if version not in SUPPORTED_MAP_VERSIONS:
-            raise MapVersionError(version, SUPPORTED_MAP_VERSIONS)
+            raise MapVersionError(version, SUPPORTED_MAP_VERSIONS, self.register_base)
         self.map_version = int(version)  # for the record (a report names it)
-        g = self._read_entry("n_joints")
+        try:
+            self._read(_HALF, WINDOW_SIZE - _HALF)
+        except RegisterWindowError as exc:
+            raise RegisterWindowError(exc.code, exc.function_code, exc.address, exc.count, self.register_base,
+                                      WINDOW_SIZE, ": the controller's window is smaller than the map") from exc
+        self._check_word_order(int(field("order_check")))
+        g = field("n_joints")
         if not 1 <= g <= MAX_JOINTS:
             raise ControllerError(f"controller reports {g} joints; supported are 1..{MAX_JOINTS}")
         self._n_joints = int(g)
+        state = int(field("correction_state"))
+        self.correction_state = (CorrectionState(state) if state in CorrectionState._value2member_map_
+                                 else CorrectionState.UNKNOWN)
+        self._xfer_seq = int(self._read_entry("xfer_ack"))  # the program answers the next number
         self._soft_limits = self._checked_soft_limits(g)
         self._seq = int(self._read_entry("cmd_seq"))
         self._link_lost = None
@@ -236,22 +272,24 @@ class ModbusController:
             self._start_heartbeat()
         return self
 
-    def _checked_soft_limits(self, g: int) -> np.ndarray:
-        """Soft limits ``(g, 2)``, read once and decoded in the configured word order; if they
-        are implausible there but plausible in the other order, the link's word order is
-        wrong (:class:`WordOrderError`), else the map does not fit (:class:`RegisterDecodeError`)."""
-        r = REG["soft_limits"]
-        raw = self._read(r.address, r.n_registers)
-        lim = np.asarray(decode(r, raw, self.word_order), dtype=float)[:2 * g]
-        problem = implausible_limits(lim, g)
+    def _check_word_order(self, value: int) -> None:
+        problem = word_order_problem(value, self.word_order)
         if problem is not None:
-            other = WordOrder.LITTLE if self.word_order is WordOrder.BIG else WordOrder.BIG
-            if implausible_limits(decode(r, raw, other), g) is None:
-                raise WordOrderError(self.word_order, other, problem)
-            raise RegisterDecodeError(
-                f"the controller's soft limits are implausible in either word order ({problem}): "
-                f"the robot program does not fill the register map as documented; check it")
-        return lim.reshape(g, 2)
+            raise problem
+
+    def _checked_soft_limits(self, g: int) -> np.ndarray:
+        """Soft limits ``(g, 2)`` from info page 0 (see :func:`checked_soft_limits`)."""
+        return checked_soft_limits(self._read_info_raw("soft_limits"), g, self.word_order)
+
+    def controller_correction_state(self) -> CorrectionState:
+        """The controller's own kinematic correction, as the robot program reports it in
+        ``correction_state`` (read now): NONE, VENDOR (a factory / absolute-accuracy correction
+        is on; the station's table would correct on top of it) or UNKNOWN."""
+        self._check_link()
+        state = int(self._read_entry("correction_state"))
+        self.correction_state = (CorrectionState(state) if state in CorrectionState._value2member_map_
+                                 else CorrectionState.UNKNOWN)
+        return self.correction_state
 
     def close(self) -> None:
         """Stop the heartbeat and close the socket (pending motions are not stopped)."""
@@ -343,7 +381,7 @@ class ModbusController:
     def read_cartesian(self) -> np.ndarray:
         """Actual tool pose ``(6,)`` x,y,z,roll,pitch,yaw from the controller's nominal FK, base frame."""
         self._check_link()
-        return np.asarray(self._read_entry("act_pose"), dtype=float)
+        return self._read_info("act_pose")
 
     def soft_limits(self) -> np.ndarray:
         """Soft limits ``(g, 2)`` [lower, upper] as read at connect()."""
@@ -450,7 +488,9 @@ class ModbusController:
 
     # -- correction table ------------------------------------------------------------------
     def upload_table(self, table: CorrectionTableData) -> None:
-        """Write header and values into the controller's staging area (chunked writes)."""
+        """Send the header page, then every value page (29 values each), each in one request
+        that the controller acknowledges after checking its page CRC. A refused page raises
+        :class:`TablePageError`: the controller then holds no complete table to stage."""
         if not isinstance(table, CorrectionTableData):
             raise TypeError("upload_table needs a CorrectionTableData")
         if self._n_joints and table.n_joints != self._n_joints:
@@ -459,18 +499,23 @@ class ModbusController:
         self._uploaded = None
         self._readback_ok = False
         self._readback_problem = "the uploaded table was not read back yet: call read_table()"
-        self._write(_HDR_FIRST, table.header_registers(self.word_order))
-        self._write(TABLE_DATA_ADDRESS, table.data_registers(self.word_order))
+        self._upload_failed = "an upload is in progress"
+        try:
+            self._send_table_pages(table.header_registers(self.word_order), table.value_pages(self.word_order))
+        except ControllerError as exc:
+            self._upload_failed = f"the last upload failed ({exc})"
+            raise
+        self._upload_failed = None
         self._uploaded = table
 
     def read_table(self) -> CorrectionTableData:
-        """Read header and values back from the staging area. If a table was uploaded in this
-        session, compare value by value; the result gates :meth:`activate_table`."""
+        """Read the header page and every value page back (each page's CRC checked, then the
+        whole table's CRC-32). If a table was uploaded in this session, compare value by value;
+        the result gates :meth:`stage_table` and :meth:`activate_table`."""
         self._check_link()
-        header = self._read(_HDR_FIRST, _HDR_COUNT)
         try:
+            header, data = self._read_table_pages()
             h = CorrectionTableData.decode_header(header, self.word_order)
-            data = self._read(TABLE_DATA_ADDRESS, 2 * h["n_values"])
             table = CorrectionTableData.from_registers(header, data, self.word_order)
         except ControllerError as exc:
             if self._uploaded is not None:
@@ -485,11 +530,28 @@ class ModbusController:
             self._readback_problem = "" if diff is None else f"read-back differs from upload: {diff}"
         return table
 
+    def read_slot_table(self, slot: str) -> CorrectionTableData | None:
+        """The table the controller holds in ``slot`` (``staged``, ``active`` or ``previous``),
+        each page's CRC and the whole table's CRC-32 checked; None when the slot is empty. Reads
+        only: the upload interlock is not touched."""
+        if slot not in ("staged", "active", "previous"):
+            raise ValueError(f"slot must be staged, active or previous, got {slot!r}")
+        self._check_link()
+        if not self.table_crcs()[slot]:
+            return None
+        header, data = self._read_table_pages(slot)
+        return CorrectionTableData.from_registers(header, data, self.word_order)
+
     def verify_table(self) -> CorrectionTableData:
         """read_table() and raise :class:`TableVerifyError` if it differs from the upload."""
         if self._uploaded is None:
             raise TableVerifyError("no table uploaded in this session: call upload_table() first")
-        table = self.read_table()
+        try:
+            table = self.read_table()
+        except TableVerifyError:
+            raise
+        except TableError as exc:  # a page or the whole table fails its CRC-32: not verified
+            raise TableVerifyError(f"read-back failed: {exc}") from exc
         if not self._readback_ok:
             raise TableVerifyError(self._readback_problem + ": upload the table again")
         return table
@@ -498,7 +560,13 @@ class ModbusController:
         self._send(code).wait(timeout or self.command_timeout)
 
     def stage_table(self, timeout: float | None = None) -> None:
-        """Controller checks header and CRC of the staging area and keeps it as staged table."""
+        """Controller checks header, pages and CRC-32 of its stored table and keeps it as the
+        staged table. A table uploaded in this session is only staged once it was read back
+        identical (:meth:`verify_table`), else :class:`TableVerifyError`."""
+        if self._upload_failed is not None:
+            raise TableVerifyError(f"staging refused: {self._upload_failed}: upload the table again")
+        if self._uploaded is not None and not self._readback_ok:
+            raise TableVerifyError(f"staging refused: {self._readback_problem}")
         self._table_command(Command.TABLE_STAGE, timeout)
 
     def activate_table(self, timeout: float | None = None) -> None:
@@ -529,6 +597,10 @@ class ModbusController:
     def rollback_table(self, timeout: float | None = None) -> None:
         """Make the previous table active again."""
         self._table_command(Command.TABLE_ROLLBACK, timeout)
+
+    def discard_previous_table(self, timeout: float | None = None) -> None:
+        """Forget the previous table: a later roll back has nothing to revive."""
+        self._table_command(Command.TABLE_DISCARD_PREVIOUS, timeout)
 
     def table_crcs(self) -> dict[str, int]:
         """CRC-32 of the staged, active and previous tables on the controller (0 = none)."""

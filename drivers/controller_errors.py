@@ -2,29 +2,48 @@
 
 The error codes and their messages are part of the register map (:mod:`drivers.controller_map`,
 ``docs/protocols.md``); the table errors live with the table data in
-:mod:`drivers.correction_table`. :mod:`drivers.controller` re-exports all of them.
+:mod:`drivers.correction_table`. :mod:`drivers.controller` re-exports all of them. This module
+depends on the map and the table data only, never on the driver or its status objects: what
+:func:`error_for` needs of a status is the structural :class:`ReportedError`.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from .controller_map import (
     ERROR_MESSAGES,
+    INFO_PAGES,
     MODBUS_EXCEPTION_MEANINGS,
+    ORDER_CHECK_VALUE,
     Command,
     ControllerError,
     ErrorCode,
+    RegisterDecodeError,
+    WordOrder,
+    decode,
+    implausible_limits,
 )
 from .correction_table import TableError
 
-if TYPE_CHECKING:
-    from .controller_status import ControllerStatus
+
+class ReportedError(Protocol):
+    """What the controller reported about a failed command (a status snapshot has these)."""
+
+    @property
+    def error_code(self) -> int: ...
+
+    @property
+    def error_joint(self) -> int: ...
+
+    @property
+    def error_bound(self) -> int: ...
 
 __all__ = [
     "ModbusExceptionError",
+    "RegisterWindowError",
     "ModbusResponseError",
     "MapVersionError",
     "WordOrderError",
@@ -40,6 +59,8 @@ __all__ = [
     "MotionTimeout",
     "error_message",
     "error_for",
+    "word_order_problem",
+    "checked_soft_limits",
 ]
 
 
@@ -58,6 +79,25 @@ class ModbusExceptionError(ControllerError):
             f"word order configured for this controller; the request may be repeated once the "
             f"cause is fixed"
         )
+
+
+class RegisterWindowError(ModbusExceptionError):
+    """The controller refused an address of the map's window (exception 2): the window starts
+    elsewhere, or is smaller than the map."""
+
+    def __init__(self, code: int, function_code: int, address: int, count: int, base: int, size: int,
+                 detail: str = ""):
+        super().__init__(code, function_code, address, count)
+        self.base = int(base)
+        self.size = int(size)
+        Exception.__init__(
+            self,
+            f"the controller refused register {self.address} (count {self.count}, function "
+            f"{self.function_code}) with Modbus exception {self.code} ({self.meaning}){detail}: the "
+            f"station expects map {self.size} registers at {self.base}..{self.base + self.size - 1}. Set "
+            f"[devices] controller_register_base to the first register the robot program hosts "
+            f"(128 for a Universal Robots controller's general-purpose registers) and make sure the "
+            f"controller offers all {self.size} registers from there; nothing was commanded")
 
 
 class ModbusResponseError(ControllerError):
@@ -79,14 +119,16 @@ class ModbusResponseError(ControllerError):
 class MapVersionError(ControllerError):
     """The controller reports a register-map version this driver does not know."""
 
-    def __init__(self, found: int, supported: tuple[int, ...]):
+    def __init__(self, found: int, supported: tuple[int, ...], base: int = 0):
         self.found = int(found)
         self.supported = tuple(int(v) for v in supported)
+        self.base = int(base)
         known = ", ".join(str(v) for v in self.supported)
         super().__init__(
-            f"the controller reports register map version {self.found}; this driver supports "
-            f"version {known} only: nothing was commanded. Install the robot program that speaks "
-            f"map version {known}, or a driver that knows version {self.found}")
+            f"the controller reports register map version {self.found} (register {self.base + 2}); "
+            f"this driver expects version {known}: nothing was commanded. Install the robot program "
+            f"that speaks map version {known} (robot-programs/, docs/robot-program.md), or check "
+            f"that [devices] controller_register_base = {self.base} is where the program hosts the map")
 
 
 class WordOrderError(ControllerError):
@@ -154,7 +196,7 @@ def error_message(code: int) -> str:
         return f"unknown error code {code}: check the controller program's map version"
 
 
-def error_for(st: ControllerStatus, seq: int, command: Command, target: Any,
+def error_for(st: ReportedError, seq: int, command: Command, target: Any,
               soft_limits: np.ndarray | None) -> ControllerError:
     """The typed error for command ``seq`` that the controller reported failed in ``st``.
 
@@ -198,3 +240,34 @@ def error_for(st: ControllerStatus, seq: int, command: Command, target: Any,
               ErrorCode.NO_PREVIOUS_TABLE):
         return TableError(msg)
     return CommandRejected(msg, code, seq)
+
+
+def word_order_problem(value: int, configured: WordOrder) -> ControllerError | None:
+    """The error ``order_check`` = ``value`` means in the ``configured`` word order, or None:
+    it holds 1 in the link's word order; 65536 means the other order."""
+    if value == ORDER_CHECK_VALUE:
+        return None
+    other = WordOrder.LITTLE if configured is WordOrder.BIG else WordOrder.BIG
+    if value == ORDER_CHECK_VALUE << 16:
+        return WordOrderError(configured, other, f"order_check reads {value}, not {ORDER_CHECK_VALUE}")
+    return RegisterDecodeError(
+        f"order_check reads {value:#010x}, expected {ORDER_CHECK_VALUE} in either word order: the robot "
+        f"program does not fill the register map as documented; check it")
+
+
+def checked_soft_limits(raw: list[int], g: int, configured: WordOrder) -> np.ndarray:
+    """Soft limits ``(g, 2)`` from the raw registers of info entry ``soft_limits``, decoded in
+    the ``configured`` word order; if they are implausible there but plausible in the other
+    order, the link's word order is wrong (:class:`WordOrderError`), else the map does not fit
+    (:class:`RegisterDecodeError`)."""
+    r = INFO_PAGES["soft_limits"][1]
+    lim = np.asarray(decode(r, raw, configured), dtype=float)[:2 * g]
+    problem = implausible_limits(lim, g)
+    if problem is not None:
+        other = WordOrder.LITTLE if configured is WordOrder.BIG else WordOrder.BIG
+        if implausible_limits(decode(r, raw, other), g) is None:
+            raise WordOrderError(configured, other, problem)
+        raise RegisterDecodeError(
+            f"the controller's soft limits are implausible in either word order ({problem}): "
+            f"the robot program does not fill the register map as documented; check it")
+    return lim.reshape(g, 2)

@@ -2,7 +2,9 @@
 
 :class:`ControllerStatus` decodes the response block of the register map
 (:mod:`drivers.controller_map`); :class:`CommandStatus` follows one acknowledged command of a
-:class:`drivers.controller.ModbusController` until the controller reports it done or failed.
+controller (:class:`drivers.controller.ModbusController`, seen here only as the structural
+:class:`StatusSource`, so that this module does not import the driver) until the controller
+reports it done or failed.
 """
 
 from __future__ import annotations
@@ -10,15 +12,12 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import Any, Protocol, Sequence
 
 from .controller_errors import MotionTimeout, error_message
-from .controller_map import REG, Command, RegisterDecodeError, StatusBit, decode, register_span
+from .controller_map import REG, Command, ControllerError, RegisterDecodeError, StatusBit, decode, register_span
 
-if TYPE_CHECKING:
-    from .controller import ModbusController
-
-__all__ = ["ControllerStatus", "CommandStatus", "MotionStatus"]
+__all__ = ["ControllerStatus", "CommandStatus", "MotionStatus", "StatusSource"]
 
 # --------------------------------------------------------------------------------------------
 # status
@@ -81,6 +80,18 @@ class ControllerStatus:
 # --------------------------------------------------------------------------------------------
 
 
+class StatusSource(Protocol):
+    """What a :class:`CommandStatus` needs of its controller."""
+
+    poll_interval: float
+
+    def _check_link(self) -> None: ...
+
+    def status(self) -> "ControllerStatus": ...
+
+    def _error_for(self, st: "ControllerStatus", seq: int, command: Command, target: Any) -> ControllerError: ...
+
+
 class CommandStatus:
     """Status of one acknowledged command (ophyd ``StatusBase`` style).
 
@@ -88,7 +99,7 @@ class CommandStatus:
     (failure, typed error). Polling happens in :meth:`wait`, :attr:`done` and :meth:`exception`.
     """
 
-    def __init__(self, controller: "ModbusController", seq: int, command: Command, target: Any = None):
+    def __init__(self, controller: StatusSource, seq: int, command: Command, target: Any = None):
         self.controller = controller
         self.seq = int(seq)
         self.command = command

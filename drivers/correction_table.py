@@ -1,14 +1,15 @@
 """Correction-table data: grid axes, values, register encoding and the interpolation rule.
 
-The table travels in the controller's table area (:mod:`drivers.controller_map`, documented in
-``docs/protocols.md``, section "Correction table"); the driver uploads it, the simulator decodes
-and applies it, and the station builds it. Only numpy and the register map are imported here, so
+The table travels through the controller's transfer block in pages (:mod:`drivers.controller_map`,
+documented in ``docs/protocols.md``, section "Correction table"): a header page, then the values
+as scaled 32-bit integers, 29 per page. The driver uploads it, the simulator decodes and applies
+it, and the station builds it. Values and axes are held exactly as they travel (values on the
+1e-8 grid as float32, axes on the 1e-6 grid), so a read back compares bit for bit. Only numpy and the register map are imported here, so
 that the station can build and check tables without pymodbus or pyserial installed.
 """
 
 from __future__ import annotations
 
-import zlib
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -18,19 +19,26 @@ from .controller_map import (
     MAX_JOINTS,
     MAX_TABLE_AXES,
     MAX_TABLE_VALUES,
-    REG,
+    PAGE_VALUES,
+    TABLE_AXIS_SCALE,
     TABLE_FORMAT_VERSION,
+    TABLE_HDR,
+    TABLE_HEADER_REGISTERS,
+    TABLE_VALUE_SCALE,
     ControllerError,
     RegisterDecodeError,
     WordOrder,
     decode,
-    decode_f32_array,
+    decode_i32_array,
+    decode_i32_raw,
     encode,
-    encode_f32_array,
-    register_span,
+    encode_i32_array,
+    quantize_values,
+    raw_crc32,
 )
 
-__all__ = ["MAX_TABLE_VALUES", "TableAxis", "CorrectionTableData", "TableError", "TableVerifyError", "TableRangeError"]
+__all__ = ["MAX_TABLE_VALUES", "TableAxis", "CorrectionTableData", "TableError", "TableVerifyError",
+           "TableRangeError", "TablePageError", "n_value_pages"]
 
 # --------------------------------------------------------------------------------------------
 # errors
@@ -49,19 +57,32 @@ class TableRangeError(TableError):
     """A point lies outside a correction table's grid."""
 
 
+class TablePageError(TableError):
+    """A page of the table transfer was refused by the controller or read back wrong; nothing
+    was staged from it."""
+
+
+def n_value_pages(n_values: int) -> int:
+    """Value pages of a table of ``n_values`` values (29 values a page)."""
+    return -(-int(n_values) // PAGE_VALUES)
+
+
+def _on_axis_grid(v: float) -> float:
+    # the same expression as decode(): raw * scale
+    return float(round(float(v) / TABLE_AXIS_SCALE) * TABLE_AXIS_SCALE)
+
+
 # --------------------------------------------------------------------------------------------
 # correction table
 # --------------------------------------------------------------------------------------------
-
-_HDR_FIRST, _HDR_COUNT = register_span("table_format", "table_crc")
-
 
 @dataclass(frozen=True)
 class TableAxis:
     """One grid axis: nodes at ``start + i*step`` for ``i in range(count)``.
 
     A periodic axis (yaw) wraps with period ``count*step``: node ``count`` is node 0 again.
-    ``start`` and ``step`` are rounded to float32, as they travel as f32.
+    ``start`` and ``step`` are rounded to the wire's 1e-6 grid (mm or rad), as they travel as
+    scaled 32-bit integers.
     """
 
     start: float
@@ -70,8 +91,12 @@ class TableAxis:
     periodic: bool = False
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "start", float(np.float32(self.start)))
-        object.__setattr__(self, "step", float(np.float32(self.step)))
+        if not (np.isfinite(self.start) and np.isfinite(self.step)
+                and max(abs(self.start), abs(self.step)) < 2000.0):
+            raise TableError(f"table axis start and step must be finite and within +-2000 (mm or rad), "
+                             f"got {self.start}, {self.step}")
+        object.__setattr__(self, "start", _on_axis_grid(self.start))
+        object.__setattr__(self, "step", _on_axis_grid(self.step))
         object.__setattr__(self, "count", int(self.count))
         object.__setattr__(self, "periodic", bool(self.periodic))
         if not (np.isfinite(self.start) and np.isfinite(self.step) and self.step > 0):
@@ -88,8 +113,8 @@ class TableAxis:
 class CorrectionTableData:
     """Joint corrections on a grid over (up to) x, y, z, yaw of the Cartesian target.
 
-    ``values``: float32 array of shape ``(n_configs, *grid_shape, n_joints)``; configuration 0
-    is elbow=+1, 1 is elbow=-1. The controller adds the multilinear interpolation of the values
+    ``values``: float32 array of shape ``(n_configs, *grid_shape, n_joints)``, rounded to the
+    wire's 1e-8 grid (rad or mm; at most +-21.47); configuration 0 is elbow=+1, 1 is elbow=-1. The controller adds the multilinear interpolation of the values
     to the joints its nominal inverse kinematics computes (see :meth:`interpolate`).
     """
 
@@ -103,7 +128,7 @@ class CorrectionTableData:
         for a in axes:
             if not isinstance(a, TableAxis):
                 raise TableError(f"table axes must be TableAxis objects, got {type(a).__name__}")
-        v = np.array(self.values, dtype=np.float32, copy=True)
+        v = np.array(self.values, dtype=np.float64, copy=True)
         shape = tuple(a.count for a in axes)
         if v.ndim != len(axes) + 2 or v.shape[1:-1] != shape:
             raise TableError(
@@ -118,6 +143,10 @@ class CorrectionTableData:
                              f"use a coarser grid")
         if not np.all(np.isfinite(v)):
             raise TableError("table values contain NaN or infinity")
+        try:
+            v = quantize_values(v, TABLE_VALUE_SCALE).reshape(v.shape)
+        except ValueError as exc:
+            raise TableError(f"table values: {exc}: a correction this large is not a calibration") from exc
         v.setflags(write=False)
         object.__setattr__(self, "axes", axes)
         object.__setattr__(self, "values", v)
@@ -139,9 +168,14 @@ class CorrectionTableData:
     def n_values(self) -> int:
         return int(self.values.size)
 
+    def raw_values(self) -> np.ndarray:
+        """The values as the wire's counts (int64, C order): ``value / 1e-8``."""
+        return np.rint(self.values.ravel().astype(np.float64) / TABLE_VALUE_SCALE).astype(np.int64)
+
     def crc32(self) -> int:
-        """CRC-32 (zlib, ISO-HDLC polynomial) of the values as big-endian f32 bytes, C order."""
-        return zlib.crc32(self.values.astype(">f4").tobytes()) & 0xFFFFFFFF
+        """CRC-32 (zlib, ISO-HDLC polynomial) of the raw counts as big-endian 32-bit two's
+        complement bytes, C order."""
+        return raw_crc32(self.raw_values())
 
     def same_as(self, other: "CorrectionTableData") -> bool:
         """Bit-exact equality of axes and values."""
@@ -164,7 +198,7 @@ class CorrectionTableData:
 
     # -- encoding --------------------------------------------------------------------------
     def header_registers(self, order: WordOrder = WordOrder.BIG) -> list[int]:
-        """Registers ``table_format .. table_crc`` (one contiguous write)."""
+        """The header page's data registers (``TABLE_HEADER``, 30 registers)."""
         n = len(self.axes)
         pad = MAX_TABLE_AXES - n
         periodic = sum(1 << i for i, a in enumerate(self.axes) if a.periodic)
@@ -179,29 +213,40 @@ class CorrectionTableData:
         regs += encode("table_n_configs", self.n_configs, order)
         regs += encode("table_n_values", self.n_values, order)
         regs += encode("table_crc", self.crc32(), order)
-        assert len(regs) == _HDR_COUNT
+        regs += encode("table_value_scale_exp", -8, order)
+        assert len(regs) == TABLE_HEADER_REGISTERS
         return regs
 
     def data_registers(self, order: WordOrder = WordOrder.BIG) -> list[int]:
-        return encode_f32_array(self.values.ravel(), order)
+        """All values as scaled i32 registers (2 per value), C order."""
+        return encode_i32_array(self.values.ravel(), TABLE_VALUE_SCALE, order)
+
+    def value_pages(self, order: WordOrder = WordOrder.BIG) -> list[list[int]]:
+        """The data registers of value page 0, 1, ... (29 values, 58 registers each; the last
+        one shorter)."""
+        regs = self.data_registers(order)
+        step = 2 * PAGE_VALUES
+        return [regs[i:i + step] for i in range(0, len(regs), step)]
 
     @staticmethod
     def decode_header(regs: Sequence[int], order: WordOrder = WordOrder.BIG) -> dict:
-        """Header registers -> dict(axes, n_joints, n_configs, n_values, crc, format).
+        """Header page registers -> dict(axes, n_joints, n_configs, n_values, crc, format).
 
         Raises :class:`TableError` (or :class:`RegisterDecodeError`) for an invalid header.
         """
-        if len(regs) != _HDR_COUNT:
-            raise RegisterDecodeError(f"table header: expected {_HDR_COUNT} registers, got {len(regs)}")
+        if len(regs) < TABLE_HEADER_REGISTERS:
+            raise RegisterDecodeError(f"table header: expected {TABLE_HEADER_REGISTERS} registers, got {len(regs)}")
 
         def f(name: str):
-            r = REG[name]
-            return decode(r, regs[r.address - _HDR_FIRST:r.end - _HDR_FIRST], order)
+            r = TABLE_HDR[name]
+            return decode(r, regs[r.address:r.end], order)
 
         fmt = f("table_format")
         if fmt != TABLE_FORMAT_VERSION:
             raise TableError(f"table format version {fmt} is not {TABLE_FORMAT_VERSION}: "
                              f"the controller holds no table in this format")
+        if f("table_value_scale_exp") != -8:
+            raise TableError(f"table value scale exponent {f('table_value_scale_exp')} is not -8")
         n_axes = f("table_n_axes")
         if not 1 <= n_axes <= MAX_TABLE_AXES:
             raise TableError(f"table header: n_axes {n_axes} not in 1..{MAX_TABLE_AXES}")
@@ -221,10 +266,15 @@ class CorrectionTableData:
     @classmethod
     def from_registers(cls, header: Sequence[int], data: Sequence[int],
                        order: WordOrder = WordOrder.BIG) -> "CorrectionTableData":
+        """Header page and all value registers -> table. Raises :class:`TableError` when the
+        values' CRC-32 is not the header's."""
         h = cls.decode_header(header, order)
         if len(data) != 2 * h["n_values"]:
             raise RegisterDecodeError(f"table data: expected {2 * h['n_values']} registers, got {len(data)}")
-        vals = decode_f32_array(data, order)
+        crc = raw_crc32(decode_i32_raw(data, order))
+        if crc != h["crc"]:
+            raise TableError(f"the table's values have CRC-32 {crc:#010x}, its header says {h['crc']:#010x}")
+        vals = decode_i32_array(data, TABLE_VALUE_SCALE, order)
         shape = (h["n_configs"], *[a.count for a in h["axes"]], h["n_joints"])
         return cls(h["axes"], vals.reshape(shape))
 

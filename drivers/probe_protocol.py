@@ -33,6 +33,12 @@ __all__ = [
     "ProbeSpreadError",
     "ProbeDisconnected",
     "ProbeOutOfRange",
+    "ProbeConfigError",
+    "ProbeLineSettingsError",
+    "ProbeDialectMismatch",
+    "ProbeLineGarbled",
+    "ProbeUnsettled",
+    "ErrorAction",
     "ChannelStatus",
     "Field",
     "CommandSpec",
@@ -84,16 +90,32 @@ class ProbeFrameError(ProbeError):
     """A reply was malformed, garbled, truncated or did not answer the request sent."""
 
 
-class ProbeDeviceError(ProbeError):
-    """The unit answered ``ER,<command>,<code>``."""
+class ErrorAction(enum.Enum):
+    """What the driver does with an error reply (each dialect's error table names one)."""
 
-    def __init__(self, command: str, code: int, detail: str = "") -> None:
+    RETRY = "repeat a read-only request at once"
+    RETRY_AFTER_WAIT = "repeat a read-only request after the dialect's wait (unit starting up, busy)"
+    DEVICE_FAULT = "stop: the unit or its sensors need attention"
+    CONFIG_ERROR = "stop: the configuration (line settings, channels, dialect) does not match the unit"
+    DRIVER_ERROR = "stop: the request was malformed (a driver bug or another dialect)"
+
+
+class ProbeDeviceError(ProbeError):
+    """The unit answered with an error reply (``ER,<command>,<code>`` in the ASCII dialects).
+
+    ``errors``: the dialect's error table (default: station-ascii's :data:`ERROR_CODES`);
+    ``dialect``: its name, for the message. A code the table lacks is not retried."""
+
+    def __init__(self, command: str, code: int, detail: str = "", errors: "dict[int, ErrorCode] | None" = None,
+                 dialect: str = "station-ascii") -> None:
         self.command = command
         self.code = code
-        spec = ERROR_CODES.get(code)
+        self.dialect = dialect
+        spec = (ERROR_CODES if errors is None else errors).get(code)
         self.meaning = spec.meaning if spec else "unknown error code"
         self.retryable = spec.retryable if spec else False
-        advice = spec.advice if spec else "consult the unit's manual for this code"
+        self.action = spec.effective_action if spec else ErrorAction.DEVICE_FAULT
+        advice = spec.advice if spec else f"the {dialect} table has no code {code:02d}; consult the unit's manual"
         msg = f"probe unit refused {command!r}: error {code:02d} ({self.meaning}); {advice}"
         if detail:
             msg += f" [{detail}]"
@@ -127,6 +149,38 @@ class ProbeOutOfRange(ProbeError):
         super().__init__(
             f"probe channels not in range ({listing}): the cube is not where the head expects "
             "it; check the measuring point's nominal position and the robot's approach pose"
+        )
+
+
+class ProbeConfigError(ProbeError):
+    """The station's probe configuration cannot work with the named dialect (unknown dialect,
+    line settings the unit does not offer). The lead maps it to a configuration error (exit 2)."""
+
+
+class ProbeLineSettingsError(ProbeConfigError):
+    """``baudrate`` / ``probe_bytesize`` / ``probe_parity`` / stop bits not offered by the dialect."""
+
+
+class ProbeDialectMismatch(ProbeError):
+    """The unit answered in another dialect than the configured one (e.g. ``ER,ID,00``)."""
+
+
+class ProbeLineGarbled(ProbeFrameError):
+    """Bytes arrived that no ASCII dialect sends (top bit set, control characters): the line
+    settings of station and unit differ (baud rate, data bits, parity) or the line is noisy."""
+
+
+class ProbeUnsettled(ProbeError):
+    """Consecutive buffered readings did not agree within the tolerance (no fresh, settled data)."""
+
+    def __init__(self, channel: int, diff_mm: float, tolerance_mm: float, attempts: int) -> None:
+        self.channel = channel
+        self.diff_mm = diff_mm
+        self.tolerance_mm = tolerance_mm
+        super().__init__(
+            f"channel {channel:02d}: {attempts} pairs of consecutive readings differed by up to "
+            f"{diff_mm * 1000:.2f} µm (tolerance {tolerance_mm * 1000:.2f} µm): the amplifier's data is "
+            "still changing (robot not settled, or a long response-time filter); let it settle longer"
         )
 
 
@@ -208,6 +262,14 @@ class ErrorCode:
     meaning: str
     advice: str
     retryable: bool
+    #: what the driver does; None: RETRY if ``retryable`` else DEVICE_FAULT
+    action: ErrorAction | None = None
+
+    @property
+    def effective_action(self) -> ErrorAction:
+        if self.action is not None:
+            return self.action
+        return ErrorAction.RETRY if self.retryable else ErrorAction.DEVICE_FAULT
 
 
 ERR_UNKNOWN_COMMAND = 0

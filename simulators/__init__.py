@@ -29,6 +29,10 @@ def _wait_tcp(host: str, port: int, timeout: float) -> None:
             time.sleep(0.01)
 
 
+#: the simulated DL-RS1A's buffer refresh when motions take time (a few amplifiers: ~20 ms)
+SIMULATED_REFRESH_S = 0.02
+
+
 @dataclass
 class SimulatedCellServers:
     """Running simulators. ``cell.truth`` is the oracle (true robot, set-up, body)."""
@@ -52,6 +56,11 @@ class SimulatedCellServers:
     @property
     def probe_port(self) -> str:
         return self.probe_server.port
+
+    @property
+    def probe_refresh_s(self) -> float | None:
+        """The simulated unit's buffer refresh [s] (None: its dialect buffers nothing)."""
+        return getattr(getattr(self.probe_server, "unit", None), "refresh_s", None)
 
     def endpoints(self) -> dict:
         return {"controller": f"{self.controller_host}:{self.controller_port}",
@@ -79,16 +88,23 @@ class SimulatedCellServers:
 
 
 def start_simulated_cell(seed: int = 0, time_scale: float = 0.0, pace: bool = False,
-                         baudrate: int = 38400, host: str = "127.0.0.1", port: int = 0,
+                         baudrate: int | None = None, host: str = "127.0.0.1", port: int = 0,
                          word_order: WordOrder = WordOrder.BIG, watchdog: float = 1.0,
                          cell: Any = None, ready_timeout: float = 10.0,
                          map_version: int | None = None, thermal_length_um: float = 0.0,
                          thermal_offset_arcsec: float = 0.0, thermal_time_constant_s: float = 600.0,
                          step_joint: int = 0, step_offset_deg: float = 0.0,
                          step_tool_um: tuple[float, float, float] = (0.0, 0.0, 0.0),
-                         soft_limits: Any = None, **physics: float) -> SimulatedCellServers:
+                         soft_limits: Any = None, register_base: int = 0, register_count: int = 128,
+                         correction_state: int = 0,
+                         probe_protocol: str = "keyence-dl-rs1a", probe_bytesize: int | None = None,
+                         probe_parity: str | None = None, **physics: float) -> SimulatedCellServers:
     """Start the controller and probe-head simulators on one :class:`SimulatedCell`.
     ``map_version``: publish another register-map version (the driver must refuse it).
+    ``register_base``/``register_count``: the controller's register window (``[devices]
+    controller_register_base``, ``[simulation] controller_register_count``); every address
+    outside it is refused with Modbus exception 2. ``correction_state``: what the simulated program
+    reports of the controller's own correction (0 none, 1 the vendor's, 2 unknown).
 
     Drift (``simulators/thermal.py``; the ``[simulation]`` keys of the same names): a thermal
     model (``thermal_length_um`` growth of the arm lengths, ``thermal_offset_arcsec`` of the
@@ -127,11 +143,19 @@ def start_simulated_cell(seed: int = 0, time_scale: float = 0.0, pace: bool = Fa
         cell = SimulatedCell(seed=seed, thermal=thermal, step=step, **cell_kw)
     ctrl = SimulatedController(cell=cell, host=host, port=port, word_order=word_order,
                                time_scale=time_scale, watchdog=watchdog, soft_limits=soft_limits,
-                               map_version=MAP_VERSION if map_version is None else map_version
+                               map_version=MAP_VERSION if map_version is None else map_version,
+                               register_base=register_base, register_count=register_count,
+                               correction_state=correction_state
                                ).start(ready_timeout)
     try:
         _wait_tcp(ctrl.host, ctrl.port, ready_timeout)
-        probe = ProbeHeadServer(snapshot_source=cell.probe_values, baudrate=baudrate, pace=pace).start()
+        # the simulated probe unit's own line settings: [devices] probe_protocol, baudrate,
+        # probe_bytesize, probe_parity (a station at other settings gets garbled replies)
+        # at time scale 0 nothing takes time: the unit refreshes its buffer on every request, as
+        # the station's configuration of the simulated cell says (reference_cell.devices_toml)
+        probe = ProbeHeadServer(snapshot_source=cell.probe_values, baudrate=baudrate, pace=pace,
+                                protocol=probe_protocol, bytesize=probe_bytesize, parity=probe_parity,
+                                refresh_s=SIMULATED_REFRESH_S if time_scale > 0 else 0.0).start()
     except BaseException:
         ctrl.stop()
         raise

@@ -1,7 +1,12 @@
 """Simulated robot controller: pymodbus async TCP server + robot program, in a background thread.
 
-The register map and the handshake are those of :mod:`drivers.controller_map` /
-``docs/protocols.md``. The robot program reacts to writes of the command block, acknowledges,
+The register map (map 2) and the handshake are those of :mod:`drivers.controller_map` /
+``docs/protocols.md``. The controller hosts the map's window at ``register_base`` and refuses
+every address outside ``[register_base, register_base + register_count)`` with Modbus exception
+2, and every function code but 3, 4, 6 and 16 with exception 1; ``requests_log`` records every
+request it served or refused in the action hook. The robot program carries out requests of the
+transfer block (table pages, info pages) at once, while the request is served, and reacts to
+writes of the command block on its program loop: it acknowledges,
 validates (soft limits, reachability, correction-table range), moves with a simple max-speed
 motion-time model scaled by ``time_scale`` (0 = instant), and reports done or error with the
 same sequence number. Cartesian moves use the controller's NOMINAL kinematics in the robot base
@@ -25,7 +30,6 @@ import contextlib
 import logging
 import threading
 import time
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Iterable, cast
 
 import numpy as np
@@ -34,23 +38,25 @@ from pymodbus.server import ModbusTcpServer
 from pymodbus.simulator import DataType, SimData, SimDevice
 
 from drivers.controller_map import (
+    FUNCTION_CODES,
+    INFO_PAGES,
     MAP_VERSION,
     MAX_JOINTS,
+    ORDER_CHECK_VALUE,
     REG,
     REGISTERS,
-    TABLE_DATA_ADDRESS,
+    WINDOW_SIZE,
     Command,
     ErrorCode,
     StatusBit,
     WordOrder,
     decode,
-    decode_f32_array,
     encode,
-    encode_f32_array,
     register_span,
 )
 from drivers.correction_table import CorrectionTableData, TableRangeError
-from simulators.controller_tables import TableSlots
+from simulators.controller_faults import QUIRKS, ModbusFault
+from simulators.controller_tables import TableSlots, serve_transfer
 from station.core.kinematics import forward, inverse_kinematics, scara_ik
 from station.core.model import RobotModel
 from station.core.transforms import matrix_to_pose, pose_to_matrix
@@ -66,31 +72,6 @@ log = logging.getLogger(__name__)
 
 _CMD_FIRST, _CMD_COUNT = register_span("cmd_code", "cmd_pose")
 _LATCHING = (ErrorCode.ESTOP, ErrorCode.DRIVE_FAULT, ErrorCode.WATCHDOG_TIMEOUT)
-
-#: Fault injection for the conformance kit: a robot program that gets one rule of
-#: ``docs/protocols.md`` wrong. ``SimulatedController(..., quirks={"no_heartbeat"})``.
-QUIRKS: dict[str, str] = {
-    "swapped_word_order": "every 32-bit value (limits, joints, pose, table, CRCs) is written and read with its "
-                          "two words in the other order than the link's word_order",
-    "ack_without_seq": "ack_seq is set to 1 (a flag) instead of the command's sequence number",
-    "no_heartbeat": "hb_robot never advances (the program does not run its heartbeat)",
-    "crc_mismatch": "TABLE_STAGE computes the CRC-32 over little-endian f32 bytes instead of big-endian ones, "
-                    "so a correct table is refused with TABLE_CRC_MISMATCH",
-    "done_before_motion": "done_seq is written when a motion starts, not when it has arrived (observable with "
-                          "time_scale > 0)",
-}
-
-
-@dataclass
-class ModbusFault:
-    """Reply with Modbus exception ``code`` to the next ``times`` requests touching ``address``
-    (with function code ``function_code``, or any if None)."""
-
-    address: int
-    function_code: int | None
-    code: int
-    times: int
-
 
 class _Abort(Exception):
     def __init__(self, code: ErrorCode, joint: int = 0):
@@ -111,7 +92,8 @@ class SimulatedController:
                  host: str = "127.0.0.1", port: int = 0, word_order: WordOrder = WordOrder.BIG,
                  time_scale: float = 0.0, heartbeat_period: float = 0.1, watchdog: float = 1.0,
                  max_speed: np.ndarray | None = None, soft_limits: np.ndarray | None = None,
-                 map_version: int = MAP_VERSION, quirks: Iterable[str] = ()):
+                 map_version: int = MAP_VERSION, quirks: Iterable[str] = (), register_base: int = 0,
+                 register_count: int = WINDOW_SIZE, correction_state: int = 0):
         if model is None:
             model = cell.truth.model if cell is not None else load_robot("sr800")
         self.model = model
@@ -143,14 +125,26 @@ class SimulatedController:
                              f"lower < upper, got {self.soft_limits.tolist()}")
         #: the version published in ``map_version`` (another one plays a foreign robot program)
         self.map_version = int(map_version)
-        self._regs = [0] * 65536
+        #: the window it hosts: wire addresses register_base .. register_base + register_count - 1
+        self.register_base, self.register_count = int(register_base), int(register_count)
+        if not 1 <= self.register_count or self.register_base < 0 \
+                or self.register_base + self.register_count > 65536:
+            raise ValueError(f"register window {register_base}+{register_count} outside 0..65535")
+        #: what the program reports in correction_state (CorrectionState)
+        self.correction_state = int(correction_state)
+        # the image by window offset (the map's 128, or more when the window is larger)
+        self._regs = [0] * max(WINDOW_SIZE, self.register_count)
+        self._readonly = [False] * len(self._regs)
+        for r in REGISTERS:
+            if r.access == "r":
+                self._readonly[r.address:r.end] = [True] * r.n_registers
         self._lock = threading.Lock()
         # robot state
         self._q = np.zeros(self.g)
         self._bits = StatusBit.READY | StatusBit.IN_POSITION
         self._last_seq = 0
         self._latched: ErrorCode | None = None
-        self._tables = TableSlots(crc_little_endian="crc_mismatch" in self.quirks)
+        self._tables = TableSlots(crc_little_endian="crc_mismatch" in self.quirks, quirks=self.quirks)
         self._move_task: asyncio.Task | None = None
         self._stop_request = False
         self._hb_robot = 0
@@ -165,6 +159,10 @@ class SimulatedController:
         self._hb_frozen = "no_heartbeat" in self.quirks
         # introspection
         self.command_writes: list[tuple[int, int]] = []  # (code, seq) per write of the command block
+        #: (function code, wire address, count) of every request that reached the program
+        self.requests_log: list[tuple[int, int, int]] = []
+        self._corrupt_next_page = False
+        self._xfer_last = 0
         self.requests = 0
         self.motion_failures = 0  # motions that ended in an internal error (reported DRIVE_FAULT)
         self.failure: BaseException | None = None
@@ -194,32 +192,50 @@ class SimulatedController:
         self._set("map_version", self.map_version)
         self._set("n_joints", self.g)
         self._set("watchdog_ms", int(round(self.watchdog * 1000)))
-        lim = np.zeros(2 * MAX_JOINTS)
-        lim[:2 * self.g] = self.soft_limits.ravel()
-        self._set("soft_limits", lim)
+        self._set("correction_state", self.correction_state)
+        self._set("order_check", ORDER_CHECK_VALUE)
 
     def _publish_state(self) -> None:
         q = np.zeros(MAX_JOINTS)
         q[:self.g] = self._q
         self._set("act_joints", q)
-        T = forward(self.model, self._q[None], setup=False)[0]
-        self._set("act_pose", matrix_to_pose(T))
         self._bits = self._tables.status_bits(self._bits)
         self._set("status", int(self._bits))
         for k, crc in self._tables.crcs().items():
             self._set(f"table_{k}_crc", crc)
 
+    def _info_page(self, number: int) -> list[int] | None:
+        """Info page ``number`` as the program fills it (None: no such page)."""
+        if number == INFO_PAGES["soft_limits"][0]:
+            lim = np.zeros(2 * MAX_JOINTS)
+            lim[:2 * self.g] = self.soft_limits.ravel()
+            return encode(INFO_PAGES["soft_limits"][1], lim, self.word_order)
+        if number == INFO_PAGES["act_pose"][0]:
+            T = forward(self.model, self._q[None], setup=False)[0]
+            return encode(INFO_PAGES["act_pose"][1], matrix_to_pose(T), self.word_order)
+        return None
+
+    def _transfer(self) -> None:
+        """The program's side of a transfer request (caller holds the lock)."""
+        self._xfer_last = int(self._get("xfer_seq"))
+        corrupt, self._corrupt_next_page = self._corrupt_next_page, False
+        serve_transfer(self._regs, self._tables, self.word_order, self._info_page, corrupt)
+
     def _build_device(self) -> SimDevice:
-        blocks = [SimData(r.address, count=r.n_registers, values=0, datatype=DataType.REGISTERS,
-                          readonly=(r.access == "r")) for r in sorted(REGISTERS, key=lambda r: r.address)]
-        return SimDevice(0, simdata=blocks, action=self._action)
+        # one block: the whole window; pymodbus refuses any address outside it with exception 2
+        block = SimData(self.register_base, count=self.register_count, values=0, datatype=DataType.REGISTERS)
+        return SimDevice(0, simdata=[block], action=self._action)
 
     async def _action(self, function_code: int, start_address: int, address: int, count: int,
                       registers: list[int], set_values) -> ExcCodes | None:
         """pymodbus hook: runs on every request before it is served (on the server loop)."""
         self.requests += 1
+        self.requests_log.append((int(function_code), int(address), int(count)))
+        if function_code not in FUNCTION_CODES:
+            return ExcCodes.ILLEGAL_FUNCTION
         if self._latency > 0:
             await asyncio.sleep(self._latency)
+        first = address - self.register_base
         with self._lock:
             for f in self._faults:
                 if (address <= f.address < address + count
@@ -230,19 +246,24 @@ class SimulatedController:
                     return ExcCodes(f.code)
             if set_values:
                 vals = [int(v) for v in set_values]
-                self._regs[address:address + len(vals)] = vals
+                if any(self._readonly[first:first + len(vals)]):
+                    return ExcCodes.ILLEGAL_ADDRESS
+                self._regs[first:first + len(vals)] = vals
                 hb = REG["hb_pc"].address
-                if address <= hb < address + len(vals) and vals[hb - address] != self._hb_pc_last:
-                    self._hb_pc_last = vals[hb - address]
+                if first <= hb < first + len(vals) and vals[hb - first] != self._hb_pc_last:
+                    self._hb_pc_last = vals[hb - first]
                     self._hb_pc_changed = time.monotonic()
+                xs = REG["xfer_seq"].address
+                if first <= xs < first + len(vals) and vals[xs - first] != self._xfer_last:
+                    self._transfer()
                 seq_addr = REG["cmd_seq"].address
-                if address <= seq_addr < address + len(vals):
+                if first <= seq_addr < first + len(vals):
                     self.command_writes.append((int(self._get("cmd_code")), int(self._get("cmd_seq"))))
                     if self._cmd_event is not None:
                         self._cmd_event.set()
             else:
                 off = address - start_address
-                registers[off:off + count] = self._regs[address:address + count]
+                registers[off:off + count] = self._regs[first:first + count]
         return None
 
     # ------------------------------------------------------------------ lifetime
@@ -348,11 +369,16 @@ class SimulatedController:
             raise RuntimeError("could not drop connections")
 
     def corrupt_staging_value(self, index: int, delta: float = 1e-3) -> None:
-        """Change value ``index`` of the staging data area (as a flaky link would)."""
+        """Change value ``index`` of the stored table pages (as a flaky store would): the page
+        keeps its old CRC, so its read-back fails."""
         with self._lock:
-            a = TABLE_DATA_ADDRESS + 2 * int(index)
-            v = decode_f32_array(self._regs[a:a + 2], self.word_order)[0]
-            self._regs[a:a + 2] = encode_f32_array([float(v) + delta], self.word_order)
+            self._tables.corrupt_value(int(index), delta, self.word_order)
+
+    def corrupt_next_page(self) -> None:
+        """The next page written through the transfer block arrives with one bit flipped (its
+        page CRC no longer matches): the program refuses it with PAGE_CRC_MISMATCH."""
+        with self._lock:
+            self._corrupt_next_page = True
 
     # ------------------------------------------------------------------ introspection
     @property
@@ -557,7 +583,7 @@ class SimulatedController:
     def _table_command(self, seq: int, cmd: Command) -> None:
         with self._lock:
             if cmd is Command.TABLE_STAGE:
-                code = self._tables.stage(self._regs, self.word_order, self.g)
+                code = self._tables.stage(self.word_order, self.g)
             else:
                 code = self._tables.switch(cmd)
             self._publish_state()

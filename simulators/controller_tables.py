@@ -1,70 +1,137 @@
 """The simulated robot program's correction tables: staged, active and previous.
 
-Implements the table commands of the handshake (``docs/protocols.md``, section "Correction
-table") on the staging area of the register image, and the correction that the active table
-adds to the nominal inverse kinematics of a Cartesian target. Used by
+Implements the table side of the robot program (``docs/protocols.md``, section "Correction
+table"): the pages written through the transfer block (header page and value pages, each
+checked against its page CRC), the table commands of the handshake on them, and the correction
+that the active table adds to the nominal inverse kinematics of a Cartesian target. Used by
 :class:`simulators.controller_server.SimulatedController`, which holds its lock around every call.
 """
 
 from __future__ import annotations
 
 import zlib
-from typing import Sequence
+from typing import Callable
 
 import numpy as np
 
 from drivers.controller_map import (
-    TABLE_DATA_ADDRESS,
+    MAX_TABLE_VALUES,
+    PAGE_DATA_REGISTERS,
+    REG,
+    TABLE_HEADER_REGISTERS,
+    TABLE_VALUE_SCALE,
     Command,
     ErrorCode,
     StatusBit,
     WordOrder,
-    decode_f32_array,
-    register_span,
+    XferOp,
+    decode,
+    decode_i32_raw,
+    encode,
+    encode_i32_array,
+    raw_crc32,
+    registers_crc32,
 )
-from drivers.correction_table import CorrectionTableData, TableError
+from drivers.correction_table import CorrectionTableData, TableError, n_value_pages
 
-__all__ = ["TableSlots"]
+__all__ = ["TableSlots", "serve_transfer"]
 
-_HDR_FIRST, _HDR_COUNT = register_span("table_format", "table_crc")
+#: value pages the store holds (a table of MAX_TABLE_VALUES values)
+MAX_PAGES = n_value_pages(MAX_TABLE_VALUES)
 
 
 class TableSlots:
     """The three tables of the robot program. Not thread-safe: the caller holds its lock."""
 
-    def __init__(self, crc_little_endian: bool = False) -> None:
-        #: fault injection (quirk ``crc_mismatch``): the CRC over little-endian f32 bytes, which
+    def __init__(self, crc_little_endian: bool = False, quirks: frozenset[str] = frozenset()) -> None:
+        #: fault injection (quirk ``crc_mismatch``): the CRC over little-endian i32 bytes, which
         #: the protocol forbids; False is the documented big-endian rule
         self.crc_little_endian = crc_little_endian
+        #: the table quirks of :data:`simulators.controller_faults.QUIRKS` it plays
+        self.quirks = quirks
+        #: the pages as the PC wrote them: the header page, value page k (data registers)
+        self.header: list[int] | None = None
+        self.pages: dict[int, list[int]] = {}
         self.staged: CorrectionTableData | None = None
         self.active: CorrectionTableData | None = None
         self.previous: CorrectionTableData | None = None
 
-    def stage(self, regs: Sequence[int], word_order: WordOrder, n_joints: int) -> ErrorCode:
-        """TABLE_STAGE: check header and CRC of the staging area in the register image ``regs``
-        and keep it as the staged table."""
-        header = regs[_HDR_FIRST:_HDR_FIRST + _HDR_COUNT]
+    def store(self, header: bool, index: int, data: list[int]) -> ErrorCode:
+        """A page written through the transfer block (its page CRC already checked). A header
+        page starts a new table: the stored value pages are dropped."""
+        if header:
+            if index != 0 or len(data) != TABLE_HEADER_REGISTERS:
+                return ErrorCode.PAGE_INVALID
+            self.header, self.pages = list(data), {}
+            return ErrorCode.NONE
+        if not 0 <= index < MAX_PAGES or not data or len(data) % 2 or len(data) > PAGE_DATA_REGISTERS:
+            return ErrorCode.PAGE_INVALID
+        self.pages[index] = list(data)
+        return ErrorCode.NONE
+
+    def slot_page(self, slot: str, header: bool, index: int, word_order: WordOrder) -> list[int] | None:
+        """Header page or value page ``index`` of the table in ``slot`` (staged, active,
+        previous), as the PC would have sent it; None when the slot is empty or no such page."""
+        table = getattr(self, slot)
+        if table is None:
+            return None
+        if header:
+            return table.header_registers(word_order) if index == 0 else None
+        pages = table.value_pages(word_order)
+        return pages[index] if 0 <= index < len(pages) else None
+
+    def stored(self, header: bool, index: int) -> list[int] | None:
+        """The stored header page, or value page ``index`` (None if there is none)."""
+        if header:
+            return self.header if index == 0 else None
+        return self.pages.get(index)
+
+    def stage(self, word_order: WordOrder, n_joints: int) -> ErrorCode:
+        """TABLE_STAGE: check the stored header, that every value page is there, and the
+        values' CRC-32, and keep the table as the staged one."""
+        if self.header is None:
+            return ErrorCode.TABLE_SHAPE_INVALID
         try:
-            h = CorrectionTableData.decode_header(header, word_order)
+            h = CorrectionTableData.decode_header(self.header, word_order)
         except TableError:
             return ErrorCode.TABLE_SHAPE_INVALID
-        data = regs[TABLE_DATA_ADDRESS:TABLE_DATA_ADDRESS + 2 * h["n_values"]]
-        vals = decode_f32_array(data, word_order)
-        if h["n_joints"] != n_joints or not np.all(np.isfinite(vals)):
+        n_pages = n_value_pages(h["n_values"])
+        if any(k not in self.pages for k in range(n_pages)) or h["n_joints"] != n_joints:
             return ErrorCode.TABLE_SHAPE_INVALID
-        byte_order = "<f4" if self.crc_little_endian else ">f4"
-        if zlib.crc32(vals.astype(byte_order).tobytes()) & 0xFFFFFFFF != h["crc"]:
+        data = [w for k in range(n_pages) for w in self.pages[k]]
+        if len(data) != 2 * h["n_values"]:
+            return ErrorCode.TABLE_SHAPE_INVALID
+        raw = decode_i32_raw(data, word_order)
+        crc = (zlib.crc32(raw.astype("<i4").tobytes()) & 0xFFFFFFFF if self.crc_little_endian
+               else raw_crc32(raw))
+        if crc != h["crc"]:
             return ErrorCode.TABLE_CRC_MISMATCH
         shape = (h["n_configs"], *[a.count for a in h["axes"]], h["n_joints"])
+        vals = (raw.astype(np.float64) * TABLE_VALUE_SCALE).astype(np.float32)
         self.staged = CorrectionTableData(h["axes"], vals.reshape(shape))
         return ErrorCode.NONE
 
+    def corrupt_value(self, index: int, delta: float, word_order: WordOrder) -> None:
+        """Fault injection: value ``index`` of the stored pages changes by ``delta``."""
+        page, at = divmod(index, PAGE_DATA_REGISTERS // 2)
+        data = self.pages[page]
+        raw = int(decode_i32_raw(data[2 * at:2 * at + 2], word_order)[0])
+        data[2 * at:2 * at + 2] = encode_i32_array([raw * TABLE_VALUE_SCALE + delta], TABLE_VALUE_SCALE, word_order)
+
     def switch(self, cmd: Command) -> ErrorCode:
-        """TABLE_ACTIVATE, TABLE_DEACTIVATE or TABLE_ROLLBACK (anything else is a bad command)."""
+        """TABLE_ACTIVATE, TABLE_DEACTIVATE, TABLE_ROLLBACK or TABLE_DISCARD_PREVIOUS (anything
+        else is a bad command); ``docs/robot-program.md`` gives the slot rules."""
         if cmd is Command.TABLE_ACTIVATE:
             if self.staged is None:
                 return ErrorCode.TABLE_NOT_STAGED
-            self.previous, self.active, self.staged = self.active, self.staged, None
+            # activating over none keeps the previous table: the one a deactivation set aside
+            # (the operator's table during "verify before") stays the one a roll back revives
+            if self.active is not None or "activate_drops_previous" in self.quirks:
+                self.previous = self.active
+            self.active, self.staged = self.staged, None
+            return ErrorCode.NONE
+        if cmd is Command.TABLE_DISCARD_PREVIOUS:
+            self.previous = None
             return ErrorCode.NONE
         if cmd is Command.TABLE_DEACTIVATE:
             if self.active is not None:
@@ -99,3 +166,59 @@ class TableSlots:
         cfg = 0 if (elbow == 1 or table.n_configs == 1) else 1
         point = np.array([pose[0], pose[1], pose[2], pose[5]])[:len(table.axes)]
         return q + table.interpolate(point, cfg)
+
+
+_SLOT_READS = {XferOp.READ_STAGED_HEADER: ("staged", True), XferOp.READ_STAGED_PAGE: ("staged", False),
+               XferOp.READ_ACTIVE_HEADER: ("active", True), XferOp.READ_ACTIVE_PAGE: ("active", False),
+               XferOp.READ_PREVIOUS_HEADER: ("previous", True), XferOp.READ_PREVIOUS_PAGE: ("previous", False)}
+_READS = {XferOp.READ_HEADER, XferOp.READ_PAGE, XferOp.READ_INFO, *_SLOT_READS}
+
+
+def serve_transfer(regs: list[int], tables: TableSlots, word_order: WordOrder,
+                   info_page: Callable[[int], list[int] | None], corrupt: bool = False) -> None:
+    """Carry out the transfer request in the register image ``regs`` (by window offset): store
+    a written page after checking its length and page CRC, or fill the page fields with a stored
+    page or info page; then answer in ``xfer_error`` and ``xfer_ack``. ``corrupt``: the page
+    arrived with one bit flipped (fault injection)."""
+
+    def get(name: str) -> int:
+        r = REG[name]
+        return int(decode(r, regs[r.address:r.end], word_order))
+
+    def put(name: str, value: int) -> None:
+        r = REG[name]
+        regs[r.address:r.end] = encode(r, value, word_order)
+
+    op, index, n = get("xfer_op"), get("page_index"), get("page_len")
+    a = REG["page_data"].address
+    error = ErrorCode.NONE
+    if op in (XferOp.WRITE_HEADER, XferOp.WRITE_PAGE):
+        data = regs[a:a + min(n, PAGE_DATA_REGISTERS)]
+        if corrupt and data:
+            data = [data[0] ^ 0x0001, *data[1:]]
+        if n > PAGE_DATA_REGISTERS:
+            error = ErrorCode.PAGE_INVALID
+        elif registers_crc32(data) != get("page_crc") and "page_crc_ignored" not in tables.quirks:
+            error = ErrorCode.PAGE_CRC_MISMATCH
+        else:
+            error = tables.store(op == XferOp.WRITE_HEADER, index, data)
+    elif op in _SLOT_READS and "no_slot_reads" in tables.quirks:
+        error = ErrorCode.PAGE_INVALID
+    elif op in _READS:
+        if op == XferOp.READ_INFO:
+            page = info_page(index)
+        elif op in (XferOp.READ_HEADER, XferOp.READ_PAGE):
+            page = tables.stored(op == XferOp.READ_HEADER, index)
+        else:
+            slot, header = _SLOT_READS[XferOp(op)]
+            page = tables.slot_page(slot, header, index, word_order)
+        if page is None:
+            error = ErrorCode.PAGE_INVALID
+        else:
+            regs[a:a + PAGE_DATA_REGISTERS] = list(page) + [0] * (PAGE_DATA_REGISTERS - len(page))
+            put("page_len", len(page))
+            put("page_crc", registers_crc32(page))
+    else:
+        error = ErrorCode.PAGE_INVALID
+    put("xfer_error", int(error))
+    put("xfer_ack", get("xfer_seq"))

@@ -199,7 +199,11 @@ def station_config_text(cfg: Any, servers: SimulatedCellServers, seed: int, sour
     devices = dict(data.get("devices", {}))
     devices["probe_head"] = servers.probe_port
     devices["controller"] = f"{servers.controller_host}:{servers.controller_port}"
+    # the simulated unit speaks the file's dialect at the file's line settings, and the simulated
+    # robot program hosts the file's register window: only the endpoints change
     devices["probe_timeout_s"] = max(float(cfg.devices.probe_timeout_s), SIMULATOR_PROBE_TIMEOUT_S)
+    if instant and servers.probe_refresh_s is not None:  # the simulated unit refreshes on every request
+        devices["probe_refresh_ms"] = 1000.0 * servers.probe_refresh_s
     data["devices"] = devices
     data["simulation"] = {**data.get("simulation", {}), "seed": int(seed)}
     if instant:
@@ -248,7 +252,12 @@ def simulate_config(cfg: Any, seed: int | None = None, source: str | Path | None
     cell = simulated_cell_for(cfg, seed)
     d = cfg.devices
     drift = _drift(_settings(cfg))
+    settings = _settings(cfg)
     servers = start_simulated_cell(seed=seed, time_scale=time_scale, pace=pace, baudrate=d.baudrate, host=host,
+                                   probe_protocol=d.probe_protocol, probe_bytesize=d.probe_bytesize,
+                                   probe_parity=d.probe_parity, register_base=d.controller_register_base,
+                                   register_count=int(settings.get("controller_register_count") or 128),
+                                   correction_state=int(settings.get("controller_correction_state") or 0),
                                    port=port, word_order=WordOrder(d.word_order), cell=cell,
                                    ready_timeout=ready_timeout, soft_limits=np.asarray(cfg.soft_limits, dtype=float),
                                    **drift)
@@ -257,7 +266,9 @@ def simulate_config(cfg: Any, seed: int | None = None, source: str | Path | None
         text = station_config_text(cfg, servers, seed, source, instant=instant)
         devices = dataclasses.replace(d, probe_head=servers.probe_port, controller_host=servers.controller_host,
                                       controller_port=servers.controller_port,
-                                      probe_timeout_s=max(float(d.probe_timeout_s), SIMULATOR_PROBE_TIMEOUT_S))
+                                      probe_timeout_s=max(float(d.probe_timeout_s), SIMULATOR_PROBE_TIMEOUT_S),
+                                      probe_refresh_s=(servers.probe_refresh_s if instant and
+                                                       servers.probe_refresh_s is not None else d.probe_refresh_s))
         plan = dataclasses.replace(cfg.plan, settle_s=0.0) if instant else cfg.plan
         station_cfg = dataclasses.replace(cfg, devices=devices, plan=plan, source_text=text, simulated_seed=seed)
     except BaseException:

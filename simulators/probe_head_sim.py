@@ -3,9 +3,15 @@
 * :class:`ProbeHeadPhysics` turns the true cube pose into readings: exact geometry from
   :mod:`station.core.probe_geometry`, Gaussian noise per probe (default σ 0.5 µm), quantised to the
   protocol's 0.1 µm, markers where a probe misses or leaves its stroke.
-* :class:`ProbeHeadServer` speaks the protocol of :mod:`drivers.probe_protocol` on a
-  pseudo-terminal; ``.port`` is the slave device path for ``serial.serial_for_url``. Replies are
-  paced at the configured baud rate (10 bits per byte) so throughput is realistic.
+* :class:`ProbeHeadServer` speaks one dialect of :mod:`drivers.probe_dialects` on a
+  pseudo-terminal (``protocol``: station-ascii, the default; keyence-dl-rs1a; mitutoyo-ga, the
+  units of :mod:`simulators.probe_dialect_units`); ``.port`` is the slave device path for
+  ``serial.serial_for_url``. Replies are paced at the unit's baud rate (start + data + parity +
+  stop bits per byte) so throughput is realistic. The unit has its own line settings
+  (``baudrate``, ``bytesize``, ``parity``; None: the dialect's factory default); where the pty
+  exposes the station's settings (termios of the slave: the baud rate on Linux, whose ptys force
+  CS8 and clear PARENB; the data bits and parity where they are kept) a station whose settings
+  differ gets garbled replies, as from a real unit at the wrong baud rate.
   :class:`ProbeHeadTcpServer` serves the same unit on ``socket://127.0.0.1:<port>``.
 * :class:`ProbeFaults` scripts faults at run time: one-shot garble / truncate / drop / busy /
   delay, added latency, a per-channel forced marker, unsolicited frames (before the next reply);
@@ -21,6 +27,7 @@ import math
 import os
 import select
 import socket
+import termios
 import threading
 import time
 import tty
@@ -28,19 +35,12 @@ from typing import Callable
 
 import numpy as np
 
+from drivers.probe_dialects import check_line_settings, get_dialect
 from drivers.probe_protocol import (
-    ERR_BUSY,
-    ERR_NO_CHANNEL,
-    ERR_NOT_MEASURING,
-    ERR_OUT_OF_RANGE,
     MAX_REQUEST_BYTES,
-    VALUE_LIMIT_MM,
     ChannelStatus,
-    ProbeDeviceError,
-    format_error,
-    format_reply,
-    parse_request,
 )
+from simulators.probe_dialect_units import KeyenceUnit, MitutoyoUnit, StationUnit
 from station.core.probe_geometry import ProbeHeadGeometry, default_probe_head, readings_from_pose
 
 __all__ = ["ProbeHeadPhysics", "FaultKind", "ProbeFaults", "ProbeHeadServer",
@@ -230,69 +230,25 @@ class ProbeFaults:
             return dict(self._forced)
 
 
-class _Unit:
-    """Protocol state of the unit: offsets (zero/preset) and request handling. No I/O."""
+def _garble(reply: bytes) -> bytes:
+    """What a receiver at another baud rate or framing makes of ``reply``: every byte a
+    different one with the top bit set, the CR LF included (so no line ever ends)."""
+    return bytes(((b * 37 + 0x5B) & 0x7F) | 0x80 for b in reply)
 
-    def __init__(self, source: Callable[[], np.ndarray], n_channels: int, model: str,
-                 firmware: str, faults: ProbeFaults) -> None:
-        self.source = source
-        self.n = n_channels
-        self.model = model
-        self.firmware = firmware
-        self.faults = faults
-        self.offsets = np.zeros(n_channels)
-        self.requests = 0
 
-    def _raw(self) -> np.ndarray:
-        values = np.asarray(self.source(), dtype=float)
-        if values.shape != (self.n,):
-            raise ValueError(f"snapshot_source returned shape {values.shape}, expected ({self.n},)")
-        for ch, status in self.faults._forced_now().items():
-            if ch < self.n:
-                values = values.copy()
-                values[ch] = _STATUS_VALUE[status]
-        return values
-
-    def _displayed(self) -> np.ndarray:
-        return self._raw() - self.offsets  # inf/NaN stay markers
-
-    def handle(self, line: bytes) -> bytes:
-        """Reply (CR LF terminated) to one request line without its terminator."""
-        self.requests += 1
-        try:
-            req = parse_request(line)
-            return self._execute(req.name, req.args)
-        except ProbeDeviceError as exc:
-            return format_error(exc.command, exc.code)
-
-    def _check(self, name: str, ch: int) -> None:
-        if ch >= self.n:
-            raise ProbeDeviceError(name, ERR_NO_CHANNEL)
-
-    def _execute(self, name: str, args: tuple) -> bytes:
-        if name == "M0":
-            return format_reply("M0", *self._displayed())
-        if name == "MS":
-            self._check(name, args[0])
-            return format_reply("MS", args[0], self._displayed()[args[0]])
-        if name == "ID":
-            return format_reply("ID", self.model, self.firmware, self.n)
-        ch = args[0]
-        self._check(name, ch)
-        if name == "ZC":
-            self.offsets[ch] = 0.0
-            return format_reply("ZC", ch)
-        raw = self._raw()[ch]
-        if not math.isfinite(raw):
-            raise ProbeDeviceError(name, ERR_NOT_MEASURING)
-        if name == "ZS":
-            self.offsets[ch] = raw
-            return format_reply("ZS", ch)
-        # PS: the present reading becomes the preset value
-        if abs(args[1]) > VALUE_LIMIT_MM:
-            raise ProbeDeviceError(name, ERR_OUT_OF_RANGE)
-        self.offsets[ch] = raw - args[1]
-        return format_reply("PS", ch, args[1])
+def _termios_exposure(fd: int) -> tuple[bool, bool]:
+    """Whether this pty keeps CSIZE and PARENB as set (Linux forces CS8, clears PARENB)."""
+    attrs = termios.tcgetattr(fd)
+    trial = list(attrs)
+    trial[2] = (attrs[2] & ~termios.CSIZE) | termios.CS7 | termios.PARENB
+    try:
+        termios.tcsetattr(fd, termios.TCSANOW, trial)
+        back = termios.tcgetattr(fd)[2]
+    except termios.error:  # a pty that refuses the framing outright exposes none of it
+        return False, False
+    finally:
+        termios.tcsetattr(fd, termios.TCSANOW, attrs)
+    return (back & termios.CSIZE) == termios.CS7, bool(back & termios.PARENB)
 
 
 def _split_lines(buf: bytearray) -> list[bytes]:
@@ -319,22 +275,41 @@ class ProbeHeadServer:
     range, -inf under range, NaN invalid); it is called once per request that needs readings,
     so an ``M0`` reply is one consistent snapshot (``n_channels=None``: called once here to
     count them). ``pace``: hold replies to the time the bytes would take at ``baudrate``
-    (10 bits per byte), including the request's own transfer.
+    (start + data + parity + stop bits per byte), including the request's own transfer.
+    ``protocol``: the dialect the unit speaks; ``baudrate`` / ``bytesize`` / ``parity``: the
+    unit's own line settings (None: the dialect's factory default; station-ascii 38400 8N1,
+    keyence-dl-rs1a 9600 8N1). ``refresh_s`` / ``writable``: the DL-RS1A's buffer refresh and
+    read/write switch. ``garble_on_mismatch``: garble replies when the pty shows other settings.
     """
 
     def __init__(self, snapshot_source: Callable[[], np.ndarray], n_channels: int | None = None,
-                 baudrate: int = 38400, pace: bool = True, model: str = "SIM-PH6",
-                 firmware: str = "1.0.0", faults: ProbeFaults | None = None) -> None:
+                 baudrate: int | None = None, pace: bool = True, model: str = "SIM-PH6",
+                 firmware: str = "1.0.0", faults: ProbeFaults | None = None, *, protocol: str = "station-ascii",
+                 bytesize: int | None = None, parity: str | None = None, refresh_s: float = 0.02,
+                 writable: bool = False, garble_on_mismatch: bool = True) -> None:
         if n_channels is None:
             n_channels = len(np.asarray(snapshot_source()))
         self.faults = faults if faults is not None else ProbeFaults()
-        self.unit = _Unit(snapshot_source, n_channels, model, firmware, self.faults)
+        self.dialect = get_dialect(protocol)
+        self.line = check_line_settings(self.dialect, baudrate, bytesize, parity)
+        self.unit: StationUnit | KeyenceUnit | MitutoyoUnit
+        if self.dialect.name == "keyence-dl-rs1a":
+            self.unit = KeyenceUnit(snapshot_source, n_channels, self.faults, refresh_s=refresh_s, writable=writable)
+        elif self.dialect.name == "mitutoyo-ga":
+            self.unit = MitutoyoUnit(snapshot_source, n_channels, self.faults)
+        else:
+            self.unit = StationUnit(snapshot_source, n_channels, model, firmware, self.faults)
+        baudrate = self.line.baudrate
         self.baudrate = baudrate
         self.pace = pace
+        self.garble_on_mismatch = garble_on_mismatch
+        #: replies garbled because the station's line settings differed from the unit's
+        self.garbled_replies = 0
+        self._exposes = (False, False)  # (data bits, parity) visible in the pty's termios
         self.failure: BaseException | None = None
         #: requests fully answered (or deliberately dropped); tests wait on it
         self.requests_done = 0
-        self._byte_s = 10.0 / baudrate
+        self._byte_s = self.line.bits_per_byte / baudrate
         self._stop = threading.Event()
         self._ready = threading.Event()
         self._thread: threading.Thread | None = None
@@ -352,6 +327,7 @@ class ProbeHeadServer:
         master, slave = os.openpty()
         # Raw mode: no echo, no CR/LF translation - the bytes are the protocol.
         tty.setraw(slave)
+        self._exposes = _termios_exposure(slave)
         # Keep our slave fd open so the master does not see EIO whenever the driver closes
         # its port; the pty only dies when disconnect()/stop() closes the master.
         self._slave = slave
@@ -361,6 +337,26 @@ class ProbeHeadServer:
 
     def _wait_client(self) -> bool:
         return True  # a pty is always "connected"
+
+    def _line_differs(self) -> bool:
+        """The station's settings as the pty shows them differ from the unit's own."""
+        slave = getattr(self, "_slave", -1)
+        if not self.garble_on_mismatch or slave is None or slave < 0:
+            return False
+        try:
+            attrs = termios.tcgetattr(slave)
+        except termios.error:
+            return False
+        expected = getattr(termios, f"B{self.line.baudrate}", None)
+        if expected is not None and attrs[5] != expected:
+            return True
+        cflag = attrs[2]
+        if self._exposes[0] and (cflag & termios.CSIZE) != (termios.CS7 if self.line.bytesize == 7 else termios.CS8):
+            return True
+        if self._exposes[1]:
+            shown = "none" if not cflag & termios.PARENB else "odd" if cflag & termios.PARODD else "even"
+            return shown != self.line.parity
+        return False
 
     def _close(self) -> None:
         for fd in (self._fd, getattr(self, "_slave", -1)):
@@ -460,7 +456,7 @@ class ProbeHeadServer:
         self._send(bytes(frame))
         self.unsolicited_sent += 1
 
-    def _reply(self, reply: bytes, line: bytes) -> None:
+    def _reply(self, reply: bytes | None, line: bytes) -> None:
         fault, arg = self.faults._next()
         if fault is FaultKind.DELAY and isinstance(arg, float):
             self._stop.wait(arg)
@@ -468,9 +464,11 @@ class ProbeHeadServer:
             self._send(arg)
             self.unsolicited_sent += 1
         elif fault is FaultKind.BUSY:
-            name = line[:2].decode("ascii", "replace") if line[:2].isalnum() else "??"
-            reply = format_error(name, ERR_BUSY)
-        elif fault is FaultKind.DROP:
+            reply = self.unit.busy_reply(line)
+        if reply is None:  # a unit that stays silent (no such indicator, busy without a reply)
+            self.requests_done += 1
+            return
+        if fault is FaultKind.DROP:
             self.requests_done += 1
             return
         elif fault is FaultKind.TRUNCATE:
@@ -479,6 +477,9 @@ class ProbeHeadServer:
             b = bytearray(reply)
             b[3] |= 0x80  # the first field starts at index 3 in every reply
             reply = bytes(b)
+        if self._line_differs():
+            reply = _garble(reply)
+            self.garbled_replies += 1
         if self.faults.latency_s > 0:
             self._stop.wait(self.faults.latency_s)
         self._send(reply)

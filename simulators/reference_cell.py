@@ -37,6 +37,26 @@ class CellEndpoints(Protocol):
     def controller_port(self) -> int: ...
 
 
+def devices_toml(servers: CellEndpoints) -> str:
+    """The ``[devices]`` lines that reach running simulators: endpoints, the simulated probe
+    unit's dialect and line settings (and, where it buffers, its refresh time), the simulated
+    robot program's register base. Servers that do not say (a test's stand-in) get the built-in
+    cell's: a DL-RS1A at its factory 9600 8N1, the window at 0."""
+    probe = getattr(servers, "probe_server", None)
+    line = getattr(probe, "line", None)
+    dialect = getattr(getattr(probe, "dialect", None), "name", "keyence-dl-rs1a")
+    refresh = getattr(getattr(probe, "unit", None), "refresh_s", None)
+    base = getattr(getattr(servers, "controller_server", None), "register_base", 0)
+    out = [f'probe_head = "{servers.probe_port}"', f'probe_protocol = "{dialect}"']
+    if line is not None:
+        out += [f"baudrate = {line.baudrate}", f"probe_bytesize = {line.bytesize}", f'probe_parity = "{line.parity}"']
+    if refresh is not None:
+        out.append(f"probe_refresh_ms = {1000.0 * refresh!r}")
+    out += [f'controller = "{servers.controller_host}:{servers.controller_port}"',
+            f"controller_register_base = {int(base)}"]
+    return "\n".join(out) + "\n"
+
+
 def body_and_devices_toml(servers: CellEndpoints, word_order_line: str = "") -> str:
     """The ``[body]`` (the simulated body's CMM report: its nominal corner frames, named
     ``C<cube>.<a-d>``) and ``[devices]`` (the simulators' endpoints) tables of a simulated cell."""
@@ -53,10 +73,7 @@ points = [
 ]
 
 [devices]
-probe_head = "{servers.probe_port}"
-baudrate = 38400
-controller = "{servers.controller_host}:{servers.controller_port}"
-{word_order_line}motion_timeout_s = 30.0
+{devices_toml(servers)}{word_order_line}motion_timeout_s = 30.0
 # The simulators share the CPU with the station (and, in CI, with the tests): a loaded machine
 # must not turn into probe timeouts, whose retries make a run stop reproducing.
 probe_timeout_s = 2.0

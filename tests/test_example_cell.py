@@ -84,8 +84,9 @@ def test_a_head_wired_to_channels_the_interface_lacks_is_refused_before_anything
 
     cfg = load_config(CELL)
     cell = simulated_cell_for(cfg, 1)
-    with start_simulated_cell(cell=cell, word_order=WordOrder.LITTLE) as sim:
-        six = ProbeHeadServer(snapshot_source=lambda: cell.probe_values()[:6], n_channels=6).start()
+    with start_simulated_cell(cell=cell, word_order=WordOrder.LITTLE, register_base=128) as sim:
+        six = ProbeHeadServer(snapshot_source=lambda: cell.probe_values()[:6], n_channels=6,
+                              protocol="keyence-dl-rs1a").start()
         try:
             text = CELL.read_text().replace('probe_head = "/dev/ttyUSB0"', f'probe_head = "{six.port}"').replace(
                 'controller = "127.0.0.1:502"', f'controller = "{sim.controller_host}:{sim.controller_port}"')

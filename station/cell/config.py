@@ -97,7 +97,7 @@ MAX_CONFIG_BYTES = 4 * 1024 * 1024
 @dataclass(frozen=True)
 class DeviceConfig:
     probe_head: str
-    baudrate: int
+    baudrate: int  # checked against the dialect's unit; the factory default when the file gives none
     probe_timeout_s: float
     controller_host: str
     controller_port: int
@@ -105,6 +105,11 @@ class DeviceConfig:
     word_order: str
     controller_timeout_s: float
     motion_timeout_s: float
+    probe_protocol: str = "keyence-dl-rs1a"
+    probe_bytesize: int = 8
+    probe_parity: str = "none"
+    controller_register_base: int = 0
+    probe_refresh_s: float | None = None  # None: the dialect's
 
 
 @dataclass(frozen=True)
@@ -401,6 +406,18 @@ def _tools(tools: list[_Tool], corr: CorrectionConfig, elbows: tuple[int, ...], 
     return tuple(out)
 
 
+def _probe_line(d: Any, source: str) -> Any:
+    """The probe port's line settings: the file's, each absent one the dialect's factory default,
+    refused (naming what the unit offers) where the dialect's unit does not offer them."""
+    from drivers.probe_dialects import check_line_settings
+    from drivers.probe_protocol import ProbeConfigError
+
+    try:
+        return check_line_settings(d.probe_protocol, d.baudrate, d.probe_bytesize, d.probe_parity)
+    except ProbeConfigError as exc:
+        raise ConfigError(f"{source}: [devices]: {exc}") from None
+
+
 def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellConfig:
     """A validated :class:`CellConfig` from parsed TOML; :class:`ConfigError` names the key."""
     if not isinstance(data, dict):
@@ -413,10 +430,14 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
 
     d = f.devices
     host, _, port = d.controller.rpartition(":")
+    line = _probe_line(d, source)
     devices = DeviceConfig(
-        probe_head=d.probe_head, baudrate=d.baudrate, probe_timeout_s=d.probe_timeout_s,
+        probe_head=d.probe_head, baudrate=line.baudrate, probe_timeout_s=d.probe_timeout_s,
         controller_host=host, controller_port=int(port), device_id=d.device_id, word_order=d.word_order,
-        controller_timeout_s=d.controller_timeout_s, motion_timeout_s=d.motion_timeout_s)
+        controller_timeout_s=d.controller_timeout_s, motion_timeout_s=d.motion_timeout_s,
+        probe_protocol=d.probe_protocol, probe_bytesize=line.bytesize, probe_parity=line.parity,
+        controller_register_base=d.controller_register_base,
+        probe_refresh_s=None if d.probe_refresh_ms is None else d.probe_refresh_ms / 1000.0)
     p = f.plan
     plan = PlanConfig(
         elbows=tuple(p.elbows), approach_deg=p.approach_deg, approach_mm=p.approach_mm,

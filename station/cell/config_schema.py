@@ -111,9 +111,23 @@ _CONTROLLER = re.compile(r"^([^\s:][^\s]*):([0-9]{1,5})$")
 
 class _Devices(_Section):
     probe_head: PathText = Field("/dev/ttyUSB0", description="serial device, or socket://host:port, rfc2217://host:port")
-    baudrate: Literal[9600, 19200, 38400, 57600, 115200] = Field(
-        38400, description="the rate set on the probe unit: 9600, 19200, 38400, 57600 or 115200")
+    # the probe interface's dialect (drivers/probe_dialects): its commands, replies and the line
+    # settings its unit offers; the line settings below are checked against it before anything opens
+    probe_protocol: Literal["keyence-dl-rs1a", "station-ascii", "mitutoyo-ga"] = Field(
+        "keyence-dl-rs1a", description='"keyence-dl-rs1a" (Keyence DL-RS1A with GT2 amplifiers), "mitutoyo-ga" '
+        '(Mitutoyo RS-232C indicators, GA requests) or "station-ascii" (a custom interface speaking the station\'s own)')
+    baudrate: Literal[2400, 4800, 9600, 19200, 38400, 57600, 115200] | None = Field(
+        None, description="the rate set on the probe unit (2400 … 115200 as its dialect allows; "
+        "absent: the unit's factory default, 9600 for the DL-RS1A)")
+    probe_bytesize: Literal[7, 8] | None = Field(None, description="data bits set on the probe unit, 7 or 8 "
+                                                 "(absent: the unit's factory default)")
+    probe_parity: Literal["none", "even", "odd"] | None = Field(
+        None, description='parity set on the probe unit: "none", "even" or "odd" (absent: the factory default)')
     probe_timeout_s: float = _num(0.5, ge=0.01, le=60.0, what="seconds to wait for a probe reply")
+    # a DL-RS1A answers from a buffer it refreshes every ~7 ms (one amplifier) to ~50 ms (ten),
+    # behind each amplifier's response-time filter: a reading is taken as two replies this far apart
+    probe_refresh_ms: float | None = _num(None, ge=0.0, le=10000.0, what="the probe unit's buffer refresh "
+                                          "time [ms] (absent: the dialect's, 50 ms for a DL-RS1A)")
     controller: str = Field("127.0.0.1:502", max_length=300,
                             description='Modbus TCP host:port, e.g. "192.168.0.10:502" (port 1 … 65535)')
     device_id: int = _num(1, ge=0, le=255, what="Modbus unit id of the controller")
@@ -121,6 +135,10 @@ class _Devices(_Section):
         "big", description='"big" or "little" (how the controller orders 32-bit words)')
     controller_timeout_s: float = _num(1.0, ge=0.01, le=60.0, what="seconds to wait for a controller reply")
     motion_timeout_s: float = _num(60.0, ge=1.0, le=600.0, what="seconds one motion may take")
+    # the robot program's register window (docs/robot-program.md): 0, or 128 for the general-purpose
+    # registers of a Universal Robots controller
+    controller_register_base: int = _num(0, ge=0, le=65535 - 128, what="first holding register of the robot "
+                                         "program's 128-register window")
 
     @field_validator("controller")
     @classmethod
@@ -183,6 +201,13 @@ class _Simulation(_Section):
     holds the same numbers): a realistic SCARA of the 800 mm class and a CMM-measured body."""
 
     seed: int = _num(None, ge=0, le=2**32 - 1, what="seed of the simulated cell")
+    # the simulated robot program's register window (docs/robot-program.md): every address outside
+    # [devices] controller_register_base + 0 … count-1 is refused with Modbus exception 2
+    controller_register_count: int = _num(128, ge=1, le=65536, what="holding registers the simulated "
+                                          "controller hosts from [devices] controller_register_base")
+    # what the simulated program reports in correction_state: 0 none, 1 the vendor's correction, 2 unknown
+    controller_correction_state: int = _num(0, ge=0, le=2, what="the simulated controller's own correction "
+                                            "state (0 none, 1 vendor correction on, 2 unknown)")
     # the true errors of the simulated robot (seeded; σ of a normal distribution each)
     length_sigma_um: float = _num(40.0, ge=0.0, le=5000.0,
                                   what="σ of the true errors of the robot's lengths (arms, head) [µm]")

@@ -44,13 +44,17 @@ default_sigma_angle_arcsec = 0.0 # 0 … 3600
 
 [devices]
 probe_head = "/dev/ttyUSB0"      # serial device, or socket://host:port, rfc2217://host:port
-baudrate = 38400                 # 9600, 19200, 38400, 57600 or 115200
+probe_protocol = "keyence-dl-rs1a"  # the interface's dialect: "keyence-dl-rs1a", "mitutoyo-ga" or "station-ascii"
+baudrate = 9600                  # as set on the unit; the DL-RS1A offers 2400 … 38400 (factory 9600)
+probe_bytesize = 8               # data bits set on the unit: 7 or 8 (DL-RS1A factory 8)
+probe_parity = "none"            # "none", "even" or "odd" (DL-RS1A factory none; 1 stop bit)
 probe_timeout_s = 0.5            # 0.01 … 60
 controller = "192.168.0.10:502"  # Modbus TCP host:port
 device_id = 1                    # Modbus unit id, 0 … 255
 word_order = "big"               # 32-bit word order of the controller: "big" or "little"
 controller_timeout_s = 1.0       # 0.01 … 60
 motion_timeout_s = 60.0          # longest single motion [s], 1 … 600
+controller_register_base = 0     # first register of the robot program's 128-register window, 0 … 65407 (UR: 128)
 
 [plan]
 elbows = [1, -1]                 # elbow configurations to measure every point in: [1, -1] or [1]

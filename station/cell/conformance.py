@@ -14,8 +14,10 @@ controller's soft limits. The one exception is the soft-limit probe: its target 
 soft limit by design, so it is checked by a guard on the park zone alone; it is only sent when
 that limit lies inside the park zone (a joint parked within ``test_move`` of its limit), so even a
 program that wrongly accepted it would stay in the park zone, and it is sent at the lowest speed
-and stopped at once if the controller starts moving. Tables: the kit's test tables are removed
-again and the controller's active table restored (checked by CRC).
+and stopped at once if the controller starts moving. Tables: before its first command the kit
+reads the three table slots (CRC-32 and data, through the slot reads); afterwards it rebuilds them
+exactly as found and compares the CRCs (:mod:`station.cell.conformance_slots`). A table it cannot
+read back makes it change no slot at all.
 
 The driver (:class:`drivers.controller.ModbusController`) does every register transfer; the
 kit uses a subclass that can also send what a conforming station never sends (a wrong sequence
@@ -39,6 +41,7 @@ from station.cell.conformance_report import (
     ConformanceReport,
     Requirement,
 )
+from station.cell.conformance_slots import _SlotKeeper
 from station.cell.conformance_table import _TableChecks
 from station.errors import ConfigError
 
@@ -48,7 +51,7 @@ from station.errors import ConfigError
 __all__ = ["REQUIREMENTS", "Requirement", "ConformanceReport", "run_conformance", "PASSED", "FAILED", "NOT_CHECKED"]
 
 
-class _Kit(_HandshakeChecks, _TableChecks):
+class _Kit(_HandshakeChecks, _TableChecks, _SlotKeeper):
     """The kit: every check of the requirements, run in report order."""
 
     # -- the run -----------------------------------------------------------------------------
@@ -63,15 +66,7 @@ class _Kit(_HandshakeChecks, _TableChecks):
             self.req[rid].failed(f"{type(exc).__name__}: {exc}",
                                  "serve every register of the map (docs/robot-program.md) as documented")
 
-    def run(self) -> None:
-        self.emit("identification and word order")
-        if not self.identification():
-            for rq in self.req.values():
-                if rq.status == NOT_CHECKED and not rq.detail:
-                    rq.not_checked("identification failed", "fix the identification registers first")
-            return
-        self.emit("heartbeats")
-        self._step("heartbeat", self.heartbeat)
+    def _checks(self) -> None:
         self.prepare_motion()
         if self.may_move:
             self.emit("sequence numbers")
@@ -86,9 +81,41 @@ class _Kit(_HandshakeChecks, _TableChecks):
                 self.req[rid].not_checked(self.why_not_move, self.why_not_move.rpartition(": ")[2])
         self.emit("error codes")
         self._step("error_codes", self.error_codes)
+        self.emit("table pages")
+        self._step("pages", self.pages)
         self.emit("correction table")
         self._step("table", self.table)
+        self.emit("table slot rules")
+        self._step("activation", self.switching)
+
+    def run(self) -> None:
+        self.emit("identification and word order")
+        try:
+            identified = self.identification()
+        except ControllerConnectionError:
+            raise
+        except ControllerError as exc:  # a window too small for the map, a refused info page
+            self.req["identification"].failed(f"{type(exc).__name__}: {exc}", "serve the map's 128-register window "
+                                              "at [devices].controller_register_base (docs/robot-program.md)")
+            identified = False
+        if not identified:
+            for rq in self.req.values():
+                if rq.status == NOT_CHECKED and not rq.detail:
+                    rq.not_checked("identification failed", "fix the identification registers first")
+            return
+        self.emit("heartbeats")
+        self._step("heartbeat", self.heartbeat)
+        self.emit("table slots as found")  # before the first command: nothing has changed them yet
+        self._step("slot_reads", self.read_slots)
+        try:
+            self._checks()
+        finally:
+            self.emit("table slots put back")
+            self._step("slots_restored", self.restore_slots)
         self.judge_ack()
+        for rq in self.req.values():  # never a bare "not checked"
+            if rq.status == NOT_CHECKED and not rq.detail:
+                rq.not_checked("the steps it needs did not run (see the requirements before it)")
 
 
 def run_conformance(cfg: CellConfig, emit: Callable[[str], None] | None = None) -> ConformanceReport:
@@ -103,7 +130,8 @@ def run_conformance(cfg: CellConfig, emit: Callable[[str], None] | None = None) 
     d = cfg.devices
     order = WordOrder.BIG if d.word_order == "big" else WordOrder.LITTLE
     link = _Link(d.controller_host, d.controller_port, device_id=d.device_id, word_order=order,
-                 timeout=d.controller_timeout_s, heartbeat_period=0.2, link_timeout=3600.0)
+                 timeout=d.controller_timeout_s, register_base=d.controller_register_base, heartbeat_period=0.2,
+                 link_timeout=3600.0)
     kit = _Kit(cfg, conf, link, emit or (lambda _m: None))
     try:
         kit.run()

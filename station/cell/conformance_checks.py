@@ -11,9 +11,13 @@ import time
 import numpy as np
 
 from drivers.controller_map import (
+    INFO_PAGES,
+    ORDER_CHECK_VALUE,
     REG,
     SUPPORTED_MAP_VERSIONS,
     Command,
+    ControllerError,
+    CorrectionState,
     ErrorCode,
     WordOrder,
     decode,
@@ -29,56 +33,80 @@ _HEARTBEAT_WINDOW = 1.5  # seconds to watch the heartbeats
 class _HandshakeChecks(_KitBase):
     # -- the checks --------------------------------------------------------------------------
     def identification(self) -> bool:
-        """Map version, joints, watchdog and soft limits; the word order from the soft limits.
-        False when nothing else can be checked."""
+        """Map version, joints, watchdog, the word order from ``order_check``, and the soft limits
+        from info page 0. False when nothing else can be checked."""
         r, w = self.req["identification"], self.req["word_order"]
         link = self.link
         link.open_socket()
-        version = int(decode("map_version", link.read_registers(REG["map_version"].address, 1)))
+        ident = link.read_registers(0, REG["order_check"].end)
+
+        def field(name: str, order: WordOrder = link.word_order) -> int:
+            reg = REG[name]
+            return int(decode(reg, ident[reg.address:reg.end], order))
+
+        version = field("map_version")
         if version not in SUPPORTED_MAP_VERSIONS:
-            r.failed(f"map_version reads {version}", f"publish map_version = {SUPPORTED_MAP_VERSIONS[0]} (the "
-                     f"register map this station speaks) and implement that map")
+            r.failed(f"map_version reads {version} at register {link.register_base + REG['map_version'].address}",
+                     f"publish map_version = {SUPPORTED_MAP_VERSIONS[0]} (the register map this station speaks) and "
+                     f"implement that map, or set [devices].controller_register_base to where its window starts")
             return False
-        g = int(decode("n_joints", link.read_registers(REG["n_joints"].address, 1)))
+        g = field("n_joints")
         if g != self.g:
             r.failed(f"n_joints reads {g}; the configured robot {self.cfg.model.name!r} has {self.g}",
                      "publish the robot's number of joints in n_joints (or configure the right robot file)")
             return False
-        wd = int(decode("watchdog_ms", link.read_registers(REG["watchdog_ms"].address, 1)))
+        wd = field("watchdog_ms")
         if wd == 0:
             r.failed("watchdog_ms reads 0", "publish the watchdog time in ms (e.g. 1000) and stop a motion when "
                      "hb_pc has not changed for that long")
-        lim_reg = REG["soft_limits"]
-        raw = link.read_registers(lim_reg.address, lim_reg.n_registers)
         configured = link.word_order
         other = WordOrder.LITTLE if configured is WordOrder.BIG else WordOrder.BIG
-        problem = implausible_limits(decode(lim_reg, raw, configured), g)
-        if problem is None:
+        if field("order_check") == ORDER_CHECK_VALUE:
             self.detected = configured
-        elif implausible_limits(decode(lim_reg, raw, other), g) is None:
+        elif field("order_check", other) == ORDER_CHECK_VALUE:
             self.detected = other
-            w.failed(f"soft_limits decode implausibly in the configured word order {configured.name} ({problem}) and "
-                     f"plausibly in {other.name}; the rest of the checks use {other.name}",
+            w.failed(f"order_check reads {field('order_check')} in the configured word order {configured.name} and "
+                     f"{ORDER_CHECK_VALUE} in {other.name}; the rest of the checks use {other.name}",
                      f"write every 32-bit value with the word order of the link: {configured.name} = "
                      f"{'high word first (ABCD)' if configured is WordOrder.BIG else 'low word first (CDAB)'}; "
                      f"or, if {other.name} is what the controller must use, set [devices].word_order = "
                      f"\"{other.value}\"")
             link.word_order = other
         else:
-            r.failed(f"soft_limits are implausible in either word order ({problem})",
-                     "publish the soft limits as f32 pairs lower_1, upper_1, ... (finite, lower < upper) at "
-                     f"registers {lim_reg.address}..{lim_reg.end - 1}")
+            r.failed(f"order_check reads {field('order_check')} ({configured.name}), expected {ORDER_CHECK_VALUE}",
+                     f"publish order_check = {ORDER_CHECK_VALUE} as a u32 at offsets {REG['order_check'].address}.."
+                     f"{REG['order_check'].end - 1} of the window, in the link's word order")
             return False
-        lim = np.asarray(decode(lim_reg, raw, link.word_order), dtype=float)[:2 * g].reshape(g, 2)
+        link.sync_transfer()
+        lim_reg = INFO_PAGES["soft_limits"][1]
+        try:
+            raw = link.read_info_raw("soft_limits")
+        except ControllerError as exc:
+            r.failed(f"info page 0 (the soft limits) could not be read: {exc}",
+                     "serve READ_INFO page 0: the soft limits as 12 scaled i32 (1e-6 rad or mm per count)")
+            return False
+        decoded = np.asarray(decode(lim_reg, raw, link.word_order), dtype=float)
+        problem = implausible_limits(decoded, g)
+        if problem is not None:
+            r.failed(f"the soft limits of info page 0 are implausible ({problem})",
+                     "publish the soft limits on info page 0 as scaled i32 pairs lower_1, upper_1, ... "
+                     "(1e-6 rad or mm per count; finite, lower < upper), in the link's word order")
+            return False
+        lim = decoded[:2 * g].reshape(g, 2)
         self.ctrl_limits = lim
-        r.passed(f"map_version {version}, n_joints {g}, watchdog_ms {wd}, soft limits "
+        state = field("correction_state")
+        r.passed(f"map_version {version}, n_joints {g}, watchdog_ms {wd}, correction_state {state}, soft limits "
                  f"{np.round(lim, 4).tolist()}")
+        if state != CorrectionState.NONE:
+            self.notes.append(f"correction_state reads {state}: the controller applies (or may apply) a correction "
+                              f"of its own; a station table would correct on top of it")
         link.connect()  # the driver's own checks (map version, word order) now pass
         q = self._joints()
         span = lim[:, 1] - lim[:, 0]
         if not (np.all(np.isfinite(q)) and np.all(q >= lim[:, 0] - span) and np.all(q <= lim[:, 1] + span)):
             w.failed(f"act_joints read {q.tolist()} in {link.word_order.name}: not plausible joint values",
-                     "write act_joints as f32 in the link's word order, the same as soft_limits")
+                     "write act_joints as scaled i32 (1e-6 rad or mm per count) in the link's word order, as the "
+                     "soft limits")
         else:
             w.passed(f"soft_limits and act_joints {np.round(q, 5).tolist()} decode plausibly in "
                      f"{link.word_order.name}")
@@ -275,12 +303,14 @@ class _HandshakeChecks(_KitBase):
         else:
             r.detail.append(f"zero-speed refusal not checked: {self.why_not_move}")
         crcs = self.link.table_crcs()
-        if crcs["staged"] == 0 and not self.link.status().table_staged:
+        if self.why_not_tables:  # a faulty program might activate 'nothing' over a table the kit cannot put back
+            r.detail.append(f"TABLE_NOT_STAGED not checked: {self.why_not_tables}")
+        elif crcs["staged"] == 0 and not self.link.status().table_staged:
             c = self._command(Command.TABLE_ACTIVATE)
             expect(c, ErrorCode.TABLE_NOT_STAGED, "TABLE_ACTIVATE with nothing staged",
                    "refuse TABLE_ACTIVATE without a staged table with TABLE_NOT_STAGED (8)")
-            if c.result == "done":  # undo what a faulty program did (activated 'nothing')
-                self.notes.append("the controller accepted TABLE_ACTIVATE with nothing staged; check its active table")
+            if c.result == "done":  # the slots are put back at the end; say what the program did
+                self.notes.append("the controller accepted TABLE_ACTIVATE with nothing staged")
         else:
             r.detail.append("TABLE_NOT_STAGED not checked: the controller has a staged table")
 

@@ -16,14 +16,17 @@ from typing import Any
 
 import numpy as np
 
-from drivers.controller import ControllerConnectionError, ModbusController
-from drivers.controller_map import MAX_JOINTS, REG, Command, ErrorCode, WordOrder, encode
+from drivers.controller import ControllerConnectionError, HandshakeTimeout, ModbusController
+from drivers.controller_map import MAX_JOINTS, REG, Command, ErrorCode, WordOrder, encode, registers_crc32
 from drivers.controller_status import ControllerStatus
+from drivers.correction_table import CorrectionTableData
 from station.cell.config import CellConfig, ConformanceConfig
 from station.cell.conformance_report import REQUIREMENTS, Requirement
 from station.cell.safety import MotionGuard
 
 _CMD_FIRST = REG["cmd_code"].address
+_XFER_FIRST = REG["xfer_seq"].address
+_ACK = REG["xfer_ack"].address  # xfer_ack, xfer_error: two consecutive registers
 _ANSWER_TIMEOUT = 3.0  # seconds for a non-motion command to be answered
 
 
@@ -55,6 +58,37 @@ class _Link(ModbusController):
     @property
     def last_seq(self) -> int:
         return self._seq
+
+    def sync_transfer(self) -> None:
+        """Continue the transfer numbers from the program's ``xfer_ack`` (connect() does it too;
+        the kit reads the soft limits before it connects)."""
+        self._xfer_seq = int(self._read_entry("xfer_ack"))
+
+    def read_info_raw(self, name: str) -> list[int]:
+        """The raw registers of info entry ``name`` (``soft_limits``, ``act_pose``)."""
+        return self._read_info_raw(name)
+
+    def raw_transfer(self, op: int, index: int, data: Sequence[int] = (), *, length: int | None = None,
+                     crc: int | None = None) -> int:
+        """Send one transfer request as given - any operation, page length or page CRC, which a
+        conforming station never sends: the kit tests the refusals - and return the program's
+        ``xfer_error``. Raises :class:`HandshakeTimeout` when it is not answered."""
+        with self._xfer_lock:
+            seq = _next(self._xfer_seq)
+            self._xfer_seq = seq  # consumed even if the write fails
+            words = [int(w) for w in data]
+            n = len(words) if length is None else int(length)
+            c = registers_crc32(words) if crc is None else int(crc)
+            self._write(_XFER_FIRST, [seq, int(op), int(index), n, *encode("page_crc", c, self.word_order), *words])
+            deadline = time.monotonic() + _ANSWER_TIMEOUT
+            while True:
+                ack, error = self._read(_ACK, 2)
+                if ack == seq:
+                    return int(error)
+                if time.monotonic() >= deadline:
+                    raise HandshakeTimeout(f"transfer request {op} page {index} (xfer_seq {seq}) was not answered "
+                                           f"within {_ANSWER_TIMEOUT} s (xfer_ack is {ack})")
+                time.sleep(self.poll_interval)
 
     def send_block(self, code: int, seq: int, joints: np.ndarray | None = None, speed: float = 0.0) -> None:
         """Write the whole command block in one request, as the handshake prescribes (any code,
@@ -123,6 +157,11 @@ class _KitBase:
         self.ctrl_limits: np.ndarray | None = None
         self.may_move = False
         self.why_not_move = ""
+        #: the slots as found (CRC-32 per slot, 0 empty) and their tables (None: empty or unread)
+        self.crc0: dict[str, int] = {}
+        self.found: dict[str, CorrectionTableData | None] = {}
+        #: why the kit must not change the slots (a table it could not read back), "" if it may
+        self.why_not_tables = "the slots were not read"
 
     # -- plumbing --------------------------------------------------------------------------
     def _guarded(self, target: np.ndarray, what: str, probe: bool = False) -> np.ndarray:

@@ -19,7 +19,8 @@ PASSED, FAILED, NOT_CHECKED = "passed", "failed", "not checked"
 
 #: The requirements, in report order: (id, what the robot program must do).
 REQUIREMENTS: tuple[tuple[str, str], ...] = (
-    ("identification", "map_version, n_joints, watchdog_ms and soft_limits are published"),
+    ("identification", "map_version, n_joints, watchdog_ms, order_check and the soft limits (info page 0) are "
+                       "published"),
     ("word_order", "32-bit values use the link's word order"),
     ("heartbeat", "heartbeat both ways: hb_robot advances every period, hb_pc is taken from the PC"),
     ("ack", "every command is acknowledged with its sequence number in ack_seq"),
@@ -29,8 +30,18 @@ REQUIREMENTS: tuple[tuple[str, str], ...] = (
                    "the robot does not move"),
     ("error_codes", "the documented error codes: BAD_COMMAND for an unknown command and a bad speed, "
                     "TABLE_NOT_STAGED; rejections do not latch"),
-    ("table", "correction table: write, read-back, CRC-32, stage, activate, roll back; the original "
-              "active table restored"),
+    ("table", "correction table through the transfer block: header and value pages written and read back, "
+              "whole-table CRC-32, TABLE_STAGE"),
+    ("pages", "a page whose data do not match its page CRC is refused with PAGE_CRC_MISMATCH; an unknown "
+              "operation, page number or length with PAGE_INVALID"),
+    ("slot_reads", "the slot reads (READ_STAGED/ACTIVE/PREVIOUS_HEADER and _PAGE) answer with the table in "
+                   "that slot"),
+    ("activation", "TABLE_ACTIVATE, TABLE_DEACTIVATE and TABLE_ROLLBACK move the tables between the slots as "
+                   "documented; NO_PREVIOUS_TABLE without a previous table"),
+    ("discard_previous", "TABLE_DISCARD_PREVIOUS empties the previous slot"),
+    ("keep_previous", "activating while no table is active keeps the previous table"),
+    ("slots_restored", "the kit leaves the staged, active and previous slots as it found them (CRC-32 of each "
+                       "compared)"),
 )
 
 

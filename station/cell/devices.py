@@ -115,6 +115,10 @@ class TableController(Protocol):
 
     def table_crcs(self) -> dict[str, int]: ...
 
+    def read_slot_table(self, slot: str) -> CorrectionTableData | None: ...  # staged/active/previous
+
+    def discard_previous_table(self, timeout: float | None = ...) -> None: ...
+
 
 @runtime_checkable
 class CellController(RobotController, TableController, Protocol):

@@ -49,6 +49,7 @@ from station.cell.summary import (
     RunSummary,
     UploadSummary,
 )
+from station.cell.table_keeping import finish_tables, restore_after_failure, table_at_start
 from station.cell.tools import check_tools, run_tools
 from station.cell.upload import verified_upload
 from station.core.identification import BODY_NOTE_PREFIX, IdentificationResult
@@ -151,10 +152,15 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
     emit(RunStarted(run_id, len(steps), resumed))
     db.log(run_id, "info", f"run {'resumed' if resume_run else 'started'}: {len(steps)} steps, {resumed} on disk")
     summary = RunSummary(outcome=Outcome.SUCCESS, run_id=run_id, cell=cfg.name, robot=cfg.model.name)
+    start = table_at_start(controller, db, run_id, emit)  # before anything changes the controller's tables
     try:
         summary = _pipeline(cfg, runner, db, run_id, steps, emit, options, with_oracle, summary)
+        summary = finish_tables(controller, start, summary, emit)
     except Exception as exc:  # station and driver errors alike: log, mark the run, re-raise
+        note = restore_after_failure(controller, start, emit)
+        exc.add_note(note)
         db.log(run_id, "error", f"{type(exc).__name__}: {exc}")
+        db.log(run_id, "info", note)
         db.set_status(run_id, "aborted" if isinstance(exc, RunAborted) else "failed")
         raise
     db.save_result(run_id, "summary", summary.to_json())
@@ -242,8 +248,7 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
 
     emit(PhaseChanged("verify", "before correction"))
     controller = runner.controller
-    had_table = controller.status().table_active
-    if had_table:
+    if controller.status().table_active:  # the operator's table: kept aside (table_keeping.py)
         controller.deactivate_table()
     runner.guard.table = None
     measure({StepKind.VERIFY_BEFORE}, R_id)
@@ -256,7 +261,7 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
         interpolation_bound_um=float(table.interpolation_bound_um), crc32=f"{table.data.crc32():08x}",
         max_correction=tuple(float(v) for v in table.max_correction), joint_types=tuple(cfg.model.joint_types))
     if options.confirm is not None and not options.confirm(proposal):
-        emit(Notice("info", "upload declined by the operator: the controller's table was not changed"))
+        emit(Notice("info", "upload declined by the operator: the controller's table of the run's start is kept"))
         return summary.replace(upload_skipped=True, outcome=Outcome.NOT_UPLOADED,
                                notes=(*summary.notes, "upload declined by the operator"))
 
@@ -277,6 +282,9 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
         measure({StepKind.ORACLE}, p_true[:6])
         summary = summary.replace(oracle=stats(StepKind.ORACLE))
         controller.rollback_table()  # the station's own table is the one left active
+        # the oracle's table must never be what a later roll back revives: the roll-back slot is
+        # emptied (the table of the run's start stays recoverable from the run database)
+        controller.discard_previous_table()
         runner.guard.table = table.data
         emit(Notice("info", "rolled back to the station's table after the oracle check"))
     gain = summary.gain
@@ -285,15 +293,9 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
     if options.confirm is not None and summary.before is not None and summary.after is not None:
         keep = KeepCorrection(summary.before.rms_um, summary.after.rms_um, float(gain or 0.0),
                               f"{table.data.crc32():08x}")
-        if not options.confirm(keep):
-            if had_table and not with_oracle:  # the table that was active before this run comes back
-                controller.rollback_table()
-                what = "the controller's previous table is active again"
-            else:  # there was none (or the oracle's table sits in between): no correction at all
-                controller.deactivate_table()
-                what = "no correction table is active"
+        if not options.confirm(keep):  # run_calibration puts the table of the run's start back
             runner.guard.table = None
-            emit(Notice("warning", f"rolled back by the operator: {what}"))
+            emit(Notice("warning", "declined by the operator: the table of the run's start is restored"))
             return summary.replace(outcome=Outcome.NOT_UPLOADED,
                                    notes=(*summary.notes, "the new table was rolled back by the operator"))
     return summary.replace(outcome=outcome)

@@ -116,6 +116,13 @@ def probe_readings(geom: ProbeHeadGeometry, values_mm: np.ndarray, status: Seque
                           f"{geom.label(k)}: check the channel numbers in the head file against the interface's wiring")
     out = v[ch] * geom.probe_scales
     st = tuple(str(getattr(status[c], "value", status[c])) for c in ch)
+    # Whatever the interface's dialect calls valid, a value beyond the probe's own stroke (head
+    # file) is no measurement: a unit whose range exceeds the probe's, or a sentinel a manual
+    # does not spell out, must never reach the pose solve.
+    beyond = np.isfinite(out) & (np.abs(out) > geom.strokes / 2)
+    if np.any(beyond):
+        st = tuple(("over_range" if out[i] > 0 else "under_range") if beyond[i] else s for i, s in enumerate(st))
+        out = np.where(beyond, np.nan, out)
     return out, st
 
 

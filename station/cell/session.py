@@ -73,8 +73,9 @@ class LoadedCell:
 def open_probe(cfg: CellConfig, stack: ExitStack) -> ProbeHead:
     """The probe head interface named in ``cfg`` (closed when ``stack`` closes)."""
     d = cfg.devices
-    probe: ProbeHead = stack.enter_context(SerialProbeHead(d.probe_head, baudrate=d.baudrate,
-                                                           timeout=d.probe_timeout_s))
+    probe: ProbeHead = stack.enter_context(SerialProbeHead(
+        d.probe_head, baudrate=d.baudrate, timeout=d.probe_timeout_s, dialect=d.probe_protocol,
+        bytesize=d.probe_bytesize, parity=d.probe_parity, refresh_s=d.probe_refresh_s))
     return probe
 
 
@@ -84,7 +85,7 @@ def open_controller(cfg: CellConfig, stack: ExitStack) -> CellController:
     d = cfg.devices
     driver = ModbusController(d.controller_host, d.controller_port, device_id=d.device_id,
                               word_order=WordOrder.BIG if d.word_order == "big" else WordOrder.LITTLE,
-                              timeout=d.controller_timeout_s)
+                              timeout=d.controller_timeout_s, register_base=d.controller_register_base)
     driver.connect()
     stack.callback(driver.close)
     controller: CellController = driver
@@ -109,7 +110,35 @@ def describe_devices(devices: Devices) -> dict[str, str]:
         info["probe_interface"] = f"not identified ({exc})"
     version = getattr(devices.controller, "map_version", None)
     info["controller_map_version"] = "unknown" if version is None else str(version)
+    info["controller_correction"] = controller_correction(devices.controller)
     return info
+
+
+#: what the robot program reports in correction_state (drivers.controller_map.CorrectionState),
+#: as the run record names it
+_CORRECTION_NAMES = {0: "none", 1: "vendor"}
+
+
+def controller_correction(controller: object) -> str:
+    """The controller's own kinematic correction as its robot program reports it: ``none``,
+    ``vendor`` (a factory or absolute-accuracy correction is on) or ``unknown``."""
+    state = getattr(controller, "correction_state", None)  # read by the driver on connect
+    if state is None:  # a device that reports none (a test double): nothing to correct on top of
+        return "none"
+    return _CORRECTION_NAMES.get(int(state), "unknown")
+
+
+def check_controller_correction(controller: object) -> str:
+    """Refuse (ConfigError, before anything moves) a controller whose own correction state is
+    unknown: the station identifies the robot as the controller drives it, so a table made on top
+    of a correction that may be switched on or off later corrects the wrong robot."""
+    state = controller_correction(controller)
+    if state == "unknown":
+        raise ConfigError("the robot program reports that the controller's own kinematic correction is in an unknown "
+                          "state (correction_state): find out whether a vendor factory or absolute-accuracy "
+                          "correction is on, and have the program report 0 (none) or 1 (vendor correction on) "
+                          "(docs/robot-program.md)")
+    return state
 
 
 #: what builds the cell a request names (``station.ui.simulated_cell.load_cell`` composes the
@@ -164,6 +193,7 @@ def run_calibration_session(request: CellRequest, emit: Callable[[Event], None],
             emit(PhaseChanged("connect", "connecting the probe head and the controller"))
             devices = open_cell(cfg, stack)
             check_head_channels(cfg, probe_channel_count(devices.probe))  # before anything moves
+            check_controller_correction(devices.controller)
             seed = loaded.endpoints.get("seed", request.seed) if request.simulated else None
             summary = run_calibration(cfg, devices.probe, devices.controller, db, tracker, control,
                                       Options(upload=request.upload, oracle_truth=loaded.truth, confirm=confirm),
@@ -270,8 +300,13 @@ def check_cell(cfg: CellConfig) -> CheckReport:
             st = controller.status()
             q = controller.read_joints()
             lim = controller.soft_limits()
-            lines.append(f"controller {where}: {st}; joints {np.round(q, 5).tolist()}")
-            tol = 1e-6 * np.maximum(1.0, np.abs(lim))  # the registers hold float32: equal limits read back rounded
+            lines.append(f"controller {where}: {st}; joints {np.round(q, 5).tolist()}; register map "
+                         f"{getattr(controller, 'map_version', '?')} at base {d.controller_register_base}")
+            state = check_controller_correction(controller)
+            lines.append(f"  the controller's own correction: {state}"
+                         + ("; the station's correction is identified and applied on top of it: keep it on"
+                            if state == "vendor" else ""))
+            tol = 1e-6 * np.maximum(1.0, np.abs(lim))  # the registers hold scaled i32 (1e-6): limits read back rounded
             wide = (cfg.soft_limits[:, 0] < lim[:, 0] - tol[:, 0]) | (cfg.soft_limits[:, 1] > lim[:, 1] + tol[:, 1])
             if np.any(wide):
                 lines.append(f"  warning: [limits] are wider than the controller's soft limits for joints "

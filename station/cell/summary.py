@@ -92,6 +92,17 @@ class UploadSummary:
 
 
 @dataclass(frozen=True)
+class TableSummary:
+    """Which correction table the controller applied when the run started and when it ended
+    (CRC-32 as 8 hex digits, or "none"); ``restored``: the run put the table of its start back
+    (declined, aborted, failed or not uploaded)."""
+
+    active_at_start: str
+    active_at_end: str
+    restored: bool = False
+
+
+@dataclass(frozen=True)
 class ReversalSummary:
     """Position difference between approaching each pose from either side [µm]."""
 
@@ -200,6 +211,7 @@ class RunSummary:
     notes: tuple[str, ...] = field(default=())
     tools: tuple[ToolSummary, ...] = field(default=())  # [[tool]]: each tool's own correction
     compensation: CompensationSummary | None = None  # an articulated arm's compensated targets
+    tables: TableSummary | None = None  # the controller's active table at the run's start and end
 
     @property
     def exit_code(self) -> int:
@@ -254,7 +266,7 @@ class RunSummary:
         if self.db is not None:
             out["db"] = self.db
         for key in ("identification", "correction", "compensation", "before", "after", "oracle", "upload",
-                    "reversal", "failure"):
+                    "reversal", "failure", "tables"):
             value = getattr(self, key)
             if value is not None:
                 out[key] = _plain(dataclasses.asdict(value))
@@ -292,7 +304,7 @@ class RunSummary:
             reversal=sub("reversal", ReversalSummary), failure=sub("failure", Failure),
             report=d.get("report"), notes=tuple(d.get("notes", ())),
             tools=tuple(_build(ToolSummary, t) for t in d.get("tools", ())),
-            compensation=sub("compensation", CompensationSummary))
+            compensation=sub("compensation", CompensationSummary), tables=sub("tables", TableSummary))
 
 
 def _plain(obj: Any) -> Any:

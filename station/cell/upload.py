@@ -19,7 +19,7 @@ from drivers.correction_table import CorrectionTableData, TableVerifyError
 from station.cell.devices import TableController
 from station.cell.events import Event, Notice, PhaseChanged
 
-__all__ = ["UploadReport", "verified_upload"]
+__all__ = ["TableState", "UploadReport", "restore_table", "verified_upload"]
 
 
 @dataclass(frozen=True)
@@ -118,3 +118,56 @@ def verified_upload(controller: TableController, table: CorrectionTableData,
     return UploadReport(crc, table.n_values, t_up, t_rb, t_st, t_act, total,
                         staged_crc32=None if before is None else before.get("staged"),
                         active_crc32=final.get("active"), previous_crc32=final.get("previous"))
+
+
+def _crc_text(crc: int | None) -> str:
+    return "none" if not crc else f"{crc:08x}"
+
+
+@dataclass(frozen=True)
+class TableState:
+    """Which correction table the controller applies: the CRC-32 of its active table as 8 hex
+    digits, or ``"none"``. A run records it before it changes anything and again at its end."""
+
+    active: str
+
+    @classmethod
+    def read(cls, controller: TableController) -> TableState | None:
+        crcs = _crcs(controller)
+        return None if crcs is None else cls(_crc_text(crcs.get("active")))
+
+
+def restore_table(controller: TableController, wanted: TableState, emit: Callable[[Event], None],
+                  data: CorrectionTableData | None = None) -> TableState:
+    """Make ``wanted`` the active table again: the table the operator had before this run, or
+    none. The controller keeps the table active before the last activation as its previous one
+    (``docs/robot-program.md``), so the table of the start of a run is either still active,
+    bypassed by a deactivation, or the previous one: a roll back or a deactivation brings it back,
+    and its CRC-32 confirms it. Where the controller no longer holds it (the oracle check of a
+    simulated run pushes it out), ``data`` - the table as read from the controller when the run
+    started - is uploaded again through the verified upload. Raises :class:`TableVerifyError`
+    naming the CRCs when neither is possible (nothing else is activated then)."""
+    now = _crcs(controller)
+    if now is None:
+        raise TableVerifyError(f"the controller's table CRCs could not be read: restore table {wanted.active} by hand "
+                               f"(station export of the run that uploaded it), then check 'station check'")
+    if _crc_text(now.get("active")) == wanted.active:
+        return wanted
+    if wanted.active == "none":
+        controller.deactivate_table()
+    elif _crc_text(now.get("previous")) == wanted.active:
+        controller.rollback_table()
+    elif data is not None and _crc_text(data.crc32()) == wanted.active:
+        verified_upload(controller, data, emit)
+    else:
+        raise TableVerifyError(
+            f"the table that was active before this run (CRC-32 {wanted.active}) is no longer on the controller "
+            f"(active {_crc_text(now.get('active'))}, previous {_crc_text(now.get('previous'))}); nothing else was "
+            f"activated: upload it again from the run that made it")
+    after = TableState.read(controller)
+    if after is None or after.active != wanted.active:
+        raise TableVerifyError(f"restoring table {wanted.active} did not take: the controller reports "
+                               f"{'unreadable CRCs' if after is None else after.active}; check the robot program")
+    emit(Notice("info", "the table active before this run is active again" if wanted.active != "none"
+                else "no correction table is active, as before this run"))
+    return after

@@ -80,7 +80,9 @@ def _load_simulated(request: CellRequest, stack: ExitStack) -> LoadedCell:
     sim = simulation_settings(text, str(request.config)) if request.config else {}
     given = sim.pop("seed", None)
     seed = request.seed if request.seed is not None else (1 if given is None else int(given))
-    servers = start_simulated_cell(seed=seed, time_scale=request.time_scale, **sim)
+    window = {"register_count": sim.pop("controller_register_count", 128),
+              "correction_state": sim.pop("controller_correction_state", 0)}
+    servers = start_simulated_cell(seed=seed, time_scale=request.time_scale, **window, **sim)
     stack.callback(servers.stop)
     cell_text = cell_config_text(servers, seed)
     taken = {t: data[t] for t in _TAKEN if isinstance(data.get(t), dict)}

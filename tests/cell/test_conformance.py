@@ -1,7 +1,9 @@
-"""station conformance against the simulated controller, and against deliberately wrong variants
-of it (``SimulatedController(quirks=...)``): the simulator passes every requirement, each wrong
-variant fails exactly its requirement. Also: the kit moves only inside the park zone, restores the
-controller's tables, and docs/robot-program.md lists every register of the map."""
+"""station conformance against the simulated controller (register map 2), and against deliberately
+wrong variants of it (``SimulatedController(quirks=...)``): the simulator passes every requirement,
+at register base 0 and in a 128-register window at 128; each wrong variant fails exactly its
+requirement. Also: the kit moves only inside the park zone, leaves the controller's three table
+slots as it found them (or, when it cannot read a table back, touches none), and
+docs/robot-program.md lists every register of the map."""
 
 from __future__ import annotations
 
@@ -26,7 +28,7 @@ DOC = Path(__file__).resolve().parents[2] / "docs" / "robot-program.md"
 PARK = "[0.0, 0.0, -1.0, 0.0]"  # joint 3 (the quill) 1 mm below its upper limit 0 mm: inside the 2 mm zone
 
 
-def config_text(port: int, order: str = "big", park: str | None = PARK) -> str:
+def config_text(port: int, order: str = "big", park: str | None = PARK, base: int = 0) -> str:
     conformance = "" if park is None else f"[conformance]\npark_joints = {park}\ntest_move = 2.0\n"
     return f"""
 [robot]
@@ -40,6 +42,7 @@ points = [
 [devices]
 controller = "127.0.0.1:{port}"
 word_order = "{order}"
+controller_register_base = {base}
 {conformance}"""
 
 
@@ -57,16 +60,20 @@ def sent_targets(monkeypatch):
     return sent
 
 
-@pytest.mark.parametrize("order", [WordOrder.BIG, WordOrder.LITTLE])
-def test_the_simulator_passes_every_requirement_inside_the_park_zone(order, sent_targets):
-    with SimulatedController(time_scale=1.0, word_order=order) as sim:
+@pytest.mark.parametrize("order,base", [(WordOrder.BIG, 0), (WordOrder.LITTLE, 0), (WordOrder.BIG, 128)])
+def test_the_simulator_passes_every_requirement_inside_the_park_zone(order, base, sent_targets):
+    with SimulatedController(time_scale=1.0, word_order=order, register_base=base, register_count=128) as sim:
         q_start = sim.joints
-        cfg = parse_text(config_text(sim.port, order.value))
+        cfg = parse_text(config_text(sim.port, order.value, base=base))
         report = cf.run_conformance(cfg)
         assert report.passed, "\n".join(report.describe())
         assert [r.id for r in report.requirements] == [rid for rid, _ in cf.REQUIREMENTS]
         np.testing.assert_allclose(sim.joints, q_start, atol=1e-9)  # back where it was parked
         assert sim.active_table is None  # no table was active, none is
+        assert all(c == 0 for c in (sim.register("table_staged_crc"), sim.register("table_previous_crc")))
+        # every request of the kit lay in the window (the simulator refuses any other with exception 2)
+        assert all(base <= a and a + n <= base + 128 for _fc, a, n in sim.requests_log)
+        assert {fc for fc, _a, _n in sim.requests_log} <= {3, 16}
     assert cfg.conformance is not None
     zone = cfg.conformance.zone()
     motions = [q for code, _, q in sent_targets if code == Command.MOVE_JOINTS]
@@ -82,37 +89,111 @@ def test_the_simulator_passes_every_requirement_inside_the_park_zone(order, sent
     ("no_heartbeat", "heartbeat"),
     ("crc_mismatch", "table"),
     ("done_before_motion", "done"),
+    ("page_crc_ignored", "pages"),
+    ("no_slot_reads", "slot_reads"),
+    ("activate_drops_previous", "keep_previous"),
 ])
 def test_each_wrong_variant_fails_exactly_its_requirement(quirk, requirement):
     assert quirk in QUIRKS
     with SimulatedController(time_scale=1.0, quirks={quirk}) as sim:
         report = cf.run_conformance(parse_text(config_text(sim.port)))
-    failed = {r.id for r in report.requirements if r.status != cf.PASSED}
+        crcs = {k: sim.register(f"table_{k}_crc") for k in ("staged", "active", "previous")}
+    failed = {r.id for r in report.requirements if r.status == cf.FAILED}
     assert failed == {requirement}, "\n".join(report.describe())
-    r = report.requirement(requirement)
-    assert r.status == cf.FAILED and r.fix, r  # and it says what to fix
+    assert report.requirement(requirement).fix  # it says what to fix
+    for other in report.requirements:  # what could not be checked after it says why
+        assert other.status != cf.NOT_CHECKED or any(d.startswith("not checked: ") for d in other.detail), other
     assert report.outcome == 7
+    assert report.requirement("slots_restored").status == cf.PASSED
+    assert crcs == {"staged": 0, "active": 0, "previous": 0}  # the slots were empty: they are again
 
 
-def test_the_controllers_tables_are_restored():
-    with SimulatedController(time_scale=0.0) as sim:
-        with ModbusController("127.0.0.1", sim.port, heartbeat_period=None) as c:
-            active = CorrectionTableData((TableAxis(250.0, 100.0, 2),), np.full((1, 2, 4), 1e-5))
-            c.upload_table(active)
+def _tables() -> dict[str, CorrectionTableData]:
+    """The operator's tables: P (previous), A (active) and S (staged), each a different CRC-32."""
+    return {slot: CorrectionTableData((TableAxis(250.0, 100.0, n),), np.full((1, n, 4), value))
+            for slot, n, value in (("previous", 2, 3e-5), ("active", 2, 1e-5), ("staged", 3, 2e-5))}
+
+
+def _load_slots(port: int, base: int = 0) -> dict[str, int]:
+    """P previous, A active, S staged, as the station's own runs leave them; the slot CRCs."""
+    t = _tables()
+    with ModbusController("127.0.0.1", port, heartbeat_period=None, register_base=base) as c:
+        for slot in ("previous", "active", "staged"):
+            c.upload_table(t[slot])
             c.verify_table()
             c.stage_table()
-            c.activate_table()
-            staged = CorrectionTableData((TableAxis(250.0, 100.0, 3),), np.full((1, 3, 4), 2e-5))
-            c.upload_table(staged)
-            c.stage_table()
-            before = c.table_crcs()
-        report = cf.run_conformance(parse_text(config_text(sim.port)))
+            if slot != "staged":
+                c.activate_table()
+        crcs = c.table_crcs()
+    assert crcs == {k: t[k].crc32() for k in crcs}
+    return crcs
+
+
+def _slot_tables(port: int, base: int = 0) -> dict[str, CorrectionTableData | None]:
+    with ModbusController("127.0.0.1", port, heartbeat_period=None, register_base=base) as c:
+        return {slot: c.read_slot_table(slot) for slot in ("staged", "active", "previous")}
+
+
+@pytest.mark.parametrize("base", [0, 128])
+def test_the_three_table_slots_are_left_as_found(base):
+    with SimulatedController(time_scale=0.0, register_base=base, register_count=128) as sim:
+        before = _load_slots(sim.port, base)
+        report = cf.run_conformance(parse_text(config_text(sim.port, base=base)))
         assert report.passed, "\n".join(report.describe())
+        after = _slot_tables(sim.port, base)
+        # a later roll back revives the operator's P, not a test table of the kit
+        with ModbusController("127.0.0.1", sim.port, heartbeat_period=None, register_base=base) as c:
+            c.rollback_table()
+            rolled = c.table_crcs()
+    for slot, table in _tables().items():
+        got = after[slot]
+        assert got is not None and got.same_as(table) and got.crc32() == before[slot], slot
+    assert "slots as found" in " ".join(report.requirement("slots_restored").detail)
+    assert rolled["active"] == before["previous"] and rolled["previous"] == before["active"]
+
+
+@pytest.mark.parametrize("quirk", ["activate_drops_previous", "page_crc_ignored", "crc_mismatch", "no_heartbeat"])
+def test_a_faulty_program_gets_its_table_slots_back_too(quirk):
+    with SimulatedController(time_scale=0.0, quirks={quirk}) as sim:
+        before = _load_slots(sim.port) if quirk != "crc_mismatch" else None
+        report = cf.run_conformance(parse_text(config_text(sim.port)))
+        after = {k: sim.register(f"table_{k}_crc") for k in ("staged", "active", "previous")}
+    assert not report.passed
+    assert after == (before or {"staged": 0, "active": 0, "previous": 0}), "\n".join(report.describe())
+    assert report.requirement("slots_restored").status == cf.PASSED
+
+
+def test_a_program_without_slot_reads_keeps_its_tables_untouched():
+    """The kit cannot read the tables back, so it cannot put them back: it changes no slot."""
+    with SimulatedController(time_scale=0.0, quirks={"no_slot_reads"}) as sim:
+        before = _load_slots(sim.port)
+        n_writes = len(sim.command_writes)
+        report = cf.run_conformance(parse_text(config_text(sim.port)))
         with ModbusController("127.0.0.1", sim.port, heartbeat_period=None) as c:
             after = c.table_crcs()
-        assert after["active"] == before["active"] == active.crc32()
-        assert after["staged"] == before["staged"] == staged.crc32()
-        assert sim.active_table is not None and sim.active_table.same_as(active)
+        kit_codes = {code for code, _seq in sim.command_writes[n_writes:]}
+    assert after == before
+    assert not kit_codes & {int(c) for c in (Command.TABLE_STAGE, Command.TABLE_ACTIVATE, Command.TABLE_DEACTIVATE,
+                                             Command.TABLE_ROLLBACK, Command.TABLE_DISCARD_PREVIOUS)}
+    assert report.requirement("slot_reads").status == cf.FAILED
+    for rid in ("activation", "discard_previous", "keep_previous"):
+        r = report.requirement(rid)
+        assert r.status == cf.NOT_CHECKED and "never destroys a table it could not put back" in " ".join(r.detail)
+    assert report.requirement("table").status == cf.NOT_CHECKED  # written and read back, not staged
+    assert report.requirement("slots_restored").status == cf.PASSED
+    assert report.requirement("pages").status == cf.PASSED  # the transfer buffer was still checked
+
+
+def test_slots_that_are_not_put_back_fail_loudly(monkeypatch):
+    monkeypatch.setattr(cf._Kit, "_rebuild", lambda self: None)  # as a program whose slot rules defeat it
+    with SimulatedController(time_scale=0.0) as sim:
+        before = _load_slots(sim.port)
+        report = cf.run_conformance(parse_text(config_text(sim.port)))
+    r = report.requirement("slots_restored")
+    assert r.status == cf.FAILED and "put the controller's tables back by hand" in " ".join(r.fix)
+    assert f"active {before['active']:#010x}" in " ".join(r.detail)  # what it found, to put back
+    assert any("TABLE SLOTS ARE NOT AS THE KIT FOUND THEM" in n for n in report.notes)
+    assert not report.passed and report.outcome == 7
 
 
 def test_a_robot_outside_the_park_zone_is_not_moved(sent_targets):
@@ -168,7 +249,7 @@ def test_cli(tmp_path, capsys):
         out = json.loads(capsys.readouterr().out)
         assert out["passed"] and out["outcome"] == "SUCCESS" and len(out["requirements"]) == len(cf.REQUIREMENTS)
         assert main(["conformance", str(p)]) == 0
-        assert "9 of 9 requirements passed" in capsys.readouterr().out
+        assert f"{len(cf.REQUIREMENTS)} of {len(cf.REQUIREMENTS)} requirements passed" in capsys.readouterr().out
     p.write_text(config_text(_closed_port()))
     assert main(["conformance", str(p), "--json"]) == 7
     captured = capsys.readouterr()

@@ -71,7 +71,8 @@ def test_fault_exit_code_then_resume_to_completion(tmp_path, kind, outcome):
 
             old_port = sim.probe_server.port
             sim.probe_server.stop()
-            sim.probe_server = ProbeHeadServer(snapshot_source=sim.cell.probe_values).start()
+            sim.probe_server = ProbeHeadServer(snapshot_source=sim.cell.probe_values, protocol="keyence-dl-rs1a",
+                                               refresh_s=0.0).start()
             cfg.write_text(cfg.read_text().replace(old_port, sim.probe_server.port))
         _repair(sim, kind)
         resumed = run_calibration_session(CellRequest(config=str(cfg), db=str(db), resume=first.run_id),

@@ -110,6 +110,12 @@ def positions(run: Run, q: np.ndarray) -> np.ndarray:
     return forward(m, q, params=p, setup=True)[:, :3, 3]
 
 
+#: how far a fault run's identified robot may lie from the fault-free run's over its poses [µm]:
+#: within the identified position's own uncertainty ('station plan' predicts 2.8–4.0 µm for the
+#: built-in cell; with register map 2's integer joints two fault-free realisations differ by 3.8)
+AGREE_UM = 5.0
+
+
 def agreement_um(run: Run, base: Run) -> float:
     """RMS difference [µm] of two identified models over the baseline's measured poses."""
     q = np.array([r.joints_read for r in base.records if r.ok and r.joints_read is not None])
@@ -147,7 +153,7 @@ def test_a_stuck_probe_is_named_and_the_identification_is_unaffected(tmp_path, s
     notices = [e.message for e in run.events if isinstance(e, Notice)]
     assert any(m.startswith("probe P3 (channel 4) stuck? check it") for m in notices)
     # the identified robot: within a few µm of the fault-free run over the measured poses
-    assert agreement_um(run, seven_baseline) < 3.0
+    assert agreement_um(run, seven_baseline) < AGREE_UM
 
 
 def test_debris_for_one_touch_is_detected_re_measured_and_the_reading_kept(tmp_path, seven_baseline):
@@ -158,7 +164,7 @@ def test_debris_for_one_touch_is_detected_re_measured_and_the_reading_kept(tmp_p
     assert len(hit) >= 0.95 * injected
     # each such touch was re-measured; the second touch agreed and is the stored reading
     assert all(r.ok and "the re-measured touch agrees" in r.message for r in hit)
-    assert agreement_um(run, seven_baseline) < 3.0
+    assert agreement_um(run, seven_baseline) < AGREE_UM
 
 
 def test_debris_that_stays_on_a_seven_probe_head_stops_the_run_naming_the_candidates(tmp_path):
@@ -178,7 +184,7 @@ def test_a_ten_probe_head_names_permanent_debris_and_keeps_the_identification(tm
     named = [r for r in later if "probe Q6 (channel 6) excluded" in r.message and "off by +" in r.message]
     assert len(named) >= 0.95 * len(later)
     assert all(r.ok for r in named)
-    assert agreement_um(run, base) < 3.0
+    assert agreement_um(run, base) < AGREE_UM
 
 
 # --- the runner's small parts ------------------------------------------------------------------
@@ -214,4 +220,4 @@ def test_a_dead_channel_on_a_redundant_head_is_left_out_and_the_run_goes_on(tmp_
     assert all(r.channel_status[5] == "invalid" for r in later)
     notices = [e.message for e in run.events if isinstance(e, Notice)]
     assert any(m.startswith("probe P6 (channel 7) stuck? check it") for m in notices)
-    assert agreement_um(run, seven_baseline) < 3.0
+    assert agreement_um(run, seven_baseline) < AGREE_UM

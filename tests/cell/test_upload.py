@@ -52,7 +52,7 @@ class FakeController:
         back = self.uploaded
         if self.corrupt:
             v = back.values.copy()
-            v.ravel()[17] = np.nextafter(v.ravel()[17], np.float32(1))
+            v.ravel()[17] += 1e-8  # one count of the wire's 1e-8 grid
             back = CorrectionTableData(back.axes, v)
         diff = self.uploaded.first_difference(back)
         if diff is not None:

@@ -129,7 +129,7 @@ def test_node_values_are_ik_differences(robot, identified, table):
         q_nom = scara_ik(robot, targets(p), elbow, robot.nominal, check_limits=False)
         d = q_id - q_nom
         d[:, [0, 1, 3]] = wrap_angle(d[:, [0, 1, 3]])
-        np.testing.assert_allclose(table.data.values[(c, *i)], d[0], atol=1e-9, rtol=1e-6)
+        np.testing.assert_allclose(table.data.values[(c, *i)], d[0], atol=5.1e-9, rtol=1e-6)  # values on the wire's 1e-8 grid
 
 
 def test_revolute_corrections_are_wrapped(table):

@@ -241,13 +241,14 @@ def test_table_lifecycle(sim, ctl):
 def test_activation_refused_when_readback_differs(sim, ctl):
     t = _table(3)
     ctl.upload_table(t)
-    sim.corrupt_staging_value(17, 1e-3)
-    ctl.read_table()
-    with pytest.raises(TableVerifyError, match="first at flat index 17"):
-        ctl.activate_table()
+    sim.corrupt_staging_value(17, 1e-3)  # value 17 changes in the controller's store
     with pytest.raises(TableError, match="CRC-32"):
-        ctl.stage_table()  # the controller's own CRC check catches it as well
-    assert not ctl.status().table_active
+        ctl.read_table()  # the whole-table CRC-32 of the read-back catches it
+    with pytest.raises(TableVerifyError, match="read-back failed"):
+        ctl.activate_table()
+    with pytest.raises(TableVerifyError, match="read-back failed"):
+        ctl.stage_table()  # nothing is staged from a table that did not read back
+    assert not ctl.status().table_active and not ctl.status().table_staged
 
 
 def test_corrected_cartesian_move_follows_interpolation_rule(sim, ctl):

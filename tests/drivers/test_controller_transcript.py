@@ -1,11 +1,37 @@
-"""Exact register transactions of the driver against a scripted fake pymodbus client."""
+"""Exact register transactions of the driver (map 2) against a scripted fake pymodbus client.
+
+The fake hosts the 128-register window at a base (128 like a Universal Robots controller unless
+a test says otherwise) and answers transfer requests with the simulator's own robot-program
+logic (:func:`simulators.controller_tables.serve_transfer`)."""
 
 import numpy as np
 import pytest
 
-from drivers.controller import HandshakeTimeout, ModbusController, ModbusExceptionError
-from drivers.controller_map import REG, WordOrder, encode, encode_f32_array
-from drivers.correction_table import CorrectionTableData, TableAxis, TableVerifyError
+from drivers.controller import (
+    HandshakeTimeout,
+    MapVersionError,
+    ModbusController,
+    ModbusExceptionError,
+    RegisterWindowError,
+    WordOrderError,
+)
+from drivers.controller_map import (
+    INFO_PAGES,
+    REG,
+    TABLE_HEADER_REGISTERS,
+    WINDOW_SIZE,
+    CorrectionState,
+    WordOrder,
+    XferOp,
+    encode,
+    encode_i32_array,
+    registers_crc32,
+)
+from drivers.correction_table import CorrectionTableData, TableAxis, TableError, TablePageError, TableVerifyError
+from simulators.controller_tables import TableSlots, serve_transfer
+
+BASE = 128
+LIMITS = [-2, 2, -2.5, 2.5, -200, 0, -6, 6]
 
 
 class _Resp:
@@ -18,22 +44,30 @@ class _Resp:
 
 
 class FakeClient:
-    """Records every transaction; reads are answered from a register image that a script may
-    change after each request (what the robot would do)."""
+    """Records every transaction (wire addresses); the image is by window offset. Transfer
+    requests are carried out at once, as the simulator's program does."""
 
-    def __init__(self, order=WordOrder.BIG):
-        self.regs = [0] * 65536
+    def __init__(self, order=WordOrder.BIG, base=BASE):
+        self.base = base
+        self.regs = [0] * WINDOW_SIZE
         self.log = []
         self.on_request = None
         self.order = order
-        self.put("map_version", 1)
+        self.tables = TableSlots()
+        self.put("map_version", 2)
         self.put("n_joints", 4)
-        self.put("soft_limits", [-2, 2, -2.5, 2.5, -200, 0, -6, 6])
+        self.put("order_check", 1)
+        self.put("correction_state", 1)
 
     def put(self, name, value):
         r = REG[name]
         w = encode(r, value, self.order)
         self.regs[r.address:r.address + len(w)] = w
+
+    def info(self, number):
+        if number == 0:
+            return encode(INFO_PAGES["soft_limits"][1], LIMITS + [0] * 4, self.order)
+        return None
 
     def connect(self):
         self.log.append(("connect",))
@@ -42,34 +76,55 @@ class FakeClient:
     def close(self):
         self.log.append(("close",))
 
+    def _window(self, address, count):
+        off = address - self.base
+        return off if 0 <= off and off + count <= WINDOW_SIZE else None
+
     def read_holding_registers(self, address, *, count=1, device_id=1):
         self.log.append(("read", address, count, device_id))
-        out = _Resp(self.regs[address:address + count])
+        off = self._window(address, count)
+        if off is None:
+            return _Resp(exception_code=2)
+        out = _Resp(self.regs[off:off + count])
         if self.on_request:
-            self.on_request(self, ("read", address, count))
+            self.on_request(self, ("read", off, count))
         return out
 
     def write_registers(self, address, values, *, device_id=1):
         self.log.append(("write", address, list(values), device_id))
-        self.regs[address:address + len(values)] = list(values)
+        off = self._window(address, len(values))
+        if off is None:
+            return _Resp(exception_code=2)
+        self.regs[off:off + len(values)] = list(values)
+        if off == REG["xfer_seq"].address:
+            serve_transfer(self.regs, self.tables, self.order, self.info)
         if self.on_request:
-            self.on_request(self, ("write", address, values))
+            self.on_request(self, ("write", off, values))
         return _Resp()
 
 
 def _connect(fake, **kw):
+    kw.setdefault("register_base", BASE)
     c = ModbusController("fake", 0, device_id=7, heartbeat_period=None, client=fake, **kw)
     c.connect()
     return c
 
 
+def _read_info_request(seq, number):
+    return ("write", BASE + 63, [seq, int(XferOp.READ_INFO), number], 7)
+
+
 def test_connect_transcript():
     fake = FakeClient()
     c = _connect(fake)
-    assert fake.log == [("connect",), ("read", 2, 1, 7), ("read", 3, 1, 7), ("read", 72, 24, 7),
-                        ("read", 11, 1, 7)]
-    assert c.n_joints == 4
-    np.testing.assert_array_equal(c.soft_limits(), [[-2, 2], [-2.5, 2.5], [-200, 0], [-6, 6]])
+    assert fake.log == [("connect",), ("read", BASE, 64, 7), ("read", BASE + 64, 64, 7),
+                        ("read", BASE + 43, 1, 7),          # xfer_ack: where the transfer numbers go on
+                        _read_info_request(1, 0),           # soft limits: info page 0
+                        ("read", BASE + 43, 84, 7),         # answer + page in one read
+                        ("read", BASE + 9, 1, 7)]           # cmd_seq
+    assert c.n_joints == 4 and c.map_version == 2
+    assert c.correction_state is CorrectionState.VENDOR
+    np.testing.assert_array_equal(c.soft_limits(), np.reshape(LIMITS, (4, 2)))
 
 
 @pytest.mark.parametrize("order", list(WordOrder))
@@ -80,9 +135,9 @@ def test_move_handshake_transcript(order):
     reads_of_status = []
 
     def robot(f, req):  # the robot acts after each request has been answered
-        if req[0] == "write" and req[1] == 10:
+        if req[0] == "write" and req[1] == REG["cmd_code"].address:
             f.put("ack_seq", 42)            # acknowledges the command
-        if req[0] == "read" and req[1] == 40:
+        if req[0] == "read" and req[1] == REG["ack_seq"].address:
             reads_of_status.append(1)
             if len(reads_of_status) == 1:
                 f.put("done_seq", 42)       # finishes after the first status poll
@@ -92,13 +147,15 @@ def test_move_handshake_transcript(order):
     q = [0.1, -0.2, -50.0, 1.0]
     st = c.move_joints(q, speed=0.25)
     st.wait(timeout=1.0)
-    expected_block = ([1, 42, 0, 250] + encode_f32_array(q + [0, 0], order)
-                      + encode_f32_array(np.zeros(6), order))
+    expected_block = ([1, 42, 0, 250] + encode_i32_array(q + [0, 0], 1e-6, order)
+                      + encode_i32_array(np.zeros(6), 1e-6, order))
     assert fake.log == [
-        ("write", 10, expected_block, 7),   # whole command block in ONE request
-        ("read", 40, 7, 7),                 # ack poll -> ack_seq == 42
-        ("read", 40, 7, 7),                 # done poll -> done_seq == 42
+        ("write", BASE + 8, expected_block, 7),   # whole command block in ONE request, at 136
+        ("read", BASE + 36, 7, 7),                # ack poll -> ack_seq == 42
+        ("read", BASE + 36, 7, 7),                # done poll -> done_seq == 42
     ]
+    # -50 mm is -50 000 000 counts of 1e-6: two's complement over two registers
+    assert expected_block[8:10] == encode_i32_array([-50.0], 1e-6, order)
     assert st.done and st.success
 
 
@@ -110,16 +167,39 @@ def test_missing_ack_is_not_resent():
         c.move_cartesian([500, 0, 300, 0, 0, 0], elbow=-1)
     writes = [e for e in fake.log if e[0] == "write"]
     assert len(writes) == 1 and writes[0][2][:3] == [2, 1, 0xFFFF]
-    assert all(e == ("read", 40, 7, 7) for e in fake.log[1:])
+    assert all(e == ("read", BASE + 36, 7, 7) for e in fake.log[1:])
 
 
 def test_modbus_exception_carries_code():
     fake = FakeClient()
     c = _connect(fake)
-    fake.read_holding_registers = lambda address, *, count=1, device_id=1: _Resp(exception_code=2)
-    with pytest.raises(ModbusExceptionError, match="illegal data address") as ei:
+    fake.read_holding_registers = lambda address, *, count=1, device_id=1: _Resp(exception_code=4)
+    with pytest.raises(ModbusExceptionError, match="server device failure") as ei:
         c.read_joints()
-    assert ei.value.code == 2 and ei.value.address == REG["act_joints"].address
+    assert ei.value.code == 4 and ei.value.address == BASE + REG["act_joints"].address
+
+
+def test_wrong_base_is_named_on_the_first_read():
+    fake = FakeClient(base=128)
+    with pytest.raises(RegisterWindowError, match=r"first read.*controller_register_base") as ei:
+        _connect(fake, register_base=0)
+    assert ei.value.code == 2 and ei.value.base == 0
+    assert fake.log == [("connect",), ("read", 0, 64, 7)]  # nothing written, nothing commanded
+
+
+def test_wrong_map_version_names_expected_and_found():
+    fake = FakeClient()
+    fake.put("map_version", 1)
+    with pytest.raises(MapVersionError, match=r"version 1 \(register 130\).*expects version 2") as ei:
+        _connect(fake)
+    assert (ei.value.found, ei.value.supported) == (1, (2,))
+    assert not [e for e in fake.log if e[0] == "write"]
+
+
+def test_word_order_mismatch_from_order_check():
+    fake = FakeClient(WordOrder.LITTLE)
+    with pytest.raises(WordOrderError, match="LITTLE"):
+        _connect(fake, word_order=WordOrder.BIG)
 
 
 def _table(n_first=2):
@@ -128,35 +208,53 @@ def _table(n_first=2):
     return CorrectionTableData(axes, vals)
 
 
-def test_table_upload_and_readback_transcript():
+def _page_request(seq, op, index, data):
+    return ("write", BASE + 63, [seq, int(op), index, len(data)] + encode("page_crc", registers_crc32(data))
+            + list(data), 7)
+
+
+def test_table_upload_page_and_readback_transcript():
     fake = FakeClient()
     c = _connect(fake)
-    t = _table(2)  # 24 values = 48 registers
+    t = _table(3)  # 36 values = 72 registers: pages of 29 + 7 values
     fake.log.clear()
     c.upload_table(t)
-    assert fake.log == [("write", 100, t.header_registers(), 7),
-                        ("write", 1000, t.data_registers(), 7)]
+    data = t.data_registers()
+    assert len(t.header_registers()) == TABLE_HEADER_REGISTERS
+    assert fake.log == [_page_request(2, XferOp.WRITE_HEADER, 0, t.header_registers()),
+                        ("read", BASE + 43, 84, 7),
+                        _page_request(3, XferOp.WRITE_PAGE, 0, data[:58]),
+                        ("read", BASE + 43, 84, 7),
+                        _page_request(4, XferOp.WRITE_PAGE, 1, data[58:]),
+                        ("read", BASE + 43, 84, 7)]
+    assert all(len(e[2]) <= 123 for e in fake.log if e[0] == "write")
     fake.log.clear()
     back = c.read_table()
     assert back.same_as(t)
-    assert fake.log == [("read", 100, 29, 7), ("read", 1000, 48, 7)]
+    assert fake.log == [("write", BASE + 63, [5, int(XferOp.READ_HEADER), 0], 7), ("read", BASE + 43, 84, 7),
+                        ("write", BASE + 63, [6, int(XferOp.READ_PAGE), 0], 7), ("read", BASE + 43, 84, 7),
+                        ("write", BASE + 63, [7, int(XferOp.READ_PAGE), 1], 7), ("read", BASE + 43, 84, 7)]
 
 
-def test_large_table_is_chunked_within_modbus_limits():
+def test_refused_page_raises_and_leaves_nothing_to_stage():
     fake = FakeClient()
     c = _connect(fake)
-    t = _table(30)  # 360 values = 720 registers
-    fake.log.clear()
-    c.upload_table(t)
-    writes = [e for e in fake.log if e[0] == "write" and e[1] >= 1000]
-    assert [w[1] for w in writes] == [1000 + 122 * i for i in range(6)]
-    assert all(len(w[2]) <= 123 and len(w[2]) % 2 == 0 for w in writes)
-    assert sum(len(w[2]) for w in writes) == 720
-    fake.log.clear()
-    c.read_table()
-    reads = [e for e in fake.log if e[1] >= 1000]
-    assert [r[1] for r in reads] == [1000 + 124 * i for i in range(6)]
-    assert all(r[2] <= 125 for r in reads)
+    t = _table(3)
+    real = fake.write_registers
+
+    def flaky(address, values, *, device_id=1):  # the second value page arrives with a bit flipped
+        if values[:2] == [4, int(XferOp.WRITE_PAGE)]:
+            values = list(values)
+            values[6] ^= 1
+        return real(address, values, device_id=device_id)
+
+    fake.write_registers = flaky
+    with pytest.raises(TablePageError, match="PAGE_CRC_MISMATCH"):
+        c.upload_table(t)
+    assert 1 not in fake.tables.pages
+    with pytest.raises(TableVerifyError, match="last upload failed"):
+        c.stage_table()
+    assert not [e for e in fake.log if e[0] == "write" and e[1] == BASE + 8]  # no TABLE_STAGE sent
 
 
 def test_activation_refused_without_readback_or_with_difference():
@@ -168,7 +266,11 @@ def test_activation_refused_without_readback_or_with_difference():
     with pytest.raises(TableVerifyError, match="not read back"):
         c.activate_table()
     assert fake.log == []  # refused before touching the controller
-    fake.regs[1000 + 5] ^= 1  # one bit of value 2 flips in the controller
-    c.read_table()
-    with pytest.raises(TableVerifyError, match="first at flat index 2"):
+    # value 2 changes in the controller's store behind its page: the whole-table CRC-32 catches it
+    fake.tables.corrupt_value(2, 1e-6, WordOrder.BIG)
+    with pytest.raises(TableError, match="CRC-32"):
+        c.read_table()
+    with pytest.raises(TableVerifyError, match="read-back failed"):
+        c.stage_table()
+    with pytest.raises(TableVerifyError, match="read-back failed"):
         c.activate_table()

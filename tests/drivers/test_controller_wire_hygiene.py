@@ -1,6 +1,8 @@
 """Issue 12 on the Modbus link: the reply's function code is checked (exact wire transcript),
 the map version and the word order are checked on connect, and the simulated controller
-enforces the motion safety invariants for any client (raw pymodbus, property-based)."""
+enforces the motion safety invariants for any client (raw pymodbus, property-based). Map 2:
+targets travel as scaled 32-bit integers, so no client can send a NaN; the ends of the integer
+range are what a broken client can send."""
 
 from __future__ import annotations
 
@@ -27,15 +29,18 @@ from drivers.controller import (
 )
 from drivers.controller_map import (
     REG,
+    WINDOW_SIZE,
     Command,
     ErrorCode,
     StatusBit,
     WordOrder,
     encode,
+    encode_i32_array,
     implausible_limits,
     register_span,
 )
 from simulators.controller_server import SimulatedController
+from simulators.controller_tables import TableSlots, serve_transfer
 
 # --------------------------------------------------------------------------------------------
 # function code: a scripted server on a real socket, exact bytes both ways
@@ -44,12 +49,34 @@ from simulators.controller_server import SimulatedController
 LIMITS = [-2.0, 2.0, -2.5, 2.5, -200.0, 0.0, -6.0, 6.0]
 
 
-def _regs(name, value, order=WordOrder.BIG) -> bytes:
-    return b"".join(struct.pack(">H", w) for w in encode(name, value, order))
-
-
 def _read_reply(payload: bytes) -> bytes:
     return bytes([3, len(payload)]) + payload
+
+
+class _Program:
+    """The robot program behind the scripted server: a window image at base 0 that answers
+    reads and writes by the request PDU (transfers as the simulator's program does)."""
+
+    def __init__(self):
+        self.regs = [0] * WINDOW_SIZE
+        for name, value in (("map_version", 2), ("n_joints", 4), ("order_check", 1)):
+            r = REG[name]
+            self.regs[r.address:r.end] = encode(r, value)
+        self.tables = TableSlots()
+
+    def info(self, number):
+        from drivers.controller_map import INFO_PAGES
+        return encode(INFO_PAGES["soft_limits"][1], LIMITS + [0.0] * 4) if number == 0 else None
+
+    def __call__(self, pdu: bytes) -> bytes:
+        fc, address, count = pdu[0], *struct.unpack(">HH", pdu[1:5])
+        if fc == 3:
+            return _read_reply(b"".join(struct.pack(">H", w) for w in self.regs[address:address + count]))
+        values = list(struct.unpack(f">{count}H", pdu[6:6 + 2 * count]))
+        self.regs[address:address + count] = values
+        if address == REG["xfer_seq"].address:
+            serve_transfer(self.regs, self.tables, WordOrder.BIG, self.info)
+        return pdu[:5]
 
 
 class ScriptedServer:
@@ -89,18 +116,19 @@ class ScriptedServer:
         self.sock.close()
 
 
-CONNECT = [
-    lambda req: _read_reply(_regs("map_version", 1)),
-    lambda req: _read_reply(_regs("n_joints", 4)),
-    lambda req: _read_reply(_regs("soft_limits", LIMITS + [0.0] * 4)),
-    lambda req: _read_reply(_regs("cmd_seq", 0)),
+CONNECT_REQUESTS = [  # MBAP (tid, protocol 0, length, unit 1) + PDU
+    bytes.fromhex("0001 0000 0006 01 03 0000 0040"),      # offsets 0..63: identification
+    bytes.fromhex("0002 0000 0006 01 03 0040 0040"),      # 64..127: the whole window is there
+    bytes.fromhex("0003 0000 0006 01 03 002b 0001"),      # xfer_ack
+    bytes.fromhex("0004 0000 000d 01 10 003f 0003 06 0001 0005 0000"),  # READ_INFO page 0
+    bytes.fromhex("0005 0000 0006 01 03 002b 0054"),      # answer + soft limits in one read
+    bytes.fromhex("0006 0000 0006 01 03 0009 0001"),      # cmd_seq
 ]
-CONNECT_REQUESTS = [  # MBAP (tid, protocol 0, length 6, unit 1) + FC 3, address, count
-    bytes.fromhex("0001 0000 0006 01 03 0002 0001"),
-    bytes.fromhex("0002 0000 0006 01 03 0003 0001"),
-    bytes.fromhex("0003 0000 0006 01 03 0048 0018"),
-    bytes.fromhex("0004 0000 0006 01 03 000b 0001"),
-]
+
+
+def _connect_script():
+    program = _Program()
+    return [program] * len(CONNECT_REQUESTS)
 
 
 @pytest.mark.parametrize("reply, error, got", [
@@ -110,7 +138,7 @@ CONNECT_REQUESTS = [  # MBAP (tid, protocol 0, length 6, unit 1) + FC 3, address
     (bytes.fromhex("83 02"), ModbusExceptionError, None),            # the right exception
 ])
 def test_a_reply_with_another_function_code_is_refused(reply, error, got):
-    srv = ScriptedServer(CONNECT + [lambda req: reply])
+    srv = ScriptedServer(_connect_script() + [lambda req: reply])
     c = ModbusController("127.0.0.1", srv.port, heartbeat_period=None, timeout=2.0)
     try:
         c.connect()
@@ -121,7 +149,7 @@ def test_a_reply_with_another_function_code_is_refused(reply, error, got):
         srv.close()
     status_first, status_count = register_span("ack_seq", "error_bound")
     assert srv.requests == CONNECT_REQUESTS + [
-        bytes.fromhex("0005 0000 0006 01 03") + struct.pack(">HH", status_first, status_count)]
+        bytes.fromhex("0007 0000 0006 01 03") + struct.pack(">HH", status_first, status_count)]
     if got is not None:
         assert (info.value.expected_fc, info.value.got_fc) == (3, got)
         assert "was not used" in str(info.value)
@@ -130,7 +158,7 @@ def test_a_reply_with_another_function_code_is_refused(reply, error, got):
 
 
 def test_a_write_answered_with_a_read_response_is_refused():
-    srv = ScriptedServer(CONNECT + [lambda req: _read_reply(b"\x00\x01")])
+    srv = ScriptedServer(_connect_script() + [lambda req: _read_reply(b"\x00\x01")])
     c = ModbusController("127.0.0.1", srv.port, heartbeat_period=None, timeout=2.0)
     try:
         c.connect()
@@ -139,7 +167,7 @@ def test_a_write_answered_with_a_read_response_is_refused():
     finally:
         c.close()
         srv.close()
-    assert srv.requests[-1] == bytes.fromhex("0005 0000 0009 01 10 0000 0001 02 0007")
+    assert srv.requests[-1] == bytes.fromhex("0007 0000 0009 01 10 0000 0001 02 0007")
     assert (info.value.expected_fc, info.value.got_fc) == (16, 3)
 
 
@@ -149,14 +177,14 @@ def test_a_write_answered_with_a_read_response_is_refused():
 
 
 def test_unknown_map_version_is_refused_naming_both_versions():
-    with SimulatedController(map_version=2) as sim:
+    with SimulatedController(map_version=1) as sim:
         c = ModbusController("127.0.0.1", sim.port, heartbeat_period=None)
         with pytest.raises(MapVersionError) as info:
             c.connect()
         c.close()
         assert sim.command_writes == []
-    assert (info.value.found, info.value.supported) == (2, (1,))
-    assert "version 2" in str(info.value) and "version 1" in str(info.value)
+    assert (info.value.found, info.value.supported) == (1, (2,))
+    assert "version 1" in str(info.value) and "version 2" in str(info.value)
 
 
 @pytest.mark.parametrize("sim_order, drv_order", [(WordOrder.LITTLE, WordOrder.BIG),
@@ -191,38 +219,14 @@ def test_implausible_limits():
     assert implausible_limits(LIMITS[:6], 4) is not None
 
 
-class _Resp:
-    def __init__(self, registers):
-        self.registers = registers
-
-    def isError(self):
-        return False
-
-
-class NaNLimitsClient:
-    """Soft limits that are implausible in either word order (NaN): a broken program."""
-
-    def __init__(self):
-        self.regs = [0] * 200
-        for name, value in (("map_version", 1), ("n_joints", 1)):
-            w = encode(name, value)
-            self.regs[REG[name].address:REG[name].address + len(w)] = w
-        self.regs[72:76] = [0x7FC0, 0x0000, 0x3F80, 0x0000]  # NaN, 1.0 (BIG)
-
-    def connect(self):
-        return True
-
-    def close(self):
-        pass
-
-    def read_holding_registers(self, address, *, count=1, device_id=1):
-        return _Resp(self.regs[address:address + count])
-
-
 def test_limits_implausible_in_either_order_are_a_decode_error():
-    c = ModbusController("x", 0, heartbeat_period=None, client=NaNLimitsClient())
-    with pytest.raises(RegisterDecodeError, match="either word order"):
-        c.connect()
+    with SimulatedController() as sim:
+        sim.soft_limits = np.array([[1.0, -1.0]] * 4)  # a broken program: lower above upper
+        c = ModbusController("127.0.0.1", sim.port, heartbeat_period=None)
+        with pytest.raises(RegisterDecodeError, match="either word order"):
+            c.connect()
+        c.close()
+        assert sim.command_writes == []
 
 
 # --------------------------------------------------------------------------------------------
@@ -233,12 +237,11 @@ _CMD_FIRST, _ = register_span("cmd_code", "cmd_pose")
 _ST_FIRST, _ST_COUNT = register_span("ack_seq", "error_bound")
 
 
-def _f32_words(values) -> list[int]:
-    out = []
-    for v in values:
-        b = struct.pack(">f", v)
-        out += [int.from_bytes(b[:2], "big"), int.from_bytes(b[2:], "big")]
-    return out
+def _i32_words(values) -> list[int]:
+    """Scaled i32 words; values beyond the range are clipped to its ends (what a broken client
+    can at worst send)."""
+    v = np.clip(np.asarray(values, dtype=float), -2147.483648, 2147.483647)
+    return encode_i32_array(v, 1e-6)
 
 
 class RawClient:
@@ -257,8 +260,8 @@ class RawClient:
     def command(self, code: Command, joints=(0.0,) * 6, pose=(0.0,) * 6, elbow=1, speed=500):
         self.seq = self.seq % 0xFFFF + 1
         block = [int(code), self.seq, elbow & 0xFFFF, speed]
-        block += _f32_words(list(joints) + [0.0] * (6 - len(joints)))
-        block += _f32_words(pose)
+        block += _i32_words(list(joints) + [0.0] * (6 - len(joints)))
+        block += _i32_words(pose)
         assert not self.client.write_registers(_CMD_FIRST, block, device_id=1).isError()
         deadline = time.monotonic() + 5.0
         while True:  # resolved: done_seq or error_seq is this command's number
@@ -285,28 +288,28 @@ def raw():
 HOME = [0.0, 0.0, -100.0, 0.0]
 
 
-@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+@pytest.mark.parametrize("bad", [2147.483647, -2147.483648])
 @pytest.mark.parametrize("joint", [0, 2])
-def test_non_finite_joint_target_is_refused_and_never_stuck(raw, bad, joint):
+def test_extreme_joint_target_is_refused_and_never_stuck(raw, bad, joint):
     sim, client = raw
     target = list(HOME)
     target[joint] = bad
-    ok, code, bits, err_joint, _ = client.command(Command.MOVE_JOINTS, joints=target)
-    assert not ok and code == ErrorCode.BAD_COMMAND and err_joint == joint + 1
+    ok, code, bits, err_joint, bound = client.command(Command.MOVE_JOINTS, joints=target)
+    assert not ok and code == ErrorCode.SOFT_LIMIT and err_joint == joint + 1 and bound == (1 if bad > 0 else -1)
     assert not bits & StatusBit.MOVING and bits & StatusBit.READY
     assert np.all(np.isfinite(sim.joints))
     ok, *_ = client.command(Command.MOVE_JOINTS, joints=HOME)  # and it still moves
     assert ok
 
 
-@pytest.mark.parametrize("bad", [math.nan, math.inf])
-@pytest.mark.parametrize("axis", [0, 5])
-def test_non_finite_cartesian_target_is_refused(raw, bad, axis):
+@pytest.mark.parametrize("bad", [2147.483647, -2147.483648])
+@pytest.mark.parametrize("axis", [0, 2])  # (a yaw of 2147 rad is reachable: it wraps)
+def test_extreme_cartesian_target_is_refused(raw, bad, axis):
     _, client = raw
     pose = [550.0, 150.0, 320.0, 0.0, 0.0, 0.3]
     pose[axis] = bad
     ok, code, bits, _, _ = client.command(Command.MOVE_CARTESIAN, pose=pose)
-    assert not ok and code == ErrorCode.BAD_COMMAND
+    assert not ok and code in (ErrorCode.UNREACHABLE, ErrorCode.SOFT_LIMIT)
     assert not bits & StatusBit.MOVING
 
 
@@ -314,27 +317,22 @@ _LIM = SimulatedController().soft_limits  # the sr800's, as the simulator publis
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(st.lists(st.one_of(st.floats(allow_nan=True, allow_infinity=True, width=32),
-                          st.floats(-3.0, 3.0, width=32), st.floats(-400.0, 50.0, width=32)),
+@given(st.lists(st.one_of(st.floats(-1e4, 1e4), st.floats(-3.0, 3.0), st.floats(-400.0, 50.0)),
                 min_size=4, max_size=4))
 def test_property_a_joint_move_is_done_only_inside_the_limits(raw, q):
     sim, client = raw
     ok, code, bits, err_joint, bound = client.command(Command.MOVE_JOINTS, joints=q)
     assert not bits & StatusBit.MOVING  # resolved, never left moving
-    q = np.asarray(q, dtype=float)
-    finite = np.isfinite(q)
-    inside = finite & (q >= _LIM[:, 0]) & (q <= _LIM[:, 1])
+    q = np.clip(np.rint(np.asarray(q, dtype=float) / 1e-6) * 1e-6, -2147.483648, 2147.483647)  # as on the wire
+    inside = (q >= _LIM[:, 0]) & (q <= _LIM[:, 1])
     if inside.all():
         assert ok, f"refused a valid target {q} (code {code})"
         np.testing.assert_allclose(sim.joints, q, atol=1e-5)
         return
     assert not ok
     j = int(np.argmin(inside))  # the first joint that fails
-    if not finite.all():
-        assert code == ErrorCode.BAD_COMMAND and err_joint == int(np.argmin(finite)) + 1
-    else:
-        assert code == ErrorCode.SOFT_LIMIT and err_joint == j + 1
-        assert bound == (-1 if q[j] < _LIM[j, 0] else 1)
+    assert code == ErrorCode.SOFT_LIMIT and err_joint == j + 1
+    assert bound == (-1 if q[j] < _LIM[j, 0] else 1)
     assert np.all(np.isfinite(sim.joints))
 
 

@@ -91,7 +91,7 @@ def test_python_m_simulators_serves_both_endpoints():
             c.move_joints([0.1, 0.2, -100.0, 0.0]).wait(2.0)
             np.testing.assert_allclose(c.read_joints(), [0.1, 0.2, -100.0, 0.0], atol=1e-5)
         import serial
-        with serial.Serial(ep["probe_head"], 38400, timeout=2.0) as s:
+        with serial.Serial(ep["probe_head"], 9600, timeout=2.0) as s:  # a DL-RS1A at its factory 9600 8N1
             s.write(b"M0\r\n")
             reply = s.read_until(b"\r\n")
         assert reply.startswith(b"M0,") and reply.endswith(b"\r\n")

@@ -183,7 +183,7 @@ def test_simulated_run_report(simulated_run):
     assert all(n.startswith("K.") for n in column(page.tables["params-head"], "parameter"))
     # the record
     record = dict((r[0], r[1]) for r in page.tables["record-table"])
-    assert record["station version"] and "SIM-PH6" in record["probe interface"]
+    assert record["station version"] and "DL-RS1A" in record["probe interface"]
     assert "[robot]" in page.texts["config"]
     # the table rebuilt from the stored measurements is the one uploaded
     facts = dict((r[0], r[1]) for r in page.tables["table-facts"])
