@@ -48,6 +48,10 @@ from station.errors import ConfigError
 # The requirements and the report live in conformance_report, the link in conformance_kit; they
 # stay importable from here.
 
+#: the requirements that only a controller holding the station's correction table must meet
+_TABLE_REQUIREMENTS = ("table", "pages", "slot_reads", "activation", "discard_previous", "keep_previous",
+                       "slots_restored")
+
 __all__ = ["REQUIREMENTS", "Requirement", "ConformanceReport", "run_conformance", "PASSED", "FAILED", "NOT_CHECKED"]
 
 
@@ -66,6 +70,11 @@ class _Kit(_HandshakeChecks, _TableChecks, _SlotKeeper):
             self.req[rid].failed(f"{type(exc).__name__}: {exc}",
                                  "serve every register of the map (docs/robot-program.md) as documented")
 
+    @property
+    def uses_table(self) -> bool:
+        """The station uploads a correction table to this cell's controller (SCARA robots)."""
+        return bool(self.cfg.model.is_scara)
+
     def _checks(self) -> None:
         self.prepare_motion()
         if self.may_move:
@@ -81,6 +90,8 @@ class _Kit(_HandshakeChecks, _TableChecks, _SlotKeeper):
                 self.req[rid].not_checked(self.why_not_move, self.why_not_move.rpartition(": ")[2])
         self.emit("error codes")
         self._step("error_codes", self.error_codes)
+        if not self.uses_table:
+            return
         self.emit("table pages")
         self._step("pages", self.pages)
         self.emit("correction table")
@@ -105,13 +116,20 @@ class _Kit(_HandshakeChecks, _TableChecks, _SlotKeeper):
             return
         self.emit("heartbeats")
         self._step("heartbeat", self.heartbeat)
-        self.emit("table slots as found")  # before the first command: nothing has changed them yet
-        self._step("slot_reads", self.read_slots)
-        try:
+        if not self.uses_table:  # compensated targets: the program holds no table (robot-programs/ur)
+            for rid in _TABLE_REQUIREMENTS:
+                self.req[rid].not_checked("this cell's robot is not a SCARA: the station sends compensated targets "
+                                          "and uploads no correction table", "nothing: the robot program need "
+                                          "hold no table")
             self._checks()
-        finally:
-            self.emit("table slots put back")
-            self._step("slots_restored", self.restore_slots)
+        else:
+            self.emit("table slots as found")  # before the first command: nothing has changed them yet
+            self._step("slot_reads", self.read_slots)
+            try:
+                self._checks()
+            finally:
+                self.emit("table slots put back")
+                self._step("slots_restored", self.restore_slots)
         self.judge_ack()
         for rq in self.req.values():  # never a bare "not checked"
             if rq.status == NOT_CHECKED and not rq.detail:

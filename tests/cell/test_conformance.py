@@ -285,3 +285,22 @@ def test_robot_program_document_lists_every_register_and_code():
     for rid, _ in cf.REQUIREMENTS:
         assert f"`{rid}`" in doc, rid
     assert "station conformance" in doc
+
+
+def test_a_six_axis_cell_needs_no_table_on_its_controller():
+    """An articulated arm gets compensated targets and no table (robot-programs/ur holds none): the
+    table requirements are not checked, with the reason, and every other one passes."""
+    from simulators.six_axis_cell import six_axis_config_text, start_six_axis_cell
+
+    with start_six_axis_cell(seed=1) as srv:
+        park = ", ".join(repr(float(v)) for v in np.degrees(srv.controller_server.joints))
+        text = six_axis_config_text(srv, 1) + f"\n[conformance]\npark_joints = [{park}]\ntest_move = 2.0\n"
+        report = cf.run_conformance(parse_text(text))
+        assert srv.controller_server.active_table is None  # the kit sent no table
+    by_id = {r.id: r for r in report.requirements}
+    for rid in cf._TABLE_REQUIREMENTS:
+        assert by_id[rid].status == cf.NOT_CHECKED and "compensated targets" in " ".join(by_id[rid].detail)
+    # the handshake is checked as on a SCARA (the soft-limit refusal needs a joint parked at a limit)
+    assert not [r for r in report.requirements if r.status == cf.FAILED], "\n".join(report.describe())
+    for rid in ("identification", "word_order", "heartbeat", "ack", "done", "sequence", "error_codes"):
+        assert by_id[rid].status == cf.PASSED, rid
