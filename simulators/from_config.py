@@ -54,6 +54,9 @@ DEFAULT_SEED = 1
 #: the simulators share the CPU with the station: a loaded machine must not turn into probe
 #: timeouts, whose retries make a run stop reproducing (the built-in cell's value)
 SIMULATOR_PROBE_TIMEOUT_S = 2.0
+#: the same for the controller's replies and its heartbeat: [devices] controller_timeout_s and
+#: controller_link_timeout_s of a simulated cell are at least this [s]
+SIMULATOR_CONTROLLER_DEADLINE_S = 5.0
 
 
 @dataclass(frozen=True)
@@ -202,6 +205,8 @@ def station_config_text(cfg: Any, servers: SimulatedCellServers, seed: int, sour
     # the simulated unit speaks the file's dialect at the file's line settings, and the simulated
     # robot program hosts the file's register window: only the endpoints change
     devices["probe_timeout_s"] = max(float(cfg.devices.probe_timeout_s), SIMULATOR_PROBE_TIMEOUT_S)
+    for key in ("controller_timeout_s", "controller_link_timeout_s"):
+        devices[key] = max(float(getattr(cfg.devices, key)), SIMULATOR_CONTROLLER_DEADLINE_S)
     if instant and servers.probe_refresh_s is not None:  # the simulated unit refreshes on every request
         devices["probe_refresh_ms"] = 1000.0 * servers.probe_refresh_s
     data["devices"] = devices
@@ -267,6 +272,10 @@ def simulate_config(cfg: Any, seed: int | None = None, source: str | Path | None
         devices = dataclasses.replace(d, probe_head=servers.probe_port, controller_host=servers.controller_host,
                                       controller_port=servers.controller_port,
                                       probe_timeout_s=max(float(d.probe_timeout_s), SIMULATOR_PROBE_TIMEOUT_S),
+                                      controller_timeout_s=max(float(d.controller_timeout_s),
+                                                               SIMULATOR_CONTROLLER_DEADLINE_S),
+                                      controller_link_timeout_s=max(float(d.controller_link_timeout_s),
+                                                                    SIMULATOR_CONTROLLER_DEADLINE_S),
                                       probe_refresh_s=(servers.probe_refresh_s if instant and
                                                        servers.probe_refresh_s is not None else d.probe_refresh_s))
         plan = dataclasses.replace(cfg.plan, settle_s=0.0) if instant else cfg.plan

@@ -75,8 +75,11 @@ points = [
 [devices]
 {devices_toml(servers)}{word_order_line}motion_timeout_s = 30.0
 # The simulators share the CPU with the station (and, in CI, with the tests): a loaded machine
-# must not turn into probe timeouts, whose retries make a run stop reproducing.
+# must not turn into probe timeouts, whose retries make a run stop reproducing, nor into a
+# controller link declared lost (SIMULATOR_DEADLINES_S in simulators/from_config.py).
 probe_timeout_s = 2.0
+controller_timeout_s = 5.0
+controller_link_timeout_s = 5.0
 """
 
 

@@ -107,3 +107,24 @@ def test_what_does_not_match_is_refused_before_any_motion(builtin_sim, tmp_path,
     assert main(["check", str(path)]) == code
     captured = capsys.readouterr()
     assert says in (captured.out + captured.err)
+
+
+def test_simulated_cells_allow_for_a_loaded_machine_and_a_real_cell_keeps_its_deadlines(builtin_sim):
+    """The simulators share the CPU with the station: their cells widen the station's device
+    deadlines (and the session says so); a real cell's configuration keeps what it gives."""
+    from simulators.from_config import SIMULATOR_CONTROLLER_DEADLINE_S, station_config_text
+    from station.cell.config import parse_text
+
+    sim = parse_text(builtin_sim).devices
+    assert sim.controller_timeout_s >= SIMULATOR_CONTROLLER_DEADLINE_S
+    assert sim.controller_link_timeout_s >= SIMULATOR_CONTROLLER_DEADLINE_S
+    real = load_config(CELL)
+    assert (real.devices.controller_timeout_s, real.devices.controller_link_timeout_s) == (1.0, 1.0)
+
+    class Servers:  # what station_config_text reads of running simulators
+        probe_port, controller_host, controller_port, probe_refresh_s = "/dev/null", "127.0.0.1", 1502, None
+
+    import tomllib
+    text = station_config_text(real, Servers(), 1)
+    devices = tomllib.loads(text)["devices"]
+    assert devices["controller_link_timeout_s"] >= SIMULATOR_CONTROLLER_DEADLINE_S

@@ -110,6 +110,7 @@ class DeviceConfig:
     probe_parity: str = "none"
     controller_register_base: int = 0
     probe_refresh_s: float | None = None  # None: the dialect's
+    controller_link_timeout_s: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -437,7 +438,8 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
         controller_timeout_s=d.controller_timeout_s, motion_timeout_s=d.motion_timeout_s,
         probe_protocol=d.probe_protocol, probe_bytesize=line.bytesize, probe_parity=line.parity,
         controller_register_base=d.controller_register_base,
-        probe_refresh_s=None if d.probe_refresh_ms is None else d.probe_refresh_ms / 1000.0)
+        probe_refresh_s=None if d.probe_refresh_ms is None else d.probe_refresh_ms / 1000.0,
+        controller_link_timeout_s=d.controller_link_timeout_s)
     p = f.plan
     plan = PlanConfig(
         elbows=tuple(p.elbows), approach_deg=p.approach_deg, approach_mm=p.approach_mm,

@@ -134,6 +134,9 @@ class _Devices(_Section):
     word_order: Literal["big", "little"] = Field(
         "big", description='"big" or "little" (how the controller orders 32-bit words)')
     controller_timeout_s: float = _num(1.0, ge=0.01, le=60.0, what="seconds to wait for a controller reply")
+    # the station declares the link lost when the robot program's heartbeat stands still this long
+    controller_link_timeout_s: float = _num(1.0, ge=0.2, le=60.0, what="seconds the controller's heartbeat "
+                                            "may stand still before the link counts as lost")
     motion_timeout_s: float = _num(60.0, ge=1.0, le=600.0, what="seconds one motion may take")
     # the robot program's register window (docs/robot-program.md): 0, or 128 for the general-purpose
     # registers of a Universal Robots controller

@@ -53,6 +53,7 @@ controller = "192.168.0.10:502"  # Modbus TCP host:port
 device_id = 1                    # Modbus unit id, 0 … 255
 word_order = "big"               # 32-bit word order of the controller: "big" or "little"
 controller_timeout_s = 1.0       # 0.01 … 60
+controller_link_timeout_s = 1.0  # the robot program's heartbeat may stand still this long [s], 0.2 … 60
 motion_timeout_s = 60.0          # longest single motion [s], 1 … 600
 controller_register_base = 0     # first register of the robot program's 128-register window, 0 … 65407 (UR: 128)
 

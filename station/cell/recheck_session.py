@@ -48,7 +48,9 @@ def run_recheck_session(request: CellRequest, emit: Callable[[Event], None], con
                 on_cell(loaded)
             cfg = loaded.cfg
             cell_name, robot = cfg.name, cfg.model.name
-            db = stack.enter_context(RunDB(request.db))
+            db = stack.enter_context(RunDB(request.db, lock_new_runs=True))  # one process per run
+            if request.resume is not None:  # refused here, before any device is connected
+                stack.enter_context(db.lock_run(request.resume))
             emit(PhaseChanged("connect", "connecting the probe head and the controller"))
             devices = open_cell(cfg, stack)
             summary = run_recheck(cfg, devices.probe, devices.controller, db, tracker, control,

@@ -29,11 +29,16 @@ import math
 import sqlite3
 import threading
 import tomllib
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Iterable, Sequence
+from typing import Any, Iterable, Iterator, Sequence
 
 import numpy as np
 
+from station.cell import record_checks as rc
+from station.cell import run_lock
+from station.cell.record_checks import DamagedRecordError
+from station.cell.run_lock import LockHolder, RunLockedError
 from station.cell.run_records import (  # re-exported: the database's records and errors
     DuplicateMeasurementError,
     EventRecord,
@@ -42,18 +47,15 @@ from station.cell.run_records import (  # re-exported: the database's records an
     RunNotFoundError,
     RunRecord,
     SchemaVersionError,
-    _array_from_json,
     _dumps,
     _float_list,
-    _loads,
-    _required_array,
     _station_version,
     utc_now,
 )
 from station.cell.steps import MEASUREMENT_KINDS
 
 __all__ = ["RunDB", "RunRecord", "MeasurementRecord", "EventRecord", "RunDatabaseError", "SchemaVersionError",
-           "RunNotFoundError", "DuplicateMeasurementError", "RUN_STATUSES", "EVENT_LEVELS", "SCHEMA_VERSION",
+           "RunNotFoundError", "DuplicateMeasurementError", "DamagedRecordError", "RunLockedError", "RUN_STATUSES", "EVENT_LEVELS", "SCHEMA_VERSION",
            "utc_now"]
 
 SCHEMA_VERSION = 1
@@ -124,9 +126,13 @@ _TABLES = {"schema_version", "runs", "measurements", "results", "events"}
 class RunDB:
     """The station's run database (one SQLite file). Use as a context manager or call close()."""
 
-    def __init__(self, path: str | Path, *, timeout_s: float = 10.0):
+    def __init__(self, path: str | Path, *, timeout_s: float = 10.0, lock_new_runs: bool = False):
+        """``lock_new_runs``: a run this RunDB creates is locked to this process from its creation
+        until :meth:`close` (a session's database; :meth:`lock_run` locks a resumed run)."""
         self.path = Path(path)
         self._lock = threading.RLock()
+        self._lock_new_runs = lock_new_runs
+        self._run_locks: dict[int, str] = {}  # run id -> token of the run lock this RunDB holds
         self._conn: sqlite3.Connection | None = None
         if self.path.is_dir():
             raise RunDatabaseError(f"{self.path}: is a directory; give the path of a run database "
@@ -206,6 +212,8 @@ class RunDB:
         if missing:
             raise RunDatabaseError(f"{self.path}: tables {', '.join(sorted(missing))} are "
                                    f"missing; the file is damaged, restore a backup")
+        for table in rc.TABLE_COLUMNS:  # a table re-made by a foreign tool fails here, not mid-run
+            rc.check_columns(self.path, table, [r[1] for r in c.execute(f"PRAGMA table_info({table})")])
 
     def _create_schema(self) -> None:
         c = self._conn
@@ -220,6 +228,7 @@ class RunDB:
                     if stmt.strip():
                         c.execute(stmt)
                 c.execute("INSERT INTO schema_version(version) VALUES (?)", (SCHEMA_VERSION,))
+                c.execute(run_lock.LOCK_TABLE)
             c.execute("COMMIT")
         except BaseException:
             c.execute("ROLLBACK")
@@ -234,8 +243,11 @@ class RunDB:
         self.close()
 
     def close(self) -> None:
-        """Close the file. Everything recorded is already committed; closing loses nothing."""
+        """Close the file, releasing the run locks it holds. Everything recorded is already
+        committed; closing loses nothing."""
         with self._lock:
+            for run_id in list(self._run_locks):
+                self._release(run_id)
             if self._conn is not None:
                 self._conn.close()
                 self._conn = None
@@ -286,10 +298,56 @@ class RunDB:
 
     @staticmethod
     def _run_from_row(row: tuple) -> RunRecord:
-        rid, created, version, status, config, plan_json, seed, note = row
-        return RunRecord(id=rid, created_utc=created, station_version=version, status=status,
-                         config_toml=config, plan=tuple(_loads(plan_json)),
-                         seed=None if seed is None else int(seed), note=note)
+        return rc.run_record(row)
+
+    # -- run locks (station.cell.run_lock) ---------------------------------------------------
+
+    @contextmanager
+    def lock_run(self, run_id: int) -> Iterator[LockHolder | None]:
+        """Hold the run's lock until the block ends (or :meth:`close`); yields the stale holder it
+        took over, if any. Raises :class:`RunLockedError` when a live process holds it."""
+        with self._lock:
+            self._require_run(run_id)
+            if int(run_id) not in self._run_locks:
+                try:
+                    token, stale = run_lock.acquire(self._c(), self.path, int(run_id))
+                except sqlite3.OperationalError as e:
+                    raise RunDatabaseError(f"{self.path}: the run lock of run {run_id} could not be "
+                                           f"taken ({e}); check that the file is writable") from e
+                self._run_locks[int(run_id)] = token
+            else:
+                stale = None
+        try:
+            yield stale
+        finally:
+            with self._lock:
+                self._release(int(run_id))
+
+    def _release(self, run_id: int) -> None:
+        token = self._run_locks.pop(run_id, None)
+        if token is None or self._conn is None:
+            return
+        try:
+            run_lock.release(self._conn, token)
+        except sqlite3.Error:  # a lock left behind is taken over as stale: this process ends
+            pass
+
+    def run_lock(self, run_id: int) -> LockHolder | None:
+        """Who holds the run's lock, or None."""
+        with self._lock:
+            self._require_run(run_id)
+            return run_lock.read_holder(self._c(), run_id)
+
+    def unlock_run(self, run_id: int) -> LockHolder | None:
+        """Clear the run's lock whoever holds it (``station runs --unlock``); returns the holder it
+        removed, or None if the run was not locked."""
+        with self._lock:
+            holder = self.run_lock(run_id)
+            if holder is not None:
+                self._write([("DELETE FROM run_locks WHERE run_id = ?", (int(run_id),)),
+                             ("INSERT INTO events(run_id, t_utc, level, message) VALUES (?, ?, 'warning', ?)",
+                              (int(run_id), utc_now(), f"run lock of {holder.describe()} cleared by hand"))])
+            return holder
 
     # -- runs ----------------------------------------------------------------------------------
 
@@ -314,17 +372,24 @@ class RunDB:
             seed_text = str(int(seed))  # as text: SQLite integers stop at 2**63
         version = _station_version() if station_version is None else str(station_version)
         now = utc_now()
+        token = run_lock.new_token()
         with self._lock:
-            cur, _ = self._write([
+            lock = [(run_lock.LOCK_TABLE, ()), run_lock.insert_statements(
+                "(SELECT MAX(id) FROM runs)", token)] if self._lock_new_runs else []
+            cur, *_ = self._write([
                 ("INSERT INTO runs(created_utc, station_version, status, config_toml, plan_json, "
                  "seed, note) VALUES (?, ?, 'created', ?, ?, ?, ?)",
                  (now, version, config_toml, plan_json, seed_text, str(note))),
                 ("INSERT INTO events(run_id, t_utc, level, message) VALUES "
                  "(last_insert_rowid(), ?, 'info', ?)",
                  (now, f"run created: {len(plan)} planned steps, station {version}")),
+                *lock,
             ])
             rowid = cur.lastrowid
             assert rowid is not None  # an INSERT always sets it
+            if self._lock_new_runs:  # taken in the run's own transaction: no moment unlocked
+                run_lock.held(token)
+                self._run_locks[int(rowid)] = token
             return int(rowid)
 
     def run(self, run_id: int) -> RunRecord:
@@ -442,15 +507,7 @@ class RunDB:
 
     @staticmethod
     def _measurement_from_row(r: tuple) -> MeasurementRecord:
-        (run_id, step, kind, point_id, label, jc, jr, raw, rd, cs, pose, res, ok, msg, t) = r
-        return MeasurementRecord(
-            run_id=run_id, step_index=step, kind=kind, point_id=point_id, label=label,
-            joints_commanded=_required_array(jc), joints_read=_array_from_json(jr),
-            raw_frames=bytes(raw), readings_mm=_array_from_json(rd),
-            channel_status=None if cs is None else tuple(_loads(cs)),
-            pose=_array_from_json(pose, ndim=2),
-            pose_residual_um=None if res is None else float(res), ok=bool(ok), message=msg,
-            t_utc=t)
+        return rc.measurement_record(r)
 
     def measurements(self, run_id: int, kind: str | None = None) -> list[MeasurementRecord]:
         """The run's measurements ordered by step index, optionally only those of one kind."""
@@ -514,7 +571,7 @@ class RunDB:
                 raise RunDatabaseError(f"run {run_id}: no result {key!r}; run the step that "
                                        f"produces it first, or pass default=")
             return default
-        return _loads(row[0])
+        return rc.check_result(rc.parse_json(row[0], int(run_id), f"result {key!r}"), int(run_id), key)
 
     def result_keys(self, run_id: int) -> list[str]:
         with self._lock:

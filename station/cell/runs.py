@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from station.cell.record_checks import checked
 from station.cell.rundb import RunDB
 from station.cell.summary import RunSummary
 
@@ -68,9 +69,9 @@ def list_runs(db: RunDB) -> list[RunInfo]:
     out = []
     for run in db.runs():
         stored = db.load_result(run.id, "summary", default=None)
-        summary = RunSummary.from_json(stored) if stored else None
+        summary = checked(run.id, "result 'summary'", RunSummary.from_json, stored) if stored else None
         cell, robot = _names(run.config_toml)
-        recheck = _recheck_figures(db, run.id, run.plan)
+        recheck = checked(run.id, "recheck results", _recheck_figures, db, run.id, run.plan)
         out.append(RunInfo(
             id=run.id, created_utc=run.created_utc, cell=summary.cell if summary else cell,
             robot=summary.robot if summary else robot, status=run.status,

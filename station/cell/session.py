@@ -26,7 +26,7 @@ from drivers.controller_map import WordOrder
 from drivers.probe_head import ProbeHead as SerialProbeHead
 from station.cell.config import CellConfig, load_config
 from station.cell.devices import CellController, ProbeHead
-from station.cell.events import Event, PhaseChanged, RunFailed, RunStarted
+from station.cell.events import Event, Notice, PhaseChanged, RunFailed, RunStarted
 from station.cell.outcomes import classify, failure_summary, hint_for
 from station.cell.pipeline import Options, run_calibration
 from station.cell.questions import Confirm
@@ -85,7 +85,8 @@ def open_controller(cfg: CellConfig, stack: ExitStack) -> CellController:
     d = cfg.devices
     driver = ModbusController(d.controller_host, d.controller_port, device_id=d.device_id,
                               word_order=WordOrder.BIG if d.word_order == "big" else WordOrder.LITTLE,
-                              timeout=d.controller_timeout_s, register_base=d.controller_register_base)
+                              timeout=d.controller_timeout_s, register_base=d.controller_register_base,
+                              link_timeout=d.controller_link_timeout_s)
     driver.connect()
     stack.callback(driver.close)
     controller: CellController = driver
@@ -189,8 +190,15 @@ def run_calibration_session(request: CellRequest, emit: Callable[[Event], None],
             loaded = (load or load_cell)(request, stack)  # the module's load_cell at call time
             cfg = loaded.cfg
             cell_name, robot = cfg.name, cfg.model.name
-            db = stack.enter_context(RunDB(request.db))
+            db = stack.enter_context(RunDB(request.db, lock_new_runs=True))  # one process per run
+            if request.resume is not None:  # refused here, before any device is connected
+                stack.enter_context(db.lock_run(request.resume))
             emit(PhaseChanged("connect", "connecting the probe head and the controller"))
+            if request.simulated:  # the simulators share this machine's CPU with the station
+                d = cfg.devices
+                emit(Notice("info", f"simulated cell: device deadlines allow for a loaded machine (probe reply "
+                                    f"{d.probe_timeout_s:g} s, controller reply {d.controller_timeout_s:g} s, "
+                                    f"controller heartbeat {d.controller_link_timeout_s:g} s)"))
             devices = open_cell(cfg, stack)
             check_head_channels(cfg, probe_channel_count(devices.probe))  # before anything moves
             check_controller_correction(devices.controller)
@@ -224,20 +232,40 @@ def reset_controller(cfg: CellConfig, confirm: Callable[[str], bool]) -> tuple[s
     """The documented recovery after an e-stop or a drive fault: show the controller's latched
     error, ask ``confirm(question)`` (the operator must have checked the cell), and only then
     send RESET. Motion commands are never retried by this; the run is continued with
-    ``--resume``. Returns the lines to show."""
+    ``--resume``. Returns the lines to show; a controller that cannot be reached or fails on the
+    way is :class:`~station.cell.device_errors.DeviceUnavailable` (exit 7) saying what to check."""
+    from station.cell.device_errors import DeviceUnavailable
+    from station.errors import StationError
+
+    where = f"{cfg.devices.controller_host}:{cfg.devices.controller_port}"
+    check = (f"check that the controller is powered and on the network, that [devices].controller ({where}) is "
+             "its address and port, and that the robot program is running; then run 'station reset CONFIG' again")
+    sent = False
+
+    def device(call: Callable[[], Any]) -> Any:
+        try:
+            return call()
+        except Exception as exc:  # a driver's error: only the device kinds are the operator's to fix
+            if isinstance(exc, StationError) or classify(exc) is not Outcome.DEVICE_FAULT:
+                raise
+            what = ("the RESET may not have reached it: run 'station reset CONFIG' again to see its state"
+                    if sent else "nothing was sent to it")
+            raise DeviceUnavailable(f"the controller at {where} cannot be used ({exc}); {what}. "
+                                    f"{check[0].upper()}{check[1:]}") from None
+
     with ExitStack() as stack:
-        controller = open_controller(cfg, stack)
-        st = controller.status()
+        controller = device(lambda: open_controller(cfg, stack))
+        st = device(controller.status)
         if not (st.error or st.estop):
-            return (f"controller {cfg.devices.controller_host}:{cfg.devices.controller_port}: no latched error; "
-                    f"nothing to reset",)
+            return (f"controller {where}: no latched error; nothing to reset",)
         what = "emergency stop" if st.estop else st.error_message
         question = (f"The controller reports: {what}. Is the e-stop released and the cell clear, and shall the "
                     f"controller's error be reset?")
         if not confirm(question):
             raise RunAborted("reset declined by the operator; nothing was sent to the controller")
-        controller.reset_error()
-        after = controller.status()
+        sent = True
+        device(controller.reset_error)
+        after = device(controller.status)
         if after.error or after.estop:
             raise ConfigError(f"the controller still reports {'an emergency stop' if after.estop else after.error_message} "
                               f"after RESET: release the e-stop or clear the fault at the controller first")

@@ -9,8 +9,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from station.cell.config import CellConfig, parse_text
-from station.cell.rundb import RunDatabaseError, RunDB
+from station.cell.record_checks import check_step_joints, checked
+from station.cell.rundb import RunDB
 from station.cell.steps import PlannedStep
+from station.errors import StationError
 
 __all__ = ["config_source", "stored_config", "stored_plan"]
 
@@ -31,9 +33,21 @@ def stored_config(db: RunDB, run_id: int) -> CellConfig:
     return parse_text(db.run(run_id).config_toml, source or f"run {run_id}")
 
 
-def stored_plan(db: RunDB, run_id: int) -> tuple[PlannedStep, ...]:
-    """The run's plan as typed steps."""
+def stored_plan(db: RunDB, run_id: int, n_joints: int | None = None) -> tuple[PlannedStep, ...]:
+    """The run's plan as typed steps, checked: one joint value per joint of the robot the run was
+    made with (``n_joints``; by default the stored configuration's robot), a known step kind."""
+    plan = db.run(run_id).plan
+    steps = tuple(checked(run_id, f"plan step {i}", PlannedStep.from_record, rec)
+                  for i, rec in enumerate(plan))
+    check_step_joints(plan, run_id, _stored_joint_count(db, run_id) if n_joints is None else n_joints)
+    return steps
+
+
+def _stored_joint_count(db: RunDB, run_id: int) -> int | None:
+    """The joints of the stored configuration's robot; None where it does not read (its robot file
+    moved): then the steps are only checked against each other, and the configuration's reader
+    reports its own error."""
     try:
-        return tuple(PlannedStep.from_record(rec) for rec in db.run(run_id).plan)
-    except (KeyError, ValueError, TypeError) as exc:
-        raise RunDatabaseError(f"run {run_id}: the stored plan is not readable ({exc}); start a new run") from None
+        return int(stored_config(db, run_id).model.n_joints)
+    except StationError:
+        return None

@@ -38,6 +38,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from station.core.probe_geometry import (
+    _MIN_INCIDENCE,
     FACE_NORMALS,
     PoseSolution,
     PoseSolveError,
@@ -136,7 +137,21 @@ def _rows(points: np.ndarray, directions: np.ndarray, faces: np.ndarray, tip_rad
     p0 = matrix_to_pose(np.asarray(M, dtype=float))
     h = 1e-6
     s, _, _ = _contact(g, pose_to_matrix(p0 + np.concatenate([np.eye(6) * h, -np.eye(6) * h])))  # type: ignore[arg-type]
-    return np.asarray(((s[:6] - s[6:]) / (2 * h)).T)
+    # a probe parallel to its face has infinite readings: its row is NaN, which the callers
+    # treat as "this probe fixes nothing" (check_arrangement names it)
+    with np.errstate(invalid="ignore"):
+        return np.asarray(((s[:6] - s[6:]) / (2 * h)).T)
+
+
+def _blind(directions: np.ndarray, faces: np.ndarray, nominal_pose: np.ndarray, G: np.ndarray) -> np.ndarray:
+    """``(n,)`` bool: probes that do not point into their face at the nominal touch (the
+    geometry's own test, :data:`~station.core.probe_geometry._MIN_INCIDENCE`) or whose row of
+    the contact Jacobian is not finite: they fix no motion of the corner."""
+    d = np.asarray(directions, dtype=float)
+    d = d / np.linalg.norm(d, axis=1, keepdims=True)
+    normals = FACE_NORMALS[faces] @ np.asarray(nominal_pose, dtype=float)[:3, :3].T   # (n,3) in MKKS
+    incidence = np.einsum("ni,ni->n", normals, d)
+    return ~(incidence < -_MIN_INCIDENCE) | ~np.all(np.isfinite(G), axis=1)
 
 
 def contact_jacobian(geom: ProbeHeadGeometry, M: np.ndarray | None = None) -> np.ndarray:
@@ -158,6 +173,10 @@ def check_arrangement(points, directions, faces, tip_radii, nominal_pose: np.nda
     faces = np.asarray(faces, dtype=int)
     G = _rows(points, directions, faces, tip_radii, nominal_pose)
     n = G.shape[0]
+    blind = _blind(directions, faces, nominal_pose, G)
+    # a probe parallel to its face has a NaN row, which would stop the SVD: it fixes nothing.
+    # (A probe pointing away keeps its row; the geometry names it when the rank is full.)
+    G = np.where(np.all(np.isfinite(G), axis=1)[:, None], G, 0.0)
     scale = np.r_[np.ones(3), np.full(3, 1.0 / cube_edge_mm)]
     Gs = G * scale
     U, sv, Vt = np.linalg.svd(Gs, full_matrices=True)
@@ -172,28 +191,38 @@ def check_arrangement(points, directions, faces, tip_radii, nominal_pose: np.nda
         free = [_MOTIONS[k] for k in range(6) if weight[k] > 0.05]
         # probes whose readings depend on each other (the left null space of G)
         dependent = U[:, rank:] if U.shape[1] > rank else np.zeros((n, 0))
-        inv = [labels[i] for i in range(n) if dependent.size and np.sum(dependent[i] ** 2) > 1e-6]
+        inv = [labels[i] for i in range(n)
+               if not blind[i] and dependent.size and np.sum(dependent[i] ** 2) > 1e-6]
         # faces where one more probe (pointing straight in, at a few points of the face) fixes more
         helps = []
         for f in range(3):
             cand = _face_candidates(f, cube_edge_mm)
             for c in cand:
-                pts = np.vstack([points, (nominal_pose[:3, :3] @ (c + FACE_NORMALS[f] * 1.0)) + nominal_pose[:3, 3]])
-                dirs = np.vstack([directions, -(nominal_pose[:3, :3] @ FACE_NORMALS[f])])
-                rows = _rows(pts, dirs, np.append(faces, f), np.append(np.broadcast_to(tip_radii, (n,)), 1.0),
-                             nominal_pose) * scale
+                pt = (nominal_pose[:3, :3] @ (c + FACE_NORMALS[f] * 1.0)) + nominal_pose[:3, 3]
+                row = _rows(pt[None], -(nominal_pose[:3, :3] @ FACE_NORMALS[f])[None], np.array([f]),
+                            np.array([1.0]), nominal_pose)
+                rows = np.vstack([G, row]) * scale
                 s2 = np.linalg.svd(rows, compute_uv=False)
                 if np.sum(s2 > _RANK_TOL * max(s2[0], 1e-300)) > rank:
                     helps.append(FACE_NAMES[f])
                     break
-        faces_hint = " or ".join(f"the {h} face" for h in helps) if helps else "another face"
+        faces_hint = "a probe on " + (" or ".join(f"the {h} face" for h in helps) if helps else "another face") + ","
+        # each face's plane is seen only along its normal: a face without a probe that points
+        # into it leaves that translation free whatever the other faces hold
+        bare = [FACE_NAMES[f] for f in range(3) if not np.any((faces == f) & ~blind)]
+        if bare:
+            faces_hint = (f"{'probes' if len(bare) > 1 else 'a probe'} on {_join([f'the {b} face' for b in bare])} "
+                          "(every face needs at least one probe pointing into it),")
         who = (f"probes {', '.join(inv)} measure dependent motions (same face and in line, or parallel)"
-               if inv else f"{n} probe(s) cannot fix six degrees of freedom")
+               if inv else f"{n - int(blind.sum())} probe(s) cannot fix six degrees of freedom")
+        if blind.any():
+            who += (f"; probes {', '.join(labels[i] for i in range(n) if blind[i])} do not point into their "
+                    "face and fix nothing (check their direction and face)")
         by_face = "; ".join(f"{FACE_NAMES[f]} face: {', '.join(labels[i] for i in range(n) if faces[i] == f) or 'none'}"
                             for f in range(3))
         raise ConfigError(
             f"the probe arrangement does not fix {_join(free) if free else 'the pose'} of the cube corner "
-            f"(contact Jacobian rank {rank} of 6): {who} ({by_face}); add a probe on {faces_hint}, "
+            f"(contact Jacobian rank {rank} of 6): {who} ({by_face}); add {faces_hint} "
             f"or move the probes involved apart")
     if condition > MAX_CONDITION:
         weak = _MOTIONS[int(np.argmax(np.abs(Vt[5])))]

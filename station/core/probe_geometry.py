@@ -294,10 +294,12 @@ def _contact(geom: ProbeHeadGeometry, M: np.ndarray):
     hM = np.einsum("...ni,...i->...n", nM, t)                       # face planes pass the origin
     incidence = np.einsum("...ni,ni->...n", nM, geom.directions)
     nb = np.einsum("...ni,ni->...n", nM, geom.mount_points)
+    # a probe parallel to its face reads ±inf and its contact is NaN: readings_from_poses
+    # reports it as a miss, check_arrangement as a probe that fixes nothing
     with np.errstate(divide="ignore", invalid="ignore"):
         s = (rho + hM - nb) / incidence
-    c = geom.mount_points + s[..., None] * geom.directions          # tip centres in MKKS
-    q = np.einsum("...ji,...nj->...ni", R, c - t[..., None, :])     # ... in MPKS
+        c = geom.mount_points + s[..., None] * geom.directions      # tip centres in MKKS
+        q = np.einsum("...ji,...nj->...ni", R, c - t[..., None, :]) # ... in MPKS
     contact = q - rho[:, None] * n_f
     return s, contact, incidence
 

@@ -63,6 +63,12 @@ def robot_from_dh(rows, convention: str = "dh", name: str = "imported", tool=Non
     for i, (kind, theta, d, a, alpha, lo, hi) in enumerate(rows, start=1):
         if kind not in ("revolute", "prismatic", "fixed"):
             raise ConfigError(f"DH row {i}: type must be revolute, prismatic or fixed, got {kind!r}")
+        # refused before the trigonometry: a NaN or inf would become a NaN model (and a warning)
+        bad = [n for n, v in zip(("theta", "d", "a", "alpha", "lower", "upper"), (theta, d, a, alpha, lo, hi))
+               if not math.isfinite(v)]
+        if bad:
+            raise ConfigError(f"DH row {i}: {', '.join(bad)} must be {'a finite number' if len(bad) == 1 else 'finite numbers'}"
+                              "; give the values from the robot's data sheet")
         if convention == "dh":
             pre, post = _T(rot_z(theta)) @ _T(t=(0, 0, d)), _T(t=(a, 0, 0)) @ _T(rot_x(alpha))
         else:
@@ -125,6 +131,8 @@ def robot_from_dh_file(path: Path) -> RobotModel:
                 vals[n] = float(rec[n]) * scale[u]
             except (KeyError, ValueError):
                 raise ConfigError(f"{path}, line {k}: {n} must be a number, got {rec.get(n)!r}") from None
+            if not math.isfinite(vals[n]):
+                raise ConfigError(f"{path}, line {k}: {n} must be a finite number, got {rec[n]!r}") from None
         out.append((kind, vals["theta"], vals["d"], vals["a"], vals["alpha"], vals["lower"], vals["upper"]))
     return robot_from_dh(out, conv, name=path.name.split(".")[0])
 
@@ -176,8 +184,104 @@ def _urdf_limit(path: Path, j: ET.Element, lim: ET.Element, attr: str) -> float:
     return _urdf_numbers(path, j, "limit", attr, text, 1)[0]
 
 
+def _names_of(joints: Sequence[ET.Element]) -> str:
+    return ", ".join(repr(_joint_name(j)) for j in joints)
+
+
+def _urdf_loop(path: Path, edges: list[tuple[ET.Element, str, str]]) -> None:
+    """Refuse a closed kinematic loop, naming its joints: a joint whose child is an ancestor
+    of its parent (a directed cycle), or a link that two joints lead to."""
+    out: dict[str, list[tuple[ET.Element, str]]] = {}
+    into: dict[str, list[tuple[ET.Element, str]]] = {}
+    for j, parent, child in edges:
+        out.setdefault(parent, []).append((j, child))
+        into.setdefault(child, []).append((j, parent))
+    state: dict[str, int] = {}  # 1: on the current path, 2: done
+    for start in out:
+        if state.get(start):
+            continue
+        path_links: list[str] = [start]
+        path_joints: list[ET.Element] = []
+        stack = [iter(out.get(start, []))]
+        state[start] = 1
+        while stack:  # iterative depth-first search (a long chain must not hit the recursion limit)
+            step = next(stack[-1], None)
+            if step is None:
+                state[path_links.pop()] = 2
+                stack.pop()
+                if path_joints:
+                    path_joints.pop()
+                continue
+            j, child = step
+            if state.get(child) == 1:
+                k = path_links.index(child)
+                cycle = [*path_joints[k:], j]
+                links = " -> ".join([*path_links[k:], child])
+                raise ConfigError(f"{path}: joints {_names_of(cycle)} form a closed loop ({links}): a URDF for "
+                                  "the station is one serial chain; remove the joint that closes the loop")
+            if not state.get(child):
+                state[child] = 1
+                path_links.append(child)
+                path_joints.append(j)
+                stack.append(iter(out.get(child, [])))
+    for link, parents in into.items():
+        if len(parents) > 1:
+            (j1, p1), (j2, p2) = parents[:2]
+            up1, up2 = _ancestors(p1, into), _ancestors(p2, into)
+            common = next((a for a in up1 if a in up2), None)
+            loop = [j1] + (up1[common] + up2[common] if common is not None else []) + [j2]
+            raise ConfigError(f"{path}: link {link!r} has two parents (joints {_names_of([j for j, _ in parents])}): joints "
+                              f"{_names_of(list(dict.fromkeys(loop)))} close a loop; a URDF for the station is one "
+                              "serial chain: remove the joints of the loop that are not in it")
+
+
+def _ancestors(link: str, into: dict[str, list[tuple[ET.Element, str]]]) -> dict[str, list[ET.Element]]:
+    """Each ancestor of ``link`` (itself first) with the joints leading down from it, nearest first
+    (breadth first over every parent; called only once no directed cycle is left)."""
+    found: dict[str, list[ET.Element]] = {link: []}
+    queue = [link]
+    while queue:
+        here = queue.pop(0)
+        for j, parent in into.get(here, []):
+            if parent not in found:
+                found[parent] = [*found[here], j]
+                queue.append(parent)
+    return found
+
+
+def _urdf_chain(path: Path, root: ET.Element) -> tuple[str, dict[str, ET.Element]]:
+    """The root link and each link's joint towards the tip; refuses a loop, several roots and a
+    branch (a chain is never flattened: a dropped branch would drop its joints)."""
+    elements = root.findall("joint")
+    edges = [(j, _urdf_link(path, j, "parent"), _urdf_link(path, j, "child")) for j in elements]
+    _urdf_loop(path, edges)
+    children = {c for _, _, c in edges}
+    roots = [link.get("name") for link in root.findall("link") if link.get("name") not in children]
+    if len(roots) != 1:
+        raise ConfigError(f"{path}: expected one root link, found {roots}")
+    out: dict[str, list[ET.Element]] = {}
+    child_of = {}
+    for j, parent, child in edges:
+        out.setdefault(parent, []).append(j)
+        child_of[id(j)] = child
+    for link, js in out.items():
+        if len(js) > 1:
+            tips = []
+            for j in js:  # the tip each branch ends at (the first, where it branches again)
+                here = child_of[id(j)]
+                while len(out.get(here, [])) == 1:
+                    here = child_of[id(out[here][0])]
+                tips.append(f"{here!r} (joint {_joint_name(j)!r})")
+            raise ConfigError(f"{path}: the chain branches at link {link!r} into joints {_names_of(js)}, towards "
+                              f"{' and '.join(tips)}; the station calibrates one serial chain from {roots[0]!r} to "
+                              "the flange: keep the branch that ends at the flange and delete the other "
+                              "branches' joints and links")
+    return str(roots[0]), {link: js[0] for link, js in out.items()}
+
+
 def robot_from_urdf(path: Path) -> RobotModel:
-    """Model of the serial chain in a URDF file (the first chain from the root link).
+    """Model of the serial chain in a URDF file: one chain from the root link to the tip
+    (a loop or a branch is refused, naming the joints).
 
     Every joint needs ``<parent link>`` and ``<child link>``; ``<origin>`` (xyz, rpy) and
     ``<axis>`` are optional with the URDF defaults (identity, x axis). A revolute or prismatic
@@ -187,12 +291,8 @@ def robot_from_urdf(path: Path) -> RobotModel:
         root = ET.parse(path).getroot()
     except ET.ParseError as exc:
         raise ConfigError(f"{path}: not valid XML ({exc})") from None
-    joints = {_urdf_link(path, j, "parent"): j for j in root.findall("joint")}
-    children = {_urdf_link(path, j, "child") for j in root.findall("joint")}
-    roots = [link.get("name") for link in root.findall("link") if link.get("name") not in children]
-    if len(roots) != 1:
-        raise ConfigError(f"{path}: expected one root link, found {roots}")
-    link, carry = roots[0], np.eye(4)
+    base, joints = _urdf_chain(path, root)
+    link, carry = base, np.eye(4)
     specs, poses, limits = [TransformSpec("R")], [np.zeros(6)], []
     while link in joints:
         j = joints[link]

@@ -14,10 +14,42 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import math
 import sys
 from collections.abc import Callable, Sequence
+from typing import NoReturn
 
-from station.errors import Outcome, StationError
+from station.errors import ConfigError, Outcome, StationError
+from station.ui.output import guarded_streams
+from station.ui.stop_signals import catch_stop_signals
+
+#: the commands that run a session: their SIGTERM and SIGINT are caught from main()'s first line
+SESSION_COMMANDS = ("calibrate", "recheck")
+
+
+class UsageError(Exception):
+    """A command line argparse refused; main() turns it into a message (and JSON) and exit 2."""
+
+
+class StationArgumentParser(argparse.ArgumentParser):
+    """argparse's parser whose errors come back to main() instead of exiting, so that ``--json``
+    still gets its one JSON object (the subcommands' parsers are of this class too)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.print_usage(sys.stderr)
+        raise UsageError(f"{self.prog}: error: {message}")
+
+
+def time_scale(text: str) -> float:
+    """``--time-scale``: 0 (instant) or a positive, finite factor."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"{text!r}: give 0 (instant motion) or a positive number "
+                                         f"(1 = real time)")
+    return value
 
 
 def _command(spec: str) -> Callable[[argparse.Namespace], int | None]:
@@ -34,7 +66,7 @@ def _add_cell(p):
     p.add_argument("--simulated", action="store_true", help="run against a simulated cell: CONFIG's (rehearse "
                    "your cell), or the built-in one")
     p.add_argument("--seed", type=int, default=None, help="simulated cell seed (default [simulation].seed, else 1)")
-    p.add_argument("--time-scale", type=float, default=0.0, help="simulated motion time scale (0 = instant)")
+    p.add_argument("--time-scale", type=time_scale, default=0.0, help="simulated motion time scale (0 = instant)")
 
 
 def _add_robot(p):
@@ -48,7 +80,7 @@ def _add_prefs(p):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="station", description="Robot calibration station")
+    ap = StationArgumentParser(prog="station", description="Robot calibration station")
     sub = ap.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("analyze", help="identifiability of a robot's parameters")
@@ -173,6 +205,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("runs", help="list the runs of a run database (status, outcome, figures, resumable)")
     p.add_argument("--db", default="runs.sqlite")
+    p.add_argument("--unlock", type=int, metavar="RUN",
+                   help="clear RUN's run lock (its process is gone, e.g. on another PC)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func="station.ui.commands_cell:cmd_runs")
 
@@ -202,8 +236,23 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    words = list(sys.argv[1:] if argv is None else argv)
+    # the handlers first: a SIGTERM while the modules load is an ABORTED run, not a death by signal
+    with catch_stop_signals(enabled=words[:1] != [] and words[0] in SESSION_COMMANDS):
+        if words[:1] == ["tui"]:  # the full-screen UI owns the terminal: its streams stay as they are
+            return _main(words)
+        with guarded_streams():  # a closed stdout or stderr (| head) never stops or fails a command
+            return _main(words)
+
+
+def _main(words: list[str]) -> int:
+    try:
+        args = build_parser().parse_args(words)
+    except UsageError as exc:
+        print(exc, file=sys.stderr)
+        if "--json" in words:
+            print(json.dumps(_usage_json(str(exc))), flush=True)
+        return int(Outcome.CONFIG_ERROR)
     try:
         return int(_command(args.func)(args) or 0)
     except StationError as exc:
@@ -227,15 +276,27 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _internal_error(exc, args)
 
 
+def _usage_json(message: str) -> dict:
+    from station.cell.outcomes import failure_summary
+
+    out: dict = failure_summary(ConfigError(message), run_id=None, log_dir=".").to_json()
+    return out
+
+
 def _internal_error(exc: Exception, args: argparse.Namespace) -> int:
     from station.cell.outcomes import failure_summary
 
     summary = failure_summary(exc, run_id=None, log_dir=".")
-    print(f"station: internal error {type(exc).__name__}: {exc}\n  the traceback is in "
-          f"{summary.failure.log_file if summary.failure else '?'}; please report it with that file", file=sys.stderr)
+    failure = summary.failure
+    if summary.outcome is not Outcome.INTERNAL_ERROR:  # a device's typed error (a driver's): its outcome
+        hint = f"\n  what to do: {failure.hint}" if failure is not None and failure.hint else ""
+        print(f"station: error: {failure.message if failure else exc}{hint}", file=sys.stderr)
+    else:
+        print(f"station: internal error {type(exc).__name__}: {exc}\n  the traceback is in "
+              f"{failure.log_file if failure else '?'}; please report it with that file", file=sys.stderr)
     if getattr(args, "json", False):
         print(json.dumps(summary.to_json()))
-    return int(Outcome.INTERNAL_ERROR)
+    return int(summary.outcome)
 
 
 if __name__ == "__main__":

@@ -9,27 +9,26 @@ stdout; its exit code is the run's :class:`~station.errors.Outcome`. Devices are
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import math
-import signal
 import sys
-import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import TextIO
 
 from station.cell import events as ev
 from station.cell.config import TEMPLATE, load_config
-from station.cell.outcomes import write_traceback
+from station.cell.outcomes import failure_summary, write_traceback
 from station.cell.runcontrol import RunControl
 from station.cell.rundb import RunDB
 from station.cell.runs import list_runs
 from station.cell.session import CellRequest, check_cell, reset_controller, run_calibration_session
 from station.cell.summary import RunSummary
 from station.core.probe_check import check_head
-from station.errors import ConfigError, Outcome, StationError
+from station.errors import ConfigError, Outcome, RunAborted, StationError
 from station.ui.simulated_cell import load_cell
+from station.ui.stop_signals import current as current_stop_signals
+from station.ui.stop_signals import safe_stop_on_signals
 
 
 def request_from(args: argparse.Namespace) -> CellRequest:
@@ -137,8 +136,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if args.report:  # checked before the first motion, not after an hour of measuring
         _check_report_dir(Path(args.report))
     control = RunControl()
-    with safe_stop_on_signals(control):
-        summary = run_calibration_session(request, progress_printer(sys.stderr), control, load=load_cell)
+    summary = stopped_before_start(request)
+    if summary is None:
+        with safe_stop_on_signals(control):
+            summary = run_calibration_session(request, progress_printer(sys.stderr), control, load=load_cell)
     if args.report and summary.run_id is not None and summary.outcome is not Outcome.ABORTED:
         from station.ui.report_run import report_for_run
 
@@ -157,31 +158,14 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     return summary.exit_code
 
 
-@contextlib.contextmanager
-def safe_stop_on_signals(control: RunControl) -> Iterator[None]:
-    """SIGTERM (a scheduler, systemd) and SIGINT (Ctrl-C) stop the run at the next safe point:
-    the runner raises RunAborted there, the summary is written and the exit code is 6. A second
-    signal stops at once (every measurement is already committed)."""
-    received: list[int] = []
-
-    def handler(signum: int, frame: object) -> None:
-        received.append(signum)
-        if len(received) == 1:
-            print(f"\nstation: {signal.Signals(signum).name}: stopping at the next safe point "
-                  f"(send it again to stop at once)", file=sys.stderr, flush=True)
-            control.abort()
-        else:
-            raise KeyboardInterrupt
-
-    if threading.current_thread() is not threading.main_thread():
-        yield  # signal handlers belong to the main thread (tests call main() from workers)
-        return
-    previous = {sig: signal.signal(sig, handler) for sig in (signal.SIGTERM, signal.SIGINT)}
-    try:
-        yield
-    finally:
-        for sig, old in previous.items():
-            signal.signal(sig, old)
+def stopped_before_start(request: CellRequest) -> RunSummary | None:
+    """The ABORTED summary of a command that SIGTERM or SIGINT stopped before its session began
+    (nothing was opened, nothing moved); None when no signal came."""
+    stops = current_stop_signals()
+    if stops is None or not stops.requested:
+        return None
+    exc = RunAborted(f"stopped by {stops.name} before the session started; nothing was opened or moved")
+    return failure_summary(exc, run_id=request.resume, log_dir=".", db=request.db)
 
 
 def cmd_reset(args: argparse.Namespace) -> int:
@@ -232,6 +216,11 @@ def cmd_runs(args: argparse.Namespace) -> int:
     """The runs of a run database: a table for people, one JSON object for scripts."""
     if not Path(args.db).exists():
         raise ConfigError(f"{args.db}: no run database here; give it with --db")
+    if getattr(args, "unlock", None) is not None:
+        with RunDB(args.db) as db:
+            holder = db.unlock_run(args.unlock)
+        print(f"run {args.unlock}: " + (f"lock of {holder.describe()} cleared" if holder else "was not locked"))
+        return 0
     with RunDB(args.db) as db:
         runs = list_runs(db)
     if args.json:
@@ -301,7 +290,11 @@ def cmd_tui(args: argparse.Namespace) -> int:
         raise ConfigError("--baseline and --poses go with --recheck")
     if poses is not None and not 3 <= poses <= 100:
         raise ConfigError(f"--poses {poses}: give 3 … 100 poses")
+    if args.config and not Path(args.config).is_file():  # before the full-screen UI takes the terminal
+        raise ConfigError(f"no such configuration file: {args.config}; give the path of a cell configuration "
+                          f"('station init' writes one)")
     return launch(request_from(args), recheck=RecheckOptions(baseline=baseline, poses=poses) if recheck else None)
 
 
-__all__ = ["cmd_calibrate", "print_summary", "progress_printer", "request_from"]
+__all__ = ["cmd_calibrate", "print_summary", "progress_printer", "request_from", "safe_stop_on_signals",
+           "stopped_before_start"]

@@ -36,6 +36,22 @@ def _print_json(obj) -> None:
 
 # --- analyze --------------------------------------------------------------------------------
 
+#: random poses ``station analyze`` draws: a plan measures tens to hundreds, and beyond this
+#: the rank and condition no longer change
+MAX_ANALYZE_POSES = 10_000
+
+
+def _check_analyze_args(args) -> None:
+    """Refuse counts that would give an empty or meaningless analysis, naming the range."""
+    low = 2 if args.objective == "distance" else 1  # a distance needs two points
+    if not low <= args.poses <= MAX_ANALYZE_POSES:
+        raise ConfigError(f"--poses {args.poses}: the number of poses must be {low} … {MAX_ANALYZE_POSES} "
+                          f"for --objective {args.objective} (e.g. --poses 30, the default)")
+    if args.objective == "distance" and args.distances < 1:
+        raise ConfigError(f"--distances {args.distances}: the number of distances must be at least 1 "
+                          "(e.g. --distances 200, the default)")
+
+
 def cmd_analyze(args) -> int:
     from station.core.distance_pairs import make_pairs
     from station.core.identifiability import analyze
@@ -44,6 +60,7 @@ def cmd_analyze(args) -> int:
     from station.io.datafile import joints_from_table, read_table
     from station.io.robot_files import load_robot
 
+    _check_analyze_args(args)
     model = load_robot(args.robot)
     rng = np.random.default_rng(args.seed)
     objective = args.objective

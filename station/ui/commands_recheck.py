@@ -18,7 +18,7 @@ from station.cell.runcontrol import RunControl
 from station.cell.session import CellRequest
 from station.cell.summary import RunSummary
 from station.errors import ConfigError
-from station.ui.commands_cell import print_summary, progress_printer, safe_stop_on_signals
+from station.ui.commands_cell import print_summary, progress_printer, safe_stop_on_signals, stopped_before_start
 from station.ui.simulated_cell import load_cell
 
 
@@ -67,9 +67,11 @@ def cmd_recheck(args: argparse.Namespace) -> int:
     if args.poses is not None and not 3 <= args.poses <= 100:
         raise ConfigError(f"--poses {args.poses}: give 3 … 100 poses")
     control = RunControl()
-    with safe_stop_on_signals(control):
-        summary = run_recheck_session(request, progress_printer(sys.stderr), control,
-                                      RecheckOptions(baseline=args.baseline, poses=args.poses), load=load_cell)
+    summary: RunSummary | RecheckSummary | None = stopped_before_start(request)
+    if summary is None:
+        with safe_stop_on_signals(control):
+            summary = run_recheck_session(request, progress_printer(sys.stderr), control,
+                                          RecheckOptions(baseline=args.baseline, poses=args.poses), load=load_cell)
     if isinstance(summary, RunSummary):
         print_summary(summary, sys.stderr)
         out = summary.to_json()

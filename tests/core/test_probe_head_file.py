@@ -189,7 +189,7 @@ def test_six_probes_on_the_top_face_leave_x_y_and_yaw_free():
     msg = str(exc.value)
     assert "x translation, y translation and yaw" in msg and "rank 3 of 6" in msg
     assert all(lb in msg for lb in labels)  # every probe is involved: they all measure z, roll, pitch
-    assert "add a probe on the x face or the y face" in msg
+    assert "add probes on the x face and the y face" in msg
 
 
 def test_collinear_top_probes_name_the_probes_and_the_motion():
