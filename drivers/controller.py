@@ -530,18 +530,6 @@ class ModbusController(TablePager):
             self._readback_problem = "" if diff is None else f"read-back differs from upload: {diff}"
         return table
 
-    def read_slot_table(self, slot: str) -> CorrectionTableData | None:
-        """The table the controller holds in ``slot`` (``staged``, ``active`` or ``previous``),
-        each page's CRC and the whole table's CRC-32 checked; None when the slot is empty. Reads
-        only: the upload interlock is not touched."""
-        if slot not in ("staged", "active", "previous"):
-            raise ValueError(f"slot must be staged, active or previous, got {slot!r}")
-        self._check_link()
-        if not self.table_crcs()[slot]:
-            return None
-        header, data = self._read_table_pages(slot)
-        return CorrectionTableData.from_registers(header, data, self.word_order)
-
     def verify_table(self) -> CorrectionTableData:
         """read_table() and raise :class:`TableVerifyError` if it differs from the upload."""
         if self._uploaded is None:

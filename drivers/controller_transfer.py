@@ -35,7 +35,7 @@ from .controller_map import (
     encode,
     registers_crc32,
 )
-from .correction_table import TablePageError, n_value_pages
+from .correction_table import CorrectionTableData, TablePageError, n_value_pages
 
 __all__ = ["TablePager", "PageRead"]
 
@@ -76,6 +76,12 @@ class TablePager:
         raise NotImplementedError
 
     def _write(self, address: int, values: Sequence[int]) -> None:  # pragma: no cover - the host's
+        raise NotImplementedError
+
+    def _check_link(self) -> None:  # pragma: no cover - the host's
+        raise NotImplementedError
+
+    def table_crcs(self) -> dict[str, int]:  # pragma: no cover - the host's
         raise NotImplementedError
 
     # -- one request -----------------------------------------------------------------------
@@ -166,3 +172,15 @@ class TablePager:
         for k in range(n_value_pages(n_values)):
             data += self._read_page(op_page, k).data
         return header, data
+
+    def read_slot_table(self, slot: str) -> CorrectionTableData | None:
+        """The table the controller holds in ``slot`` (``staged``, ``active`` or ``previous``),
+        each page's CRC and the whole table's CRC-32 checked; None when the slot is empty. Reads
+        only: the upload interlock is not touched."""
+        if slot not in ("staged", "active", "previous"):
+            raise ValueError(f"slot must be staged, active or previous, got {slot!r}")
+        self._check_link()
+        if not self.table_crcs()[slot]:
+            return None
+        header, data = self._read_table_pages(slot)
+        return CorrectionTableData.from_registers(header, data, self.word_order)
