@@ -1,8 +1,11 @@
 """The bad-input campaign of issue 12, kept: malformed configurations, robot files, data files
 and CLI arguments, each run with a time budget; prints the inputs tried per category and the
-tracebacks and hangs found (both must be 0).
+tracebacks and hangs found (both must be 0). Then the surfaces of issue 19 (``_fuzz_surfaces.py``):
+damaged run-database records through runs/report/export/calibrate --resume, SIGTERM (once or
+twice) at seeded random moments of a simulated calibration, and closed or early-closed stdout and
+stderr; each prints the inputs tried, the exit codes, the internal errors and the hangs.
 
-    .venv/bin/python benchmarks/fuzz_campaign.py [--scale N]
+    .venv/bin/python benchmarks/fuzz_campaign.py [--scale N] [--only inputs|records|signals|pipes]
 
 The targets and their input generators are the ones of ``tests/test_fuzz_inputs.py`` (the test
 runs them with fewer examples); ``--scale`` multiplies the test's example counts (default 3).
@@ -38,15 +41,51 @@ def _load_targets():
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scale", type=int, default=3, help="examples per target = the test's × SCALE")
+    ap.add_argument("--only", choices=["inputs", "records", "signals", "pipes"], help="one family")
     args = ap.parse_args(argv)
+    failures: list[str] = []
+    n_tb = n_hang = n_tried = 0
+    if args.only in (None, "inputs"):
+        n_tried, n_tb, n_hang = _inputs(args.scale, failures)
+    if args.only != "inputs":
+        n_tb_new, n_hang_new, n_tried_new = _new_surfaces(args.scale, args.only, failures)
+        n_tb, n_hang, n_tried = n_tb + n_tb_new, n_hang + n_hang_new, n_tried + n_tried_new
+    for f in failures:  # one line each, then the first few in full
+        print(" ", f.splitlines()[0][:300])
+    for f in failures[:3]:
+        print("\n", f)
+    print(f"all families: {n_tried} tried, internal errors (tracebacks): {n_tb}, hangs: {n_hang}")
+    return 1 if failures else 0
+
+
+def _new_surfaces(scale: int, only: str | None, failures: list[str]) -> tuple[int, int, int]:
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import _fuzz_surfaces as fs
+
+    fams = [run(scale) for name, run in fs.FAMILIES.items() if only in (None, name)]
+    codes = sorted({c for fam in fams for c in fam.by_exit})
+    print()
+    print(f"{'surface':<16} {'tried':>7} " + " ".join(f"{'exit ' + str(c):>8}" for c in codes)
+          + f" {'internal':>9} {'hangs':>6} {'seconds':>8}")
+    for fam in fams:
+        print(f"{fam.name:<16} {fam.tried:>7} " + " ".join(f"{fam.by_exit[c]:>8}" for c in codes)
+              + f" {fam.internal:>9} {fam.hangs:>6} {fam.elapsed_s:>8.1f}")
+        failures.extend(fam.failures)
+    n_int, n_hang = sum(f.internal for f in fams), sum(f.hangs for f in fams)
+    n_tried = sum(f.tried for f in fams)
+    print(f"surfaces tried: {n_tried}, internal errors: {n_int}, hangs: {n_hang} "
+          f"({sum(f.elapsed_s for f in fams):.1f} s, budget {fs.BUDGET_S:.0f} s per command)")
+    return n_int, n_hang, n_tried
+
+
+def _inputs(scale: int, failures: list[str]) -> tuple[int, int, int]:
     warnings.simplefilter("ignore", RuntimeWarning)  # NaN arithmetic on the way to a refusal
     fz = _load_targets()
     tried: Counter[str] = Counter()
     outcome: Counter[tuple[str, str]] = Counter()
-    failures: list[str] = []
     t0 = time.perf_counter()
     def campaign(target, d: Path):
-        @settings(max_examples=target.examples * args.scale, **fz.FUZZ_SETTINGS)
+        @settings(max_examples=target.examples * scale, **fz.FUZZ_SETTINGS)
         @given(target.strategy)
         def one(case):
             tried[target.category] += 1
@@ -75,9 +114,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{'total':<16} {sum(tried.values()):>7} {'':>8} {'':>9} {n_tb:>11} {n_hang:>6}")
     print(f"inputs tried: {sum(tried.values())}, tracebacks: {n_tb}, hangs: {n_hang} "
           f"({elapsed:.1f} s, budget {fz.BUDGET_S} s per input)")
-    for f in failures[:10]:
-        print(" ", f)
-    return 1 if failures else 0
+    return sum(tried.values()), n_tb, n_hang
 
 
 if __name__ == "__main__":

@@ -141,6 +141,7 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
             stored_fp = fingerprint(stored_config(db, run_id))
         check_same_cell(stored_fp, fingerprint(cfg), run_id)
         steps = stored_plan(db, run_id)
+        db.measurements(run_id)  # what is on disk must belong to that plan (record_checks.py), else exit 5
         planned_upload = any(st.kind is StepKind.VERIFY_AFTER for st in steps)
         if planned_upload != options.upload:
             raise ConfigError(f"run {run_id} was planned {'with' if planned_upload else 'without'} the upload; "

@@ -92,6 +92,20 @@ def check_step_joints(plan: Sequence[Mapping[str, Any]], run_id: int, n_joints: 
             raise damaged(run_id, f"plan step {i}", f"{len(q)} joints for a robot with {n_joints}")
 
 
+def check_against_plan(records: Sequence[MeasurementRecord], plan: Sequence[Mapping[str, Any]],
+                       run_id: int) -> None:
+    """Each measurement belongs to a step of the stored plan and has that step's joint count: a
+    plan emptied or shortened under its measurements, or joints of another robot, is damage."""
+    for r in records:
+        what = f"measurement of step {r.step_index}"
+        if not 0 <= r.step_index < len(plan):
+            raise damaged(run_id, what, f"the stored plan has {len(plan)} steps")
+        n = len(plan[r.step_index].get("joints") or ())
+        for name, q in (("joints commanded", r.joints_commanded), ("joints read", r.joints_read)):
+            if q is not None and n and (q.ndim != 1 or q.shape[0] != n):
+                raise damaged(run_id, f"{what} ({name})", f"{q.size} values for a step of {n} joints")
+
+
 def check_result(value: Any, run_id: int, key: str) -> Any:
     """A stored result of a key the station knows must have the type the station wrote."""
     want = _RESULT_TYPES.get(key)

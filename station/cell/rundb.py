@@ -37,7 +37,7 @@ import numpy as np
 
 from station.cell import record_checks as rc
 from station.cell import run_lock
-from station.cell.record_checks import DamagedRecordError
+from station.cell.record_checks import DamagedRecordError, check_against_plan
 from station.cell.run_lock import LockHolder, RunLockedError
 from station.cell.run_records import (  # re-exported: the database's records and errors
     DuplicateMeasurementError,
@@ -521,7 +521,9 @@ class RunDB:
         with self._lock:
             self._require_run(run_id)
             rows = self._c().execute(sql + " ORDER BY step_index", params).fetchall()
-        return [self._measurement_from_row(r) for r in rows]
+        records = [self._measurement_from_row(r) for r in rows]
+        check_against_plan(records, self.run(run_id).plan, run_id)
+        return records
 
     def completed_steps(self, run_id: int, ok_only: bool = False) -> set[int]:
         """Step indices that have a stored measurement (also failed ones unless ``ok_only``)."""

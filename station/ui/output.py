@@ -23,18 +23,19 @@ class SafeStream:
     """A text stream that never raises on write or flush: the first failure (a broken pipe, a
     closed file, a descriptor that is gone) marks it ``broken`` and everything after is dropped."""
 
-    def __init__(self, stream: TextIO) -> None:
+    def __init__(self, stream: TextIO | None) -> None:
         self.wrapped = stream
-        self.broken = False
+        # Python sets sys.stdout to None when descriptor 1 was closed before it started (>&-)
+        self.broken = stream is None
         self.dropped_chars = 0
 
     def write(self, text: str) -> int:
         if not self.broken:
             try:
-                return self.wrapped.write(text)
+                return self.wrapped.write(text)  # type: ignore[union-attr]
             # ValueError: "I/O operation on closed file"; OSError: EPIPE, EBADF, and also a full
             # disk behind a redirect: none of them may stop a robot in the middle of a run
-            except (OSError, ValueError):
+            except (OSError, ValueError, AttributeError):
                 self.broken = True
         self.dropped_chars += len(text)
         return len(text)
@@ -47,14 +48,14 @@ class SafeStream:
         if self.broken:
             return
         try:
-            self.wrapped.flush()
-        except (OSError, ValueError):
+            self.wrapped.flush()  # type: ignore[union-attr]
+        except (OSError, ValueError, AttributeError):
             self.broken = True
 
     def isatty(self) -> bool:
         try:
-            return self.wrapped.isatty()
-        except (OSError, ValueError):
+            return bool(self.wrapped.isatty())  # type: ignore[union-attr]
+        except (OSError, ValueError, AttributeError):
             return False
 
     def __getattr__(self, name: str) -> Any:  # encoding, fileno, errors …: the wrapped stream's
@@ -79,7 +80,7 @@ def _silence(stream: TextIO) -> None:
 def guarded_streams() -> Iterator[tuple[SafeStream, SafeStream]]:
     """``sys.stdout`` and ``sys.stderr`` as :class:`SafeStream` for the duration; afterwards the
     originals are back, and a broken one writes to /dev/null from then on."""
-    out, err = sys.stdout, sys.stderr
+    out, err = sys.stdout, sys.stderr  # None where the descriptor was closed at start
     safe_out = out if isinstance(out, SafeStream) else SafeStream(out)
     safe_err = err if isinstance(err, SafeStream) else SafeStream(err)
     sys.stdout, sys.stderr = safe_out, safe_err
@@ -90,5 +91,5 @@ def guarded_streams() -> Iterator[tuple[SafeStream, SafeStream]]:
         safe_err.flush()
         sys.stdout, sys.stderr = out, err
         for safe in (safe_out, safe_err):
-            if safe.broken:
+            if safe.broken and safe.wrapped is not None:
                 _silence(safe.wrapped)

@@ -102,3 +102,19 @@ def test_measurement_pose_of_the_wrong_shape(good_db, tmp_path, capsys):
     db = _damaged(good_db, tmp_path, "UPDATE measurements SET pose = '[[1, 2], [3, 4]]' WHERE step_index = 0;")
     _refused(capsys, ("export", "--db", db, "--run", "1", tmp_path / "m.csv"),
              "run 1: the stored measurement of step 0 (pose) is damaged (an array of shape (2, 2))")
+
+
+def test_a_plan_emptied_under_its_measurements(good_db, tmp_path, capsys):
+    """Found by benchmarks/fuzz_campaign.py: an IndexError deep in the verification figures."""
+    db = _damaged(good_db, tmp_path, "UPDATE runs SET plan_json = '[]' WHERE id = 1;")
+    msg = ("run 1: the stored measurement of step 0 is damaged", "the stored plan has 0 steps")
+    _refused(capsys, ("report", "1", "--db", db, "-o", tmp_path / "rep"), *msg)
+    _refused(capsys, ("calibrate", "--simulated", "--seed", "1", "--resume", "1", "--db", db), *msg)
+
+
+def test_joints_read_of_another_robot(good_db, tmp_path, capsys):
+    """Found by benchmarks/fuzz_campaign.py: numpy's 'inhomogeneous shape' in the identification."""
+    db = _damaged(good_db, tmp_path, "UPDATE measurements SET joints_read = '[1]' WHERE run_id = 1 AND step_index = 0;")
+    msg = ("run 1: the stored measurement of step 0 (joints read) is damaged", "1 values for a step of 4 joints")
+    _refused(capsys, ("report", "1", "--db", db, "-o", tmp_path / "rep"), *msg)
+    _refused(capsys, ("calibrate", "--simulated", "--seed", "1", "--resume", "1", "--db", db), *msg)

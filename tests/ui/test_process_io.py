@@ -272,3 +272,17 @@ def test_tui_with_a_missing_configuration_says_so_instead_of_opening(tmp_path):
     out, err = p.communicate(timeout=60)
     assert p.returncode == CONFIG_ERROR and "no such configuration file: missing.toml" in err
     assert "\x1b[" not in out  # the full-screen UI never drew
+
+
+def test_a_descriptor_closed_before_start_is_not_a_crash(tmp_path):
+    """Found by benchmarks/fuzz_campaign.py: with fd 1 closed (>&-) Python starts with sys.stdout
+    None, and the station exited 120 from its own stream wrapper."""
+    import shutil as _shutil
+
+    sh = _shutil.which("sh")
+    assert sh is not None
+    for redirect in (">&-", "2>&-", ">&- 2>&-"):
+        r = subprocess.run([sh, "-c", f'exec "{sys.executable}" -m station.ui.cli --help {redirect}'],
+                           cwd=tmp_path, capture_output=True, text=True, timeout=60)
+        assert r.returncode == 0, (redirect, r.stderr)
+        assert "Traceback" not in r.stderr and not list(tmp_path.glob("station-error-*.log"))
