@@ -101,7 +101,10 @@ def catch_stop_signals(enabled: bool = True) -> Iterator[StopSignals | None]:
     finally:
         _current = outer
         for sig, old in previous.items():
-            signal.signal(sig, old)
+            # After a stop the command is ending with exit 6: a late repeat of the signal (the
+            # operator pressing twice) must not kill the process by the default action before
+            # its JSON and exit code are out, so it is ignored from here instead.
+            signal.signal(sig, signal.SIG_IGN if stops.requested and old == signal.SIG_DFL else old)
 
 
 @contextlib.contextmanager
