@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -72,17 +72,11 @@ class TablePager:
     _xfer_seq: int
     _xfer_lock: threading.RLock
 
-    def _read(self, address: int, count: int) -> list[int]:  # pragma: no cover - the host's
-        raise NotImplementedError
-
-    def _write(self, address: int, values: Sequence[int]) -> None:  # pragma: no cover - the host's
-        raise NotImplementedError
-
-    def _check_link(self) -> None:  # pragma: no cover - the host's
-        raise NotImplementedError
-
-    def table_crcs(self) -> dict[str, int]:  # pragma: no cover - the host's
-        raise NotImplementedError
+    # what the host (the driver) supplies: declared, not defined, so nothing here can shadow it
+    _read: Callable[[int, int], list[int]]
+    _write: Callable[[int, Sequence[int]], None]
+    _check_link: Callable[[], None]
+    table_crcs: Callable[[], dict[str, int]]
 
     # -- one request -----------------------------------------------------------------------
     def _xfer(self, op: XferOp, index: int, data: Sequence[int] | None = None) -> list[int]:

@@ -59,6 +59,7 @@ __all__ = [
     "Request",
     "DeviceInfo",
     "format_value",
+    "format_fixed_value",
     "parse_value",
     "format_request",
     "parse_request",
@@ -326,19 +327,25 @@ _TEXT_RE = re.compile(rb"[A-Za-z0-9._-]{1,16}")
 _NAME_RE = re.compile(rb"[A-Z0-9]{2}")
 
 
-def format_value(value_mm: float) -> bytes:
-    """Reading [mm] -> wire field. +inf/-inf/NaN and magnitudes beyond ±999.9999 give markers."""
+def format_fixed_value(value_mm: float, limit_mm: float, specials: dict[ChannelStatus, bytes]) -> bytes:
+    """Reading [mm] -> ``±DDD.DDDD`` (the field of the DL-RS1A family); NaN, ±inf and magnitudes
+    beyond ``limit_mm`` give the dialect's ``specials`` for INVALID, OVER_RANGE, UNDER_RANGE."""
     v = float(value_mm)
     if math.isnan(v):
-        return MARKERS[ChannelStatus.INVALID]
+        return specials[ChannelStatus.INVALID]
     rounded = round(v, 4)
-    if rounded > VALUE_LIMIT_MM:
-        return MARKERS[ChannelStatus.OVER_RANGE]
-    if rounded < -VALUE_LIMIT_MM:
-        return MARKERS[ChannelStatus.UNDER_RANGE]
+    if rounded > limit_mm:
+        return specials[ChannelStatus.OVER_RANGE]
+    if rounded < -limit_mm:
+        return specials[ChannelStatus.UNDER_RANGE]
     if rounded == 0.0:
         rounded = 0.0  # never send "-000.0000"
     return f"{rounded:+09.4f}".encode("ascii")
+
+
+def format_value(value_mm: float) -> bytes:
+    """Reading [mm] -> wire field. +inf/-inf/NaN and magnitudes beyond ±999.9999 give markers."""
+    return format_fixed_value(value_mm, VALUE_LIMIT_MM, MARKERS)
 
 
 def parse_value(field: bytes) -> tuple[float, ChannelStatus]:

@@ -37,6 +37,7 @@ from drivers.probe_protocol import (
     ErrorCode,
     ProbeDeviceError,
     ProbeFrameError,
+    format_fixed_value,
 )
 
 __all__ = ["DIALECT", "COMMANDS", "ERRORS", "LINE", "DATA_NUMBERS", "VALUE_LIMIT_MM", "SPECIAL_VALUES",
@@ -131,15 +132,7 @@ _NAME_RE = re.compile(rb"[A-Z0-9]{2}")
 
 def format_value(value_mm: float) -> bytes:
     """Reading [mm] -> ``±DDD.DDDD``; NaN / beyond ±199.9999 -> the simulator's special values."""
-    v = float(value_mm)
-    if math.isnan(v):
-        return SPECIAL_VALUES[ChannelStatus.INVALID]
-    r = round(v, 4)
-    if r > VALUE_LIMIT_MM:
-        return SPECIAL_VALUES[ChannelStatus.OVER_RANGE]
-    if r < -VALUE_LIMIT_MM:
-        return SPECIAL_VALUES[ChannelStatus.UNDER_RANGE]
-    return f"{0.0 if r == 0 else r:+09.4f}".encode("ascii")
+    return format_fixed_value(value_mm, VALUE_LIMIT_MM, SPECIAL_VALUES)
 
 
 def parse_value(field: bytes) -> tuple[float, ChannelStatus]:
