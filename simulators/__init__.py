@@ -128,9 +128,9 @@ def start_simulated_cell(seed: int = 0, time_scale: float = 0.0, pace: bool = Fa
             from simulators.cell import CalibrationBody
             from simulators.from_config import SimulationPhysics
 
-            phys = SimulationPhysics(**physics)
+            phys = SimulationPhysics.from_settings(physics)
             default = SimulationPhysics()
-            recorded = {k: float(v) for k, v in physics.items() if float(v) != getattr(default, k)}
+            recorded = {k: getattr(phys, k) for k in physics if getattr(phys, k) != getattr(default, k)}
             truth = CellTruth.generate(seed=seed, **phys.truth_kwargs())
             pos_sigma, ang_sigma = phys.body_sigma()
             body = CalibrationBody.generate(seed=seed, position_sigma_mm=pos_sigma, angle_sigma_rad=ang_sigma)

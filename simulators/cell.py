@@ -92,25 +92,43 @@ class CellTruth:
                  setup_tilt_sigma_rad: float = np.deg2rad(0.03),
                  repeatability_mm: float = 0.005, backlash_mm: float = 0.1,
                  prismatic_backlash_mm: float = 0.02, lever_mm: float = 450.0,
-                 encoder_resolution: float = 1e-6) -> "CellTruth":
+                 encoder_resolution: float = 1e-6, offset_sigma_rad: float | None = None,
+                 tilt_sigma_rad: float | None = None,
+                 joint_backlash_mm: np.ndarray | None = None) -> "CellTruth":
         """Seeded true robot: lengths of A1..Ag and K with σ ``length_sigma_mm``, angles with
         σ ``angle_sigma_rad``; set-up R = ``setup_nominal`` + σ ``setup_sigma_mm`` in x, y, z,
         ``setup_yaw_sigma_rad`` in yaw and ``setup_tilt_sigma_rad`` in roll, pitch.
         Revolute joints get backlash ``backlash_mm/lever_mm`` rad and repeatability
-        ``repeatability_mm/lever_mm`` rad; prismatic joints the mm values directly."""
+        ``repeatability_mm/lever_mm`` rad; prismatic joints the mm values directly.
+        ``offset_sigma_rad`` (the revolute joints' encoder offsets: the yaw of their transforms)
+        and ``tilt_sigma_rad`` (roll and pitch of every transform) replace ``angle_sigma_rad``
+        where given; ``joint_backlash_mm`` (g,) gives each joint its own backlash (revolute at
+        ``lever_mm``). The same seed draws the same numbers whatever the σ."""
         model = load_robot("sr800") if model is None else model
         model = model.with_setup(np.asarray(setup_nominal, dtype=float))
         rng = np.random.default_rng(seed)
         n_t = model.n_params // 6
         err = np.zeros((n_t, 6))
         err[1:, :3] = rng.normal(0.0, length_sigma_mm, (n_t - 1, 3))
-        err[1:, 3:] = rng.normal(0.0, angle_sigma_rad, (n_t - 1, 3))
+        ang = np.full((n_t, 3), float(angle_sigma_rad))
+        if tilt_sigma_rad is not None:
+            ang[:, :2] = tilt_sigma_rad
+        if offset_sigma_rad is not None:
+            for t, kind in zip(model.joint_transforms, model.joint_types):
+                if kind == "revolute":
+                    ang[t, 2] = offset_sigma_rad
+        err[1:, 3:] = rng.normal(0.0, 1.0, (n_t - 1, 3)) * ang[1:]
         err[0, :3] = rng.normal(0.0, setup_sigma_mm, 3)
         err[0, 3:5] = rng.normal(0.0, setup_tilt_sigma_rad, 2)
         err[0, 5] = rng.normal(0.0, setup_yaw_sigma_rad)
         rev = np.array([t == "revolute" for t in model.joint_types])
         rep = np.where(rev, repeatability_mm / lever_mm, repeatability_mm)
         bl = np.where(rev, backlash_mm / lever_mm, prismatic_backlash_mm)
+        if joint_backlash_mm is not None:
+            jb = np.asarray(joint_backlash_mm, dtype=float)
+            if jb.shape != (model.n_joints,):
+                raise ValueError(f"joint_backlash_mm needs one value per joint ({model.n_joints}), got {jb.shape}")
+            bl = np.where(rev, jb / lever_mm, jb)
         enc = np.full(model.n_joints, float(encoder_resolution))
         return cls(model, model.nominal + err.ravel(), rep, bl, enc, seed)
 

@@ -79,12 +79,21 @@ class SimulationPhysics:
     body_angle_sigma_arcsec: float = 3.0
     capture_mm: float = 8.0
     capture_angle_deg: float = 10.0
+    offset_sigma_arcsec: float | None = None  # the revolute joints' encoder offsets; None: angle_sigma_arcsec
+    tilt_sigma_arcsec: float | None = None  # the axis tilts (roll, pitch); None: angle_sigma_arcsec
+    joint_backlash_um: tuple[float, ...] | None = None  # per joint (revolute at lever_mm); None: the two above
 
     @classmethod
     def from_settings(cls, settings: Mapping[str, Any] | None) -> "SimulationPhysics":
-        """From a ``[simulation]`` table (other keys, the seed and the drift, are ignored)."""
+        """From a ``[simulation]`` table (other keys, the seed and the drift, are ignored; a key
+        set to None keeps its default)."""
         names = {f.name for f in fields(cls)}
-        return cls(**{k: float(v) for k, v in (settings or {}).items() if k in names})
+        kw: dict[str, Any] = {}
+        for k, v in (settings or {}).items():
+            if k not in names or v is None:
+                continue
+            kw[k] = tuple(float(x) for x in v) if k == "joint_backlash_um" else float(v)
+        return cls(**kw)
 
     def truth_kwargs(self) -> dict[str, Any]:
         """Keyword arguments of :meth:`CellTruth.generate` (mm, rad)."""
@@ -96,7 +105,11 @@ class SimulationPhysics:
                 "repeatability_mm": self.repeatability_um / 1000.0,
                 "backlash_mm": self.backlash_um / 1000.0,
                 "prismatic_backlash_mm": self.prismatic_backlash_um / 1000.0,
-                "lever_mm": self.lever_mm}
+                "lever_mm": self.lever_mm,
+                "offset_sigma_rad": None if self.offset_sigma_arcsec is None else self.offset_sigma_arcsec * ARCSEC,
+                "tilt_sigma_rad": None if self.tilt_sigma_arcsec is None else self.tilt_sigma_arcsec * ARCSEC,
+                "joint_backlash_mm": (None if self.joint_backlash_um is None
+                                      else np.asarray(self.joint_backlash_um, dtype=float) / 1000.0)}
 
     def body_sigma(self) -> tuple[float, float]:
         """σ of a body point's true deviation: position [mm], angle [rad]."""

@@ -119,7 +119,10 @@ class ProbeHeadPhysics:
         so that a repeated command sequence reproduces its readings exactly)."""
         n = self.geometry.n_probes
         if M_true is None:
-            return np.full(n, np.nan)
+            # Nothing under the head: each spring-loaded plunger rests at its extended stop, past
+            # the far end of its measuring range (a positive reading is further extended), so the
+            # unit shows over range there, as a real head parked in the air does, not "invalid".
+            return np.full(n, np.inf)
         exact = readings_from_pose(self.geometry, M_true)
         noisy = exact + (self._rng if rng is None else rng).normal(0.0, self.noise_mm, n)
         noisy = self._faulted(np.asarray(M_true, dtype=float), noisy)

@@ -47,7 +47,7 @@ _DESCRIPTIONS = {
     Outcome.DEVICE_FAULT: "device fault (probe head or controller: missing, timeout, link lost, Modbus exception)",
     Outcome.SAFETY_STOP: "safety stop (emergency stop, drive fault)",
     Outcome.UPLOAD_FAILED: "correction table upload failed verification — it was not activated",
-    Outcome.TARGET_MISSED: "verification showed less than the required gain",
+    Outcome.TARGET_MISSED: "verification showed less than the required gain, or a pose beyond [verification] max_ap_um / max_rp_um",
     Outcome.NOT_UPLOADED: "identified and verified before correction, but no correction is active (--no-upload, or the operator declined or rolled it back)",
     Outcome.DRIFTED: "recheck: the robot drifted beyond the tolerance since its baseline calibration — recalibrate",
     Outcome.RECHECK_UNTRUSTED: "recheck: the measurement is not trustworthy (invalid readings, or the repeated pose moved) — no verdict",

@@ -78,6 +78,7 @@ from station.cell.config_schema import (
     _Simulation,
     _Tool,
     _validate_schema,
+    _Verification,
     _Warmup,
     bounds_text,
 )
@@ -87,6 +88,7 @@ from station.core.table_grid import GridSpec
 from station.core.transforms import pose_to_matrix
 from station.core.units import ARCSEC, DEG, UM
 from station.errors import ConfigError
+from station.io.certificate import Certificate
 from station.io.robot_files import load_robot, read_user_text
 
 #: a configuration file larger than this is refused before it is read (a real one is a few kB;
@@ -170,6 +172,28 @@ class RecheckConfig:
 
 
 @dataclass(frozen=True)
+class VerificationConfig:
+    """``[verification]``: the accuracy specification the report judges the held-out poses by
+    after correction (ISO 9283 AP and RP per pose [µm]; None: not judged) and the test conditions
+    it states (air temperature [°C], mass on the flange [kg]; None: not recorded)."""
+
+    max_ap_um: float | None = None
+    max_rp_um: float | None = None
+    temperature_c: float | None = None
+    load_kg: float | None = None
+
+
+@dataclass(frozen=True)
+class CellIdentity:
+    """``[cell]``'s traceability: the robot's serial number, the controller (make, model, serial)
+    and the operator, as the report names them ("": not given)."""
+
+    robot_serial: str = ""
+    controller: str = ""
+    operator: str = ""
+
+
+@dataclass(frozen=True)
 class WarmupConfig:
     """A warm-up before measuring: cycles of a motion program over the workspace, each ended by
     a measurement of one reference pose, until its extrapolated remaining drift is below
@@ -244,6 +268,10 @@ class CellConfig:
     tools: tuple[ToolConfig, ...] = ()  # the tools that replace the head ([[tool]])
     simulation: Any = None  # the validated [simulation] table (what --simulated CONFIG simulates)
     source: str = ""  # the file it was read from (or a label such as "<simulated cell>")
+    verification: VerificationConfig = VerificationConfig()  # [verification]: the report's specification
+    identity: CellIdentity = CellIdentity()  # [cell] robot_serial, controller, operator (the report's)
+    head_certificate: Certificate = Certificate()  # the [head] file's CMM certificate (empty: none given)
+    body_certificate: Certificate = Certificate()  # the [body] file's CMM certificate (empty: none given)
 
 
 # --------------------------------------------------------------------------------------------
@@ -264,10 +292,10 @@ def _robot_path(model_name: str, source: str) -> str:
         return model_name
 
 
-def _body_points(b: _Body, source: str) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
-    """ids, ``(n, 6)`` poses [mm, rad] and ``(n, 2)`` σ [mm, rad] of the body's measuring points:
-    from ``[body] file`` (the CMM report, relative to the configuration file) or inline; a point
-    without σ takes ``default_sigma_*``."""
+def _body_points(b: _Body, source: str) -> tuple[tuple[str, ...], np.ndarray, np.ndarray, Certificate]:
+    """ids, ``(n, 6)`` poses [mm, rad] and ``(n, 2)`` σ [mm, rad] of the body's measuring points,
+    and the CMM certificate the file names: from ``[body] file`` (the CMM report, relative to the
+    configuration file) or inline (no certificate); a point without σ takes ``default_sigma_*``."""
     default = (b.default_sigma_position_um * UM, b.default_sigma_angle_arcsec * ARCSEC)
     if b.file is not None:
         from station.io.body_file import read_body_file
@@ -279,30 +307,32 @@ def _body_points(b: _Body, source: str) -> tuple[tuple[str, ...], np.ndarray, np
             report = read_body_file(path)
         except ConfigError as exc:
             raise ConfigError(f"{source}: body.file: {exc}") from None
-        return report.ids, np.array(report.poses), report.sigma_with_default(*default)
+        return report.ids, np.array(report.poses), report.sigma_with_default(*default), report.certificate
     assert b.points is not None  # the schema allows exactly one of the two
     ids = tuple(pt.id for pt in b.points)
     poses = np.array([_pose_deg(pt.pose) for pt in b.points])
     sigma = np.array([[default[0] if pt.sigma_position_um is None else pt.sigma_position_um * UM,
                        default[1] if pt.sigma_angle_arcsec is None else pt.sigma_angle_arcsec * ARCSEC]
                       for pt in b.points])
-    return ids, poses, sigma
+    return ids, poses, sigma, Certificate()
 
 
-def _head(file: str | None, cube_edge_mm: float, model: RobotModel, source: str) -> tuple[Any, np.ndarray, RobotModel]:
-    """``[head] file``: the head's geometry, MKKS in the flange (4,4), and the robot model with
-    the head frame as its nominal K. Without it: the built-in reference head on the robot file's K."""
+def _head(file: str | None, cube_edge_mm: float, model: RobotModel,
+          source: str) -> tuple[Any, np.ndarray, RobotModel, Certificate]:
+    """``[head] file``: the head's geometry, MKKS in the flange (4,4), the robot model with the
+    head frame as its nominal K, and the head's CMM certificate. Without it: the built-in
+    reference head on the robot file's K (no certificate)."""
     from station.core.probe_geometry import default_probe_head
     from station.io.head_file import load_head
 
     if file is None:
-        return default_probe_head(cube_edge_mm=cube_edge_mm), pose_to_matrix(model.nominal[-6:]), model
+        return default_probe_head(cube_edge_mm=cube_edge_mm), pose_to_matrix(model.nominal[-6:]), model, Certificate()
     path = file if Path(file).is_absolute() else str(Path(source).parent / file)
     try:
         h = load_head(path, cube_edge_mm)
     except ConfigError as exc:
         raise ConfigError(f"{source}: head.file: {exc}") from None
-    return h.geometry, h.frame_in_flange, model.with_tool(h.frame_pose)
+    return h.geometry, h.frame_in_flange, model.with_tool(h.frame_pose), h.certificate
 
 
 def _soft_limits(raw: list | None, model: RobotModel, source: str) -> np.ndarray:
@@ -426,7 +456,7 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
     f = _validate_schema(data, source)
 
     model = load_robot(_robot_path(f.robot.model, source)).with_setup(_pose_deg(f.robot.setup))
-    head, head_in_flange, model = _head(f.head.file, f.body.cube_edge_mm, model, source)  # [head]
+    head, head_in_flange, model, head_cert = _head(f.head.file, f.body.cube_edge_mm, model, source)  # [head]
     soft = _soft_limits(f.limits.joints, model, source)
 
     d = f.devices
@@ -468,7 +498,7 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
     if model.is_scara:  # an articulated arm gets compensated targets, not a table (issue 9)
         _check_grid(corr, plan.elbows, model.n_joints, source)
 
-    ids, poses, body_sigma = _body_points(f.body, source)
+    ids, poses, body_sigma, body_cert = _body_points(f.body, source)
     r, w = f.recheck, f.warmup
     recheck = RecheckConfig(poses=r.poses, tolerance_um=r.tolerance_um, offset_tolerance_arcsec=r.offset_tolerance_arcsec,
                             length_tolerance_um=r.length_tolerance_um, repeat_tolerance_um=r.repeat_tolerance_um)
@@ -477,6 +507,9 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
     sim = f.simulation
     if sim.step_joint > model.n_joints:
         raise ConfigError(f"{source}: simulation.step_joint = {sim.step_joint}: the robot has {model.n_joints} joints")
+    if sim.joint_backlash_um is not None and len(sim.joint_backlash_um) != model.n_joints:
+        raise ConfigError(f"{source}: simulation.joint_backlash_um has {len(sim.joint_backlash_um)} values: give one "
+                          f"per joint of the robot ({model.n_joints})")
     return CellConfig(
         f.cell.name, model, soft, ids, pose_to_matrix(poses), f.body.cube_edge_mm,
         devices, plan, ident, corr, text, f.simulation.seed, recheck, warmup,
@@ -487,6 +520,9 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
         tools=_tools(f.tool, corr, plan.elbows, model.n_joints, source),  # [[tool]] (station/cell/tools.py)
         simulation=f.simulation,  # the validated [simulation] table (simulators/from_config.py reads it)
         source=source,  # where it was read: relative robot, head and body files resolve beside it
+        verification=VerificationConfig(**f.verification.model_dump()),  # [verification] (the report's)
+        identity=CellIdentity(f.cell.robot_serial or "", f.cell.controller or "", f.cell.operator or ""),
+        head_certificate=head_cert, body_certificate=body_cert,  # the CMM certificates, for the report
     )
 
 
@@ -528,11 +564,11 @@ def parse_text(text: str, source: str = "<config>") -> CellConfig:
 
 __all__ = [  # the loading's names, the template, and the schema's (config_schema) re-exported
     "MAX_CONFIG_BYTES", "DeviceConfig", "PlanConfig", "IdentificationConfig", "CorrectionConfig", "RecheckConfig",
-    "WarmupConfig", "ConformanceConfig", "ToolConfig", "CellConfig", "correction_grid", "parse_config",
+    "WarmupConfig", "VerificationConfig", "CellIdentity", "ConformanceConfig", "ToolConfig", "CellConfig", "correction_grid", "parse_config",
     "simulation_settings", "load_config", "parse_text", "TEMPLATE", "MAX_MM", "_NO_CONTROL", "Text", "PathText",
     "PointId", "ParamName", "Mm", "Deg", "Pose", "GridStep", "GridAxis", "_POSE_WHAT", "_num", "_absent", "_Section",
     "_Cell", "_Robot", "_Limits", "_Point", "_Body", "_CONTROLLER", "_Devices", "_Plan", "_Identification",
-    "_Correction", "_Simulation", "_Recheck", "_Warmup", "_Conformance", "ToolName", "ToolMm", "ToolPose",
+    "_Correction", "_Simulation", "_Verification", "_Recheck", "_Warmup", "_Conformance", "ToolName", "ToolMm", "ToolPose",
     "MAX_TOOLS", "_Tool", "_Head", "_CellFile", "_short", "_key", "_section_of", "_field_info", "bounds_text",
     "_PROBLEM", "_describe", "_validate_schema",
 ]

@@ -56,6 +56,12 @@ class _Section(BaseModel):
 
 class _Cell(_Section):
     name: Text = Field("calibration cell", description="the cell's name in reports, 1 … 256 characters")
+    # traceability in the report (docs/station.md, "The report"): what the QA record names
+    robot_serial: Text | None = _absent(description="the robot's serial number from its plate, 1 … 256 characters")
+    controller: Text | None = _absent(description="the robot controller's make, model and serial number, "
+                                                  "1 … 256 characters")
+    operator: Text | None = _absent(description="who runs the station (the report's operator unless "
+                                                "--operator names another), 1 … 256 characters")
 
 
 class _Robot(_Section):
@@ -216,6 +222,10 @@ class _Simulation(_Section):
                                   what="σ of the true errors of the robot's lengths (arms, head) [µm]")
     angle_sigma_arcsec: float = _num(150.0, ge=0.0, le=36000.0,
                                      what="σ of the true errors of the robot's angles (offsets, axis tilts) [arc seconds]")
+    offset_sigma_arcsec: float | None = _num(None, ge=0.0, le=36000.0, what="σ of the true encoder (zero) "
+                                             "offsets of the revolute joints [arc seconds]; not given: angle_sigma_arcsec")
+    tilt_sigma_arcsec: float | None = _num(None, ge=0.0, le=36000.0, what="σ of the true axis tilts (roll, pitch "
+                                           "of every transform) [arc seconds]; not given: angle_sigma_arcsec")
     setup_sigma_mm: float = _num(1.5, ge=0.0, le=100.0,
                                  what="σ of the true set-up against the nominal [robot].setup, x, y, z [mm]")
     setup_yaw_sigma_deg: float = _num(0.2, ge=0.0, le=10.0, what="σ of the true set-up's yaw [deg]")
@@ -226,6 +236,9 @@ class _Simulation(_Section):
     backlash_um: float = _num(100.0, ge=0.0, le=5000.0,
                               what="reversal error of a revolute joint at lever_mm [µm]")
     prismatic_backlash_um: float = _num(20.0, ge=0.0, le=5000.0, what="reversal error of a prismatic joint [µm]")
+    joint_backlash_um: list[Annotated[float, Field(ge=0.0, le=5000.0)]] | None = _absent(
+        max_length=64, strict=False, description="reversal error per joint [µm] (revolute: at lever_mm), one per "
+        "joint; not given: backlash_um and prismatic_backlash_um")
     lever_mm: float = _num(450.0, ge=10.0, le=5000.0,
                            what="lever at which a revolute joint's repeatability and backlash are stated [mm]")
     probe_noise_um: float = _num(0.5, ge=0.0, le=100.0, what="σ of a probe reading's noise [µm]")
@@ -250,6 +263,20 @@ class _Simulation(_Section):
     step_tool_um: tuple[Annotated[float, Field(ge=-10000.0, le=10000.0)], ...] = Field(
         (0.0, 0.0, 0.0), min_length=3, max_length=3, strict=False,
         description="a bumped tool: shift of the head x, y, z [µm], each within ±10000")
+
+
+class _Verification(_Section):
+    """``[verification]``: the accuracy specification the report judges the held-out poses
+    against (ISO 9283 AP and RP after correction), and the test conditions it states."""
+
+    max_ap_um: float | None = _num(None, gt=0.0, le=10000.0, what="largest ISO 9283 pose accuracy AP accepted "
+                                   "after correction, per pose [µm] (absent: not judged)")
+    max_rp_um: float | None = _num(None, gt=0.0, le=10000.0, what="largest ISO 9283 pose repeatability RP "
+                                   "accepted after correction, per pose [µm] (absent: not judged)")
+    temperature_c: float | None = _num(None, ge=-40.0, le=80.0, what="the cell's air temperature during the "
+                                       "test [°C], as the report states it (absent: not recorded)")
+    load_kg: float | None = _num(None, ge=0.0, le=2000.0, what="the mass on the flange during the test (probe "
+                                 "head and adapter) [kg] (absent: not recorded)")
 
 
 class _Recheck(_Section):
@@ -325,6 +352,8 @@ class _CellFile(_Section):
     identification: _Identification = Field(default_factory=lambda: _Identification.model_validate({}), description="a table [identification]")
     correction: _Correction = Field(default_factory=lambda: _Correction.model_validate({}), description="a table [correction]")
     simulation: _Simulation = Field(default_factory=lambda: _Simulation.model_validate({}), description="a table [simulation]")
+    verification: _Verification = Field(default_factory=lambda: _Verification.model_validate({}),
+                                        description="a table [verification]")
     recheck: _Recheck = Field(default_factory=lambda: _Recheck.model_validate({}), description="a table [recheck]")
     warmup: _Warmup = Field(default_factory=lambda: _Warmup.model_validate({}), description="a table [warmup]")
     conformance: _Conformance = Field(default_factory=lambda: _Conformance.model_validate({}), description="a table [conformance]")

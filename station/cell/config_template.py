@@ -1,6 +1,89 @@
 """The configuration template ``station init`` writes: every table and key of the schema
 (:mod:`station.cell.config_schema`) with its default, and each number's bounds in its comment
-(a test checks that the comments state the schema's bounds)."""
+(a test checks that the comments state the schema's bounds). The ``[simulation]`` keys are
+written from the schema itself (:func:`simulation_block`): they are many, and only a rehearsal
+reads them, so they stay commented out with their defaults and bounds."""
+
+from __future__ import annotations
+
+import re
+import textwrap
+from typing import Any
+
+import annotated_types
+
+from station.cell.config_schema import _Simulation
+
+_WIDTH = 110  # the template's longest comment lines
+
+#: a shown value where the schema's default is "not given" (the seed then falls back to 1)
+_SHOWN_DEFAULT = {"seed": 1}
+
+
+class _Form(str):
+    """A shown value that is the form to write, not a value (``[ … ]``)."""
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, _Form):
+        return str(v)
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (tuple, list)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    if isinstance(v, float):
+        return repr(v)
+    return str(v)
+
+
+def _bound(v: Any) -> str:
+    return str(int(v)) if float(v).is_integer() else f"{v:g}"
+
+
+def _bounds(info: Any) -> str:
+    """``lo … hi`` as :func:`bounds_text` says it, with whole numbers written out (2**32 − 1)."""
+    lo = hi = ""
+    for m in info.metadata:
+        if isinstance(m, annotated_types.Ge):
+            lo = _bound(m.ge)
+        elif isinstance(m, annotated_types.Gt):
+            lo = f"> {_bound(m.gt)}"
+        elif isinstance(m, annotated_types.Le):
+            hi = _bound(m.le)
+    return f"{lo} … {hi}" if lo and hi else ""
+
+
+def _shown(key: str, info: Any) -> Any:
+    """The value a commented key shows: its default; for a key without one ("not given: OTHER"),
+    OTHER's default, which is what it then takes; else its lower bound."""
+    if key in _SHOWN_DEFAULT:
+        return _SHOWN_DEFAULT[key]
+    if info.default is not None:
+        return info.default
+    if "list" in str(info.annotation):  # a list per joint, its length the robot's: its form only
+        return _Form("[ … ]")
+    m = re.search(r"not given: (\w+)", info.description or "")
+    other = _Simulation.model_fields.get(m.group(1)) if m else None
+    if other is not None and other.default is not None:
+        return other.default
+    lows = [getattr(x, "ge", None) for x in info.metadata if isinstance(x, annotated_types.Ge)]
+    return lows[0] if lows else 0
+
+
+def simulation_block() -> str:
+    """The commented ``[simulation]`` keys: each with its default, its bounds and what it is, all
+    taken from the schema (``_Simulation``), so the template cannot drift from it."""
+    lines = []
+    for key, info in _Simulation.model_fields.items():
+        setting = f"# {key} = {_toml_value(_shown(key, info))}"
+        rng = _bounds(info)
+        what = f"{rng}: {info.description}" if rng else str(info.description)
+        indent = f"{'#':<35}# "
+        body = textwrap.wrap(what, width=_WIDTH - len(indent))
+        lines.append(f"{setting:<34} # {body[0]}")
+        lines += [f"{indent}{more}" for more in body[1:]]
+    return "\n".join(lines) + "\n"
+
 
 TEMPLATE = """\
 # Calibration cell configuration. Lengths in mm, angles in degrees, uncertainties in µm and
@@ -10,6 +93,10 @@ TEMPLATE = """\
 
 [cell]
 name = "cell 1"
+# The report's traceability block names them (absent: "not recorded"):
+# robot_serial = "SR800-0042"     # from the robot's plate
+# controller = "RC700-A s/n 1234" # the controller's make, model and serial number
+# operator = "J. Smith"           # 'calibrate --operator NAME' and 'report --operator NAME' name another
 
 [robot]
 model = "sr800"                  # built-in robot or a robot file (docs/robot-file.md)
@@ -36,6 +123,12 @@ points = [
   { id = "C1.a", pose = [-28.3, -319.7, 40.0, 0.0, 0.0, 10.0] },
   { id = "C1.b", pose = [11.1, -312.8, 40.0, 0.0, 0.0, 100.0] },
   { id = "C1.c", pose = [4.1, -273.4, 40.0, 0.0, 0.0, 190.0] },
+  { id = "C2.a", pose = [-228.3, -219.7, 140.0, 0.0, 0.0, 10.0] },
+  { id = "C2.b", pose = [-188.9, -212.8, 140.0, 0.0, 0.0, 100.0] },
+  { id = "C2.c", pose = [-195.9, -173.4, 140.0, 0.0, 0.0, 190.0] },
+  { id = "C3.a", pose = [171.7, -219.7, 90.0, 0.0, 0.0, 10.0] },
+  { id = "C3.b", pose = [211.1, -212.8, 90.0, 0.0, 0.0, 100.0] },
+  { id = "C3.c", pose = [204.1, -173.4, 90.0, 0.0, 0.0, 190.0] },
 ]
 # The CMM's uncertainty of a point that gives none; it goes into the identification's weights
 # and σ (the measurements of one point share its error). 0: the body is taken as exact.
@@ -98,6 +191,15 @@ z_mm = [250.0, 450.0, 200.0]
 yaw_step_deg = 30.0              # 1 … 180
 max_interpolation_um = 15.0      # refuse a table whose interpolation bound exceeds this, > 0 … 1000
 
+[verification]
+# The accuracy specification the report judges the held-out poses against after correction (ISO
+# 9283: AP, pose accuracy, and RP, pose repeatability, per pose), and the test conditions it
+# states. Absent: not judged / not recorded. The run's outcome stays the improvement ratio's.
+# max_ap_um = 50.0               # largest AP accepted per pose [µm], > 0 … 10000
+# max_rp_um = 30.0               # largest RP accepted per pose [µm], > 0 … 10000
+# temperature_c = 20.0           # the cell's air temperature during the test [°C], -40 … 80
+# load_kg = 2.5                  # mass on the flange: probe head and adapter [kg], 0 … 2000
+
 [recheck]
 # 'station recheck': a short check of a few poses against the last calibration (the baseline).
 # A tolerance of 0 is derived from the baseline's own accuracy.
@@ -136,4 +238,9 @@ position_tolerance = 0.01        # arrived joints vs target (deg | mm), 0.0001 �
 # tcp = [50.0, 0.0, -200.0, 0.0, 0.0, 0.0]  # TCP in the flange frame from the tool's measurement:
 #                                # x, y, z [mm] within ±2000, roll, pitch, yaw [deg] within ±360
 # z_mm = [150.0, 350.0, 200.0]   # optional x_mm, y_mm, z_mm: the tool's own grid (default: [correction])
-"""
+
+[simulation]
+# Read only by a rehearsal, 'station calibrate --simulated THIS_FILE' (this cell against
+# simulators) and 'python -m simulators --config THIS_FILE'; a real run ignores it. Each key is
+# optional; shown with its default, what it is and its bounds:
+""" + simulation_block()

@@ -57,6 +57,9 @@ class DeviceSnapshot(Event):
     joint_types: tuple[str, ...]
     controller: str  # e.g. 'ready', 'moving', 'error: …'
     heartbeat_age_s: float | None = None
+    #: the head file's probe ids, one per entry of probe_mm (head order, wired channels only);
+    #: () : probe_mm holds every channel of the interface (shown as P1, P2, …)
+    probe_ids: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -1,5 +1,8 @@
 """Which cell a run was measured on: a fingerprint stored with the run, so that a resume can
 refuse data from another cell (another body, set-up, robot file, head, limits or simulated seed).
+What only post-processes the measurements (``POST_PROCESSING``: the identification's settings,
+the correction grid, tolerances, names in the report) may change: a resume then reuses every
+measurement and says so (:func:`resume_note`).
 
 The fingerprint hashes every section of the configuration except ``[devices]`` (a port may be
 renamed between two attempts without changing the cell) plus the robot model as loaded (so an
@@ -11,11 +14,13 @@ from __future__ import annotations
 import hashlib
 import json
 import tomllib
+from collections.abc import Collection, Iterable
 from typing import Any
 
 import numpy as np
 
 from station.cell.config import CellConfig
+from station.cell.steps import StepKind
 from station.errors import ConfigError
 
 #: sections of the configuration that may change between attempts of one run
@@ -76,12 +81,52 @@ def baseline_fingerprint(config_toml: str) -> dict[str, str]:
     return out
 
 
-def check_same_cell(stored: dict[str, str], current: dict[str, str], run_id: int) -> None:
-    """Refuse (:class:`ConfigError`) to resume ``run_id`` on a cell whose fingerprint differs,
-    naming what changed."""
+#: what only post-processes the measurements (the identification, the correction grid, tolerances,
+#: the report's names, the tools' tables): a resume with only these changed reuses every measurement
+POST_PROCESSING = ("[identification]", "[correction]", "[recheck]", "[tool]", "[cell]", "[verification]")
+
+
+def post_processing_only(changed: Collection[str]) -> bool:
+    """True when every changed key of a fingerprint only post-processes the measurements."""
+    return all(k in POST_PROCESSING for k in changed)
+
+
+def check_same_cell(stored: dict[str, str], current: dict[str, str], run_id: int,
+                    records: Iterable[Any] = ()) -> tuple[str, ...]:
+    """Refuse (:class:`ConfigError`) to resume ``run_id`` on a cell whose fingerprint differs in
+    what changes measurements (robot, set-up, head, body, plan, limits, simulation), naming what
+    changed. Returns the post-processing sections that changed (``POST_PROCESSING``): the
+    measurements stay valid and are reused, except verification readings (``records``: the run's
+    measurements) made with the old identification or table, which refuse the resume."""
     changed = sorted(k for k in stored.keys() | current.keys() if stored.get(k) != current.get(k))
-    if changed:
+    measuring = [k for k in changed if k not in POST_PROCESSING]
+    if measuring:
         raise ConfigError(
             f"run {run_id} was measured on a different cell: {', '.join(changed)} changed since. Resuming would "
-            f"mix data of two cells, so it was refused. Restore the configuration the run started with "
+            f"mix data of two cells, so it was refused ({', '.join(POST_PROCESSING)} may change: they only "
+            f"post-process the measurements). Restore the configuration the run started with "
             f"(its snapshot is in the run database), or start a new run (leave out --resume)")
+    kinds = {str(getattr(r, "kind", "")) for r in records}
+    for inputs, measured in _MEASURED_WITH:
+        late = [k for k in changed if k in inputs]
+        done = sorted(kinds & measured)
+        if late and done:
+            raise ConfigError(
+                f"run {run_id}: {', '.join(late)} changed since, but its {', '.join(done)} poses were already "
+                f"measured with the old {'table' if '[correction]' in late and len(late) == 1 else 'identification'}, "
+                f"so they would not show the new one. Restore {', '.join(late)} to resume, or start a new run")
+    return tuple(changed)
+
+
+#: (sections, step kinds measured with them): the before poses are commanded through the identified
+#: set-up, the after and oracle poses also through the uploaded table
+_MEASURED_WITH = (({"[identification]"}, {StepKind.VERIFY_BEFORE.value}),
+                  ({"[identification]", "[correction]"}, {StepKind.VERIFY_AFTER.value, StepKind.ORACLE.value}))
+
+
+def resume_note(changed: Collection[str]) -> str | None:
+    """What a resume tells the operator when only post-processing sections changed."""
+    if not changed:
+        return None
+    return (f"{', '.join(changed)} changed since the run was measured; they only post-process the "
+            f"measurements, so every measurement on disk is reused and the results are computed anew")

@@ -24,7 +24,8 @@ import numpy as np
 from station.cell.config import CellConfig
 from station.cell.devices import CellController, ProbeHead
 from station.cell.events import Event, Notice, PhaseChanged, RunFinished, RunStarted
-from station.cell.fingerprint import check_same_cell, fingerprint
+from station.cell.fingerprint import check_same_cell, fingerprint, resume_note
+from station.cell.grid_precheck import check_grid
 from station.cell.pipeline_articulated import articulated_correction, articulated_targets
 from station.cell.pipeline_results import (
     build_table_for,
@@ -33,14 +34,16 @@ from station.cell.pipeline_results import (
     oracle_params,
     reversal_error,
     verification_errors,
+    verified_outcome,
 )
 from station.cell.plan import build_plan, head_targets_world, joints_for
 from station.cell.questions import Confirm, KeepCorrection, UploadProposal
+from station.cell.recentring import recentring_stats, stored_recentring
 from station.cell.runcontrol import RunControl
 from station.cell.rundb import RunDB
 from station.cell.runner import Procedure, Runner, approach_and_read
 from station.cell.steps import PlannedStep, StepKind
-from station.cell.stored_config import config_source, stored_config, stored_plan
+from station.cell.stored_config import POSTPROCESSED_CONFIG, config_source, stored_config, stored_plan
 from station.cell.summary import (
     CorrectionSummary,
     ErrorStats,
@@ -125,8 +128,10 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
     typed error of whatever stopped it (everything measured so far is on disk)."""
     control = control or RunControl()
     check_tools(cfg)  # every [[tool]] can be corrected on this robot, before anything moves
+    grid = check_grid(cfg)  # the grid's bound for the expected error size, before anything moves
     runner = Runner(cfg, probe, controller, emit, control)
     with_oracle = options.oracle_truth is not None and options.upload
+    reused: tuple[str, ...] = ()  # a resume: the post-processing sections changed since
     if resume_run is None:
         emit(PhaseChanged("plan"))
         steps = build_plan(cfg).run_steps(cfg.plan.verification_cycles, with_oracle, options.upload)
@@ -139,8 +144,11 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
         stored_fp = db.load_result(run_id, "fingerprint", default=None)
         if stored_fp is None:  # a run from before fingerprints: compare with its snapshot
             stored_fp = fingerprint(stored_config(db, run_id))
-        check_same_cell(stored_fp, fingerprint(cfg), run_id)
-        steps = stored_plan(db, run_id)
+        steps = stored_plan(db, run_id)  # the plan first: a damaged plan is named as such (exit 5)
+        reused = check_same_cell(stored_fp, fingerprint(cfg), run_id, db.measurements(run_id))
+        if reused:  # the measurements are kept; the table, the figures and the report follow this text
+            db.save_result(run_id, POSTPROCESSED_CONFIG, cfg.source_text)
+            db.save_result(run_id, "fingerprint", fingerprint(cfg))
         db.measurements(run_id)  # what is on disk must belong to that plan (record_checks.py), else exit 5
         planned_upload = any(st.kind is StepKind.VERIFY_AFTER for st in steps)
         if planned_upload != options.upload:
@@ -151,11 +159,21 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
     if devices_info:  # the devices of the latest attempt, for the report
         db.save_result(run_id, "devices", devices_info)
     emit(RunStarted(run_id, len(steps), resumed))
+    for note in (resume_note(reused), grid.note() if grid else None):
+        if note:
+            emit(Notice("info", note))
     db.log(run_id, "info", f"run {'resumed' if resume_run else 'started'}: {len(steps)} steps, {resumed} on disk")
     summary = RunSummary(outcome=Outcome.SUCCESS, run_id=run_id, cell=cfg.name, robot=cfg.model.name)
     start = table_at_start(controller, db, run_id, emit)  # before anything changes the controller's tables
     try:
         summary = _pipeline(cfg, runner, db, run_id, steps, emit, options, with_oracle, summary)
+        summary = summary.replace(recentring=recentring_stats(
+            steps, {k: db.measurements(run_id, kind=k.value) for k in StepKind if k is not StepKind.RECHECK},
+            stored_recentring(db, run_id)))
+        summary = summary.replace(notes=(*summary.notes, *runner.stuck.notes()))  # a stuck probe, by name
+        rp = summary.rp_text()  # RP after > before is no sign of a bad correction unless beyond its spread
+        if rp is not None:
+            summary = summary.replace(notes=(*summary.notes, rp))
         summary = finish_tables(controller, start, summary, emit)
     except Exception as exc:  # station and driver errors alike: log, mark the run, re-raise
         note = restore_after_failure(controller, start, emit)
@@ -187,7 +205,14 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
         runner.measure_steps(db, run_id, steps, kinds, total, _proc_for(cfg, R))
 
     def stats(kind: StepKind) -> ErrorStats | None:
-        return ErrorStats.from_errors(verification_errors(cfg, steps, db.measurements(run_id, kind=kind.value)))
+        recs = db.measurements(run_id, kind=kind.value)
+        moved = stored_recentring(db, run_id)
+        (rc,) = recentring_stats(steps, {kind: recs}, moved) or (None,)
+        if rc is not None and rc.n_recentred:
+            emit(Notice("info", f"{kind.caption}: {rc.n_recentred} of {rc.n_readings} readings re-centred to bring "
+                                f"the probes into their stroke (up to {rc.max_um:.0f} µm); the re-centring's move "
+                                f"is counted in the measured error"))
+        return ErrorStats.from_errors(verification_errors(cfg, steps, recs, moved))
 
     if cfg.warmup is not None and len(db.completed_steps(run_id, ok_only=True)) < total:  # [warmup] (issue 13)
         from station.cell.warmup import run_warmup
@@ -199,7 +224,8 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
     db.set_status(run_id, "measured")
 
     records = db.measurements(run_id, kind=StepKind.IDENTIFICATION.value)
-    reversal = reversal_error(cfg, records, db.measurements(run_id, kind=StepKind.REVERSAL.value))
+    reversal = reversal_error(cfg, records, db.measurements(run_id, kind=StepKind.REVERSAL.value),
+                              stored_recentring(db, run_id))
     if reversal is not None:
         summary = summary.replace(reversal=reversal)
         emit(Notice("info", f"reversal error (both approach directions): RMS {reversal.rms_um:.1f} µm, "
@@ -289,7 +315,8 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
         runner.guard.table = table.data
         emit(Notice("info", "rolled back to the station's table after the oracle check"))
     gain = summary.gain
-    outcome = Outcome.SUCCESS if gain is not None and gain >= options.min_gain else Outcome.TARGET_MISSED
+    outcome, missed = verified_outcome(cfg, summary, options.min_gain)
+    summary = summary.replace(notes=(*summary.notes, *missed))
     db.set_status(run_id, "verified")
     if options.confirm is not None and summary.before is not None and summary.after is not None:
         keep = KeepCorrection(summary.before.rms_um, summary.after.rms_um, float(gain or 0.0),

@@ -14,8 +14,14 @@ import numpy as np
 
 from station.cell.config import CellConfig
 from station.cell.events import Event, Notice, PhaseChanged
-from station.cell.pipeline_results import oracle_params, verification_errors, verification_orientation_errors
+from station.cell.pipeline_results import (
+    oracle_params,
+    verification_errors,
+    verification_orientation_errors,
+    verified_outcome,
+)
 from station.cell.plan import head_targets_world
+from station.cell.recentring import stored_recentring
 from station.cell.run_records import MeasurementRecord
 from station.cell.rundb import RunDB
 from station.cell.runner import Procedure, Runner, approach_and_read
@@ -125,10 +131,11 @@ def articulated_correction(cfg: CellConfig, runner: Runner, db: RunDB, run_id: i
     def measure(kind: StepKind, targets: dict) -> ErrorStats | None:
         runner.measure_steps(db, run_id, steps, {kind}, total, _articulated_proc(cfg, targets))
         recs = db.measurements(run_id, kind=kind.value)
-        ang = verification_orientation_errors(cfg, steps, recs) / ARCSEC_RAD
+        moved = stored_recentring(db, run_id)  # a re-centring's move is part of the error (issue 18)
+        ang = verification_orientation_errors(cfg, steps, recs, moved) / ARCSEC_RAD
         if ang.size:
             orient[kind.value] = {"rms_arcsec": float(np.sqrt(np.mean(ang**2))), "max_arcsec": float(ang.max())}
-        return ErrorStats.from_errors(verification_errors(cfg, steps, recs))
+        return ErrorStats.from_errors(verification_errors(cfg, steps, recs, moved))
 
     orient: dict[str, dict[str, float]] = {}
     emit(PhaseChanged("correct"))
@@ -158,8 +165,8 @@ def articulated_correction(cfg: CellConfig, runner: Runner, db: RunDB, run_id: i
     if with_oracle and p_true is not None:
         emit(PhaseChanged("verify", "oracle (true parameters)"))
         summary = summary.replace(oracle=measure(StepKind.ORACLE, articulated_targets(cfg, steps, p_true, p_true[:6])))
-    gain = summary.gain
-    outcome = Outcome.SUCCESS if gain is not None and gain >= min_gain else Outcome.TARGET_MISSED
+    outcome, missed = verified_outcome(cfg, summary, min_gain)
+    summary = summary.replace(notes=(*summary.notes, *missed))
     db.set_status(run_id, "verified")
     return _articulated_done(db, run_id, summary.replace(outcome=outcome), extra, orient, emit)
 

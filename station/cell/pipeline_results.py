@@ -2,30 +2,31 @@
 the recheck: the identification, the verification errors, the reversal error, the correction
 table on the configured grid, and (in simulation) the oracle's true parameters.
 
-Everything here is a pure function of the configuration and the records; nothing moves or
-writes, so the report of a stored run shows exactly what its run computed.
+Everything here is a pure function of the configuration and the records (with the re-centring
+displacements stored beside them, :mod:`station.cell.recentring`); nothing moves or writes, so the report of a stored run shows exactly what its run computed.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
 from station.cell.config import CellConfig, correction_grid
 from station.cell.plan import head_targets_world
+from station.cell.recentring import head_as_commanded
 from station.cell.run_records import MeasurementRecord
 from station.cell.steps import PlannedStep
-from station.cell.summary import ReversalSummary
+from station.cell.summary import ReversalSummary, RunSummary
 from station.core.correction_table import CorrectionTable, build_correction_table
 from station.core.identification import IdentificationResult, identify
 from station.core.measurements import MeasurementSet
 from station.core.table_grid import GridSpec
 from station.core.transforms import invert
-from station.errors import IdentificationError
+from station.errors import IdentificationError, Outcome
 
-__all__ = ["reversal_error", "identify_run", "verification_errors", "verification_orientation_errors",
+__all__ = ["verified_outcome", "reversal_error", "identify_run", "verification_errors", "verification_orientation_errors",
            "oracle_params", "grid_for", "build_table_for"]
 
 
@@ -44,14 +45,18 @@ def _world_heads(cfg: CellConfig, records: Sequence[MeasurementRecord]) -> tuple
 
 
 def reversal_error(cfg: CellConfig, forward_records: Sequence[MeasurementRecord],
-                   reverse_records: Sequence[MeasurementRecord]) -> ReversalSummary | None:
+                   reverse_records: Sequence[MeasurementRecord],
+                   recentring: Mapping[int, np.ndarray] | None = None) -> ReversalSummary | None:
     """Position difference [µm] between approaching each pose from below and from above (the
-    robot's reversal error, brief §8); None without reversal measurements."""
+    robot's reversal error, brief §8); None without reversal measurements. A re-centred reading
+    is moved back to its command (``recentring``, as in :func:`verification_errors`)."""
     index = {pid: i for i, pid in enumerate(cfg.point_ids)}
+    moved = recentring or {}
 
     def heads(records: Sequence[MeasurementRecord]) -> dict[tuple[str, str], np.ndarray]:
         # keyed by (point, label without the direction) so each reverse step meets its forward twin
-        return {(r.point_id, r.label.replace(" reverse", "")): (cfg.body_points[index[r.point_id]] @ invert(r.pose))[:3, 3]
+        return {(r.point_id, r.label.replace(" reverse", "")):
+                head_as_commanded(cfg.body_points[index[r.point_id]] @ invert(r.pose), moved.get(r.step_index))[:3, 3]
                 for r in records if r.ok and r.pose is not None}
 
     fwd, rev = heads(forward_records), heads(reverse_records)
@@ -88,17 +93,21 @@ def identify_run(cfg: CellConfig, records: Sequence[MeasurementRecord]) -> Ident
                     fix=cfg.identification.fix, exclude=cfg.identification.exclude)
 
 
-def verification_errors(cfg: CellConfig, steps: Sequence[PlannedStep],
-                        records: Sequence[MeasurementRecord]) -> dict[tuple[str, int], np.ndarray]:
+def verification_errors(cfg: CellConfig, steps: Sequence[PlannedStep], records: Sequence[MeasurementRecord],
+                        recentring: Mapping[int, np.ndarray] | None = None) -> dict[tuple[str, int], np.ndarray]:
     """Per held-out pose (point id, elbow): the ``(n_cycles, 3)`` position errors [mm] of the
-    measured head against its target, one row per valid cycle."""
+    measured head against its target, one row per valid cycle. ``recentring``: the run's
+    re-centring displacements by step (:func:`station.cell.recentring.stored_recentring`); a
+    re-centred reading is moved back to where the robot stood at its command, so the error is
+    the robot's, not what is left after the re-centring."""
     heads = head_targets_world(cfg)
+    moved = recentring or {}
     out: dict[tuple[str, int], list[np.ndarray]] = {}
     for r in records:
         if not r.ok or r.pose is None:
             continue
         st = steps[r.step_index]
-        meas = cfg.body_points[st.point] @ invert(r.pose)
+        meas = head_as_commanded(cfg.body_points[st.point] @ invert(r.pose), moved.get(r.step_index))
         out.setdefault((st.point_id, st.elbow), []).append(meas[:3, 3] - heads[st.point][:3, 3])
     return {k: np.array(v) for k, v in out.items()}
 
@@ -129,19 +138,38 @@ def build_table_for(cfg: CellConfig, params: np.ndarray) -> CorrectionTable:
     return build_correction_table(cfg.model, params, grid_for(cfg))
 
 
-def verification_orientation_errors(cfg: CellConfig, steps: Sequence[PlannedStep],
-                                    records: Sequence[MeasurementRecord]) -> np.ndarray:
+def verification_orientation_errors(cfg: CellConfig, steps: Sequence[PlannedStep], records: Sequence[MeasurementRecord],
+                                    recentring: Mapping[int, np.ndarray] | None = None) -> np.ndarray:
     """Orientation error [rad] ``(n,)`` of every valid verification record: the angle between the
-    measured head frame and its target."""
+    measured head frame and its target (a re-centred one moved back, as in :func:`verification_errors`)."""
     from station.core.transforms import rotation_log
 
     heads = head_targets_world(cfg)
+    moved = recentring or {}
     out = []
     for r in records:
         if not r.ok or r.pose is None:
             continue
         st = steps[r.step_index]
-        meas = cfg.body_points[st.point] @ invert(r.pose)
+        meas = head_as_commanded(cfg.body_points[st.point] @ invert(r.pose), moved.get(r.step_index))
         out.append(float(np.linalg.norm(rotation_log(heads[st.point][:3, :3].T @ meas[:3, :3]))))
     return np.array(out)
 
+
+
+def verified_outcome(cfg: CellConfig, summary: RunSummary, min_gain: float) -> tuple[Outcome, tuple[str, ...]]:
+    """A verified run's outcome: SUCCESS when the gain reaches ``min_gain`` and the held-out poses
+    meet ``[verification]``'s accuracy specification (ISO 9283 AP and RP of every pose after
+    correction, where configured); else TARGET_MISSED, with a note for each limit missed."""
+    gain = summary.gain
+    notes: list[str] = []
+    after, spec = summary.after, cfg.verification
+    if after is not None and spec.max_ap_um is not None and after.ap_max_um > spec.max_ap_um:
+        notes.append(f"AP after correction reaches {after.ap_max_um:.1f} µm at its worst pose, above "
+                     f"[verification] max_ap_um = {spec.max_ap_um:g} µm")
+    if after is not None and spec.max_rp_um is not None and after.rp_max_um is not None \
+            and after.rp_max_um > spec.max_rp_um:
+        notes.append(f"RP after correction reaches {after.rp_max_um:.1f} µm at its worst pose, above "
+                     f"[verification] max_rp_um = {spec.max_rp_um:g} µm")
+    ok = gain is not None and gain >= min_gain and not notes
+    return (Outcome.SUCCESS if ok else Outcome.TARGET_MISSED), tuple(notes)

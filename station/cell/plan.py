@@ -30,13 +30,15 @@ from station.cell.plan_common import (
 from station.cell.safety import MotionGuard
 from station.core.kinematics import scara_ik
 from station.core.transforms import invert
+from station.core.units import DEG
 from station.errors import ConfigError, UnreachableError
 
 # The shared pieces live in plan_common (both planners import them); they stay importable from here.
 __all__ = ["Target", "Plan", "nominal_contact", "head_targets_world", "assemble_plan", "hold_out",
            "select_d_optimal", "approach_offsets", "retract_offset", "travel_joints", "retracted",
            "check_joints", "joints_for", "REMEASURE_STEP", "approach_pose", "above_offset", "all_motion_poses",
-           "widest_motion_poses", "build_plan", "order_by_travel"]
+           "widest_motion_poses", "build_plan", "order_by_travel", "point_joints", "reach_reason", "limit_reason",
+           "candidate_reason", "check_enough_poses", "MIN_IDENTIFICATION_TARGETS"]
 
 
 def approach_offsets(cfg: CellConfig, direction: int = 1) -> np.ndarray:
@@ -63,25 +65,64 @@ _TRAVEL: weakref.WeakKeyDictionary[CellConfig, np.ndarray] = weakref.WeakKeyDict
 
 def travel_joints(cfg: CellConfig) -> np.ndarray:
     """Per joint, the travel position of the prismatic joints (NaN for the others): the clearance
-    above the highest measuring point, capped by the soft limit. Lateral moves happen only at
-    this height, so the head never sweeps through a cube, wherever a crash left the robot."""
+    above the highest reachable measuring point, capped by the soft limit. Lateral moves happen
+    only at this height, so the head never sweeps through a cube, wherever a crash left the robot.
+    A point out of reach is left out here (the plan names it); with none in reach, the soft limit."""
     hit = _TRAVEL.get(cfg)
     if hit is not None:
         return hit
-    if not cfg.model.is_scara:  # an articulated arm retracts along the corner's diagonal instead
-        out = np.full(cfg.model.n_joints, np.nan)
-        out.setflags(write=False)
-        _TRAVEL[cfg] = out
-        return out
-    heads = head_targets_world(cfg)
-    q = joints_for(cfg, heads, cfg.plan.elbows[0])
     out = np.full(cfg.model.n_joints, np.nan)
-    for j, kind in enumerate(cfg.model.joint_types):
-        if kind == "prismatic":
-            out[j] = min(cfg.soft_limits[j, 1], float(q[:, j].max()) + cfg.plan.clearance_mm)
+    if cfg.model.is_scara:  # an articulated arm retracts along the corner's diagonal instead
+        q = point_joints(cfg, cfg.plan.elbows[0])
+        for j, kind in enumerate(cfg.model.joint_types):
+            if kind == "prismatic":
+                col = q[:, j][np.isfinite(q[:, j])]
+                top = float(col.max()) + cfg.plan.clearance_mm if col.size else np.inf
+                out[j] = min(cfg.soft_limits[j, 1], top)
     out.setflags(write=False)
     _TRAVEL[cfg] = out
     return out
+
+
+def point_joints(cfg: CellConfig, elbow: int) -> np.ndarray:
+    """Nominal joints (n_points, g) of every measuring point with ``elbow``; NaN rows for the
+    points out of the arm's reach (each point solved on its own, so one cannot fail the rest)."""
+    heads = head_targets_world(cfg)
+    out = np.full((len(heads), cfg.model.n_joints), np.nan)
+    for j in range(len(heads)):
+        try:
+            out[j] = joints_for(cfg, heads[j], elbow)[0]
+        except UnreachableError:
+            continue
+    return out
+
+
+def reach_reason(cfg: CellConfig, head_world: np.ndarray) -> str:
+    """Why a SCARA cannot put the head at ``head_world`` (4, 4): which radius about axis 1 the
+    wrist misses, and by how much [mm]."""
+    from station.core.kinematics import scara_closed_form, scara_reach_margin
+    from station.core.transforms import pose_to_matrix
+
+    T_base = invert(pose_to_matrix(cfg.model.nominal[:6]))[None] @ np.asarray(head_world).reshape(-1, 4, 4)
+    margin = float(scara_reach_margin(cfg.model, T_base)[0])
+    _, c_beta = scara_closed_form(cfg.model, T_base, 1)
+    side = "beyond the stretched arm" if float(c_beta[0]) > 0 else "inside the folded arm"
+    return f"out of the arm's reach by {abs(margin):.1f} mm ({side}); move the point or the robot ([robot].setup)"
+
+
+def limit_reason(cfg: CellConfig, q: np.ndarray) -> str | None:
+    """None when every joint of ``q`` is inside the soft limits; else the first joint outside:
+    which limit and by how much, in the units of [limits] (deg | mm)."""
+    lo, hi = cfg.soft_limits[:, 0], cfg.soft_limits[:, 1]
+    for j, kind in enumerate(cfg.model.joint_types):
+        v, scale, unit = float(q[j]), (1 / DEG if kind == "revolute" else 1.0), ("°" if kind == "revolute" else " mm")
+        if not np.isfinite(v):
+            return f"joint {j + 1} has no solution"
+        if v < lo[j] or v > hi[j]:
+            side, limit = ("lower", lo[j]) if v < lo[j] else ("upper", hi[j])
+            return (f"joint {j + 1} = {v * scale:.2f}{unit} is {abs(v - limit) * scale:.2f}{unit} beyond its "
+                    f"{side} soft limit {limit * scale:.2f}{unit}")
+    return None
 
 
 def retracted(cfg: CellConfig, q: np.ndarray) -> np.ndarray:
@@ -96,7 +137,7 @@ def retracted(cfg: CellConfig, q: np.ndarray) -> np.ndarray:
 def check_joints(cfg: CellConfig, q: np.ndarray, what: str) -> None:
     """Refuse (UnreachableError) any joint vector outside the configured soft limits (the
     runner's :class:`~station.cell.safety.MotionGuard`, applied to the plan before any motion)."""
-    MotionGuard(cfg.soft_limits).check_joints(q, what)
+    MotionGuard(cfg.soft_limits, joint_types=cfg.model.joint_types).check_joints(q, what)
 
 
 def joints_for(cfg: CellConfig, head_world: np.ndarray, elbow: int, setup_world_base=None) -> np.ndarray:
@@ -145,30 +186,81 @@ def widest_motion_poses(cfg: CellConfig, q: np.ndarray, direction: int = 1) -> l
     return [approach_pose(cfg, q, direction, last, n), q + above_offset(cfg, last, n)]
 
 
+#: what each of a candidate's motion poses is, in the order all_motion_poses + widest_motion_poses give them
+_POSE_NAMES = ("its approach", "the pose above it", "the touch", "the last repetition's approach",
+               "the last repetition's pose above it")
+
+
+def candidate_reason(cfg: CellConfig, q: np.ndarray, label: str) -> str | None:
+    """None when every pose a measurement at ``q`` commands (both directions when planned) is
+    inside the soft limits; else the first that is not, named with the joint and the amount."""
+    for direction in ((1, -1) if cfg.plan.both_directions else (1,)):
+        where = label + ("" if direction == 1 else " (reverse approach)")
+        poses = (*all_motion_poses(cfg, q, direction), *widest_motion_poses(cfg, q, direction))
+        for name, qq in zip(_POSE_NAMES, poses):
+            why = limit_reason(cfg, qq)
+            if why is not None:
+                return f"{where}: {name} leaves the soft limits, {why}"
+    return None
+
+
 def build_plan(cfg: CellConfig) -> Plan:
+    """The plan over every (point, elbow) that can be measured; every other is left out with its
+    reason (out of reach, or a pose outside the soft limits: joint, side and amount). Too few left
+    for the identifiable set is a :class:`ConfigError` saying how many are needed."""
     if not cfg.model.is_scara:  # head orientations × arm configurations (issue 9)
         return build_articulated_plan(cfg)
     heads = head_targets_world(cfg)
     cands, rejected = [], []
-    for j, pid in enumerate(cfg.point_ids):
-        for elbow in cfg.plan.elbows:
-            try:
-                q = joints_for(cfg, heads[j], elbow)[0]
-                for qq in (*all_motion_poses(cfg, q), *widest_motion_poses(cfg, q)):
-                    check_joints(cfg, qq, f"{pid} elbow {elbow:+d}")
-                if cfg.plan.both_directions:
-                    for qq in (*all_motion_poses(cfg, q, -1), *widest_motion_poses(cfg, q, -1)):
-                        check_joints(cfg, qq, f"{pid} elbow {elbow:+d} (reverse approach)")
-            except UnreachableError as exc:
-                rejected.append((pid, elbow, str(exc)))
+    for elbow in cfg.plan.elbows:
+        q_all = point_joints(cfg, elbow)
+        for j, pid in enumerate(cfg.point_ids):
+            if not np.all(np.isfinite(q_all[j])):
+                rejected.append((pid, elbow, f"{pid} elbow {elbow:+d}: {reach_reason(cfg, heads[j])}"))
                 continue
-            cands.append(Target(j, pid, elbow, heads[j], q))
+            why = candidate_reason(cfg, q_all[j], f"{pid} elbow {elbow:+d}")
+            if why is not None:
+                rejected.append((pid, elbow, why))
+                continue
+            cands.append(Target(j, pid, elbow, heads[j], q_all[j]))
+    order = {pid: i for i, pid in enumerate(cfg.point_ids)}  # points in the body's order, then elbows
+    cands.sort(key=lambda c: (order[c.point_id], cfg.plan.elbows.index(c.elbow)))
+    rejected.sort(key=lambda r: (order[r[0]], cfg.plan.elbows.index(r[1])))
     if not cands:
-        raise ConfigError("no measuring point is reachable within the soft limits; check [robot].setup and [limits]")
+        raise ConfigError("no measuring point is reachable within the soft limits: "
+                          + "; ".join(why for _, _, why in rejected)
+                          + ". Check [robot].setup, [limits] and the body's points")
     held = hold_out(cands, cfg.plan.verification_every, cfg.plan.elbows)
     verification = tuple(c for i, c in enumerate(cands) if i in held)
     ident = [c for i, c in enumerate(cands) if i not in held]
+    check_enough_poses(cfg, ident, len(rejected))
     return assemble_plan(cfg, ident, verification, rejected, order_by_travel)
+
+
+def check_enough_poses(cfg: CellConfig, ident: list[Target], n_rejected: int) -> None:
+    """Refuse (ConfigError) identification targets too few for the identifiable set: fewer
+    pose rows than parameters with redundancy, or a rank below the minimal model's."""
+    from station.core.identifiability import analyze
+    from station.core.measurements import synthetic_set
+
+    p = cfg.model.minimal_param_count  # 4R + 2P + 6 (Everett/Hollerbach): what a well-spread plan identifies
+    needed = max(MIN_IDENTIFICATION_TARGETS, -(-2 * p // 6))  # twice as many pose rows as parameters
+    left_out = f" ({n_rejected} (point, elbow) left out, listed by 'station plan')" if n_rejected else ""
+    if len(ident) < needed:
+        raise ConfigError(f"only {len(ident)} identification targets can be measured{left_out}; the {p} parameters "
+                          f"of the minimal model need at least {needed}: bring more points within reach and the "
+                          f"soft limits, or add points to the body")
+    q = np.array([t.joints for t in ident])
+    data = synthetic_set(cfg.model, "pose", q, cfg.model.nominal, sigma=cfg.identification.pose_sigma())
+    a = analyze(cfg.model, data, describe=False)  # the structural rank: [identification].fix does not lower it
+    if a.rank < p:
+        raise ConfigError(f"the {len(ident)} identification targets that can be measured{left_out} identify only "
+                          f"{a.rank} of the {p} parameters of the minimal model: spread the reachable points over "
+                          f"more heights, wrist angles and both elbows")
+
+
+#: fewest identification targets a plan may hold, whatever the parameter count
+MIN_IDENTIFICATION_TARGETS = 5
 
 
 def order_by_travel(targets: list[Target]) -> list[Target]:

@@ -10,6 +10,7 @@ when the body report gives one).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
@@ -18,6 +19,7 @@ import numpy as np
 from station.cell.config import CellConfig
 from station.cell.pipeline import MIN_VALID_FRACTION, min_valid_identification
 from station.cell.plan import Plan, all_motion_poses, build_plan, retracted, travel_joints
+from station.cell.plan_articulated import IdentificationDesign
 from station.cell.steps import PlannedStep, StepKind
 from station.core.identifiability import analyze
 from station.core.kinematics import forward, scara_reach_margin
@@ -51,6 +53,8 @@ class PlanPreview:
     joint_types: tuple[str, ...] = ()
     #: motion time [s] at [plan].speed from the robot file's joint speeds (None: not given there)
     motion_s_estimate: float | None = None
+    #: an articulated arm's identification design: how many poses and why, σ at the held-out targets
+    design: IdentificationDesign | None = None
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -70,6 +74,7 @@ class PlanPreview:
             "predicted_accuracy_includes": "parameter uncertainty from the measurement noise only",
             "settle_s_total": self.settle_s_total,
             "motion_s_estimate": self.motion_s_estimate,
+            "identification_design": None if self.design is None else dataclasses.asdict(self.design),
             "motion_estimate_basis": "each move at the slowest joint's maximum speed × [plan].speed, no acceleration",
             "units": {"joints": "rad | mm", "limit_margin": "deg | mm", "reach_margin_mm": "mm"},
         }
@@ -150,7 +155,7 @@ def preview(cfg: CellConfig, with_upload: bool = True) -> PlanPreview:
         sigma_position_um=(float(pos.min()), float(pos.mean()), float(pos.max())),
         sigma_orientation_arcsec=(float(ori.min()), float(ori.mean()), float(ori.max())),
         settle_s_total=float(len(steps) * cfg.plan.settle_s), joint_types=tuple(cfg.model.joint_types),
-        motion_s_estimate=motion_seconds(cfg, steps))
+        motion_s_estimate=motion_seconds(cfg, steps), design=getattr(plan, "design", None))
 
 
 def describe(p: PlanPreview) -> list[str]:
@@ -163,6 +168,12 @@ def describe(p: PlanPreview) -> list[str]:
     lines.append(f"  predicted accuracy after correction (parameter uncertainty only): position σ "
                  f"{p.sigma_position_um[0]:.1f}–{p.sigma_position_um[2]:.1f} µm, orientation σ "
                  f"{p.sigma_orientation_arcsec[0]:.1f}–{p.sigma_orientation_arcsec[2]:.1f}″")
+    if p.design is not None:
+        d = p.design
+        lines.append(f"  {d.describe()}")
+        lines.append(f"  predicted accuracy at the {p.n_verification_targets} held-out targets (body frame, as the "
+                     f"verification measures them): position σ {d.sigma_held_um[0]:.1f}–{d.sigma_held_um[2]:.1f} µm, "
+                     f"RMS {d.sigma_held_um[1]:.1f} µm")
     if p.travel_clearance_mm is not None:
         lines.append(f"  travel height: {p.travel_clearance_mm:.1f} mm above the highest target")
     if p.motion_s_estimate is None:
@@ -174,7 +185,9 @@ def describe(p: PlanPreview) -> list[str]:
                      f"robot file's joint speeds × [plan].speed, no acceleration; {p.settle_s_total:.0f} s settling)")
     if p.steps:
         tight = min(p.steps, key=lambda s: min(s.limit_margin))
-        lines.append(f"  smallest margin to a soft limit: {min(tight.limit_margin):.2f} (deg | mm) at step "
+        j = int(np.argmin(tight.limit_margin))
+        unit = "°" if p.joint_types[j:j + 1] == ("revolute",) else " mm"
+        lines.append(f"  smallest margin to a soft limit: {tight.limit_margin[j]:.2f}{unit} (joint {j + 1}) at step "
                      f"{tight.step.index + 1} ({tight.step.point_id} elbow {tight.step.elbow:+d})")
         reach = [s for s in p.steps if s.reach_margin_mm is not None]
         if reach:

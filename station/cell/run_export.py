@@ -1,5 +1,7 @@
 """CSV export of a run's measurements (docs/run-database.md, "Export"): one row per
-measurement, units in the header. It reads the run database; the database knows nothing of it."""
+measurement, units in the header (:func:`export_csv`, the run's full record), or the
+identification measurements as a pose file ``station identify`` reads (:func:`export_pose_file`,
+docs/data-files.md). It reads the run database; the database knows nothing of it."""
 
 from __future__ import annotations
 
@@ -98,3 +100,63 @@ def _joint_units(config_toml: str) -> list[str]:
 
     walk(cfg)
     return found[0] if len(found) == 1 else []
+
+
+def export_pose_file(db: RunDB, run_id: int, path: str | Path) -> tuple[Path, int, str]:
+    """The run's valid identification measurements as a pose file (docs/data-files.md): the
+    joints read, ``q1 [deg]`` or ``[mm]`` per joint, and the measured head frame in the body
+    frame (what the run identified from: the touched point's CMM pose times the inverse of the
+    measured point-in-head pose), ``x [mm] … yaw [deg]``. ``station identify PATH --robot ROBOT``
+    reads it as it is. Returns the path, the rows written and the robot (its file or name)."""
+    from station.cell.stored_config import stored_config
+    from station.core.transforms import invert
+
+    cfg = stored_config(db, run_id)
+    index = {pid: i for i, pid in enumerate(cfg.point_ids)}
+    kinds = cfg.model.joint_types
+    header = ([f"q{i + 1} [{'deg' if k == 'revolute' else 'mm'}]" for i, k in enumerate(kinds)]
+              + ["x [mm]", "y [mm]", "z [mm]", "roll [deg]", "pitch [deg]", "yaw [deg]"])
+    rows = []
+    for m in db.measurements(run_id):
+        if (m.kind != "identification" or not m.ok or m.pose is None or m.joints_read is None
+                or m.point_id not in index or len(m.joints_read) != len(kinds)):
+            continue
+        head = matrix_to_pose(cfg.body_points[index[m.point_id]] @ invert(m.pose))
+        q = [np.degrees(v) if k == "revolute" else v for v, k in zip(m.joints_read, kinds)]
+        vals = [*q, *head[:3], *np.degrees(head[3:])]
+        if not np.all(np.isfinite(vals)):
+            continue
+        rows.append([_num(v) for v in vals])
+    if len(rows) < 2:
+        raise RunDatabaseError(f"run {run_id} has {len(rows)} valid identification measurements; a pose file "
+                               f"for 'station identify' needs at least two")
+    out = Path(path)
+    try:
+        with open(out, "w", newline="", encoding="utf-8") as f:
+            f.write(f"# run {run_id} of {db.path}: cell {cfg.name}, robot {cfg.model.name}; valid identification "
+                    f"measurements, head frame in the body frame\n")
+            w = csv.writer(f)
+            w.writerow(header)
+            w.writerows(rows)
+    except OSError as e:
+        raise RunDatabaseError(f"{out}: cannot write the pose file ({e}); check the folder and its "
+                               f"permissions") from e
+    return out, len(rows), _robot_argument(cfg)
+
+
+def _robot_argument(cfg: Any) -> str:
+    """What to give ``station identify --robot``: the configured robot file (absolute, resolved
+    beside the configuration as the run did), else the built-in robot's name."""
+    try:
+        model = tomllib.loads(cfg.source_text).get("robot", {}).get("model")
+    except tomllib.TOMLDecodeError:
+        model = None
+    if not isinstance(model, str) or not model:
+        return str(cfg.model.name)
+    path = Path(model)
+    if not path.is_absolute() and cfg.source and not cfg.source.startswith("<"):
+        path = Path(cfg.source).parent / model
+    try:
+        return str(path.resolve()) if path.is_file() else model
+    except (OSError, ValueError):
+        return model

@@ -11,10 +11,11 @@ Every finished measurement is committed to the run database before the next moti
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import time
 from collections import Counter, deque
-from collections.abc import Callable, Collection, Generator, Sequence
+from collections.abc import Callable, Collection, Generator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -24,10 +25,12 @@ from station.cell.config import CellConfig
 from station.cell.devices import CellController, ProbeHead, Snapshot
 from station.cell.events import DeviceSnapshot, Event, MeasurementRecorded, Notice, StepStarted
 from station.cell.plan import above_offset, approach_pose, retracted
+from station.cell.recentring import RecentringLog, displacement
 from station.cell.runcontrol import RunControl
 from station.cell.rundb import RunDB
 from station.cell.safety import MotionGuard
 from station.cell.steps import PlannedStep, StepKind
+from station.cell.stuck_probes import StuckLog, still_stuck, usable_head
 from station.core.kinematics import scara_ik
 from station.core.probe_geometry import ProbeHeadGeometry, default_probe_head
 from station.core.transforms import invert, matrix_to_pose, pose_to_matrix
@@ -76,6 +79,13 @@ class RecentReadings:
 
 
 @dataclass(frozen=True)
+class StuckProbes(RecentReadings):
+    """Ask the runner which probes earlier readings showed to be stuck: a mapping probe index
+    (head order) -> frozen reading [mm]. A question about recent readings: an executor that
+    keeps no such record answers it as a :class:`RecentReadings` (any non-mapping: none known)."""
+
+
+@dataclass(frozen=True)
 class Reading:
     """What one measurement produced."""
 
@@ -92,6 +102,13 @@ class Reading:
     excluded: str | None = None
     #: (probe id, channel) of each entry of readings_mm / status (head order); () : channel order
     probes: tuple[tuple[str, int], ...] = ()
+    #: a re-centred reading: the move from the first commanded head pose to the one read, in the
+    #: first one's head frame (x, y, z [mm], roll, pitch, yaw [rad]; :mod:`station.cell.recentring`)
+    recentring: np.ndarray | None = None
+    #: (probe index, frozen reading [mm]) of the probes left out of this reading as stuck
+    stuck: tuple[tuple[int, float], ...] = ()
+    #: probes known to be stuck that read elsewhere again at this reading (used again)
+    freed: tuple[int, ...] = ()
 
 
 Procedure = Generator[Any, Any, Reading]
@@ -139,18 +156,32 @@ def approach_and_read(cfg: CellConfig, q_target: np.ndarray, direction: int = 1,
     the probes disagree the touch is measured again (``[plan] remeasure_attempts``); when the
     same probe still disagrees and the others fix the pose and agree, the pose is solved without
     it and the reading says so (``excluded``); otherwise the reading is invalid with the reason.
+
+    A re-centred reading carries the displacement from the first command to where it was read
+    (``recentring``): verification adds it back, so that the re-centring hides no error.
+
+    A probe that repeats its reading while the others show the head moving is stuck: it is left
+    out at once (no re-measure: a re-touch would repeat the frozen value), and the runner passes
+    it to later readings (:class:`StuckProbes`), which solve without it from the start while it
+    keeps its frozen value (:mod:`station.cell.stuck_probes`).
     """
     from station.core.probe_check import diagnose, residual_test
     from station.core.probe_geometry import PoseSolveError, readings_from_pose, solve_pose
 
-    geom = head_of(cfg)
-    M_nom = geom.nominal_contact_pose()
-    half = geom.strokes / 2
-    redundant = geom.n_probes > 6
-    names = tuple((pid, int(c)) for pid, c in zip(geom.probe_ids, geom.probe_channels))
+    full = head_of(cfg)
+    M_nom = full.nominal_contact_pose()
+    stuck: dict[int, float] = {}
+    if full.n_probes > 6:
+        known = yield StuckProbes()
+        if isinstance(known, Mapping):
+            stuck = {int(k): float(v) for k, v in known.items()}
+    freed: list[int] = []
+    found: dict[int, float] = {}  # probes this reading showed stuck
+    names = tuple((pid, int(c)) for pid, c in zip(full.probe_ids, full.probe_channels))
     raw = b""
     q = np.asarray(q_target, dtype=float)
     pose_cmd = None if cartesian is None else np.asarray(cartesian[0], dtype=float)
+    q_first, pose_first = q, pose_cmd
     last: Reading | None = None
     recentred = remeasured = 0
     first_suspect: int | None = None
@@ -175,8 +206,16 @@ def approach_and_read(cfg: CellConfig, q_target: np.ndarray, direction: int = 1,
         snap = yield ReadProbes()
         q_read = yield ReadJoints()
         raw += snap.raw
-        values, status = probe_readings(geom, snap.values_mm, snap.status)
-        reading = functools.partial(_reading, q, q_read, raw, values, status, names, notes)
+        all_values, all_status = probe_readings(full, snap.values_mm, snap.status)
+        stuck, gone = still_stuck(full, all_values, stuck)
+        freed += gone
+        # the pose is solved by the probes that are not stuck (the whole head when none is)
+        geom, keep = usable_head(full, stuck)
+        kept = np.flatnonzero(keep)
+        values, status = all_values[keep], tuple(all_status[i] for i in kept)
+        half = geom.strokes / 2
+        redundant = geom.n_probes > 6
+        reading = functools.partial(_reading, q, q_read, raw, all_values, all_status, names, notes)
 
         excluded: int | None = None
         lead = ""  # what the stored message says first about a valid reading
@@ -192,6 +231,12 @@ def approach_and_read(cfg: CellConfig, q_target: np.ndarray, direction: int = 1,
             guide = _pose_from_finite(geom, values) if redundant else None
             if guide is None:
                 # Without a pose there is no safe re-centre direction: report and move on.
+                if not keep.all() and not np.isfinite(values).all():  # the solver's probe numbers count the probes left, not the head's
+                    silent = ", ".join(geom.label(int(i)) for i in np.flatnonzero(~np.isfinite(values)))
+                    out = ", ".join(full.label(int(k)) for k in np.flatnonzero(~keep))
+                    last = reading(None, None, False, f"pose not solved: probe {silent} without a reading while "
+                                                      f"probe {out} is stuck: the other {int(np.isfinite(values).sum())} "
+                                                      f"probes cannot fix the pose")
                 break
             missing = np.flatnonzero(~np.isfinite(values))
             expect = readings_from_pose(geom, guide[0].M)[missing]
@@ -214,14 +259,17 @@ def approach_and_read(cfg: CellConfig, q_target: np.ndarray, direction: int = 1,
             test = residual_test(geom, values, sol.M)
             if not test.passed:
                 recent = yield RecentReadings()
-                previous = [probe_readings(geom, v, ["ok"] * len(v))[0] for v in list(recent)[1:]]
+                previous = [probe_readings(full, v, ["ok"] * len(v))[0][keep] for v in list(recent)[1:]]
                 diag = diagnose(geom, values, test, previous)
-                if remeasured < cfg.plan.remeasure_attempts:
+                if diag.stuck and diag.suspect is not None and diag.solution is not None:
+                    i = int(kept[diag.suspect])
+                    found[i] = stuck[i] = float(values[diag.suspect])
+                elif remeasured < cfg.plan.remeasure_attempts:
                     remeasured += 1
                     first_suspect = diag.suspect
                     notes.append(f"touch {recentred + remeasured}: {diag.reason}; measured again")
                     continue
-                agree = first_suspect is None or first_suspect == diag.suspect
+                agree = diag.stuck or first_suspect is None or first_suspect == diag.suspect
                 if diag.suspect is None or diag.solution is None or not agree:
                     why = diag.reason if agree else (f"{diag.reason} (the touch before pointed at probe "
                                                      f"{geom.label(first_suspect or 0)})")
@@ -242,6 +290,15 @@ def approach_and_read(cfg: CellConfig, q_target: np.ndarray, direction: int = 1,
         if excluded is not None:
             used[excluded] = False
         near = bool(np.any(np.abs(values[used]) > half[used] - cfg.plan.recenter_margin_mm))
+        if stuck and not keep.all():
+            # a stuck probe's plunger is where the pose puts it: keep that inside its stroke too
+            off = ~keep
+            expect = readings_from_pose(full, sol.M)[off]
+            near |= bool(np.any(~np.isfinite(expect) | (np.abs(expect) > full.strokes[off] / 2
+                                                         - cfg.plan.recenter_margin_mm)))
+            left_out = "; ".join(f"probe {full.label(k)} excluded: stuck at {v:.4f} mm" for k, v in stuck.items()
+                                 if not keep[k])
+            lead = "; ".join(m for m in (f"{left_out}; solved from the other {geom.n_probes} probes", lead) if m)
         ok = res_um <= cfg.plan.max_residual_um
         label = None if excluded is None else geom.label(excluded)
         last = reading(sol.M, shown, ok, lead if ok else f"plane residual {res_um:.1f} µm exceeds "
@@ -255,7 +312,24 @@ def approach_and_read(cfg: CellConfig, q_target: np.ndarray, direction: int = 1,
         q, pose_cmd = _recentre(cfg, q, pose_cmd, sol.M, M_nom)
     yield MoveJoints(None, "retract after reading")  # None: retract from where we stand
     assert last is not None  # the loop runs at least once and sets it on every path
+    if recentred:
+        d = _displacement(cfg, q_first, pose_first, q, pose_cmd)
+        moved = (f"re-centred {recentred}× to bring the probes into their stroke, "
+                 f"{np.linalg.norm(d[:3]) * 1e3:.0f} µm from the commanded pose")
+        last = dataclasses.replace(last, recentring=d, message="; ".join(m for m in (last.message, moved) if m))
+    now = {k: v for k, v in stuck.items() if not keep[k] or k in found}
+    if now or freed:
+        last = dataclasses.replace(last, stuck=tuple(now.items()), freed=tuple(freed))
     return last
+
+
+def _displacement(cfg: CellConfig, q_first: np.ndarray, pose_first: np.ndarray | None, q: np.ndarray,
+                  pose_cmd: np.ndarray | None) -> np.ndarray:
+    """The re-centring's move: from the first command to the last (Cartesian poses as commanded,
+    else the nominal head pose of the joints)."""
+    if pose_first is not None and pose_cmd is not None:
+        return displacement(pose_to_matrix(pose_first), pose_to_matrix(pose_cmd))
+    return displacement(_fk_base(cfg, q_first), _fk_base(cfg, q))
 
 
 def _recentre(cfg: CellConfig, q: np.ndarray, pose_cmd: np.ndarray | None, M: np.ndarray,
@@ -323,11 +397,14 @@ class Runner:
         self._sleep = sleep
         self._last_q: np.ndarray | None = None
         # Every motion passes this guard; the pipeline tells it which table the controller applies.
-        self.guard = MotionGuard(cfg.soft_limits, elbows=cfg.plan.elbows)
+        self.guard = MotionGuard(cfg.soft_limits, elbows=cfg.plan.elbows, joint_types=cfg.model.joint_types)
         self._last_snapshot: Snapshot | None = None
         self._stroke_mm = float(np.min(head_of(cfg).strokes))
         #: channel values of the last touches, most recent first (a stuck probe repeats its reading)
         self._touches: deque[np.ndarray] = deque(maxlen=8)
+        self._touch_steps: deque[int] = deque(maxlen=8)  # the step of each of those touches
+        #: the probes found stuck (a redundant head): later readings solve without them
+        self.stuck = StuckLog(head_of(cfg), emit)
         #: how often each probe was left out of a reading ("P3 (channel 4)" -> count)
         self.exclusions: Counter[str] = Counter()
         # Where the wall time goes: waiting for motions, settling, sampling the probes, and the
@@ -349,6 +426,8 @@ class Runner:
         if isinstance(msg, Checkpoint):
             self.control.checkpoint(emit=self.emit, index=index)
             return None
+        if isinstance(msg, StuckProbes):  # before RecentReadings: it is one
+            return self.stuck.known()
         if isinstance(msg, RecentReadings):
             return tuple(self._touches)
         if isinstance(msg, ReadJoints):
@@ -398,6 +477,7 @@ class Runner:
                                             f"{d[2]} stale frame(s) discarded; the step's readings are fresh ones"))
             self._last_snapshot = snap
             self._touches.appendleft(np.array(snap.values_mm, dtype=float))
+            self._touch_steps.appendleft(index)
             return snap
         raise TypeError(f"unknown runner message {msg!r}")
 
@@ -406,6 +486,8 @@ class Runner:
         every 10th time): one exclusion is a speck of dust, repeated ones a probe to check."""
         self.exclusions[probe] += 1
         k = self.exclusions[probe]
+        if self.stuck.is_stuck(probe):  # said already, and more plainly ("is stuck")
+            return
         if k == 2 or (k > 2 and k % 10 == 0):
             self.emit(Notice("warning", f"probe {probe} stuck? check it: left out of {k} readings (the last: {label}) "
                                         f"because it disagreed with the other probes or gave no reading; those "
@@ -420,12 +502,14 @@ class Runner:
         state = ("e-stop" if st.estop else f"error: {st.error_message}" if st.error
                  else "moving" if getattr(st, "moving", False) else "ready" if st.ready else "not ready")
         age = getattr(self.controller, "heartbeat_age_s", None)
+        geom = head_of(self.cfg)
+        # the head's probes by id, as the pose solve sees them: an unwired channel is no probe
+        values, status = probe_readings(geom, snap.values_mm, snap.status)
         self.emit(DeviceSnapshot(
-            probe_mm=tuple(float(v) for v in np.asarray(snap.values_mm, dtype=float)),
-            probe_status=tuple(str(getattr(s, "value", s)) for s in snap.status),
+            probe_mm=tuple(float(v) for v in values), probe_status=status,
             stroke_mm=self._stroke_mm, joints=tuple(float(v) for v in q),
             joint_types=tuple(self.cfg.model.joint_types), controller=state,
-            heartbeat_age_s=None if age is None else float(age)))
+            heartbeat_age_s=None if age is None else float(age), probe_ids=geom.probe_ids))
 
     def measure_steps(self, db: RunDB, run_id: int, steps: Sequence[PlannedStep], kinds: Collection[StepKind],
                       total: int, make_proc: Callable[[PlannedStep], Procedure]) -> int:
@@ -436,6 +520,7 @@ class Runner:
         cause :data:`MAX_REPEATED_FAILURES` times in a row. Returns the number measured now."""
         valid = db.completed_steps(run_id, ok_only=True)
         stored = db.completed_steps(run_id)
+        recentring = RecentringLog(db, run_id)
         failures: list[tuple[str, str]] = []  # (cause, label) of the consecutive failed steps
         n = 0
         for st in steps:
@@ -444,6 +529,7 @@ class Runner:
             label = st.label
             self.emit(StepStarted(st.index, total, f"{st.kind.caption}: {label}"))
             reading = self.execute(make_proc(st), st.index)
+            recentring.record(st.index, reading.recentring)  # before the measurement it belongs to
             db.record_measurement(
                 run_id, st.index, kind=st.kind.value, point_id=st.point_id, label=label,
                 joints_commanded=reading.joints_commanded, joints_read=reading.joints_read,
@@ -454,6 +540,11 @@ class Runner:
             residual = float("nan") if reading.residual_um is None else float(reading.residual_um)
             self.emit(MeasurementRecorded(st.index, total, label, reading.ok, residual, reading.message))
             n += 1
+            if reading.stuck or reading.freed:
+                geom = head_of(self.cfg)
+                touches = [(s, probe_readings(geom, v, ["ok"] * len(v))[0])
+                           for s, v in zip(self._touch_steps, self._touches)]
+                self.stuck.update(reading.stuck, reading.freed, st.index, label, touches)
             if reading.excluded is not None:
                 self._excluded(reading.excluded, label)
             if reading.ok:

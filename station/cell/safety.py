@@ -20,6 +20,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from drivers.correction_table import CorrectionTableData, TableRangeError
+from station.cell.joint_text import joint_value
 from station.core.table_grid import interpolate_table
 from station.errors import ConfigError, UnreachableError
 
@@ -28,7 +29,8 @@ class MotionGuard:
     """Soft limits ``(n_joints, 2)`` [rad | mm] and the correction table the controller applies
     to Cartesian moves (None while no table is active)."""
 
-    def __init__(self, soft_limits: np.ndarray, *, elbows: Sequence[int] = (1, -1)) -> None:
+    def __init__(self, soft_limits: np.ndarray, *, elbows: Sequence[int] = (1, -1),
+                 joint_types: Sequence[str] | None = None) -> None:
         lim = np.array(soft_limits, dtype=float)
         if lim.ndim != 2 or lim.shape[1] != 2 or lim.shape[0] == 0:
             raise ConfigError(f"soft limits must be (n_joints, 2) [lower, upper], got shape {lim.shape}")
@@ -42,6 +44,8 @@ class MotionGuard:
         self.limits = lim
         self.elbows = tuple(int(e) for e in elbows)
         self.table: CorrectionTableData | None = None
+        #: "revolute" / "prismatic" per joint: messages then read in deg / mm (None: as computed)
+        self.joint_types = None if joint_types is None else tuple(joint_types)
 
     def check_joints(self, q: np.ndarray | Sequence[float], what: str) -> np.ndarray:
         """``q`` as a float array when it may be commanded; :class:`UnreachableError` otherwise
@@ -54,9 +58,15 @@ class MotionGuard:
         bad = np.nonzero(~np.isfinite(q) | (q < lo) | (q > hi))[0]
         if bad.size:
             j = int(bad[0])
+            if self.joint_types is not None and len(self.joint_types) == len(q) and np.isfinite(q[j]):
+                kind = self.joint_types[j]
+                side, limit = ("lower", lo[j]) if q[j] < lo[j] else ("upper", hi[j])
+                where = (f"joint {j + 1} = {joint_value(q[j], kind)} is {joint_value(abs(q[j] - limit), kind)} "
+                         f"beyond its {side} soft limit {joint_value(limit, kind)}")
+            else:
+                where = f"joint {j + 1} = {q[j]:.5g} is outside the soft limits [{lo[j]:.5g}, {hi[j]:.5g}]"
             raise UnreachableError(
-                f"{what}: joint {j + 1} = {q[j]:.5g} is outside the soft limits "
-                f"[{lo[j]:.5g}, {hi[j]:.5g}]; the motion was not commanded. Move the point or widen "
+                f"{what}: {where}; the motion was not commanded. Move the point or widen "
                 f"[limits] if the robot allows it")
         return q
 

@@ -25,6 +25,7 @@ from drivers.controller import ModbusController
 from drivers.controller_map import WordOrder
 from drivers.probe_head import ProbeHead as SerialProbeHead
 from station.cell.config import CellConfig, load_config
+from station.cell.device_check import controller_lines, probe_lines, wired_channels_invalid
 from station.cell.devices import CellController, ProbeHead
 from station.cell.events import Event, Notice, PhaseChanged, RunFailed, RunStarted
 from station.cell.outcomes import classify, failure_summary, hint_for
@@ -314,8 +315,10 @@ def check_cell(cfg: CellConfig) -> CheckReport:
             probe = open_probe(cfg, stack)
             info = probe.identify()
             snap = probe.read_all()
-            lines.append(f"probe head {d.probe_head}: {info}; channels {[str(s) for s in snap.status]}")
+            lines.extend(probe_lines(d.probe_head, info, snap.status, cfg.head))
             check_head_channels(cfg, len(snap.status))
+            if (invalid := wired_channels_invalid(snap.status, cfg.head)) is not None:
+                raise invalid
         except Exception as exc:  # report every device, then fail
             outcome = classify(exc) if outcome is Outcome.SUCCESS else outcome
             lines.append(f"probe head {d.probe_head}: FAILED: {type(exc).__name__}: {exc}")
@@ -328,8 +331,8 @@ def check_cell(cfg: CellConfig) -> CheckReport:
             st = controller.status()
             q = controller.read_joints()
             lim = controller.soft_limits()
-            lines.append(f"controller {where}: {st}; joints {np.round(q, 5).tolist()}; register map "
-                         f"{getattr(controller, 'map_version', '?')} at base {d.controller_register_base}")
+            lines.extend(controller_lines(where, st, q.tolist(), cfg.model.joint_types, getattr(controller, "map_version", "?"),
+                                          d.controller_register_base))
             state = check_controller_correction(controller)
             lines.append(f"  the controller's own correction: {state}"
                          + ("; the station's correction is identified and applied on top of it: keep it on"

@@ -14,7 +14,10 @@ from station.cell.rundb import RunDB
 from station.cell.steps import PlannedStep
 from station.errors import StationError
 
-__all__ = ["config_source", "stored_config", "stored_plan"]
+__all__ = ["POSTPROCESSED_CONFIG", "config_source", "stored_config", "stored_plan"]
+
+#: result key of the configuration text a resume with changed post-processing finished the run with
+POSTPROCESSED_CONFIG = "config_toml_resumed"
 
 
 def config_source(cfg: CellConfig) -> str:
@@ -30,7 +33,12 @@ def stored_config(db: RunDB, run_id: int) -> CellConfig:
     """The configuration run ``run_id`` was made with, read from its stored text; relative files
     resolve beside the configuration file it came from (:func:`config_source`)."""
     source = db.load_result(run_id, "config_source", default=None)
-    return parse_text(db.run(run_id).config_toml, source or f"run {run_id}")
+    # a resume with only post-processing changed (the correction grid, tolerances, [cell] …) stores
+    # the configuration it finished with: the table and the report are made with that one
+    text = db.load_result(run_id, POSTPROCESSED_CONFIG, default=None)
+    if not isinstance(text, str):
+        text = db.run(run_id).config_toml
+    return parse_text(text, source or f"run {run_id}")
 
 
 def stored_plan(db: RunDB, run_id: int, n_joints: int | None = None) -> tuple[PlannedStep, ...]:

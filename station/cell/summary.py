@@ -31,6 +31,11 @@ class ErrorStats:
     ap_max_um: float
     rp_max_um: float | None  # None: no pose was measured twice
     errors_um: tuple[float, ...] = ()
+    #: RP over the poses measured at least twice: mean and standard deviation from pose to pose [µm]
+    rp_mean_um: float | None = None
+    rp_sd_um: float | None = None
+    n_poses: int = 0  # held-out poses with a valid measurement
+    cycles: int = 0  # the most cycles measured at one pose (ISO 9283 repetitions)
 
     @classmethod
     def from_errors(cls, errors_by_pose: Mapping[Any, np.ndarray]) -> ErrorStats | None:
@@ -51,7 +56,10 @@ class ErrorStats:
                 ap.append(float(np.linalg.norm(e.mean(axis=0))) * 1e3)
         return cls(n=int(norms.size), rms_um=float(np.sqrt(np.mean(norms**2))), max_um=float(norms.max()),
                    ap_max_um=float(max(ap)), rp_max_um=float(max(rp)) if rp else None,
-                   errors_um=tuple(float(v) for v in norms))
+                   errors_um=tuple(float(v) for v in norms),
+                   rp_mean_um=float(np.mean(rp)) if rp else None,
+                   rp_sd_um=float(np.std(rp, ddof=1)) if len(rp) > 1 else None,
+                   n_poses=len(cycles), cycles=max(len(e) for e in cycles))
 
 
 @dataclass(frozen=True)
@@ -180,6 +188,20 @@ class CompensationSummary:
 
 
 @dataclass(frozen=True)
+class RecentringStats:
+    """Readings of one kind that were re-centred to bring the probes into their stroke
+    (:mod:`station.cell.recentring`): how many of how many, and the displacement's position
+    part, largest and RMS over the re-centred ones [µm]. In verification the displacement is
+    part of the measured error."""
+
+    kind: str
+    n_readings: int
+    n_recentred: int
+    max_um: float = 0.0
+    rms_um: float = 0.0
+
+
+@dataclass(frozen=True)
 class Failure:
     """Why a run stopped early: the error's type and message and what to do."""
 
@@ -187,6 +209,8 @@ class Failure:
     message: str
     hint: str = ""
     log_file: str | None = None  # traceback of an internal error
+    device: str = ""  # whose error: "controller", "probe" or "" (station/cell/outcomes.py, by type)
+    link: bool = False  # the fault is that device's link: no answer, connection lost
 
 
 @dataclass(frozen=True)
@@ -212,6 +236,7 @@ class RunSummary:
     tools: tuple[ToolSummary, ...] = field(default=())  # [[tool]]: each tool's own correction
     compensation: CompensationSummary | None = None  # an articulated arm's compensated targets
     tables: TableSummary | None = None  # the controller's active table at the run's start and end
+    recentring: tuple[RecentringStats, ...] = field(default=())  # re-centred readings per kind
 
     @property
     def exit_code(self) -> int:
@@ -237,6 +262,38 @@ class RunSummary:
 
     def replace(self, **changes: Any) -> RunSummary:
         return dataclasses.replace(self, **changes)
+
+    def recentring_text(self) -> str | None:
+        """One line on the re-centred readings (None when none was re-centred)."""
+        if not any(r.n_recentred for r in self.recentring):
+            return None
+        parts = [f"{_KIND_WORDS.get(r.kind, r.kind)} {r.n_recentred} of {r.n_readings}"
+                 + (f" (up to {r.max_um:.0f} µm)" if r.n_recentred else "") for r in self.recentring]
+        return ("re-centred to bring the probes into their stroke: " + ", ".join(parts)
+                + "; in verification the re-centring's move is counted in the error")
+
+    def rp_text(self) -> str | None:
+        """What RP before and after measured, and whether they differ beyond their spread (a
+        correction moves where the robot goes, not how well it repeats); None without RP."""
+        b, a = self.before, self.after
+        if b is None or a is None or b.rp_mean_um is None or a.rp_mean_um is None or b.rp_max_um is None \
+                or a.rp_max_um is None:
+            return None
+        text = (f"RP (ISO 9283 repeatability, {a.cycles} cycles at each of {a.n_poses} poses): before mean "
+                f"{b.rp_mean_um:.1f} µm, worst pose {b.rp_max_um:.1f}; after mean {a.rp_mean_um:.1f} µm, worst "
+                f"pose {a.rp_max_um:.1f}")
+        if b.rp_sd_um is None or a.rp_sd_um is None:
+            return text
+        # the standard error of each mean over the poses; 3 of them apart is a real change
+        se = float(np.hypot(b.rp_sd_um / np.sqrt(b.n_poses), a.rp_sd_um / np.sqrt(a.n_poses)))
+        if abs(a.rp_mean_um - b.rp_mean_um) <= 3.0 * se:
+            return (f"{text}. A correction changes where the robot goes, not how well it repeats: the means agree "
+                    f"within their spread (±{se:.1f} µm), and one pose's RP from {a.cycles} cycles scatters by "
+                    f"{max(a.rp_sd_um, b.rp_sd_um):.1f} µm from pose to pose, so the worst of {a.n_poses} poses "
+                    f"differs between before and after by chance")
+        return (f"{text}. The means differ by more than 3× their spread (±{se:.1f} µm): the robot repeated "
+                f"{'worse' if a.rp_mean_um > b.rp_mean_um else 'better'} after the correction; check what changed "
+                f"between the two (warm-up, backlash, the approach)")
 
     def figures(self) -> list[tuple[str, float, str, int]]:
         """(label, value, unit, digits) of the headline figures, in display order; the UI and
@@ -280,6 +337,8 @@ class RunSummary:
             out["report"] = self.report
         if self.notes:
             out["notes"] = list(self.notes)
+        if self.recentring:
+            out["recentring"] = [_plain(dataclasses.asdict(r)) for r in self.recentring]
         if self.tools:
             out["tools"] = [{**_plain(dataclasses.asdict(t)), "after_vs_oracle": t.after_vs_oracle}
                             for t in self.tools]
@@ -304,7 +363,12 @@ class RunSummary:
             reversal=sub("reversal", ReversalSummary), failure=sub("failure", Failure),
             report=d.get("report"), notes=tuple(d.get("notes", ())),
             tools=tuple(_build(ToolSummary, t) for t in d.get("tools", ())),
-            compensation=sub("compensation", CompensationSummary), tables=sub("tables", TableSummary))
+            compensation=sub("compensation", CompensationSummary), tables=sub("tables", TableSummary),
+            recentring=tuple(_build(RecentringStats, r) for r in d.get("recentring", ())))
+
+
+_KIND_WORDS = {"identification": "identification", "reversal": "reversal", "verification_before": "before",
+               "verification_after": "after", "oracle": "oracle"}
 
 
 def _plain(obj: Any) -> Any:

@@ -58,10 +58,11 @@ from station.core.tool_frame import (
     tool_transform,
 )
 from station.core.transforms import invert, matrix_to_pose, pose_to_matrix
-from station.errors import ConfigError, StationError, UnreachableError
+from station.errors import ConfigError, Outcome, StationError, UnreachableError
 
 __all__ = [
     "ToolCorrection",
+    "ToolTableBeyondBound",
     "ToolEvaluation",
     "ToolTargets",
     "build_tool_correction",
@@ -506,11 +507,21 @@ def table_from_json(obj: dict[str, Any]) -> CorrectionTableData:
     return data
 
 
-def tool_export(db: RunDB, run_id: int, name: str) -> dict[str, Any]:
+class ToolTableBeyondBound(StationError):
+    """``station export --tool``: the tool's table interpolates beyond its
+    ``correction.max_interpolation_um``; nothing was written (``--force`` writes it with the
+    warning inside). Exit 9, as a table the controller must not get."""
+
+    outcome = Outcome.UPLOAD_FAILED
+
+
+def tool_export(db: RunDB, run_id: int, name: str, force: bool = False) -> dict[str, Any]:
     """The tool's correction of run ``run_id`` as JSON types: for a SCARA its table, rebuilt from
     the run's configuration snapshot and identification and checked against the CRC-32 the run
     stored; for other robots the compensated targets the run stored. :class:`ConfigError` when the
-    run has no such tool or no identification."""
+    run has no such tool or no identification; :class:`ToolTableBeyondBound` when the table's
+    interpolation bound exceeds the tool's ``max_interpolation_um`` and ``force`` is not given
+    (with ``force`` the export carries that ``warning``)."""
     stored = db.load_result(run_id, result_key(name), default=None)
     ident = db.load_result(run_id, "identification", default=None)
     cfg = stored_config(db, run_id)
@@ -540,6 +551,16 @@ def tool_export(db: RunDB, run_id: int, name: str) -> dict[str, Any]:
                               f"calibration to export it")
         out["elbows"] = list(table.elbows)
         out["interpolation_bound_um"] = float(table.interpolation_bound_um)
+        limit = float(tool.correction.max_interpolation_um)
+        out["max_interpolation_um"] = limit
+        if table.interpolation_bound_um > limit:
+            why = (f"tool {name!r}: its table interpolates with up to {table.interpolation_bound_um:.1f} µm, "
+                   f"{table.interpolation_bound_um / limit:.1f}× its correction.max_interpolation_um = {limit:g}")
+            if not force:
+                raise ToolTableBeyondBound(f"run {run_id}: {why}; nothing was written. Give the tool a finer or "
+                                           f"smaller grid ([[tool]] x_mm, y_mm, z_mm) and calibrate again, or pass "
+                                           f"--force to write it with this warning inside")
+            out["warning"] = f"{why}; written with --force: the controller's correction may miss by that much"
         out["table"] = table_to_json(table.data)
     else:
         out["targets"] = stored.get("targets")

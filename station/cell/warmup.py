@@ -22,6 +22,7 @@ import numpy as np
 from station.cell.config import CellConfig
 from station.cell.events import Event, Notice, PhaseChanged
 from station.cell.plan import approach_pose, build_plan
+from station.cell.recentring import head_as_commanded
 from station.cell.rundb import RunDB
 from station.cell.runner import Checkpoint, MoveJoints, Procedure, Runner, approach_and_read
 from station.cell.steps import PlannedStep
@@ -80,7 +81,8 @@ def run_warmup(cfg: CellConfig, runner: Runner, db: RunDB | None, run_id: int | 
     for cycles in range(1, w.max_cycles + 1):
         reading = runner.execute(_cycle(cfg, program, reference), reference.index)
         if reading.ok and reading.pose is not None:
-            T = cfg.body_points[reference.point] @ invert(reading.pose)
+            # where the robot stood as commanded: a re-centring's move is part of the drift watched
+            T = head_as_commanded(cfg.body_points[reference.point] @ invert(reading.pose), reading.recentring)
             heads.append(T[:3, 3])
         remaining = remaining_drift_um(heads)
         elapsed_min = (clock() - t0) / 60.0

@@ -78,3 +78,15 @@ def shares_points(pairs: np.ndarray) -> bool:
     """Whether some point takes part in more than one pair (the distances are then correlated)."""
     flat = np.asarray(pairs).reshape(-1)
     return bool(len(np.unique(flat)) < flat.size)
+
+
+#: two nominal points closer than this [mm] are the same point: a distance between them has no
+#: direction (its Jacobian is undefined) and carries nothing of the geometry; far below any
+#: instrument's noise, far above round-off
+COINCIDENT_MM = 1e-6
+
+
+def coincident_pairs(points: np.ndarray, pairs: np.ndarray, tol_mm: float = COINCIDENT_MM) -> np.ndarray:
+    """``(k,)`` mask of the pairs whose two ``points`` ``(n, 3)`` coincide (a repeated pose, or
+    joints that differ by a full turn, such as q6 and q6 + 360°)."""
+    return distances(points, np.asarray(pairs, dtype=int)) < tol_mm

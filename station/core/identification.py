@@ -21,6 +21,11 @@ With the calibration body's uncertainty in the data (``MeasurementSet.body_sigma
 weighted by σ_meas² + σ_body² and the covariance is the sandwich that also holds the correlation
 of the measurements at one body point, which share its error
 (:func:`station.core.uncertainty.body_sandwich`); a note says so.
+
+Real data: distances between two rows with the same nominal point (q6 and q6 + 360°, a repeated
+pose) have no direction and are dropped with a note; ``loss="huber"`` fits robustly (rows beyond
+``HUBER_SCALE`` σ weigh less; the result lists them and its σ are the weighted fit's);
+``tool_unknown`` registers an unknown tool or marker point and starts from it.
 """
 
 from __future__ import annotations
@@ -30,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from station.core.distance_pairs import shares_points
+from station.core.distance_pairs import coincident_pairs, shares_points
 from station.core.identifiability import Identifiability, analyze, structural_params
 from station.core.kinematics import forward
 from station.core.measurements import MeasurementSet, residuals_and_jacobian
@@ -51,6 +56,10 @@ OUTLIER_SIGMAS = 4.0
 #: the note of a fit that holds the calibration body's uncertainty starts with this
 BODY_NOTE_PREFIX = "body uncertainty included"
 REGISTRATION_START_ANGLE = np.radians(45.0)
+LOSSES = ("linear", "huber")
+#: the robust loss's corner in σ: a row within 3 σ keeps its full weight (an ordinary row rarely
+#: leaves it), a row beyond it weighs c/|r| (its pull grows no further)
+HUBER_SCALE = 3.0
 
 
 @dataclass(frozen=True)
@@ -61,7 +70,11 @@ class IdentificationResult:
     start values). ``chosen``: names of the identified parameters, ``estimates`` their values.
     ``residuals``: ``(n_items, rows_per_item)`` model − measured at the solution [mm, rad].
     ``normalized``: per-measurement RMS of residual/σ. ``outliers``: indices of measurements
-    whose normalized residual exceeds ``OUTLIER_SIGMAS`` (robustly scaled).
+    whose normalized residual exceeds ``OUTLIER_SIGMAS`` (robustly scaled). ``downweighted``:
+    ``(item, weight)`` of every measurement the robust loss weighed below 1 (``loss="huber"``).
+    ``dropped_pairs``: the ``(i, j)`` joint rows of distances left out because both rows give the
+    same nominal point (residuals and items count without them). ``pairs``: the distances' joint
+    rows ``(k, 2)`` as fitted (distance data), else None.
     """
 
     model: RobotModel
@@ -83,6 +96,16 @@ class IdentificationResult:
     information: DataInformation | None = None
     design_rank: int | None = None
     notes: tuple[str, ...] = ()
+    loss: str = "linear"
+    downweighted: tuple[tuple[int, float], ...] = ()
+    dropped_pairs: tuple[tuple[int, int], ...] = ()
+    pairs: np.ndarray | None = None
+
+    def item_rows(self, item: int) -> tuple[int, ...]:
+        """The 0-based joint rows of measurement ``item``: itself, or a distance's two rows."""
+        if self.pairs is None:
+            return (int(item),)
+        return tuple(int(r) for r in self.pairs[item])
 
     @property
     def estimates(self) -> np.ndarray:
@@ -142,7 +165,8 @@ def _design_rank(model: RobotModel, kind: str, n_poses: int, seed: int) -> int:
 
 def identify(model: RobotModel, data: MeasurementSet, start=None, prefer=None, fix=(), exclude=(),
              chosen=None, max_nfev: int = 200, max_rms_normalized: float = 1e3,
-             register_frame: bool = True) -> IdentificationResult:
+             register_frame: bool = True, tool_unknown: bool = False,
+             loss: str = "linear") -> IdentificationResult:
     """Identify ``model``'s parameters from ``data``.
 
     ``start``: start parameters (default nominal, with the set-up R from the registration).
@@ -150,6 +174,11 @@ def identify(model: RobotModel, data: MeasurementSet, start=None, prefer=None, f
     ``prefer`` list). ``chosen``: identify exactly these parameters instead (must be
     identifiable). ``register_frame``: register pose/position data to the model first (unit
     check, start of R, residual check; the residual check is skipped when ``start`` is given).
+    ``tool_unknown``: the tool (marker) point is registered as unknown too and the fit starts from
+    it (pose/position data; for distances give a ``start`` with the tool point). ``loss``:
+    ``"linear"`` (least squares) or ``"huber"`` (robust; rows beyond ``HUBER_SCALE`` σ weigh less,
+    and the result lists them). Distances whose two rows give the same nominal point (a repeated
+    pose, q and q + 360°) carry nothing and are dropped with a note.
     Raises :class:`~station.errors.ConfigError` for data that cannot be used (units, repeated
     rows, too few configurations) and :class:`IdentificationError` on a registration residual
     far above an uncalibrated robot's, rank deficiency or divergence.
@@ -158,6 +187,11 @@ def identify(model: RobotModel, data: MeasurementSet, start=None, prefer=None, f
     if p0.shape != (model.n_params,) or not np.all(np.isfinite(p0)):
         raise IdentificationError("start parameters must be a finite vector of the model's size")
     notes: list[str] = []
+    if loss not in LOSSES:
+        raise ConfigError(f"unknown loss {loss!r}; use one of {', '.join(LOSSES)}")
+    dropped: tuple[tuple[int, int], ...] = ()
+    if data.kind == "distance":
+        data, dropped = _drop_coincident(model, data, p0, notes)
     info = data_information(model, data.joints, None if data.kind == "distance" else data.measured,
                             rows_per_item=3 if data.kind == "distance" else data.rows_per_item)
     reg = None
@@ -175,11 +209,17 @@ def identify(model: RobotModel, data: MeasurementSet, start=None, prefer=None, f
     elif register_frame:
         pos = data.measured[:, :3, 3] if data.kind == "pose" else data.measured
         try:
-            reg = register(model, data.joints, pos, _position_sigma(data), params=p0)
+            reg = register(model, data.joints, pos, _position_sigma(data), params=p0, tool_unknown=tool_unknown,
+                           explain_marker=start is None)
         except IdentificationError:
             if start is None:
                 raise
             notes.append("registration residual above the limit; fitted from the given start anyway")
+        if reg is not None and reg.tool_offset_mm is not None:
+            p0[-6:-3] = reg.tool_offset_mm
+            d = reg.tool_offset_mm - model.nominal[-6:-3]
+            notes.append(f"tool point unknown: started from the registration's, ({d[0]:.2f}, {d[1]:.2f}, "
+                         f"{d[2]:.2f}) mm from the robot file's")
         if reg is not None and start is None and not any(
                 model.param_names[i] in (*fix, *exclude) for i in range(6)):
             # Keep the robot file's set-up where Levenberg–Marquardt converges from it (the
@@ -233,12 +273,25 @@ def identify(model: RobotModel, data: MeasurementSet, start=None, prefer=None, f
         _, J = residuals_and_jacobian(model, data, full(x))
         return J[:, idx] * w[:, None]
 
-    method = "lm" if n_rows >= len(idx) else "trf"
-    sol = least_squares(fun, p0[idx], jac=jac, method=method, x_scale="jac", max_nfev=max_nfev,
-                        xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    if loss == "huber":  # MINPACK's LM knows only plain least squares
+        sol = least_squares(fun, p0[idx], jac=jac, method="trf", x_scale="jac", max_nfev=max_nfev,
+                            loss="huber", f_scale=HUBER_SCALE, xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    else:
+        method = "lm" if n_rows >= len(idx) else "trf"
+        sol = least_squares(fun, p0[idx], jac=jac, method=method, x_scale="jac", max_nfev=max_nfev,
+                            xtol=1e-15, ftol=1e-15, gtol=1e-15)
     p = full(sol.x)
     r, J = residuals_and_jacobian(model, data, p)  # recomputed at the result, on purpose
     Jw = J[:, idx] * w[:, None]
+    downweighted: tuple[tuple[int, float], ...] = ()
+    if loss == "huber":
+        # IRLS weights at the solution: the covariance is that of the weighted fit the loss solved
+        omega = np.minimum(1.0, HUBER_SCALE / np.maximum(np.abs(r * w), 1e-300))
+        Jw = Jw * np.sqrt(omega)[:, None]
+        item_w = omega.reshape(data.n_items, data.rows_per_item).min(axis=1)
+        downweighted = tuple((int(i), float(item_w[i])) for i in np.argsort(item_w) if item_w[i] < 1.0)
+        notes.append(f"robust loss huber (corner {HUBER_SCALE:g} σ): {len(downweighted)} of {data.n_items} "
+                     f"measurements down-weighted")
     names = tuple(model.param_names[i] for i in idx)
     if data.kind == "distance":
         pts = forward(model, data.joints, p, setup=False)[:, :3, 3]
@@ -284,4 +337,26 @@ def identify(model: RobotModel, data: MeasurementSet, start=None, prefer=None, f
         rms_normalized=rms, outliers=outliers, iterations=int(sol.nfev), converged=converged,
         message=str(sol.message), identifiability=ident, uncertainty=unc,
         registration=reg, information=info, design_rank=d_rank, notes=tuple(notes),
+        loss=loss, downweighted=downweighted, dropped_pairs=dropped,
+        pairs=data.distance_pairs() if data.kind == "distance" else None,
     )
+
+
+def _drop_coincident(model: RobotModel, data: MeasurementSet, p0: np.ndarray,
+                     notes: list[str]) -> tuple[MeasurementSet, tuple[tuple[int, int], ...]]:
+    """Leave out distances whose two rows give the same nominal point: their direction, and so
+    their Jacobian, is undefined (a repeated pose; q and q + 360° on a wrist)."""
+    pts = forward(model, data.joints, p0, setup=False)[:, :3, 3]
+    pr = data.distance_pairs()
+    bad = coincident_pairs(pts, pr)
+    if not bad.any():
+        return data, ()
+    dropped = tuple((int(a), int(b)) for a, b in pr[bad])
+    if bad.all():
+        raise ConfigError(
+            f"every one of the {len(pr)} distances joins two rows with the same nominal point (e.g. rows "
+            f"{dropped[0][0] + 1} and {dropped[0][1] + 1}); measure poses at different places")
+    a, b = dropped[0]
+    notes.append(f"{len(dropped)} of {len(pr)} distances dropped: both of their rows give the same nominal "
+                 f"point (a repeated pose, or q and q + 360°), e.g. rows {a + 1} and {b + 1}")
+    return data.subset(np.nonzero(~bad)[0]), dropped

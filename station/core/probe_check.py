@@ -459,13 +459,16 @@ def frozen_probes(geom: ProbeHeadGeometry, readings: np.ndarray, previous: list[
 class Diagnosis:
     """Why a redundant touch failed its residual test. ``suspect``: the one probe it is pinned
     on (None: not possible); ``solution`` / ``test``: the pose and its test without the suspect;
-    ``candidates``: the probes any one of which could explain it; ``reason``: for people."""
+    ``candidates``: the probes any one of which could explain it; ``reason``: for people;
+    ``stuck``: the suspect repeats its reading while the other probes show the head moving (a
+    stuck probe, not an offset: it stays wrong at every later touch)."""
 
     suspect: int | None
     candidates: tuple[int, ...]
     solution: PoseSolution | None
     test: ResidualTest | None
     reason: str
+    stuck: bool = False
 
 
 def diagnose(geom: ProbeHeadGeometry, readings: np.ndarray, full: ResidualTest,
@@ -481,6 +484,13 @@ def diagnose(geom: ProbeHeadGeometry, readings: np.ndarray, full: ResidualTest,
             f"{full.rms_um:.1f} µm at σ {geom.reading_sigma_mm * 1e3:g} µm")
     k = loo.named
     if k is not None:
+        # eight or more probes single a bad probe out from one touch; a repeated reading says
+        # whether it is stuck (it stays wrong) rather than off by debris
+        frozen = frozen_probes(geom, r, list(previous or []), (k,), alpha) if previous else {}
+        if k in frozen:
+            return Diagnosis(k, loo.candidates, loo.solutions[k], loo.tests[k],
+                             f"{head}: probe {geom.label(k)} stuck? it repeats its reading {r[k]:.4f} mm while "
+                             f"the other probes moved it by {frozen[k] * 1e3:.0f} µm since an earlier touch", True)
         t = full.studentised[k]
         return Diagnosis(k, loo.candidates, loo.solutions[k], loo.tests[k],
                          f"{head}: probe {geom.label(k)} is off by {full.residuals_mm[k] * 1e3:+.1f} µm "
@@ -493,7 +503,7 @@ def diagnose(geom: ProbeHeadGeometry, readings: np.ndarray, full: ResidualTest,
         k, moved = ranked[0]
         return Diagnosis(k, loo.candidates, loo.solutions[k], loo.tests[k],
                          f"{head}: probe {geom.label(k)} stuck? it repeats its reading {r[k]:.4f} mm while the "
-                         f"other probes moved it by {moved * 1e3:.0f} µm since an earlier touch")
+                         f"other probes moved it by {moved * 1e3:.0f} µm since an earlier touch", True)
     if loo.candidates:
         names = ", ".join(geom.label(i) for i in loo.candidates)
         why = (f"any one of {names} could be the bad probe ({n} probes detect a bad touch but cannot "

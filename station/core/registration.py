@@ -10,7 +10,11 @@ nominal model's positions at the same joints (brief §10):
 * a **rigid** fit (``s = 1``) whose transform starts the set-up R of the identification, and
   whose residual tells whether the nominal model can describe the data at all. A residual far
   above what an uncalibrated robot misses by points at a wrong joint order, wrong joint units
-  or a wrong robot file; the worst rows are named.
+  or a wrong robot file; the worst rows are named;
+* a **tool/marker offset** fit (:func:`station.core.tool_frame.fit_marker_offset`): where the
+  rigid fit fails but moving the tool point explains the data, the refusal says it is a marker
+  offset, not a unit error, and names ``--tool unknown``; with ``tool_unknown`` the tool point is
+  fitted with the frame and starts the identification.
 
 :func:`data_information` measures what the data can support before any fit: distinct
 configurations, duplicate rows, the spread of every joint and of the measured points.
@@ -26,6 +30,7 @@ from scipy.spatial.transform import Rotation
 
 from station.core.kinematics import forward
 from station.core.model import RobotModel
+from station.core.tool_frame import MAX_MARKER_OFFSET_MM, MarkerFit, fit_marker_offset
 from station.core.transforms import matrix_to_pose
 from station.errors import ConfigError, IdentificationError
 
@@ -52,7 +57,9 @@ class Registration:
     """Result of :func:`register`. ``transform``: ``(4, 4)`` measurement ← robot base (rigid);
     ``scale``: the similarity fit's scale (1 for consistent units); ``residuals_mm``: ``(n,)``
     per-row distance after the rigid fit; ``rms_mm``: their RMS; ``limit_mm``: the largest RMS
-    accepted; ``worst_rows``: 0-based indices of the largest residuals, largest first."""
+    accepted; ``worst_rows``: 0-based indices of the largest residuals, largest first;
+    ``tool_offset_mm``: ``(3,)`` the fitted tool point in the last joint frame (``--tool unknown``),
+    else None; ``tool_undetermined``: how many of its directions the data left open."""
 
     transform: np.ndarray
     scale: float
@@ -61,6 +68,8 @@ class Registration:
     limit_mm: float
     worst_rows: tuple[int, ...]
     unit_check: str
+    tool_offset_mm: np.ndarray | None = None
+    tool_undetermined: int = 0
 
     @property
     def setup_pose(self) -> np.ndarray:
@@ -79,6 +88,7 @@ class Registration:
             "limit_mm": self.limit_mm,
             "worst_rows": [i + 1 for i in self.worst_rows],
             "unit_check": self.unit_check,
+            "tool_offset_mm": None if self.tool_offset_mm is None else self.tool_offset_mm.tolist(),
         }
 
 
@@ -99,17 +109,65 @@ def _similarity(b: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, float, np.nda
     return R, s, mc - s * R @ bc
 
 
+def rigid_residual_mm(model: RobotModel, joints: np.ndarray, measured_mm: np.ndarray, params=None) -> float:
+    """RMS [mm] of measured points ``(n, 3)`` after the best rigid alignment of ``model``'s
+    base-frame points at ``joints`` to them, without any check: how well the model's shape
+    explains the data wherever they were measured from."""
+    b = forward(model, np.asarray(joints, dtype=float), params, setup=False)[:, :3, 3]
+    m = np.asarray(measured_mm, dtype=float)
+    bc, mc = b.mean(0), m.mean(0)
+    rot, _ = Rotation.align_vectors(m - mc, b - bc)
+    res = m - mc - (b - bc) @ rot.as_matrix().T
+    return float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
+
+
+def _limit_text(limit: float, sigma_mm: float, spread_b: float) -> str:
+    """Where the residual limit comes from, naming σ and the option that sets it."""
+    return (f"the limit {limit:.3g} mm is the larger of {RESIDUAL_NOISE_FACTOR:.0f} × σ "
+            f"({RESIDUAL_NOISE_FACTOR:.0f} × {sigma_mm * 1e3:.3g} µm; set σ with --sigma-position) "
+            f"and {RESIDUAL_SPREAD_FRACTION:.0%} of the {spread_b:.4g} mm spread of the points")
+
+
+def _marker_explains(model, q, m, params, limit: float, rms_rigid: float) -> MarkerFit | None:
+    """A tool/marker offset fit when it explains what the rigid fit cannot, else None."""
+    try:
+        fit = fit_marker_offset(model, q, m, params)
+    except (np.linalg.LinAlgError, ValueError):
+        return None
+    shift = float(np.linalg.norm(fit.shift_mm))
+    if (fit.rms_mm <= limit and fit.rms_mm < 0.5 * rms_rigid and shift <= MAX_MARKER_OFFSET_MM
+            and shift > 3.0 * fit.rms_mm):
+        return fit
+    return None
+
+
+def _marker_refusal(fit: MarkerFit, rms_rigid: float) -> ConfigError:
+    d = fit.shift_mm
+    return ConfigError(
+        f"the measured points are the nominal model's with the tool point moved by "
+        f"({d[0]:.1f}, {d[1]:.1f}, {d[2]:.1f}) mm ({np.linalg.norm(d):.1f} mm) from the robot file's tool: "
+        f"with that offset they fit to {fit.rms_mm:.3g} mm RMS (without it {rms_rigid:.3g} mm). This is a "
+        f"marker or reflector offset, not a unit error: fit it with --tool unknown, or give the tool's "
+        f"offset in the robot file (the last transform's x, y, z)")
+
+
 def register(model: RobotModel, joints: np.ndarray, measured_mm: np.ndarray, sigma_mm: float,
-             params=None) -> Registration:
+             params=None, tool_unknown: bool = False, explain_marker: bool = True) -> Registration:
     """Register measured tool positions ``(n, 3)`` [mm] to ``model`` at ``joints`` ``(n, g)``.
 
     Raises :class:`ConfigError` for a unit mistake (scale far from 1: names m, inch, µm) and
+    for a tool/marker offset that explains the data (names ``--tool unknown``), and
     :class:`IdentificationError` when even the best rigid alignment leaves residuals far above
     an uncalibrated robot's errors (wrong joint order, joint units or robot file).
+
+    ``tool_unknown``: the tool point (K's translation) is fitted with the frame
+    (:func:`station.core.tool_frame.fit_marker_offset`); ``Registration.tool_offset_mm`` holds it.
+    ``explain_marker=False`` skips the marker diagnosis (a caller that goes on from its own start).
     """
     q = np.asarray(joints, dtype=float)
     m = np.asarray(measured_mm, dtype=float)
-    b = forward(model, q, params, setup=False)[:, :3, 3]
+    p = np.array(model.nominal if params is None else params, dtype=float)
+    b = forward(model, q, p, setup=False)[:, :3, 3]
     spread_b = float(np.sqrt(np.mean(np.sum((b - b.mean(0)) ** 2, axis=1))))
     spread_m = float(np.sqrt(np.mean(np.sum((m - m.mean(0)) ** 2, axis=1))))
     if spread_b < 1e-6 * max(1.0, float(np.abs(b).max())):
@@ -123,38 +181,65 @@ def register(model: RobotModel, joints: np.ndarray, measured_mm: np.ndarray, sig
     if sv[1] < 1e-6 * sv[0]:
         raise ConfigError("the tool positions lie on one line, which leaves the tracker frame's "
                           "rotation about it open; measure poses that move at least two axes")
+    limit = max(RESIDUAL_NOISE_FACTOR * sigma_mm, RESIDUAL_SPREAD_FRACTION * spread_b)
+    marker = None
+    if tool_unknown:
+        marker = fit_marker_offset(model, q, m, p)
+        if float(np.linalg.norm(marker.shift_mm)) > MAX_MARKER_OFFSET_MM:
+            raise IdentificationError(
+                f"the tool point fitted {np.linalg.norm(marker.shift_mm):.4g} mm from the robot file's, "
+                f"more than the {MAX_MARKER_OFFSET_MM:.0f} mm a marker or tool lies from the flange: check "
+                f"the joint order and units of the data file and that the robot file is this robot")
+        p[-6:-3] = marker.offset_mm
+        b = forward(model, q, p, setup=False)[:, :3, 3]
     _, s, _ = _similarity(b, m)
     # Rigid fit: the start of the set-up transform, and the residual check.
-    bc, mc = b.mean(0), m.mean(0)
-    rot, _ = Rotation.align_vectors(m - mc, b - bc)
-    Rr = rot.as_matrix()
-    T = np.eye(4)
-    T[:3, :3] = Rr
-    T[:3, 3] = mc - Rr @ bc
-    res = np.linalg.norm(m - (b @ Rr.T + T[:3, 3]), axis=1)
+    if marker is not None:
+        T = marker.transform
+    else:
+        bc, mc = b.mean(0), m.mean(0)
+        rot, _ = Rotation.align_vectors(m - mc, b - bc)
+        T = np.eye(4)
+        T[:3, :3] = rot.as_matrix()
+        T[:3, 3] = mc - T[:3, :3] @ bc
+    res = np.linalg.norm(m - (b @ T[:3, :3].T + T[:3, 3]), axis=1)
     rms = float(np.sqrt(np.mean(res**2)))
-    limit = max(RESIDUAL_NOISE_FACTOR * sigma_mm, RESIDUAL_SPREAD_FRACTION * spread_b)
     worst = tuple(int(i) for i in np.argsort(-res)[:5])
     rows = ", ".join(f"row {i + 1}: {res[i]:.1f} mm" for i in worst)
     unit = "consistent (similarity scale {:.5f})".format(s)
-    if not np.isfinite(s) or abs(s - 1.0) > SCALE_TOLERANCE:
+    if marker is not None:
+        d = marker.shift_mm
+        unit += (f"; tool point fitted ({d[0]:.2f}, {d[1]:.2f}, {d[2]:.2f}) mm from the robot file's"
+                 + (f", {marker.undetermined} direction(s) not determined by these data (held at the "
+                    f"file's value)" if marker.undetermined else ""))
+    bad_scale = not np.isfinite(s) or abs(s - 1.0) > SCALE_TOLERANCE
+    if bad_scale:
         likely = likely_unit(s) if np.isfinite(s) and s > 0 else None
         if likely:
             raise ConfigError(
                 f"the measured positions are {s:.4g}× the nominal model's: they look like {likely[0]}, "
                 f"not mm. Label the columns with their unit or {likely[1]}")
+    if (bad_scale or rms > limit) and marker is None and explain_marker:
+        explained = _marker_explains(model, q, m, p, limit, rms)
+        if explained is not None:
+            raise _marker_refusal(explained, rms)
+    if bad_scale:
         raise IdentificationError(
             f"the measured positions are {s:.4g}× the nominal model's (spread {spread_m:.4g} vs "
-            f"{spread_b:.4g} mm), which no unit explains, and the best rigid alignment misses by "
-            f"{rms:.3g} mm RMS (worst {rows}): check the joint order and joint units of the data "
-            f"file, the length unit of x, y, z, and that the robot file is this robot")
-    reg = Registration(T, s, res, rms, limit, worst, unit)
+            f"{spread_b:.4g} mm), which no unit and no tool offset explains, and the best rigid alignment "
+            f"misses by {rms:.3g} mm RMS (worst {rows}; {_limit_text(limit, sigma_mm, spread_b)}): check the "
+            f"joint order and joint units of the data file, the length unit of x, y, z, and that the robot "
+            f"file is this robot")
+    reg = Registration(T, s, res, rms, limit, worst, unit,
+                       None if marker is None else marker.offset_mm,
+                       0 if marker is None else marker.undetermined)
     if rms > limit:
         raise IdentificationError(
             f"after the best rigid alignment the measured positions still miss the nominal model by "
-            f"{rms:.3g} mm RMS (an uncalibrated robot misses by about {limit:.3g} mm at most); "
-            f"worst {rows}. Check the joint order and joint units (deg/rad, mm/m) of the data "
-            f"file, the sign conventions, and that the robot file is this robot")
+            f"{rms:.3g} mm RMS (an uncalibrated robot misses by about {limit:.3g} mm at most: "
+            f"{_limit_text(limit, sigma_mm, spread_b)}); worst {rows}. Check the joint order and joint "
+            f"units (deg/rad, mm/m) of the data file, the sign conventions, and that the robot file is "
+            f"this robot; if the instrument is noisier than σ, give its σ with --sigma-position")
     return reg
 
 

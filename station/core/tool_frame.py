@@ -32,13 +32,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from station.core.kinematics import forward
 from station.core.model import RobotModel
 from station.core.transforms import invert, matrix_to_pose, pose_to_matrix, rotation_log
 from station.core.units import ARCSEC
 
 __all__ = [
+    "MAX_MARKER_OFFSET_MM",
+    "MarkerFit",
     "ToolKinematics",
     "derive_tool",
+    "fit_marker_offset",
     "flange_frame",
     "head_K",
     "nominal_head_in_flange",
@@ -169,3 +173,86 @@ def derive_tool(model: RobotModel, identified_params: np.ndarray, head_in_flange
         flange_nominal=F_nom, flange_identified=F_id, flange_shift_mm=D[:3, 3].copy(),
         flange_rotation_rad=rotation_log(D[:3, :3]),
         tcp_shift_mm=(invert(K_nom_tool) @ K_id_tool)[:3, 3].copy())
+
+
+# --- an unknown tool or marker offset --------------------------------------------------------
+
+#: the largest tool/marker offset from the robot file's tool that a fit takes for one [mm]: a
+#: reflector on an adapter, a motion-capture marker on a plate; beyond it is no tool but a wrong
+#: robot file
+MAX_MARKER_OFFSET_MM = 1000.0
+
+
+@dataclass(frozen=True)
+class MarkerFit:
+    """Result of :func:`fit_marker_offset`. ``transform`` ``(4, 4)``: measurement frame ← robot
+    base (rigid); ``offset_mm`` ``(3,)``: the tool point in the last joint frame (K's translation,
+    replacing the robot file's); ``shift_mm`` ``(3,)``: how far it lies from the file's tool point;
+    ``residuals_mm`` ``(n,)``: per row after the fit; ``rms_mm``: their RMS; ``undetermined``: how
+    many directions of the offset the data leave open (0 when the tool turns about two axes; 1 for
+    a SCARA, whose tool only turns about z: its height merges with the tracker's), held at the
+    robot file's values."""
+
+    transform: np.ndarray
+    offset_mm: np.ndarray
+    shift_mm: np.ndarray
+    residuals_mm: np.ndarray
+    rms_mm: float
+    undetermined: int
+
+
+def _kabsch(b: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """Rigid ``(4, 4)`` with ``m ≈ R b + t`` (least squares, proper rotation)."""
+    bc, mc = b.mean(0), m.mean(0)
+    U, _, Vt = np.linalg.svd((m - mc).T @ (b - bc))
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt)) or 1.0])
+    T = np.eye(4)
+    T[:3, :3] = U @ D @ Vt
+    T[:3, 3] = mc - T[:3, :3] @ bc
+    return T
+
+
+# The tracker's position enters the linear step scaled by this, so that a direction the data leave
+# open goes into the tracker's position and the tool point keeps the robot file's value there.
+_POSITION_SCALE = 1e6
+
+
+def fit_marker_offset(model: RobotModel, joints: np.ndarray, measured_mm: np.ndarray,
+                      params: np.ndarray | None = None, iterations: int = 500) -> MarkerFit:
+    """Register measured tool points ``(n, 3)`` [mm] with the tool point itself unknown.
+
+    The measured point of row i is ``R (a_i + C_i t) + p``, with ``a_i``, ``C_i`` the last joint
+    frame of ``params`` (default nominal) at ``joints`` ``(n, g)`` and ``t`` the tool point in it
+    (K's translation). Alternates a rigid fit (R, p for a given t) with the linear least squares
+    of (t, p) for a given R until nothing moves; from the robot file's t that converges for any
+    offset well below the workspace's spread, which is where a marker lies. The tool's
+    orientation does not enter a point, so it stays the file's.
+    """
+    p = np.array(model.nominal if params is None else params, dtype=float)
+    m = np.asarray(measured_mm, dtype=float)
+    bare = p.copy()
+    bare[-6:] = 0.0  # K = identity: the last joint frame itself
+    F = forward(model, joints, bare, setup=False)
+    a, C = F[:, :3, 3], F[:, :3, :3]
+    t0 = p[-6:-3].copy()
+    t = t0.copy()
+
+    def points(tt: np.ndarray) -> np.ndarray:
+        return a + np.einsum("nij,j->ni", C, tt)
+
+    rank = 6
+    for _ in range(iterations):
+        R = _kabsch(points(t), m)[:3, :3]
+        # m_i − R (a_i + C_i t0) = (R C_i) Δt + p: one (3n, 6) linear system
+        A = np.concatenate([np.einsum("ij,njk->nik", R, C),
+                            np.broadcast_to(np.eye(3) * _POSITION_SCALE, C.shape)], axis=2).reshape(-1, 6)
+        rhs = (m - points(t0) @ R.T).reshape(-1)
+        sol, _, rank, _ = np.linalg.lstsq(A, rhs, rcond=1e-9)
+        t_new = t0 + sol[:3]
+        step = float(np.linalg.norm(t_new - t))
+        t = t_new
+        if step < 1e-10 * max(1.0, float(np.linalg.norm(t))):
+            break
+    T = _kabsch(points(t), m)
+    res = np.linalg.norm(m - (points(t) @ T[:3, :3].T + T[:3, 3]), axis=1)
+    return MarkerFit(T, t, t - t0, res, float(np.sqrt(np.mean(res**2))), int(6 - rank))

@@ -5,6 +5,8 @@ One row per measuring point (a cube corner): its id, the pose of its corner fram
 frame, and optionally the CMM's uncertainty of that point::
 
     # body B-2, CMM report 2026-11-02, lab XY
+    # certificate_id: CMM-2026-0142
+    # certificate_date: 2026-11-02
     id,x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg,sigma_position_um,sigma_angle_arcsec
     C1.a,-28.3,-319.7,40.0,0.0,0.0,10.0,2.0,5.0
     C1.b,11.1,-312.8,40.0,0.0,0.0,100.0,,
@@ -13,7 +15,9 @@ Every column but ``id`` carries its unit, as a suffix (``x_mm``) or in brackets 
 lengths ``mm``, ``m``, ``um`` (``µm``); angles ``deg``, ``rad``, ``arcsec``. A report in metres is
 read as such when its columns say so (``x_m``); one whose columns say mm but whose points all lie
 within a few mm of each other is refused as a likely unit mistake. An empty σ cell (or no σ
-column) means "not given": the configuration's ``[body]`` default applies.
+column) means "not given": the configuration's ``[body]`` default applies. Comment lines (``#``)
+are ignored, except two optional ones the report's traceability names: ``# certificate_id: …``
+and ``# certificate_date: YYYY-MM-DD`` (``=`` may stand for ``:``), each at most once.
 
 The file is read only if it is a regular file of a sane size
 (:func:`station.io.robot_files.read_user_text`). Anything malformed — a missing or unknown
@@ -35,6 +39,7 @@ import numpy as np
 from station.core.transforms import pose_to_matrix
 from station.core.units import ARCSEC, DEG, UM
 from station.errors import ConfigError
+from station.io.certificate import Certificate, check_certificate_date, check_certificate_id
 from station.io.robot_files import read_user_text
 
 #: a body report larger than this is refused before it is read (5 000 points are ~0.5 MB)
@@ -62,6 +67,7 @@ _HEADER_HINT = ("id,x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg and optionally "
 _SUFFIX = re.compile(r"^(?P<name>.+?)_(?P<unit>mm|m|um|µm|deg|rad|arcsec)$")
 _BRACKET = re.compile(r"^(?P<name>[^\[]+?)\s*\[\s*(?P<unit>[^\]]*?)\s*\]$")
 _CONTROL = re.compile(r"[\x00-\x1f\x7f]")
+_CERTIFICATE = re.compile(r"^\s*#\s*(?P<key>certificate_id|certificate_date)\s*[:=]\s*(?P<value>.*?)\s*$")
 
 
 @dataclass(frozen=True, eq=False)
@@ -77,6 +83,7 @@ class BodyReport:
     ids: tuple[str, ...]
     poses: np.ndarray
     sigma: np.ndarray
+    certificate: Certificate = Certificate()  # the body's CMM certificate (empty: the file names none)
 
     def matrices(self) -> np.ndarray:
         """``(n, 4, 4)`` KKS←MPKS poses of the points."""
@@ -138,6 +145,24 @@ def _number(path: Path, lineno: int, col: str, text: str, decimal_comma: bool) -
         raise ConfigError(f"{path}: line {lineno}, column {col!r}: {text.strip()!r} is not a finite number; "
                           f"give the value from the CMM report")
     return v
+
+
+def _certificate(path: Path, text: str) -> Certificate:
+    """The ``# certificate_id:`` and ``# certificate_date:`` comment lines (see the module)."""
+    found: dict[str, tuple[int, str]] = {}
+    for lineno, line in enumerate(text.splitlines(), 1):
+        m = _CERTIFICATE.match(line)
+        if m is None:
+            continue
+        key = m["key"]
+        if key in found:
+            raise ConfigError(f"{path}: line {lineno}: {key} was already given on line {found[key][0]}; keep one")
+        check = check_certificate_id if key == "certificate_id" else check_certificate_date
+        try:
+            found[key] = (lineno, check(m["value"]))
+        except ValueError as exc:
+            raise ConfigError(f"{path}: line {lineno}: {key}: {exc}") from None
+    return Certificate(found.get("certificate_id", (0, ""))[1], found.get("certificate_date", (0, ""))[1])
 
 
 def read_body_file(path: str | Path) -> BodyReport:
@@ -223,4 +248,4 @@ def read_body_file(path: str | Path) -> BodyReport:
         raise ConfigError(f"{p}: the {n_rows} points lie within {extent:.3g} mm of each other (column {x_col!r} "
                           f"read as given), too close for a calibration body: is the report in metres? Label the "
                           f"columns x_m, y_m, z_m or convert the numbers to mm")
-    return BodyReport(str(p), tuple(ids), _ro(poses), _ro(sigma))
+    return BodyReport(str(p), tuple(ids), _ro(poses), _ro(sigma), _certificate(p, text))

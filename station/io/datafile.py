@@ -8,15 +8,21 @@ carries its unit in brackets, then one row per measurement::
     10.0,45.0,-50.0,0.0,812.331,402.118,431.072,0.0012,-0.0031,55.0004
 
 Joint columns ``q1 … qg`` (deg | rad for revolute, mm | m for prismatic joints); measured
-position ``x, y, z`` (mm | m); orientation ``roll, pitch, yaw`` (deg | rad | arcsec) makes the
-file a pose file, without it a position file. A joints file (for ``station predict``) has only
-the joint columns.
+position ``x, y, z`` (mm | m), or the three reflectors of a nest ``x1, y1, z1 … x3, y3, z3``
+(one pose); orientation ``roll, pitch, yaw`` (deg | rad | arcsec) makes the file a pose file,
+without it a position file. A joints file (for ``station predict``) has only the joint columns.
+
+As instruments export them: UTF-8 (with or without a byte-order mark), UTF-16 with its mark, or
+a single-byte code page (cp1252, else latin-1), each noted; names in any case (``X [mm]`` is
+``x``), the unit in brackets or parentheses; ``;`` or tab separators with decimal commas; columns
+of no known name (point ids, time stamps, temperatures) ignored, with a note naming them.
 """
 
 from __future__ import annotations
 
 import csv
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -28,19 +34,91 @@ from station.core.units import ARCSEC, DEG, UM
 from station.errors import ConfigError
 
 _SCALE = {"mm": 1.0, "m": 1000.0, "um": UM, "µm": UM, "deg": DEG, "rad": 1.0, "arcsec": ARCSEC}
+# spellings of instrument exports for the units above (after lower-casing)
+_UNIT_ALIASES = {"μm": "µm", "micron": "um", "°": "deg", "degree": "deg", "degrees": "deg",
+                 "radian": "rad", "radians": "rad", '"': "arcsec", "″": "arcsec"}
 _LENGTH_UNITS = ("mm", "m", "um", "µm")
 MAX_FILE_BYTES = 256 * 2**20
 _ANGLE_UNITS = ("deg", "rad", "arcsec")
+_HEADER = re.compile(r"^(?P<name>.*?)\s*[\[(]\s*(?P<unit>[^\])]*?)\s*[\])]$")
+NEST_COLUMNS = tuple(f"{c}{k}" for k in (1, 2, 3) for c in "xyz")
+_KNOWN = {"x", "y", "z", "roll", "pitch", "yaw", *NEST_COLUMNS}
+#: the three reflectors of a nest keep their distances to each other; a row whose distances differ
+#: from the file's median by more than this [mm] has a reflector mismatched or moved
+NEST_TOLERANCE_MM = 1.0
 
 
 @dataclass(frozen=True)
 class Table:
-    """Parsed columns in internal units (mm, rad); ``columns`` maps name -> (n,) array."""
+    """Parsed columns in internal units (mm, rad); ``columns`` maps name -> (n,) array.
+    ``lines``: the file line of every row; ``notes``: what the reader did that the user should
+    know (encoding, ignored columns)."""
 
     path: str
     columns: dict
     n_rows: int
     units: dict
+    lines: tuple[int, ...] = ()
+    notes: tuple[str, ...] = ()
+
+
+def _is_known(name: str) -> bool:
+    return name in _KNOWN or (name.startswith("q") and name[1:].isdigit())
+
+
+def _decode(p: Path, raw: bytes) -> tuple[str, str | None]:
+    """The text and, unless it was UTF-8, a note of the encoding it was read in."""
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
+        try:
+            return raw.decode("utf-16"), "read as UTF-16 (byte-order mark)"
+        except UnicodeDecodeError as exc:
+            raise ConfigError(f"{p}: starts with a UTF-16 byte-order mark but is not UTF-16 text "
+                              f"(byte {exc.start}); export the data as CSV UTF-8") from None
+    if b"\x00" in raw:
+        raise ConfigError(f"{p}: holds NUL bytes, so it is no text file; export the data as CSV (UTF-8)")
+    try:
+        return raw.decode("utf-8-sig"), None  # a byte-order mark (Excel's "CSV UTF-8") is dropped
+    except UnicodeDecodeError as exc:
+        where = exc.start
+    # instrument software on Windows writes its code page: cp1252 (µ, °, ä as one byte);
+    # latin-1 takes the five bytes cp1252 leaves undefined
+    for enc in ("cp1252", "latin-1"):
+        try:
+            return raw.decode(enc), f"not UTF-8 (byte {where}); read as {enc}"
+        except UnicodeDecodeError:
+            continue
+    raise AssertionError("latin-1 decodes every byte")  # pragma: no cover
+
+
+def _delimiter(header_line: str) -> str:
+    counts = {d: header_line.count(d) for d in (",", ";", "\t")}
+    if counts[","] == 0 and max(counts.values()) > 0:
+        return max(counts, key=lambda d: counts[d])
+    return ","
+
+
+def _parse_header(p: Path, cells: list[str]) -> tuple[list[tuple[int, str, str]], list[str]]:
+    """``(column, name, unit)`` of every used column, and the ignored columns' headers."""
+    used, ignored = [], []
+    for k, h in enumerate(cells):
+        h = h.strip()
+        m = _HEADER.match(h)
+        name = (m.group("name") if m else h).strip().lower()
+        if not _is_known(name):
+            ignored.append(h or f"(column {k + 1}, no name)")
+            continue
+        if m is None:
+            raise ConfigError(f"{p}: column {h!r} has no unit; write it like 'x [mm]' or 'q1 [deg]'")
+        unit = m.group("unit").strip()
+        unit = _UNIT_ALIASES.get(unit.lower(), unit.lower() if unit.lower() in _SCALE else unit)
+        if unit not in _SCALE:
+            raise ConfigError(f"{p}: column {name!r} has unknown unit {unit!r}; use one of {sorted(_SCALE)}")
+        used.append((k, name, unit))
+    names = [n for _, n, _ in used]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise ConfigError(f"{p}: duplicate column names {dup} (names are read in any case: 'X' is 'x')")
+    return used, ignored
 
 
 def read_table(path: str | Path) -> Table:
@@ -49,52 +127,48 @@ def read_table(path: str | Path) -> Table:
         raise ConfigError(f"{p}: no such file")
     if not p.is_file():
         raise ConfigError(f"{p}: not a regular file; give the path of a CSV data file")
-    # utf-8-sig: a byte-order mark (Excel's "CSV UTF-8") is read as such, not as part of 'q1'
-    try:
-        with open(p, newline="", encoding="utf-8-sig") as f:
-            text = f.read(MAX_FILE_BYTES + 1)
-    except UnicodeDecodeError as exc:
-        raise ConfigError(f"{p}: not UTF-8 text ({exc.reason} at byte {exc.start}); export the data as CSV UTF-8") from None
-    if len(text) > MAX_FILE_BYTES:
+    with open(p, "rb") as f:
+        raw = f.read(MAX_FILE_BYTES + 1)
+    if len(raw) > MAX_FILE_BYTES:
         raise ConfigError(f"{p}: larger than {MAX_FILE_BYTES // 2**20} MB; split the measurements")
-    lines = [(i + 1, line) for i, line in enumerate(text.splitlines(keepends=True))
+    text, enc_note = _decode(p, raw)
+    notes = [enc_note] if enc_note else []
+    lines = [(i + 1, line) for i, line in enumerate(text.splitlines())
              if line.strip() and not line.lstrip().startswith("#")]
     if not lines:
         raise ConfigError(f"{p}: empty; expected a header with units and one row per measurement")
-    reader = list(csv.reader(line for _, line in lines))
-    header = [h.strip() for h in reader[0]]
-    names, scales = [], []
-    for h in header:
-        if "[" not in h or not h.endswith("]"):
-            raise ConfigError(f"{p}: column {h!r} has no unit; write it like 'x [mm]' or 'q1 [deg]'")
-        name, unit = h[: h.index("[")].strip(), h[h.index("[") + 1: -1].strip()
-        if unit not in _SCALE:
-            raise ConfigError(f"{p}: column {name!r} has unknown unit {unit!r}; use one of {sorted(_SCALE)}")
-        names.append(name)
-        scales.append((unit, _SCALE[unit]))
-    if len(set(names)) != len(names):
-        raise ConfigError(f"{p}: duplicate column names in {names}")
+    delim = _delimiter(lines[0][1])
+    try:
+        reader = list(csv.reader((line for _, line in lines), delimiter=delim))
+    except csv.Error as exc:
+        raise ConfigError(f"{p}: not readable as CSV ({exc}); export the data as CSV") from None
+    used, ignored = _parse_header(p, reader[0])
+    if ignored:
+        notes.append(f"columns ignored (no known name): {', '.join(repr(h) for h in ignored)}")
+    names = [n for _, n, _ in used]
     rows = reader[1:]
-    data = np.empty((len(rows), len(names)))
+    data = np.empty((len(rows), len(used)))
     for r_i, ((lineno, _), row) in enumerate(zip(lines[1:], rows)):
-        if len(row) != len(names):
-            raise ConfigError(f"{p}, line {lineno}: {len(row)} values but {len(names)} columns")
-        for k, v in enumerate(row):
+        if len(row) != len(reader[0]):
+            raise ConfigError(f"{p}, line {lineno}: {len(row)} values but {len(reader[0])} columns")
+        for c, (k, name, unit) in enumerate(used):
+            v = row[k].strip()
             try:
-                x = float(v)
+                x = float(v.replace(",", ".") if delim != "," else v)
             except ValueError:
-                raise ConfigError(f"{p}, line {lineno}: {names[k]} = {v!r} is not a number") from None
+                raise ConfigError(f"{p}, line {lineno}: {name} = {v!r} is not a number") from None
             if not math.isfinite(x):
-                raise ConfigError(f"{p}, line {lineno}: {names[k]} is {v.strip()}; remove or repair this row")
-            data[r_i, k] = x * scales[k][1]
+                raise ConfigError(f"{p}, line {lineno}: {name} is {v}; remove or repair this row")
+            data[r_i, c] = x * _SCALE[unit]
     cols = {n: data[:, k] for k, n in enumerate(names)}
-    for n, (unit, _) in zip(names, scales):
+    for _, n, unit in used:
         kind = "angle" if unit in _ANGLE_UNITS else "length"
-        if n in ("x", "y", "z") and kind != "length":
+        if (n in ("x", "y", "z") or n in NEST_COLUMNS) and kind != "length":
             raise ConfigError(f"{p}: column {n!r} is a position and needs a length unit (mm or m)")
         if n in ("roll", "pitch", "yaw") and kind != "angle":
             raise ConfigError(f"{p}: column {n!r} is an angle and needs deg, rad or arcsec")
-    return Table(str(p), cols, len(rows), dict(zip(names, (u for u, _ in scales))))
+    return Table(str(p), cols, len(rows), {n: u for _, n, u in used},
+                 tuple(ln for ln, _ in lines[1:]), tuple(notes))
 
 
 def joints_from_table(table: Table, model: RobotModel) -> np.ndarray:
@@ -117,23 +191,93 @@ def joints_from_table(table: Table, model: RobotModel) -> np.ndarray:
     return np.column_stack([table.columns[n] for n in expected])
 
 
-def read_measurements(path, model: RobotModel):
-    """``(kind, joints (n,g), measured)`` with measured poses (n,4,4) or positions (n,3)."""
+@dataclass(frozen=True)
+class MeasurementFile:
+    """A measurement file read: ``kind`` pose | position, ``joints`` ``(n, g)``, ``measured``
+    poses ``(n, 4, 4)`` or positions ``(n, 3)`` [mm], and the reader's ``notes``."""
+
+    kind: str
+    joints: np.ndarray
+    measured: np.ndarray
+    notes: tuple[str, ...] = ()
+
+
+def nest_frames(points: np.ndarray, path: str = "", lines: tuple[int, ...] = ()) -> np.ndarray:
+    """``(n, 4, 4)`` poses of a nest from its three reflectors ``(n, 3, 3)`` [mm] (reflector 1,
+    2, 3 of every row): origin at their centroid, x towards reflector 2 from reflector 1, z normal
+    to their plane (right-handed 1 → 2 → 3), y = z × x. Refuses reflectors on one line and rows
+    whose reflector distances differ from the file's median by more than ``NEST_TOLERANCE_MM``."""
+    P = np.asarray(points, dtype=float)
+
+    def where(i: int) -> str:
+        return f"{path}, line {lines[i]}" if lines else f"{path}, row {i + 1}"
+
+    sides = np.stack([np.linalg.norm(P[:, 1] - P[:, 0], axis=1), np.linalg.norm(P[:, 2] - P[:, 1], axis=1),
+                      np.linalg.norm(P[:, 0] - P[:, 2], axis=1)], axis=1)
+    ex = P[:, 1] - P[:, 0]
+    nz = np.cross(ex, P[:, 2] - P[:, 0])
+    area2 = np.linalg.norm(nz, axis=1)
+    # sine of the triangle's smallest angle: below 0.05 (3°) the plane, and so the orientation, is lost
+    flat = area2 < 0.05 * np.max(sides, axis=1) ** 2
+    if flat.any():
+        i = int(np.argmax(flat))
+        raise ConfigError(f"{where(i)}: the three reflectors lie on one line (or two coincide), so they give "
+                          f"no orientation; check the reflector columns x1 … z3 of this row")
+    dev = np.abs(sides - np.median(sides, axis=0))
+    if np.any(dev > NEST_TOLERANCE_MM):
+        r, k = (int(v) for v in np.unravel_index(int(np.argmax(dev)), dev.shape))
+        pair = ("1–2", "2–3", "3–1")[k]
+        raise ConfigError(
+            f"{where(r)}: reflectors {pair} lie {sides[r, k]:.3f} mm apart, the nest's median is "
+            f"{np.median(sides[:, k]):.3f} mm: a reflector was read in the wrong column or moved on the nest; "
+            f"repair or remove this row")
+    x = ex / np.linalg.norm(ex, axis=1)[:, None]
+    z = nz / area2[:, None]
+    y = np.cross(z, x)
+    T = np.tile(np.eye(4), (len(P), 1, 1))
+    T[:, :3, 0], T[:, :3, 1], T[:, :3, 2] = x, y, z
+    T[:, :3, 3] = P.mean(axis=1)
+    return T
+
+
+def read_measurement_file(path, model: RobotModel) -> MeasurementFile:
+    """Read a pose or position file (see the module); nest columns give a pose per row."""
     t = read_table(path)
     q = joints_from_table(t, model)
-    missing = [c for c in ("x", "y", "z") if c not in t.columns]
-    if missing:
-        raise ConfigError(f"{path}: measured position columns {missing} missing; add 'x [mm]' etc.")
-    pos = np.column_stack([t.columns[c] for c in ("x", "y", "z")])
+    nest = [c for c in NEST_COLUMNS if c in t.columns]
     ori = [c for c in ("roll", "pitch", "yaw") if c in t.columns]
-    if ori and len(ori) != 3:
-        raise ConfigError(f"{path}: a pose file needs all of roll, pitch, yaw; found only {ori}")
     if t.n_rows < 2:
         raise ConfigError(f"{path}: needs at least two measurements")
+    if nest:
+        if len(nest) != len(NEST_COLUMNS):
+            missing = [c for c in NEST_COLUMNS if c not in t.columns]
+            raise ConfigError(f"{path}: a nest of three reflectors needs x1, y1, z1, x2, y2, z2, x3, y3, z3; "
+                              f"missing {', '.join(missing)}")
+        extra = [c for c in ("x", "y", "z", *ori) if c in t.columns]
+        if extra:
+            raise ConfigError(f"{path}: give either the nest's three reflectors (x1 … z3) or one point "
+                              f"(x, y, z with roll, pitch, yaw), not both; found also {', '.join(extra)}")
+        P = np.stack([np.column_stack([t.columns[f"{c}{k}"] for c in "xyz"]) for k in (1, 2, 3)], axis=1)
+        frames = nest_frames(P, str(path), t.lines)
+        return MeasurementFile("pose", q, frames, t.notes + ("three reflectors per row read as the nest's pose "
+                                                             "(origin at their centroid, x from 1 to 2)",))
+    missing = [c for c in ("x", "y", "z") if c not in t.columns]
+    if missing:
+        raise ConfigError(f"{path}: measured position columns {missing} missing; add 'x [mm]' etc. "
+                          f"(or a nest's x1 … z3)")
+    pos = np.column_stack([t.columns[c] for c in ("x", "y", "z")])
+    if ori and len(ori) != 3:
+        raise ConfigError(f"{path}: a pose file needs all of roll, pitch, yaw; found only {ori}")
     if ori:
         pose = np.column_stack([pos] + [t.columns[c] for c in ("roll", "pitch", "yaw")])
-        return "pose", q, pose_to_matrix(pose)
-    return "position", q, pos
+        return MeasurementFile("pose", q, pose_to_matrix(pose), t.notes)
+    return MeasurementFile("position", q, pos, t.notes)
+
+
+def read_measurements(path, model: RobotModel):
+    """``(kind, joints (n,g), measured)`` with measured poses (n,4,4) or positions (n,3)."""
+    f = read_measurement_file(path, model)
+    return f.kind, f.joints, f.measured
 
 
 def write_csv(path, header: list[str], rows) -> None:

@@ -27,6 +27,7 @@ from station.core.probe_geometry import ProbeHeadGeometry
 from station.core.transforms import pose_to_matrix
 from station.core.units import DEG
 from station.errors import ConfigError
+from station.io.certificate import Certificate, check_certificate_date, check_certificate_id
 from station.io.robot_files import read_user_text
 
 __all__ = ["HeadFile", "load_head", "parse_head", "MAX_HEAD_BYTES", "FACES", "head_to_toml"]
@@ -58,6 +59,19 @@ class _Head(_Section):
                     "[x, y, z] mm within ±2000, [roll, pitch, yaw] deg within ±360")
     reading_sigma_um: float = Field(0.5, gt=0.0, le=100.0,
                                     description="σ of one probe reading [µm] (certificate repeatability), > 0 … 100")
+    # the head's CMM certificate, for the report's traceability (optional)
+    certificate_id: str | None = Field(None, description='the ID of the head\'s CMM certificate, e.g. "CMM-2026-0142"')
+    certificate_date: str | None = Field(None, description="the date of the head's CMM measurement, YYYY-MM-DD")
+
+    @field_validator("certificate_id", mode="before")
+    @classmethod
+    def _cert_id(cls, v: Any) -> Any:
+        return None if v is None else check_certificate_id(v)
+
+    @field_validator("certificate_date", mode="before")
+    @classmethod
+    def _cert_date(cls, v: Any) -> Any:  # a TOML date (2026-11-02) or a string of that form
+        return None if v is None else check_certificate_date(v)
 
 
 class _Probe(_Section):
@@ -113,6 +127,7 @@ class HeadFile:
     frame_pose: np.ndarray
     report: ArrangementReport
     source: str
+    certificate: Certificate = Certificate()  # the head's CMM certificate (empty: the file gives none)
 
 
 _short = reprlib.Repr()
@@ -211,7 +226,7 @@ def parse_head(data: Any, source: str = "<head>", cube_edge_mm: float = 40.0) ->
     T = pose_to_matrix(frame)
     T.flags.writeable = False
     frame.flags.writeable = False
-    return HeadFile(geom, T, frame, report, source)
+    return HeadFile(geom, T, frame, report, source, Certificate(h.certificate_id or "", h.certificate_date or ""))
 
 
 def load_head(path: str | Path, cube_edge_mm: float = 40.0) -> HeadFile:

@@ -77,12 +77,16 @@ def _mdh_link(A: np.ndarray) -> tuple[tuple[float, float, float, float], float]:
 
 
 def _closest(p1, d1, p2, d2):
-    """Closest points of two non-parallel lines."""
+    """Closest points of two non-parallel lines; None where the lines are parallel to within
+    round-off (``a·c − b²`` is 0 in doubles below a tilt of about 1e-8 rad)."""
     w0 = p1 - p2
     a, b, c, d, e = d1 @ d1, d1 @ d2, d2 @ d2, d1 @ w0, d2 @ w0
     den = a * c - b * b
+    if not den > 0.0:
+        return None
     t, s = (b * e - c * d) / den, (a * e - b * d) / den
-    return p1 + t * d1, p2 + s * d2
+    P, Q = p1 + t * d1, p2 + s * d2
+    return (P, Q) if np.all(np.isfinite(P)) and np.all(np.isfinite(Q)) else None
 
 
 def _two_links(A: np.ndarray) -> list[tuple[float, float, float, float]]:
@@ -131,15 +135,19 @@ def mdh_rows(model: RobotModel, params=None, setup: bool = True) -> tuple[list[t
             n = np.cross(z[i], z[i + 1])
             origin = None
             if np.linalg.norm(n) > 1e-9:
-                P, Q = _closest(o[i], z[i], o[i + 1], z[i + 1])
-                if np.linalg.norm(P - o[i]) <= MAX_COMMON_NORMAL_MM:
+                closest = _closest(o[i], z[i], o[i + 1], z[i + 1])
+                tilt = f"{np.degrees(np.arcsin(min(1.0, float(np.linalg.norm(n))))) * 3600:.3g}″"
+                if closest is not None and np.linalg.norm(closest[0] - o[i]) <= MAX_COMMON_NORMAL_MM:
+                    P, Q = closest
                     origin = P
                     x = (Q - P) if np.linalg.norm(Q - P) > 1e-9 else n
-                else:
-                    notes.append(f"axes {i + 1} and {i + 2} are nearly parallel "
-                                 f"({np.degrees(np.arcsin(min(1.0, float(np.linalg.norm(n))))) * 3600:.1f}″); "
-                                 f"their common normal lies {np.linalg.norm(P - o[i]) / 1000:.0f} m away, "
-                                 f"so they are written as parallel")
+                elif closest is not None:
+                    notes.append(f"axes {i + 1} and {i + 2} are nearly parallel ({tilt}); their common normal "
+                                 f"lies {np.linalg.norm(closest[0] - o[i]) / 1000:.0f} m away, so they are "
+                                 f"written as parallel")
+                else:  # the tilt is below what doubles resolve: no common normal to place
+                    notes.append(f"axes {i + 1} and {i + 2} are parallel but for a tilt of {tilt}, too small to "
+                                 f"place a common normal; they are written as parallel")
             if origin is None:
                 origin = o[i]
                 w = (o[i + 1] - o[i]) - ((o[i + 1] - o[i]) @ z[i]) * z[i]

@@ -7,6 +7,14 @@ A user file is read only if it is a regular file of a sane size (:func:`read_use
 device such as ``/dev/zero`` or a FIFO is refused before anything is read, so it can neither
 exhaust memory nor hang the station. Every model read from a file is checked before it is used:
 finite nominal parameters (a NaN names its parameter) and finite, ordered joint limits.
+
+A robot file may map the controller's joints onto the model's (``[joint_map]``, or the DH
+table's ``sign``, ``offset``, ``coupled_to``, ``k`` columns; :mod:`station.core.joint_map`):
+:func:`load_mapped_robot` gives it to the commands that apply it to data files' joints, and
+:func:`load_robot`, which the cell uses, refuses a file that has one.
+
+A TOML robot file may mark its tool (marker, reflector) point unknown (``[tool] unknown = true``):
+:func:`tool_marked_unknown` tells ``identify`` to fit it, as ``--tool unknown`` does.
 """
 
 from __future__ import annotations
@@ -20,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from station.core.joint_map import JointMap, joint_map_from_file_units
 from station.core.model import RobotModel, robot_from_dict
 from station.errors import ConfigError
 
@@ -89,31 +98,170 @@ def check_model(model: RobotModel, source: str) -> RobotModel:
     return model
 
 
-def load_robot(name_or_path: str | Path) -> RobotModel:
-    """A built-in robot by name (``sr800``) or a robot file (.toml, .dh.csv, .mdh.csv, .urdf)."""
+def load_robot(name_or_path: str | Path, base: str | None = None, tip: str | None = None) -> RobotModel:
+    """A built-in robot by name (``sr800``) or a robot file (.toml, .dh.csv, .mdh.csv, .urdf);
+    ``base``/``tip``: the links of a URDF's chain.
+
+    A file that maps the controller's joints onto the model's (sign, offset, coupling) is
+    refused: the callers of this function (the cell) command and read joints as the model
+    counts them. :func:`load_mapped_robot` gives the map to those that apply it."""
+    model, jmap = load_mapped_robot(name_or_path, base, tip)
+    if not jmap.is_identity:
+        raise ConfigError(f"{name_or_path}: the robot file maps the controller's joints onto the model's "
+                          f"({'; '.join(jmap.describe())}), and a cell sends and reads joints as the model counts "
+                          f"them: for a cell, give a robot file without [joint_map] (or sign, offset, coupled_to "
+                          f"columns) whose joints are the controller's; the map is for identify, validate, "
+                          f"predict and compensate")
+    return model
+
+
+def load_mapped_robot(name_or_path: str | Path, base: str | None = None,
+                      tip: str | None = None) -> tuple[RobotModel, JointMap]:
+    """:func:`load_robot`'s model and the file's joint map (identity when it has none)."""
     s = str(name_or_path)
     if s in builtin_robots():
+        _refuse_chain_choice(s, base, tip)
         text = resources.files("station.io.robots").joinpath(f"{s}.toml").read_text()
-        return robot_from_dict(tomllib.loads(text), source=f"built-in robot {s}")
+        model = robot_from_dict(tomllib.loads(text), source=f"built-in robot {s}")
+        return model, JointMap.identity(_joint_names(model))
     path = Path(s)
     check_user_file(path, MAX_ROBOT_FILE_BYTES, "robot file",
                     missing=f"robot {s!r} is neither a built-in robot ({', '.join(builtin_robots())}) "
                             f"nor an existing file")
+    if path.suffix != ".urdf":
+        _refuse_chain_choice(s, base, tip)
     if path.suffix == ".urdf" or path.name.endswith((".dh.csv", ".mdh.csv")):
         read_user_text(path, MAX_ROBOT_FILE_BYTES, "robot file")  # regular, bounded, UTF-8
-        from station.io.robot_import import robot_from_dh_file, robot_from_urdf
+        from station.io.robot_import import read_dh_file, robot_from_urdf
 
-        reader = robot_from_urdf if path.suffix == ".urdf" else robot_from_dh_file
         try:
-            model = reader(path)
+            if path.suffix == ".urdf":
+                model = robot_from_urdf(path, base=base, tip=tip)
+                jmap = JointMap.identity(_joint_names(model))
+            else:
+                model, jmap = read_dh_file(path)
         except (UnicodeDecodeError, OSError) as exc:
             raise ConfigError(f"{path}: cannot read the robot file ({exc})") from None
-        return check_model(model, str(path))
+        return check_model(model, str(path)), jmap
+    data = _read_toml(path)
+    model = check_model(robot_from_dict(data, source=str(path)), str(path))
+    _toml_tool_unknown(data, str(path))  # a typo in [tool] is refused by every command, not only identify
+    return model, _toml_joint_map(data, model, str(path))
+
+
+def tool_marked_unknown(name_or_path: str | Path) -> bool:
+    """Whether the TOML robot file marks its tool point unknown (``[tool] unknown = true``): its
+    K's x, y, z are then only a start, and ``identify`` fits them (``--tool unknown``). Built-in
+    robots, DH/MDH tables and URDFs have no such mark (False)."""
+    s = str(name_or_path)
+    path = Path(s)
+    if s in builtin_robots() or path.suffix == ".urdf" or path.name.endswith((".dh.csv", ".mdh.csv")):
+        return False
+    check_user_file(path, MAX_ROBOT_FILE_BYTES, "robot file")
+    return _toml_tool_unknown(_read_toml(path), s)
+
+
+def _read_toml(path: Path) -> dict:
     text = read_user_text(path, MAX_ROBOT_FILE_BYTES, "robot file")
     try:
-        data = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML ({exc}); fix the syntax at that line") from None
     except RecursionError:
         raise ConfigError(f"{path}: not valid TOML (nested too deeply); fix the syntax") from None
-    return check_model(robot_from_dict(data, source=str(path)), str(path))
+
+
+def _toml_tool_unknown(data: dict, source: str) -> bool:
+    """The ``[tool]`` table's ``unknown`` (default false); any other key or value is refused."""
+    raw = data.get("tool", {})
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{source}: tool must be a table, e.g. [tool] with unknown = true")
+    extra = sorted(set(raw) - {"unknown"})
+    if extra:
+        raise ConfigError(f"{source}: [tool] has unknown keys {extra}; allowed: unknown (true: identify fits the "
+                          f"tool point; the tool itself is the last [[transform]])")
+    v = raw.get("unknown", False)
+    if not isinstance(v, bool):
+        raise ConfigError(f"{source}: [tool].unknown must be true or false, got {v!r}")
+    return v
+
+
+def _refuse_chain_choice(robot: str, base: str | None, tip: str | None) -> None:
+    if base is not None or tip is not None:
+        raise ConfigError(f"--base/--tip choose the chain of a URDF; robot {robot!r} is not a .urdf file: "
+                          f"leave them out")
+
+
+def _joint_names(model: RobotModel) -> tuple[str, ...]:
+    return tuple(model.transforms[i].name for i in model.joint_transforms)
+
+
+_MAP_KEYS = ("sign", "offset", "coupled_to", "k")
+
+
+def _toml_joint_map(data: dict, model: RobotModel, source: str) -> JointMap:
+    """The ``[joint_map]`` table: per joint transform ``sign``, ``offset`` (the file's angle or
+    length unit), ``coupled_to`` (another joint transform) and ``k``."""
+    names = _joint_names(model)
+    raw = data.get("joint_map", {})
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{source}: [joint_map] must be a table of joints, e.g. [joint_map.A3]")
+    entries: dict[int, dict] = {}
+    for name, e in raw.items():
+        if name not in names:
+            raise ConfigError(f"{source}: [joint_map.{name}]: no joint transform {name!r}; the joints are "
+                              f"{', '.join(names)}")
+        if not isinstance(e, dict):
+            raise ConfigError(f"{source}: [joint_map].{name} must be a table with {', '.join(_MAP_KEYS)}")
+        unknown = sorted(set(e) - set(_MAP_KEYS))
+        if unknown:
+            raise ConfigError(f"{source}: [joint_map.{name}] has unknown keys {unknown}; allowed: "
+                              f"{', '.join(_MAP_KEYS)}")
+        entry: dict = {}
+        for key in ("sign", "offset", "k"):
+            if key in e:
+                v = e[key]
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                    raise ConfigError(f"{source}: [joint_map.{name}].{key} must be a finite number, got {v!r}")
+                entry[key] = float(v)
+        if "sign" in entry and entry["sign"] not in (1.0, -1.0):
+            raise ConfigError(f"{source}: [joint_map.{name}].sign must be 1 or -1, got {e['sign']!r}")
+        if "coupled_to" in e:
+            other = e["coupled_to"]
+            if other not in names or other == name:
+                raise ConfigError(f"{source}: [joint_map.{name}].coupled_to = {other!r}: give another joint "
+                                  f"transform, one of {', '.join(n for n in names if n != name)}")
+            entry["other"] = names.index(other)
+        entries[names.index(name)] = entry
+    head = data["robot"]
+    a_scale = math.pi / 180.0 if head.get("angle_unit", "deg") == "deg" else 1.0
+    l_scale = 1000.0 if head.get("length_unit", "mm") == "m" else 1.0
+    try:
+        return joint_map_from_file_units(names, model.joint_types, entries, a_scale, l_scale)
+    except ConfigError as exc:
+        raise ConfigError(f"{source}: {exc}") from None
+
+
+def joint_map_toml(jmap: JointMap, model: RobotModel, angle_unit: str = "rad") -> str:
+    """The ``[joint_map]`` table of ``jmap`` for a robot file written in ``angle_unit`` and mm
+    (appended to :func:`station.core.model.robot_to_toml`'s text; empty for the identity)."""
+    import tomli_w
+
+    if jmap.is_identity:
+        return ""
+    a = 180.0 / math.pi if angle_unit == "deg" else 1.0
+    scale = [a if t == "revolute" else 1.0 for t in model.joint_types]
+    table: dict = {}
+    for j, name in enumerate(jmap.names):
+        e: dict = {}
+        if jmap.sign[j] != 1.0:
+            e["sign"] = int(jmap.sign[j])
+        if jmap.offset[j] != 0.0:
+            e["offset"] = jmap.offset[j] * scale[j]
+        o = jmap.other[j]
+        if o is not None:
+            e["coupled_to"] = jmap.names[o]
+            e["k"] = jmap.k[j] * scale[j] / scale[o]
+        if e:
+            table[name] = e
+    return "\n" + tomli_w.dumps({"joint_map": table})

@@ -8,7 +8,8 @@ Every format is converted exactly into the six-parameter chain of :mod:`station.
 * Modified DH link i: ``Rx(α_{i-1}) · Tx(a_{i-1}) · Rz(θ_i) · Tz(d_i)`` then the joint — the same
   order as the station's form, so each link maps onto one transform.
 * URDF: each moving joint's origin, then a rotation that takes the joint axis onto z (undone at
-  the start of the next transform); fixed joints fold into their neighbours.
+  the start of the next transform); fixed joints fold into their neighbours. The chain runs
+  from the root (or ``base``) link to ``tip``; a branch without ``tip`` is refused.
 
 DH table files are CSV (``*.dh.csv`` or ``*.mdh.csv``) with units in the header, e.g.::
 
@@ -16,7 +17,8 @@ DH table files are CSV (``*.dh.csv`` or ``*.mdh.csv``) with units in the header,
     revolute,0,800,445,0,-130,130
 
 A row of type ``fixed`` (limits left empty) is a constant link without a joint: the exporter
-writes a set-up in front of axis 1 or a tool after the last axis that way.
+writes a set-up in front of axis 1 or a tool after the last axis that way. Optional columns
+``sign``, ``offset [deg|mm]``, ``coupled_to``, ``k`` give the joint map (docs/robot-file.md).
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from station.core.joint_map import JointMap, joint_map_from_file_units
 from station.core.model import RobotModel, TransformSpec
 from station.core.transforms import invert, matrix_to_pose, pose_to_matrix, rot_x, rot_z, rotation_exp
 from station.errors import ConfigError
@@ -100,6 +103,18 @@ def _unit(header: str) -> str:
 
 
 def robot_from_dh_file(path: Path) -> RobotModel:
+    """The model of a DH or MDH table file (its joint map, if any, is :func:`read_dh_file`'s)."""
+    return read_dh_file(path)[0]
+
+
+#: the optional columns of a DH table that map the controller's joints onto the model's
+#: (``offset`` has a unit like the limits; ``sign``, ``coupled_to`` and ``k`` have none)
+MAP_COLUMNS = ("sign", "offset", "coupled_to", "k")
+_UNITLESS = ("type", "sign", "coupled_to", "k")
+
+
+def read_dh_file(path: Path) -> tuple[RobotModel, JointMap]:
+    """The model of a ``*.dh.csv`` or ``*.mdh.csv`` file and its joint map (docs/robot-file.md)."""
     conv = "mdh" if path.name.endswith(".mdh.csv") else "dh"
     with open(path, newline="", encoding="utf-8-sig") as f:
         rows = [r for r in csv.reader(line for line in f if not line.lstrip().startswith("#")) if r]
@@ -111,12 +126,18 @@ def robot_from_dh_file(path: Path) -> RobotModel:
     missing = [n for n in need if n not in names]
     if missing:
         raise ConfigError(f"{path}: missing columns {missing}; expected {need} with units")
-    units = {n: (_unit(h) if n != "type" else "") for n, h in zip(names, head)}
+    units = {n: (_unit(h) if n not in _UNITLESS else "") for n, h in zip(names, head)}
     scale = {"deg": math.pi / 180, "rad": 1.0, "mm": 1.0, "m": 1000.0}
     out = []
+    map_rows: list[tuple[int, dict[str, str]]] = []  # (line, the map cells) of each joint row
     for k, r in enumerate(rows[1:], start=2):
         rec = dict(zip(names, (c.strip() for c in r)))
         kind = rec["type"]
+        cells = {n: rec[n] for n in MAP_COLUMNS if rec.get(n)}
+        if kind == "fixed" and cells:
+            raise ConfigError(f"{path}, line {k}: a fixed row has no joint; leave {', '.join(cells)} empty")
+        if kind != "fixed":
+            map_rows.append((k, cells))
         vals = {}
         for n in need[1:]:
             u = units[n]
@@ -134,7 +155,42 @@ def robot_from_dh_file(path: Path) -> RobotModel:
             if not math.isfinite(vals[n]):
                 raise ConfigError(f"{path}, line {k}: {n} must be a finite number, got {rec[n]!r}") from None
         out.append((kind, vals["theta"], vals["d"], vals["a"], vals["alpha"], vals["lower"], vals["upper"]))
-    return robot_from_dh(out, conv, name=path.name.split(".")[0])
+    model = robot_from_dh(out, conv, name=path.name.split(".")[0])
+    return model, _dh_joint_map(path, model, map_rows, units.get("offset") or "deg|mm", scale)
+
+
+def _dh_joint_map(path: Path, model: RobotModel, map_rows: list[tuple[int, dict[str, str]]], offset_unit: str,
+                  scale: dict[str, float]) -> JointMap:
+    """The joint map of a DH table's ``sign``, ``offset``, ``coupled_to``, ``k`` columns;
+    ``coupled_to`` names a joint by its number among the joint rows (``2``, ``J2`` or ``A2``)."""
+    names = tuple(model.transforms[i].name for i in model.joint_transforms)
+    a_unit, l_unit = offset_unit.split("|")[0], offset_unit.split("|")[-1]
+    for u in (a_unit, l_unit):
+        if u not in scale:
+            raise ConfigError(f"{path}: unknown unit {u!r} in column 'offset'; use deg|mm, rad|mm, deg|m ...")
+    entries: dict[int, dict] = {}
+    for j, (line, cells) in enumerate(map_rows):
+        e: dict = {}
+        for n in ("sign", "offset", "k"):
+            if n in cells:
+                try:
+                    e[n] = float(cells[n])
+                except ValueError:
+                    raise ConfigError(f"{path}, line {line}: {n} must be a number, got {cells[n]!r}") from None
+                if not math.isfinite(e[n]):
+                    raise ConfigError(f"{path}, line {line}: {n} must be a finite number, got {cells[n]!r}")
+        if "coupled_to" in cells:
+            text = cells["coupled_to"]
+            digits = text[1:] if text[:1] in "AJaj" else text
+            if not digits.isdigit() or not 1 <= int(digits) <= len(names) or int(digits) == j + 1:
+                raise ConfigError(f"{path}, line {line}: coupled_to = {text!r}: give the number of another joint "
+                                  f"row, 1 … {len(names)} (e.g. 2 for the second joint)")
+            e["other"] = int(digits) - 1
+        entries[j] = e
+    try:
+        return joint_map_from_file_units(names, model.joint_types, entries, scale[a_unit], scale[l_unit])
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
 
 
 def _axis_to_z(axis: np.ndarray) -> np.ndarray:
@@ -249,39 +305,83 @@ def _ancestors(link: str, into: dict[str, list[tuple[ET.Element, str]]]) -> dict
     return found
 
 
-def _urdf_chain(path: Path, root: ET.Element) -> tuple[str, dict[str, ET.Element]]:
-    """The root link and each link's joint towards the tip; refuses a loop, several roots and a
-    branch (a chain is never flattened: a dropped branch would drop its joints)."""
+def _leaves(link: str, out: dict[str, list[ET.Element]], child_of: dict[int, str]) -> list[str]:
+    """The links without a child joint below ``link`` (the tips a chain from it could end at)."""
+    leaves, stack = [], [link]
+    while stack:
+        here = stack.pop()
+        below = out.get(here, [])
+        if not below:
+            leaves.append(here)
+        stack.extend(child_of[id(j)] for j in reversed(below))
+    return leaves
+
+
+def _urdf_chain(path: Path, root: ET.Element, base: str | None = None,
+                tip: str | None = None) -> tuple[str, dict[str, ET.Element]]:
+    """The chain's first link and each of its links' joint towards the tip; refuses a loop,
+    several roots (without ``base``) and a branch without ``tip`` (a chain is never flattened:
+    a dropped branch would drop its joints)."""
     elements = root.findall("joint")
     edges = [(j, _urdf_link(path, j, "parent"), _urdf_link(path, j, "child")) for j in elements]
     _urdf_loop(path, edges)
     children = {c for _, _, c in edges}
-    roots = [link.get("name") for link in root.findall("link") if link.get("name") not in children]
-    if len(roots) != 1:
-        raise ConfigError(f"{path}: expected one root link, found {roots}")
+    link_names = [str(link.get("name")) for link in root.findall("link")]
+    known = set(link_names) | children | {p for _, p, _ in edges}
+    for flag, link in (("--base", base), ("--tip", tip)):
+        if link is not None and link not in known:
+            raise ConfigError(f"{path}: {flag} {link!r}: no such link; the links are "
+                              f"{', '.join(repr(n) for n in link_names)}")
     out: dict[str, list[ET.Element]] = {}
-    child_of = {}
+    child_of: dict[int, str] = {}
+    parent_joint: dict[str, tuple[ET.Element, str]] = {}
     for j, parent, child in edges:
         out.setdefault(parent, []).append(j)
         child_of[id(j)] = child
-    for link, js in out.items():
+        parent_joint[child] = (j, parent)
+    if base is None:
+        roots = [n for n in link_names if n not in children]
+        if len(roots) != 1:
+            raise ConfigError(f"{path}: expected one root link, found {roots}"
+                              f"{'; choose the chain with --base LINK' if len(roots) > 1 else ''}")
+        base = roots[0]
+    if tip is not None:  # the one path up from the tip to the base
+        chain: dict[str, ET.Element] = {}
+        here = tip
+        while here != base:
+            if here not in parent_joint:
+                raise ConfigError(f"{path}: --tip {tip!r} is not below --base {base!r}: the chain runs from the "
+                                  f"base link down to the tip; tips below {base!r}: "
+                                  f"{', '.join(repr(n) for n in _leaves(base, out, child_of))}")
+            j, parent = parent_joint[here]
+            chain[parent] = j
+            here = parent
+        return base, chain
+    chain, here = {}, base
+    while here in out:
+        js = out[here]
         if len(js) > 1:
             tips = []
             for j in js:  # the tip each branch ends at (the first, where it branches again)
-                here = child_of[id(j)]
-                while len(out.get(here, [])) == 1:
-                    here = child_of[id(out[here][0])]
-                tips.append(f"{here!r} (joint {_joint_name(j)!r})")
-            raise ConfigError(f"{path}: the chain branches at link {link!r} into joints {_names_of(js)}, towards "
-                              f"{' and '.join(tips)}; the station calibrates one serial chain from {roots[0]!r} to "
-                              "the flange: keep the branch that ends at the flange and delete the other "
-                              "branches' joints and links")
-    return str(roots[0]), {link: js[0] for link, js in out.items()}
+                end = child_of[id(j)]
+                while len(out.get(end, [])) == 1:
+                    end = child_of[id(out[end][0])]
+                tips.append(f"{end!r} (joint {_joint_name(j)!r})")
+            leaves = _leaves(base, out, child_of)
+            raise ConfigError(f"{path}: the chain branches at link {here!r} into joints {_names_of(js)}, towards "
+                              f"{' and '.join(tips)}; the station calibrates one serial chain from {base!r} to "
+                              f"the flange: choose it with --tip LINK, one of {', '.join(repr(n) for n in leaves)} "
+                              f"(and --base LINK for another start), or keep the branch that ends at the flange and "
+                              f"delete the other branches' joints and links")
+        chain[here] = js[0]
+        here = child_of[id(js[0])]
+    return base, chain
 
 
-def robot_from_urdf(path: Path) -> RobotModel:
-    """Model of the serial chain in a URDF file: one chain from the root link to the tip
-    (a loop or a branch is refused, naming the joints).
+def robot_from_urdf(path: Path, base: str | None = None, tip: str | None = None) -> RobotModel:
+    """Model of the serial chain in a URDF file: from ``base`` (default: the root link) to
+    ``tip`` (default: the end of an unbranched chain; a branch without ``tip`` is refused,
+    naming the tips it could use; a loop is refused, naming its joints).
 
     Every joint needs ``<parent link>`` and ``<child link>``; ``<origin>`` (xyz, rpy) and
     ``<axis>`` are optional with the URDF defaults (identity, x axis). A revolute or prismatic
@@ -291,7 +391,7 @@ def robot_from_urdf(path: Path) -> RobotModel:
         root = ET.parse(path).getroot()
     except ET.ParseError as exc:
         raise ConfigError(f"{path}: not valid XML ({exc})") from None
-    base, joints = _urdf_chain(path, root)
+    base, joints = _urdf_chain(path, root, base, tip)
     link, carry = base, np.eye(4)
     specs, poses, limits = [TransformSpec("R")], [np.zeros(6)], []
     while link in joints:
@@ -331,7 +431,8 @@ def robot_from_urdf(path: Path) -> RobotModel:
             raise ConfigError(f"{path}: joint {j.get('name')!r} of type {kind!r} is not supported")
         link = _urdf_link(path, j, "child")
     if len(specs) == 1:
-        raise ConfigError(f"{path}: no moving joints found")
+        raise ConfigError(f"{path}: no moving joints found between links {base!r} and {link!r}"
+                          f"{'' if tip is None else '; check --base and --tip'}")
     specs.append(TransformSpec("K"))
     poses.append(matrix_to_pose(carry))
     return RobotModel(root.get("name", path.stem), tuple(specs), np.concatenate(poses), np.array(limits))

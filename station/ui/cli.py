@@ -22,6 +22,7 @@ from typing import NoReturn
 from station.errors import ConfigError, Outcome, StationError
 from station.ui.output import guarded_streams
 from station.ui.stop_signals import catch_stop_signals
+from station.ui.warning_policy import station_warnings
 
 #: the commands that run a session: their SIGTERM and SIGINT are caught from main()'s first line
 SESSION_COMMANDS = ("calibrate", "recheck")
@@ -71,6 +72,15 @@ def _add_cell(p):
 
 def _add_robot(p):
     p.add_argument("--robot", default="sr800", help="built-in robot name or robot file (default sr800)")
+    _add_chain(p)
+
+
+def _add_chain(p, short: bool = True):
+    """``--base LINK`` / ``--tip LINK``: the chain of a URDF robot (``--base-link``/``--tip-link``
+    where ``--base`` already means the robot base frame)."""
+    base, tip = (["--base", "--base-link"], ["--tip", "--tip-link"]) if short else (["--base-link"], ["--tip-link"])
+    p.add_argument(*base, dest="base_link", metavar="LINK", help="URDF: the link the chain starts at (default the root)")
+    p.add_argument(*tip, dest="tip_link", metavar="LINK", help="URDF: the link the chain ends at (needed where it branches)")
 
 
 def _add_prefs(p):
@@ -107,6 +117,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="distance objective: which pairs of points (default cap)")
     p.add_argument("--max-pairs", type=int, default=20_000, help="distance objective: the cap (default 20000)")
     p.add_argument("--output", "-o", help="write the identified robot file here")
+    p.add_argument("--tool", choices=["file", "unknown"], default=None,
+                   help="unknown: fit the tool/marker point too (a reflector or marker offset); file: hold the robot "
+                        "file's (default: file, or unknown where the robot file has [tool] unknown = true)")
+    p.add_argument("--loss", choices=["linear", "huber"], default="linear",
+                   help="huber: robust fit for outliers, listing the rows it down-weighted (default linear)")
     _add_prefs(p)
     p.add_argument("--json", action="store_true")
     p.set_defaults(func="station.ui.commands_core:cmd_identify")
@@ -115,7 +130,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("model", help="identified robot file (or built-in robot)")
     p.add_argument("data", help="measurement CSV (docs/data-files.md)")
     p.add_argument("--robot", default=None, help="nominal robot shown beside (default: the model's name)")
+    _add_chain(p)
     p.add_argument("--sigma-position", type=float, default=15.0, help="µm (default 15), for the registration check")
+    p.add_argument("--calibration", metavar="DATA",
+                   help="the measurement CSV the model was fitted on: model and nominal are registered on it")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func="station.ui.commands_core:cmd_validate")
 
@@ -124,6 +142,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--format", choices=["mdh", "dh", "urdf", "toml"], required=True)
     p.add_argument("--output", "-o", required=True, help="file to write")
     p.add_argument("--base", action="store_true", help="robot base frame (leave out the set-up R)")
+    _add_chain(p, short=False)
     p.add_argument("--json", action="store_true")
     p.set_defaults(func="station.ui.commands_core:cmd_export_model")
 
@@ -131,6 +150,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("model", help="built-in robot name or robot file")
     p.add_argument("joints", help="joint CSV with units")
     p.add_argument("--base", action="store_true", help="robot base frame (leave out the set-up R)")
+    _add_chain(p, short=False)
     p.add_argument("--json", action="store_true")
     p.set_defaults(func="station.ui.commands_core:cmd_predict")
 
@@ -144,6 +164,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--allow-singular", action="store_true", help="compensate targets near a singularity too")
     p.add_argument("--joint-offsets", action="store_true",
                    help="also fit joint-zero offsets only and show their accuracy beside the full model's")
+    _add_chain(p)  # the chain of whichever of MODEL and --robot is a URDF; --base is free here
     p.add_argument("--json", action="store_true")
     p.set_defaults(func="station.ui.commands_compensate:cmd_compensate")
 
@@ -179,6 +200,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--resume", type=int, metavar="RUN", help="continue an interrupted run")
     p.add_argument("--no-upload", action="store_true", help="identify and verify 'before' only")
     p.add_argument("--report", metavar="DIR", help="write the run's report here: one self-contained report.html (printable), report.md beside it")
+    p.add_argument("--operator", metavar="NAME", help="the operator the report names (default [cell] operator)")
     p.add_argument("--json", action="store_true", help="JSON summary on stdout")
     p.set_defaults(func="station.ui.commands_cell:cmd_calibrate")
 
@@ -213,13 +235,21 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("report", help="rebuild a run's report from the run database")
     p.add_argument("run", type=int)
     p.add_argument("--db", default="runs.sqlite")
-    p.add_argument("--output", "-o", metavar="DIR", help="report folder (default report-run-RUN)")
+    p.add_argument("--output", "-o", metavar="DIR", help="report folder (default report-DB-run-RUN beside the "
+                   "database, DB its file name without .sqlite)")
+    p.add_argument("--operator", metavar="NAME", help="the operator the report names (default: the one "
+                   "recorded with the run, else [cell] operator)")
     p.set_defaults(func="station.ui.commands_cell:cmd_report")
 
     p = sub.add_parser("export", help="export a run's measurements to CSV")
     p.add_argument("--db", default="runs.sqlite")
     p.add_argument("--run", type=int)
     p.add_argument("--tool", metavar="NAME", help="instead: the correction of the [[tool]] NAME (JSON, for its controller)")
+    p.add_argument("--force", action="store_true", help="with --tool: write a table beyond its max_interpolation_um "
+                   "(the warning is written into the file)")
+    p.add_argument("--format", choices=["record", "identify"], default="record",
+                   help="record: every measurement with its status (default); identify: the valid identification "
+                        "measurements as a pose file that 'station identify' reads")
     p.add_argument("output")
     p.set_defaults(func="station.ui.commands_cell:cmd_export")
 
@@ -254,7 +284,8 @@ def _main(words: list[str]) -> int:
             print(json.dumps(_usage_json(str(exc))), flush=True)
         return int(Outcome.CONFIG_ERROR)
     try:
-        return int(_command(args.func)(args) or 0)
+        with station_warnings():  # numpy's and scipy's warnings: the station's policy, not their two lines
+            return int(_command(args.func)(args) or 0)
     except StationError as exc:
         print(f"station: error: {exc}", file=sys.stderr)
         if getattr(args, "json", False):  # a script still gets one JSON object with the reason

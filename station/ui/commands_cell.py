@@ -1,7 +1,9 @@
 """The cell commands of ``station``: ``init``, ``check``, ``calibrate``, ``export``, ``tui``.
 
-``station calibrate`` prints progress on stderr and (with ``--json``) one JSON summary on
-stdout; its exit code is the run's :class:`~station.errors.Outcome`. Devices are opened by
+``station calibrate`` prints progress on stderr and its result on stdout, as Unix tools do
+(``station calibrate … > out.txt`` keeps the summary); with ``--json`` stdout holds only the one
+JSON summary and the readable one goes to stderr. Its exit code is the run's
+:class:`~station.errors.Outcome`. Devices are opened by
 :mod:`station.cell.session`, never here; a simulated cell is composed by
 :mod:`station.ui.simulated_cell`; the parser is :mod:`station.ui.cli`.
 """
@@ -39,6 +41,23 @@ def request_from(args: argparse.Namespace) -> CellRequest:
                        robot=getattr(args, "robot", None))
 
 
+#: what a phase does, for a phase announced without a detail of its own (no empty header)
+PHASE_DETAIL = {
+    "connect": "connecting the devices",
+    "plan": "planning the poses and checking every motion against the soft limits",
+    "measure": "measuring",
+    "identify": "identifying the parameters from the measurements",
+    "correct": "building the correction from the identified model",
+    "upload": "uploading the correction table",
+    "verify": "verifying",
+}
+
+
+def result_stream(args: argparse.Namespace) -> TextIO:
+    """Where a command's readable result goes: stdout, or stderr when ``--json`` owns stdout."""
+    return sys.stderr if getattr(args, "json", False) else sys.stdout
+
+
 def progress_printer(stream: TextIO) -> Callable[[ev.Event], None]:
     """Progress on ``stream``: a progress bar that redraws one line at a terminal, plain lines
     otherwise (a log file, a scheduler's journal)."""
@@ -55,7 +74,7 @@ def progress_printer(stream: TextIO) -> Callable[[ev.Event], None]:
     def emit(e: ev.Event) -> None:
         nonlocal bar_shown
         if isinstance(e, ev.PhaseChanged):
-            line(f"[{e.phase}] {e.detail}")
+            line(f"[{e.phase}] {e.detail or PHASE_DETAIL.get(e.phase, e.phase)}")
         elif isinstance(e, ev.RunStarted):
             line(f"run {e.run_id}: {e.n_steps} steps ({e.resumed_from} already on disk)")
         elif isinstance(e, ev.MeasurementRecorded):
@@ -77,9 +96,13 @@ def progress_printer(stream: TextIO) -> Callable[[ev.Event], None]:
 
 
 def print_summary(s: RunSummary, stream: TextIO) -> None:
-    """The human-readable end of a run (the same figures the TUI and the report show)."""
+    """The human-readable end of a run (the same figures the TUI and the report show). A failure's
+    reason also goes to stderr when the summary goes elsewhere: ``> out.txt`` still shows the
+    operator why the run stopped."""
     run = f"run {s.run_id}" if s.run_id is not None else "no run"
     print(f"\n{run}: {s.outcome.name} (exit code {s.exit_code})", file=stream)
+    if s.failure is not None and stream is not sys.stderr:
+        print(f"station: error: {s.failure.message}", file=sys.stderr)
     if s.failure is not None:
         print(f"  {s.failure.error_type}: {s.failure.message}", file=stream)
         if s.run_id is not None:
@@ -91,12 +114,7 @@ def print_summary(s: RunSummary, stream: TextIO) -> None:
     if idn is not None:
         print(f"  identified {idn.n_parameters} parameters from {idn.n_measurements} measurements, "
               f"RMS residual {idn.rms_residual_um:.1f} µm", file=stream)
-    for key in ("before", "after", "oracle"):
-        v = getattr(s, key)
-        if v is not None and v.n:
-            rp = "—" if v.rp_max_um is None else f"{v.rp_max_um:.1f}"
-            print(f"  {key:7s} RMS {v.rms_um:8.1f} µm  max {v.max_um:8.1f} µm  AP≤{v.ap_max_um:.1f} µm  "
-                  f"RP≤{rp} µm", file=stream)
+    print_error_table(s, stream)
     if s.upload_skipped:
         print("  upload skipped (--no-upload): no correction is active", file=stream)
     if s.upload is not None:
@@ -104,10 +122,28 @@ def print_summary(s: RunSummary, stream: TextIO) -> None:
     if s.gain is not None:
         extra = f"; after/oracle {s.after_vs_oracle:.2f}" if s.after_vs_oracle is not None else ""
         print(f"  improvement ×{s.gain:.1f}{extra}", file=stream)
+    if (recentred := s.recentring_text()) is not None:
+        print(f"  {recentred}", file=stream)
     if s.report:
         print(f"  report: {s.report}", file=stream)
     for note in s.notes:
         print(f"  note: {note}", file=stream)
+
+
+def print_error_table(s: RunSummary, stream: TextIO) -> None:
+    """Before / after / oracle as a table. AP and RP are ISO 9283's pose accuracy and
+    repeatability of one pose (station/core/iso9283.py); the summary holds the largest over
+    the held-out poses, so the columns say "worst pose" rather than a bound sign."""
+    rows = [(key, v) for key in ("before", "after", "oracle") if (v := getattr(s, key)) is not None and v.n]
+    if not rows:
+        return
+    print(f"  {'':7s} {'RMS µm':>9s} {'max µm':>9s}  {'AP µm, worst pose':>17s}  {'RP µm, worst pose':>17s}",
+          file=stream)
+    for key, v in rows:
+        rp = "—" if v.rp_max_um is None else f"{v.rp_max_um:.1f}"
+        print(f"  {key:7s} {v.rms_um:9.1f} {v.max_um:9.1f}  {v.ap_max_um:17.1f}  {rp:>17s}", file=stream)
+    print("  AP: ISO 9283 pose accuracy, |mean attained − commanded position| of a pose's cycles; "
+          "RP: its repeatability, l̄ + 3·S_l (— with one cycle per pose)", file=stream)
 
 
 def cmd_init(args: argparse.Namespace) -> int:
@@ -135,6 +171,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         raise ConfigError("give a configuration file, or --simulated for the built-in simulated cell")
     if args.report:  # checked before the first motion, not after an hour of measuring
         _check_report_dir(Path(args.report))
+    if args.operator is not None:  # likewise the name the report will carry
+        from station.ui.report_run import check_operator
+
+        check_operator(args.operator)
     control = RunControl()
     summary = stopped_before_start(request)
     if summary is None:
@@ -144,7 +184,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         from station.ui.report_run import report_for_run
 
         try:
-            path = report_for_run(args.db, summary.run_id, Path(args.report))
+            path = report_for_run(args.db, summary.run_id, Path(args.report), operator=args.operator)
             summary = summary.replace(report=str(path))
         except StationError as exc:  # e.g. the run stopped before there was anything to report
             summary = summary.replace(notes=(*summary.notes, f"no report: {exc}"))
@@ -152,7 +192,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             log = write_traceback(exc, Path(args.report))
             summary = summary.replace(notes=(*summary.notes, f"the report could not be written ({exc}); "
                                                               f"traceback in {log}; rebuild it with 'station report'"))
-    print_summary(summary, sys.stderr)
+    print_summary(summary, result_stream(args))
     if args.json:
         print(json.dumps(summary.to_json()), flush=True)
     return summary.exit_code
@@ -205,11 +245,34 @@ def cmd_plan(args: argparse.Namespace) -> int:
     cfg = load_config(args.config)
     p = preview(cfg, with_upload=not args.no_upload)
     head = check_head(cfg.head)  # the probe head's arrangement and sensitivity (docs/probe-head.md)
+    warnings = plan_warnings(p, cfg)
     if args.json:
-        print(json.dumps({**p.to_json(), "head": head.to_json()}))
+        print(json.dumps({**p.to_json(), "head": head.to_json(), "warnings": warnings}))
     else:
-        print("\n".join([*describe(p), *head.lines()]))
+        lines = describe(p)
+        at = next((i + 1 for i, ln in enumerate(lines) if ln.lstrip().startswith("predicted accuracy")), len(lines))
+        print("\n".join([*lines[:at], *(f"  warning: {w}" for w in warnings), *lines[at:], *head.lines()]))
     return 0
+
+
+#: a predicted σ after correction beyond this many times the measurement σ means the planned
+#: poses do not determine the parameters: the figure is an artefact of the plan, not an accuracy
+IMPLAUSIBLE_SIGMA_RATIO = 10.0
+
+
+def plan_warnings(p, cfg) -> list[str]:
+    """What in a plan preview is implausible, and which value to check (exit stays 0)."""
+    sig = cfg.identification.sigma_position_um
+    worst = p.sigma_position_um[2]
+    if not (math.isfinite(worst) and worst <= IMPLAUSIBLE_SIGMA_RATIO * sig):
+        n_points = len(cfg.point_ids)
+        return [f"the predicted position σ of up to {worst:.1f} µm is implausible for [identification]."
+                f"sigma_position_um = {sig:g} µm (over {IMPLAUSIBLE_SIGMA_RATIO:g}×): the planned poses do not "
+                f"determine the parameters (condition {p.condition:.3g}). Check [body]: {n_points} measuring "
+                f"point{'s' if n_points != 1 else ''} (give every corner of the body, from its CMM report), then "
+                f"[plan] elbows and [correction]'s workspace; also check that sigma_position_um is the probe "
+                f"head's σ in µm"]
+    return []
 
 
 def cmd_runs(args: argparse.Namespace) -> int:
@@ -244,15 +307,22 @@ def cmd_runs(args: argparse.Namespace) -> int:
     return 0
 
 
+def report_dir(db: str | Path, run_id: int) -> Path:
+    """A run's default report folder: ``report-<db name>-run-N/`` beside the run database (the
+    name without its suffix), so that two databases in one folder never share a report folder."""
+    path = Path(db).resolve()
+    return path.parent / f"report-{path.stem or path.name}-run-{run_id}"
+
+
 def cmd_report(args: argparse.Namespace) -> int:
     """Rebuild a run's report from the run database."""
     from station.ui.report_run import report_for_run
 
-    out = Path(args.output or f"report-run-{args.run}")
+    out = Path(args.output) if args.output else report_dir(args.db, args.run)
     _check_report_dir(out)
     with RunDB(args.db) as db:
         db.run(args.run)  # a clear error for a run that is not there
-    path = report_for_run(args.db, args.run, out)
+    path = report_for_run(args.db, args.run, out, operator=args.operator)
     print(f"report of run {args.run}: {path}")
     return 0
 
@@ -265,18 +335,28 @@ def cmd_export(args: argparse.Namespace) -> int:
         if getattr(args, "tool", None):  # a [[tool]]'s own correction (docs/correction.md, "Tools after the head")
             from station.cell.tools import tool_export
 
-            out = tool_export(db, run.id, args.tool)
+            out = tool_export(db, run.id, args.tool, force=getattr(args, "force", False))
             try:
                 Path(args.output).write_text(json.dumps(out), encoding="utf-8")
             except OSError as exc:
                 raise ConfigError(f"cannot write {args.output}: {exc.strerror or exc}; choose another path") from None
             what = f"table CRC-32 {out['table']['crc32']}" if "table" in out else "compensated targets"
             print(f"run {run.id}: tool {args.tool!r} correction ({what}) written to {args.output}")
+            if "warning" in out:
+                print(f"station: warning: {out['warning']}", file=sys.stderr)
             return 0
-        from station.cell.run_export import export_csv
+        if getattr(args, "force", False):
+            raise ConfigError("--force goes with --tool NAME")
+        from station.cell.run_export import export_csv, export_pose_file
 
+        if getattr(args, "format", "record") == "identify":
+            _, n, robot = export_pose_file(db, run.id, args.output)
+            print(f"run {run.id}: {n} identification measurements written to {args.output} as a pose file; "
+                  f"identify with: station identify {args.output} --robot {robot}")
+            return 0
         export_csv(db, run.id, args.output)
-    print(f"run {run.id} exported to {args.output}")
+    print(f"run {run.id} exported to {args.output} (every measurement with its status); for 'station identify' "
+          f"export a pose file: station export --db {args.db} --run {run.id} --format identify OUT.csv")
     return 0
 
 

@@ -17,7 +17,8 @@ numbers still match the program; its reason also goes to stderr (and ``--json``)
 code is 4 (UNREACHABLE).
 
 The nominal model — what the controller computes with — is ``--robot`` (default: the built-in
-robot of the model's name, as ``station validate`` does).
+robot of the model's name, as ``station validate`` does). ``--base-link``/``--tip-link`` choose
+the chain of whichever of the model and ``--robot`` is a URDF (docs/robot-file.md).
 """
 
 from __future__ import annotations
@@ -95,14 +96,29 @@ def read_targets(path: str | Path) -> tuple[np.ndarray, np.ndarray | None, list[
     return np.array(poses), (np.array(cfgs, dtype=int) if has_cfg else None), line_of
 
 
-def _nominal_for(model, robot_arg: str | None):
-    from station.io.robot_files import builtin_robots, load_robot
+def _chains(args) -> tuple[tuple[str | None, str | None], tuple[str | None, str | None]]:
+    """``(base, tip)`` for the model and for ``--robot``: a URDF's links go to the URDF (an
+    identified model is TOML, its nominal often the URDF it came from); where neither is one,
+    to the model, whose loader refuses them."""
+    chain = (getattr(args, "base_link", None), getattr(args, "tip_link", None))
+    none = (None, None)
+    model_urdf = str(args.model).endswith(".urdf")
+    robot_urdf = args.robot is not None and str(args.robot).endswith(".urdf")
+    return (chain if model_urdf or not robot_urdf else none), (chain if robot_urdf else none)
+
+
+def _nominal_for(model, robot_arg: str | None, jmap, chain: tuple[str | None, str | None] = (None, None)):
+    from station.io.robot_files import builtin_robots, load_mapped_robot
 
     name = robot_arg or model.name
     if robot_arg is None and name not in builtin_robots():
         raise ConfigError(f"model {model.name!r} is no built-in robot: give the controller's nominal robot "
                           f"file with --robot")
-    nominal = load_robot(name)
+    nominal, nominal_map = load_mapped_robot(name, *chain)
+    if not nominal_map.close_to(jmap):  # the joints written out must be the controller's, by one map
+        raise ConfigError(f"--robot {name}: its joint map ({'; '.join(nominal_map.describe()) or 'none'}) is not the "
+                          f"model's ({'; '.join(jmap.describe()) or 'none'}); give the nominal robot file the model "
+                          f"was identified from")
     if (tuple(t.joint for t in nominal.transforms) != tuple(t.joint for t in model.transforms)
             or nominal.n_params != model.n_params):
         raise ConfigError(f"--robot {name}: its chain ({nominal.n_joints} joints, {len(nominal.transforms)} "
@@ -117,11 +133,13 @@ def _out_header(model) -> list[str]:
              "correction_um", "correction_arcsec", "reason"])
 
 
-def _out_rows(model, res, n: int) -> list[list[str]]:
+def _out_rows(model, res, n: int, jmap) -> list[list[str]]:
+    """The output rows, the joints as the controller counts them (the robot file's joint map inverted)."""
     from station.core.transforms import matrix_to_pose
 
     rows = []
     ok = res.ok
+    q_controller = jmap.to_controller(res.joints)
     for i in range(n):
         if not ok[i]:
             rows.append([str(i + 1), res.status[i].value] + [""] * (len(_out_header(model)) - 3) + [res.reason[i]])
@@ -130,7 +148,7 @@ def _out_rows(model, res, n: int) -> list[list[str]]:
         vals = [f"{v:.6f}" for v in pose[:3]] + [f"{math.degrees(v):.9f}" for v in pose[3:]]
         cfg = [str(int(c)) if c != 0 else "" for c in res.config[i]]
         q = [f"{math.degrees(v):.9f}" if t == "revolute" else f"{v:.6f}"
-             for v, t in zip(res.joints[i], model.joint_types)]
+             for v, t in zip(q_controller[i], model.joint_types)]
         figs = [f"{res.residual_um[i]:.4f}", f"{res.residual_arcsec[i]:.4f}", f"{res.correction_um[i]:.3f}",
                 f"{res.correction_arcsec[i]:.3f}"]
         rows.append([str(i + 1), "ok", *vals, *cfg, *q, *figs, ""])
@@ -140,10 +158,11 @@ def _out_rows(model, res, n: int) -> list[list[str]]:
 def cmd_compensate(args) -> int:
     from station.core.compensation import compensated_targets
     from station.core.transforms import pose_to_matrix
-    from station.io.robot_files import load_robot
+    from station.io.robot_files import load_mapped_robot
 
-    model = load_robot(args.model)
-    nominal = _nominal_for(model, args.robot)
+    model_chain, robot_chain = _chains(args)
+    model, jmap = load_mapped_robot(args.model, *model_chain)
+    nominal = _nominal_for(model, args.robot, jmap, robot_chain)
     poses, cfgs, line_of = read_targets(args.targets)
     if cfgs is not None and nominal.is_scara and np.any(cfgs[:, [0, 2]] != 0):
         bad = int(np.argmax(np.any(cfgs[:, [0, 2]] != 0, axis=1)))
@@ -155,7 +174,7 @@ def cmd_compensate(args) -> int:
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(_out_header(nominal))
-    w.writerows(_out_rows(nominal, res, n))
+    w.writerows(_out_rows(nominal, res, n, jmap))
     Path(args.output).write_text(buf.getvalue(), encoding="utf-8")
     failures = [{"row": i + 1, "line": line_of[i], "status": s.value, "reason": r} for i, s, r in res.failures()]
     ok = res.ok
@@ -169,9 +188,9 @@ def cmd_compensate(args) -> int:
         "max_residual_arcsec": float(np.max(res.residual_arcsec[ok])) if ok.any() else None,
     }
     if args.joint_offsets:
-        summary["joint_offsets"] = _joint_offsets(nominal, model.nominal, res)
+        summary["joint_offsets"] = _joint_offsets(nominal, model.nominal, res, jmap)
     code = int(Outcome.UNREACHABLE) if failures else 0
-    summary["exit_code"] = code
+    summary["outcome"], summary["exit_code"] = Outcome(code).name, code
     for f in failures:
         print(f"station: row {f['row']} (line {f['line']}): {f['reason']}", file=sys.stderr)
     if args.json:
@@ -190,9 +209,12 @@ def cmd_compensate(args) -> int:
     return code
 
 
-def _joint_offsets(nominal, identified, res) -> dict:
-    """Joint-zero offsets fitted over the workspace, and their accuracy on the compensated targets
-    next to the full model's (predicted: the identified model is the robot)."""
+def _joint_offsets(nominal, identified, res, jmap) -> dict:
+    """Joint-zero offsets fitted over the workspace (given as the controller's joints count them),
+    and their accuracy on the compensated targets next to the full model's (predicted: the
+    identified model is the robot)."""
+    import dataclasses
+
     from station.core.joint_offsets import fit_joint_offsets, offset_accuracy
     from station.core.kinematics import forward
     from station.core.poses import spread_joints
@@ -200,7 +222,7 @@ def _joint_offsets(nominal, identified, res) -> dict:
     q = spread_joints(nominal, 500, np.random.default_rng(0))
     fit = fit_joint_offsets(nominal, identified, q)
     ok = res.ok
-    out = fit.to_dict()
+    out = dataclasses.replace(fit, offsets=jmap.delta_to_controller(fit.offsets)).to_dict()
     if ok.any():
         targets = forward(nominal, res.joints[ok], identified, setup=False)  # the wanted poses (base frame)
         acc = offset_accuracy(nominal, identified, fit.offsets, targets, configuration=res.config[ok])

@@ -30,6 +30,15 @@ def _fmt_sigma(name: str, sigma: float) -> str:
     return f"{sigma * 1e3:.2f} µm"
 
 
+def _robot(args, name):
+    """``(model, joint map)`` of the robot ``name``; a URDF's chain from ``--base``/``--tip``.
+    Controller joints from data files go through the map (``jmap.to_model``) before the model
+    sees them (docs/robot-file.md, "Joint map")."""
+    from station.io.robot_files import load_mapped_robot
+
+    return load_mapped_robot(name, getattr(args, "base_link", None), getattr(args, "tip_link", None))
+
+
 def _print_json(obj) -> None:
     print(json.dumps(obj, indent=2, default=lambda o: o.tolist() if isinstance(o, np.ndarray) else str(o)))
 
@@ -58,14 +67,13 @@ def cmd_analyze(args) -> int:
     from station.core.measurements import synthetic_set
     from station.core.poses import spread_joints
     from station.io.datafile import joints_from_table, read_table
-    from station.io.robot_files import load_robot
 
     _check_analyze_args(args)
-    model = load_robot(args.robot)
+    model, jmap = _robot(args, args.robot)
     rng = np.random.default_rng(args.seed)
     objective = args.objective
     if args.joints:
-        q = joints_from_table(read_table(args.joints), model)
+        q = jmap.to_model(joints_from_table(read_table(args.joints), model))
     else:
         q = spread_joints(model, args.poses, rng, planar=args.planar)
     pairs = (make_pairs(len(q), "cap", cap=args.distances, seed=args.seed) if objective == "distance" else None)
@@ -131,11 +139,23 @@ def _measurement_set(args, model, kind, q, measured):
     raise ConfigError(f"unknown objective {objective!r}; use pose, position or distance")
 
 
+def _succeeded(d: dict) -> dict:
+    """``d`` with ``outcome`` and ``exit_code`` first, as every ``--json`` object carries them."""
+    return {"outcome": "SUCCESS", "exit_code": 0, **d}
+
+
+def _item_label(res, i: int) -> str:
+    """Row number(s) of measurement ``i`` of a result (a distance: its two rows)."""
+    if res.kind == "distance":
+        return "{}–{}".format(*(int(r) + 1 for r in res.item_rows(i)))
+    return str(i + 1)
+
+
 def identify_report(model, res, data, objective: str, pairs_strategy: str | None) -> dict:
     """Everything ``identify`` says about a fit, as JSON-ready numbers with units in the keys."""
     ident = res.identifiability
     out = {
-        "robot": model.name, "objective": objective, "n_measurements": data.n_items,
+        "robot": model.name, "objective": objective, "n_measurements": int(res.residuals.shape[0]),
         "units": {"lengths": "mm", "angles": "rad (value_deg beside)", "sigma": "µm / arc seconds",
                   "residuals": "mm (pose rows: mm, mm, mm, rad, rad, rad)"},
         "converged": res.converged, "evaluations": res.iterations,
@@ -156,36 +176,65 @@ def identify_report(model, res, data, objective: str, pairs_strategy: str | None
         "unit_check": (res.registration.unit_check if res.registration is not None
                        else "distances compared with the nominal model's: consistent"),
         "suspected_outlier_rows": [i + 1 for i in res.outliers],
+        "loss": res.loss,
+        "down_weighted": [{"rows": [int(r) + 1 for r in res.item_rows(i)], "weight": w} for i, w in res.downweighted],
+        "dropped_pairs": [[a + 1, b + 1] for a, b in res.dropped_pairs],
         "outliers": list(res.outliers),
         "notes": list(res.notes),
         "residuals": res.residuals.tolist(),
     }
     if objective == "distance":
-        out["pairs"] = {"strategy": pairs_strategy, "count": int(data.n_items),
+        out["pairs"] = {"strategy": pairs_strategy, "count": int(res.residuals.shape[0]),
                         "points": int(data.joints.shape[0])}
     return out
+
+
+def _tool_unknown(args) -> tuple[bool, list[str]]:
+    """Whether identify fits the tool point: ``--tool unknown|file``, else the robot file's
+    ``[tool] unknown``; and the note that says the file chose it."""
+    from station.io.robot_files import tool_marked_unknown
+
+    tool = getattr(args, "tool", None)
+    if tool is not None:
+        return tool == "unknown", []
+    if not tool_marked_unknown(args.robot):
+        return False, []
+    return True, [f"{args.robot}: [tool] unknown = true: the tool point is fitted (--tool file holds it)"]
 
 
 def cmd_identify(args) -> int:
     from station.core.identification import identify
     from station.core.model import robot_to_toml
-    from station.io.datafile import read_measurements
-    from station.io.robot_files import load_robot
+    from station.io.datafile import read_measurement_file
+    from station.io.robot_files import joint_map_toml
 
-    model = load_robot(args.robot)
-    kind, q, measured = read_measurements(args.data, model)
+    model, jmap = _robot(args, args.robot)
+    mf = read_measurement_file(args.data, model)
+    kind, q, measured = mf.kind, jmap.to_model(mf.joints), mf.measured
     objective, data = _measurement_set(args, model, kind, q, measured)
-    res = identify(model, data, prefer=_names(args.prefer) or None, fix=_names(args.fix),
-                   exclude=_names(args.exclude))
+    tool_unknown, tool_note = _tool_unknown(args)
+    start = None
+    if tool_unknown and objective == "distance":  # distances have no frame: the tool point from the points
+        from station.core.tool_frame import fit_marker_offset
+
+        start = np.array(model.nominal)
+        start[-6:-3] = fit_marker_offset(model, q, measured[:, :3, 3] if kind == "pose" else measured).offset_mm
+    res = identify(model, data, start=start, prefer=_names(args.prefer) or None, fix=_names(args.fix),
+                   exclude=_names(args.exclude), tool_unknown=tool_unknown,
+                   loss=getattr(args, "loss", "linear"))
+    file_notes = [f"{args.data}: {n}" for n in mf.notes] + tool_note
     if args.output:
-        Path(args.output).write_text(robot_to_toml(model, res.params, angle_unit="rad"))
+        Path(args.output).write_text(robot_to_toml(model, res.params, angle_unit="rad")
+                                     + joint_map_toml(jmap, model, angle_unit="rad"))
     if args.json:
         rep = identify_report(model, res, data, objective, args.pairs if objective == "distance" else None)
         rep["output"] = args.output
-        _print_json(rep)
+        rep["joint_map"] = jmap.describe()
+        rep["notes"] = file_notes + rep["notes"]
+        _print_json(_succeeded(rep))
         return 0
     ident = res.identifiability
-    print(f"identified {len(res.chosen)} of {model.n_params} parameters of {model.name} from {data.n_items} "
+    print(f"identified {len(res.chosen)} of {model.n_params} parameters of {model.name} from {res.residuals.shape[0]} "
           f"{objective} measurements{f' ({args.pairs} pairs of {len(q)} points)' if objective == 'distance' else ''} "
           f"({res.iterations} evaluations, {'converged' if res.converged else 'NOT converged: ' + res.message})")
     if res.registration is not None:
@@ -205,8 +254,14 @@ def cmd_identify(args) -> int:
         print(f"left out ({len(ident.dependencies)}), held at their values; their effect merges into:")
         for d in ident.dependencies:
             print(f"  {d.describe()}")
-    for note in res.notes:
+    for note in file_notes + list(res.notes):
         print(f"note: {note}")
+    if res.downweighted:
+        print("down-weighted by the robust loss (" + ("pair of rows" if objective == "distance" else "row")
+              + ": weight): " + ", ".join(f"{_item_label(res, i)}: {w:.2f}" for i, w in res.downweighted[:20])
+              + (f" … ({len(res.downweighted)} in all)" if len(res.downweighted) > 20 else ""))
+    if not jmap.is_identity:
+        print(f"joint map applied to the file's joints (rad, mm): {'; '.join(jmap.describe())}")
     if res.outliers:
         print(f"suspected outliers (rows): {', '.join(str(i + 1) for i in res.outliers)}")
     else:
@@ -261,36 +316,92 @@ def _iso_repeats(q, e_pos, measured_pos) -> list[dict]:
     return out
 
 
+#: a model's own set-up is taken as this data's frame unless it misses them by more than this
+#: factor times (plus 1 mm) what the best rigid alignment leaves: then the set-up is not known
+SETUP_UNKNOWN_FACTOR = 10.0
+#: orientation errors beyond this [rad] (1°) are no calibration error but an orientation the
+#: model's fit did not determine (fitted on positions or distances)
+ORIENTATION_UNKNOWN_RAD = np.radians(1.0)
+
+
+def _calibration_frame(args, model):
+    """``(joints, positions)`` of ``--calibration`` for ``model`` (None without it)."""
+    from station.io.datafile import read_measurement_file
+
+    if not getattr(args, "calibration", None):
+        return None
+    cf = read_measurement_file(args.calibration, model)
+    return cf.joints, (cf.measured[:, :3, 3] if cf.kind == "pose" else cf.measured)
+
+
+def _check_own_setup(model, q, pos, e_pos, kind: str) -> None:
+    """Refuse a model whose set-up does not place it in the data's frame (see SETUP_UNKNOWN_FACTOR)."""
+    from station.core.registration import rigid_residual_mm
+
+    own = float(np.sqrt(np.mean(np.sum(e_pos**2, axis=1))))
+    rigid = rigid_residual_mm(model, q, pos)
+    if own > SETUP_UNKNOWN_FACTOR * rigid + 1.0:
+        raise ConfigError(
+            f"the model's set-up is unknown for these {kind} data: with the set-up it carries it misses them by "
+            f"{own:.4g} mm RMS, after a rigid alignment by {rigid:.3g} mm. A model fitted on distances carries no "
+            f"set-up (distances do not fix it), nor does one fitted in another instrument frame. Give "
+            f"--calibration CALIB.csv, the data it was fitted on (measured in this frame), to register it there")
+
+
 def cmd_validate(args) -> int:
     from station.core.registration import register
-    from station.io.datafile import read_measurements
-    from station.io.robot_files import load_robot
+    from station.io.datafile import read_measurement_file
 
-    model = load_robot(args.model)
-    kind, q, measured = read_measurements(args.data, model)
+    model, jmap = _robot(args, args.model)
+    mf = read_measurement_file(args.data, model)
+    kind, q_controller, measured = mf.kind, mf.joints, mf.measured
+    q = jmap.to_model(q_controller)
     pos = measured[:, :3, 3] if kind == "pose" else measured
-    e_pos, e_ang = _errors(model, q, kind, measured)
+    sigma = args.sigma_position * 1e-3
+    if not (np.isfinite(sigma) and sigma > 0):
+        raise ConfigError("--sigma-position must be a positive number of µm")
+    calib = _calibration_frame(args, model)
+    notes = [f"{args.data}: {n}" for n in mf.notes]
+    if calib is not None:  # the model registered on its calibration data, never on the held-out rows
+        reg_m = register(model, jmap.to_model(calib[0]), calib[1], sigma, params=model.nominal)
+        e_pos, e_ang = _errors(model, q, kind, measured, setup_pose=reg_m.setup_pose)
+        setup = f"registered on {args.calibration}"
+    else:
+        e_pos, e_ang = _errors(model, q, kind, measured)
+        _check_own_setup(model, q, pos, e_pos, kind)
+        setup = "the model's own (identified)"
+    if e_ang is not None and np.sqrt(np.mean(np.sum(e_ang**2, axis=1))) > ORIENTATION_UNKNOWN_RAD:
+        notes.append(f"orientation not compared: the model misses it by "
+                     f"{np.degrees(np.sqrt(np.mean(np.sum(e_ang**2, axis=1)))):.1f}° RMS, which a model fitted on "
+                     f"positions or distances does not determine; position errors only")
+        e_ang = None
     result = {"model": model.name, "data": str(args.data), "kind": kind, "rows": len(q),
-              "units": {"position": "µm", "orientation": "arc seconds"},
+              "units": {"position": "µm", "orientation": "arc seconds"}, "setup": setup,
               "model_errors": _summary(e_pos, e_ang),
               "per_row": [{"row": i + 1, "position_um": float(np.linalg.norm(e_pos[i]) * 1e3),
                            **({"orientation_arcsec": float(np.linalg.norm(e_ang[i]) / ARCSEC)} if e_ang is not None else {})}
                           for i in range(len(q))],
-              "iso9283_repeats": _iso_repeats(q, e_pos, pos)}
+              "iso9283_repeats": _iso_repeats(q, e_pos, pos), "notes": notes}
     nominal_name = args.robot or model.name
     nominal = None
-    try:
-        nominal = load_robot(nominal_name)
+    try:  # the nominal robot file has its own joint map: the data's joints go through it
+        nominal, nominal_map = _robot(args if str(nominal_name).endswith(".urdf") else None, nominal_name)
     except ConfigError:
         result["nominal"] = f"no nominal robot {nominal_name!r}; give --robot"
     if nominal is not None:
         if nominal.n_joints != model.n_joints:
             raise ConfigError(f"--robot {nominal_name}: {nominal.n_joints} joints, the model has {model.n_joints}")
-        reg = register(nominal, q, pos, args.sigma_position * 1e-3)
-        n_pos, n_ang = _errors(nominal, q, kind, measured, setup_pose=reg.setup_pose)
+        q_nominal = nominal_map.to_model(q_controller)
+        if calib is not None:  # registered the same way as the model: on the calibration data
+            nominal_setup = register(nominal, nominal_map.to_model(calib[0]), calib[1], sigma).setup_pose
+        else:  # the model's set-up: registering on the held-out rows would hide part of its error
+            nominal_setup = np.asarray(model.nominal[:6])
+        n_pos, n_ang = _errors(nominal, q_nominal, kind, measured, setup_pose=nominal_setup)
         result["nominal"] = nominal.name
-        result["nominal_errors"] = {**_summary(n_pos, n_ang), "registered": True}
+        result["nominal_errors"] = {**_summary(n_pos, n_ang if e_ang is not None else None),
+                                    "registered": True, "setup": setup}
         result["improvement"] = result["nominal_errors"]["rms_position_um"] / max(result["model_errors"]["rms_position_um"], 1e-12)
+    result = _succeeded(result)
     if args.json:
         _print_json(result)
         return 0
@@ -302,7 +413,7 @@ def cmd_validate(args) -> int:
         print(f"  {'model, orientation':28s} {m['rms_orientation_arcsec']:9.1f}″ {m['max_orientation_arcsec']:9.1f}″")
     if "nominal_errors" in result:
         n = result["nominal_errors"]
-        print(f"  {'nominal (registered), pos.':28s} {n['rms_position_um']:8.1f}µm {n['max_position_um']:8.1f}µm")
+        print(f"  {'nominal (same set-up), pos.':28s} {n['rms_position_um']:8.1f}µm {n['max_position_um']:8.1f}µm")
         if e_ang is not None:
             print(f"  {'nominal, orientation':28s} {n['rms_orientation_arcsec']:9.1f}″ {n['max_orientation_arcsec']:9.1f}″")
         print(f"  improvement (RMS position): {result['improvement']:.1f}×")
@@ -312,6 +423,9 @@ def cmd_validate(args) -> int:
         print(f"  ISO 9283 pose at rows {r['rows']}: AP {r['AP_um']:.1f} µm, RP {r['RP_um']:.1f} µm")
     worst = sorted(result["per_row"], key=lambda r: -r["position_um"])[:5]
     print("  worst rows: " + ", ".join(f"{r['row']}: {r['position_um']:.1f} µm" for r in worst))
+    print(f"  set-up: {setup}")
+    for note in notes:
+        print(f"note: {note}")
     return 0
 
 
@@ -319,22 +433,29 @@ def cmd_validate(args) -> int:
 
 def cmd_export_model(args) -> int:
     from station.io.robot_export import export_model
-    from station.io.robot_files import load_robot
+    from station.io.robot_files import joint_map_toml
 
-    model = load_robot(args.model)
+    model, jmap = _robot(args, args.model)
     res = export_model(model, args.format, setup=not args.base)
-    Path(args.output).write_text(res.text)
+    notes = list(res.notes)
+    text = res.text
+    if args.format == "toml":
+        text += joint_map_toml(jmap, model, angle_unit="rad")
+    elif not jmap.is_identity:
+        notes.append(f"the joint map ({'; '.join(jmap.describe())}) is not written in {args.format.upper()}: the "
+                     f"file's joints are the model's; export --format toml to keep it")
+    Path(args.output).write_text(text)
     if args.json:
         _print_json({"model": model.name, "format": args.format, "output": args.output,
                      "frame": "base" if args.base else "measurement", "exact": res.exact,
                      "max_position_difference_um": res.max_position_um,
-                     "max_orientation_difference_arcsec": res.max_angle_arcsec, "notes": list(res.notes)})
+                     "max_orientation_difference_arcsec": res.max_angle_arcsec, "notes": notes})
         return 0
     print(f"{model.name} written to {args.output} as {args.format.upper()}"
           f" ({'robot base frame, set-up R left out' if args.base else 'with the set-up R'})")
     print(f"re-imported: forward kinematics differ by at most {res.max_position_um:.3g} µm and "
           f"{res.max_angle_arcsec:.3g}″ over the workspace ({'exact' if res.exact else 'NOT exact'})")
-    for n in res.notes:
+    for n in notes:
         print(f"note: {n}")
     return 0
 
@@ -345,14 +466,13 @@ def cmd_predict(args) -> int:
     from station.core.kinematics import forward
     from station.core.transforms import matrix_to_pose
     from station.io.datafile import joints_from_table, read_table
-    from station.io.robot_files import load_robot
 
-    model = load_robot(args.model)
-    q = joints_from_table(read_table(args.joints), model)
+    model, jmap = _robot(args, args.model)
+    q = jmap.to_model(joints_from_table(read_table(args.joints), model))
     poses = matrix_to_pose(forward(model, q, setup=not args.base))
     if args.json:
-        _print_json({"robot": model.name, "frame": "base" if args.base else "measurement",
-                     "poses_mm_rad": poses.tolist()})
+        _print_json(_succeeded({"robot": model.name, "frame": "base" if args.base else "measurement",
+                                "poses_mm_rad": poses.tolist()}))
         return 0
     print("x [mm],y [mm],z [mm],roll [deg],pitch [deg],yaw [deg]")
     for p in poses:
@@ -364,9 +484,8 @@ def cmd_predict(args) -> int:
 
 def cmd_study(args) -> int:
     from station.core.study import chapter_studies
-    from station.io.robot_files import load_robot
 
-    model = load_robot(args.robot)
+    model = _robot(args, args.robot)[0]  # random joints of the model: a joint map does not change them
     n_sets = min(args.sets, 200) if getattr(args, "quick", False) else args.sets
     if n_sets < 3:
         raise ConfigError("--sets must be at least 3 Monte Carlo data sets")

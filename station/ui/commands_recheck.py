@@ -18,7 +18,13 @@ from station.cell.runcontrol import RunControl
 from station.cell.session import CellRequest
 from station.cell.summary import RunSummary
 from station.errors import ConfigError
-from station.ui.commands_cell import print_summary, progress_printer, safe_stop_on_signals, stopped_before_start
+from station.ui.commands_cell import (
+    print_summary,
+    progress_printer,
+    result_stream,
+    safe_stop_on_signals,
+    stopped_before_start,
+)
 from station.ui.simulated_cell import load_cell
 
 
@@ -73,12 +79,12 @@ def cmd_recheck(args: argparse.Namespace) -> int:
             summary = run_recheck_session(request, progress_printer(sys.stderr), control,
                                           RecheckOptions(baseline=args.baseline, poses=args.poses), load=load_cell)
     if isinstance(summary, RunSummary):
-        print_summary(summary, sys.stderr)
+        print_summary(summary, result_stream(args))
         out = summary.to_json()
         if summary.failure is not None and summary.run_id is not None:
             out["kind"] = "recheck"
     else:
-        print_recheck(summary, sys.stderr)
+        print_recheck(summary, result_stream(args))
         out = summary.to_json()
     if args.json:
         print(json.dumps(out), flush=True)

@@ -19,7 +19,8 @@ from station.cell.summary import RunSummary
 from station.core.units import ARCSEC, UM
 from station.errors import ConfigError
 
-__all__ = ["ReportData", "TrendRun", "HTML_NAME", "MARKDOWN_NAME"]
+__all__ = ["ReportData", "TrendRun", "IsoPose", "TestConditions", "Acceptance", "Traceability", "HTML_NAME",
+           "MARKDOWN_NAME"]
 
 HTML_NAME = "report.html"
 MARKDOWN_NAME = "report.md"
@@ -77,6 +78,107 @@ class TrendRun:
         return self.drift_rms_um if self.is_recheck else self.rms_after_um
 
 
+def _opt(v: Any) -> float | None:
+    return None if v is None else float(v)
+
+
+@dataclass(frozen=True)
+class IsoPose:
+    """One held-out verification pose as ISO 9283 reports it: where it is (the commanded TCP
+    position in the calibration body's frame [mm]), and per series (before / after correction)
+    the valid cycles, the pose accuracy AP and the pose repeatability RP [µm]. RP needs two
+    cycles (None with one); a series not measured has ``n = 0`` and None figures."""
+
+    point: str
+    elbow: int
+    target_mm: tuple[float, float, float]
+    n_before: int = 0
+    ap_before_um: float | None = None
+    rp_before_um: float | None = None
+    n_after: int = 0
+    ap_after_um: float | None = None
+    rp_after_um: float | None = None
+
+    def __post_init__(self) -> None:
+        target = tuple(float(v) for v in self.target_mm)
+        if len(target) != 3:
+            raise ConfigError(f"report: pose {self.point}: target_mm needs x, y, z, got {len(target)} values")
+        object.__setattr__(self, "target_mm", target)
+        object.__setattr__(self, "elbow", int(self.elbow))
+        for attr in ("ap_before_um", "rp_before_um", "ap_after_um", "rp_after_um"):
+            object.__setattr__(self, attr, _opt(getattr(self, attr)))
+
+
+@dataclass(frozen=True)
+class TestConditions:
+    """How the test was made, as the report's "test conditions" state it: the identification's
+    poses and visits, the held-out poses and their cycles, speed, settling, the load on the
+    flange, the warm-up and the temperature (None / "": not recorded)."""
+
+    __test__ = False  # not a pytest test class, for all its name
+
+    identification_poses: int  # distinct (point, elbow) measured for the identification
+    identification_measurements: int  # planned identification measurements (every visit and direction)
+    repeats: int  # visits per identification pose
+    verification_poses: int
+    verification_cycles: int  # ISO 9283 cycles per held-out pose, as planned
+    speed: float  # fraction of the robot's maximum speed
+    settle_s: float
+    samples: int  # probe snapshots averaged per reading
+    elbows: Sequence[int] = (1, -1)
+    both_directions: bool = False
+    load: str = ""  # what is on the flange (the probe head) and where its frame is
+    load_kg: float | None = None
+    warmup: str = ""  # what the warm-up did ("" : none configured)
+    temperature_c: float | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "elbows", tuple(int(e) for e in self.elbows))
+        object.__setattr__(self, "load_kg", _opt(self.load_kg))
+        object.__setattr__(self, "temperature_c", _opt(self.temperature_c))
+
+
+@dataclass(frozen=True)
+class Acceptance:
+    """What the run is judged against: the improvement ratio the outcome requires
+    (``min_gain``), and ``[verification]``'s per-pose limits on AP and RP after correction [µm]
+    (None: not specified)."""
+
+    min_gain: float
+    max_ap_um: float | None = None
+    max_rp_um: float | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "min_gain", float(self.min_gain))
+        object.__setattr__(self, "max_ap_um", _opt(self.max_ap_um))
+        object.__setattr__(self, "max_rp_um", _opt(self.max_rp_um))
+
+
+@dataclass(frozen=True)
+class Traceability:
+    """Who and what the record traces to ("": not recorded): the robot's serial and the
+    controller (``[cell]``), the operator and where the name came from, the probe head and the
+    body with their CMM certificates (ID, date), and the software (``software``: name →
+    version, in display order)."""
+
+    robot_serial: str = ""
+    controller: str = ""
+    operator: str = ""
+    operator_from: str = ""  # "--operator", "[cell] operator", "the run's record"
+    head: str = ""  # the head's name
+    head_file: str = ""  # "" : the built-in reference head
+    head_certificate_id: str = ""
+    head_certificate_date: str = ""
+    body: str = ""  # what the body is (its points)
+    body_file: str = ""  # "" : points inline in the configuration
+    body_certificate_id: str = ""
+    body_certificate_date: str = ""
+    software: Sequence[tuple[str, str]] = ()
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "software", tuple((str(k), str(v)) for k, v in self.software))
+
+
 @dataclass(frozen=True)
 class ReportData:
     """Everything a report shows, as plain arrays and strings.
@@ -110,6 +212,10 @@ class ReportData:
       ``max_correction``, ``crc32``, ...), ``notes`` (what the report builder wants said).
     * ``trend``: the robot's history, :class:`TrendRun` per run of the same cell and robot up to
       and including this one (kept in run order); the report shows it from two runs on.
+    * The sign-off: ``simulated`` (a banner on every page), ``conditions``
+      (:class:`TestConditions`), ``iso_poses`` (:class:`IsoPose` per held-out pose),
+      ``acceptance`` (:class:`Acceptance`) and ``traceability`` (:class:`Traceability`); None or
+      empty where not known (the report says so).
     """
 
     robot_name: str
@@ -140,6 +246,11 @@ class ReportData:
     table_info: Mapping[str, Any] | None = None
     notes: Sequence[str] = ()
     trend: Sequence[TrendRun] = ()
+    simulated: bool = False
+    conditions: TestConditions | None = None
+    iso_poses: Sequence[IsoPose] = ()
+    acceptance: Acceptance | None = None
+    traceability: Traceability | None = None
 
     def __post_init__(self) -> None:
         names = tuple(str(n) for n in self.param_names)
@@ -198,6 +309,8 @@ class ReportData:
             object.__setattr__(self, "devices", {str(k): str(v) for k, v in self.devices.items()})
         object.__setattr__(self, "notes", tuple(str(n) for n in self.notes))
         object.__setattr__(self, "trend", tuple(sorted(self.trend, key=lambda r: r.run_id)))
+        object.__setattr__(self, "simulated", bool(self.simulated))
+        object.__setattr__(self, "iso_poses", tuple(self.iso_poses))
 
     # --- derived figures, in people units --------------------------------------------------
     @property

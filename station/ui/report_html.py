@@ -10,6 +10,7 @@ from collections.abc import Sequence
 from html import escape
 
 from station.ui import report_plots as plots
+from station.ui import report_signoff as so
 from station.ui import report_tables as t
 from station.ui.report_data import ReportData
 
@@ -45,6 +46,18 @@ tr.total td { font-weight: 700; border-top: 2px solid #333; }
 tr.this-run td { font-weight: 700; background: #f6f9ff; }
 td.elbow-pos { color: #1f4e9c; } td.elbow-neg { color: #a1271d; }
 nav.toc { font-size: 13px; margin: 6px 0 0; } nav.toc a { margin-right: 10px; }
+.sim-banner { background: var(--bad); color: #fff; font-weight: 700; text-align: center; padding: 6px 10px;
+              margin: 0 0 8px; border-radius: 3px; }
+@media screen { .sim-banner { position: sticky; top: 0; z-index: 10; } }
+.watermark { display: none; }
+.verdict { display: inline-block; padding: 2px 10px; border-radius: 3px; font-weight: 700; margin-left: 8px; }
+.verdict.pass, td.pass { color: var(--ok); } .verdict.fail, td.fail { color: var(--bad); }
+.verdict.pass, .verdict.fail { border: 2px solid currentColor; } .verdict.none { color: var(--muted); border: 1px solid var(--line); }
+td.pass, td.fail { font-weight: 700; }
+table.signature { width: 100%; margin-top: 10px; }
+table.signature td { height: 16mm; } table.signature td:first-child { width: 18%; font-weight: 600; }
+table.signature th:nth-child(2), table.signature th:nth-child(4) { width: 30%; }
+section#signoff { break-inside: avoid; page-break-inside: avoid; }
 @media print {
   @page { size: A4; margin: 12mm; }
   body { max-width: none; padding: 0; font-size: 10pt; }
@@ -57,12 +70,27 @@ nav.toc { font-size: 13px; margin: 6px 0 0; } nav.toc a { margin-right: 10px; }
   pre.config { max-height: none; overflow: visible; }
   figure img { max-height: 240mm; }
   a { color: inherit; text-decoration: none; }
-  .outcome, td, th { -webkit-print-color-adjust: exact; print-color-adjust: exact; }
+  .outcome, .sim-banner, td, th { -webkit-print-color-adjust: exact; print-color-adjust: exact; }
+}
+"""
+
+#: a simulated run's marks on every printed page: a page-margin line (browsers with CSS page
+#: margin boxes) and a fixed watermark (repeated on every page by every browser's print)
+_SIM_CSS = """
+@media print {
+  @page { margin-top: 16mm;
+          @top-center { content: "SIMULATED RUN: not a calibration of a real robot"; color: #b3261e;
+                        font: 700 10pt system-ui, "DejaVu Sans", sans-serif; } }
+  .watermark { display: block; position: fixed; top: 40%; left: -20%; right: -20%; text-align: center;
+               font: 700 64pt system-ui, "DejaVu Sans", sans-serif; color: rgba(179, 38, 30, 0.12);
+               transform: rotate(-30deg); z-index: -1; pointer-events: none; }
 }
 """
 
 SECTIONS = (
     ("summary", "Summary"),
+    ("conditions", "Test conditions"),
+    ("traceability", "Traceability"),
     ("record", "Run record: configuration, station, devices"),
     ("parameters", "Identified parameters"),
     ("residuals", "Residuals of the identification"),
@@ -72,6 +100,7 @@ SECTIONS = (
     ("reversal", "Reversal error"),
     ("tools", "Tools after the head"),
     ("trend", "Trend: this robot's calibrations and rechecks"),
+    ("signoff", "Sign-off"),
 )
 
 
@@ -109,6 +138,8 @@ def _cell_class(i: int, text: str, num_from: int) -> str:
     cls = ["num"] if i >= num_from else []
     if text in ("+1", "-1"):
         cls.append("elbow-pos" if text == "+1" else "elbow-neg")
+    if text == so.PASS or text.startswith(so.FAIL):
+        cls.append("pass" if text == so.PASS else "fail")
     return " ".join(cls)
 
 
@@ -129,12 +160,50 @@ def _summary(d: ReportData) -> str:
     notes += list(d.notes)
     note_html = "".join(f"<li>{_e(n)}</li>" for n in notes)
     return (banner + _kv(t.summary_rows(d, outcome=s is None), table_id="summary-table")
+            + _acceptance(d)
             + (f"<h3>Notes</h3><ul>{note_html}</ul>" if note_html else ""))
 
 
+def _acceptance(d: ReportData) -> str:
+    rows = so.acceptance_rows(d)
+    if not rows:
+        return ""
+    v = so.verdict(d)
+    cls = {so.PASS: "pass", so.FAIL: "fail"}.get(v, "none")
+    return (f'<h3>Acceptance<span class="verdict {cls}" id="verdict">{_e(v)}</span></h3>'
+            '<p class="note">The run succeeds only when every criterion passes: the improvement ratio, and the '
+            'ISO 9283 limits that [verification] gives, per held-out pose after correction (a miss: '
+            'TARGET_MISSED, exit code 10).</p>'
+            + _table(so.ACCEPTANCE_HEAD, rows, table_id="acceptance-table", num_from=9))
+
+
+def _conditions(d: ReportData) -> str:
+    out = _kv(so.conditions_rows(d), table_id="conditions-table")
+    if d.iso_poses:
+        out += (f'<h3>Held-out poses</h3><p class="note">{_e(so.POSES_NOTE)}</p>'
+                + _table(so.POSES_HEAD, so.pose_rows(d), table_id="poses-table", num_from=2))
+    return out
+
+
+def _traceability(d: ReportData) -> str:
+    return (_kv(so.traceability_rows(d), table_id="traceability-table")
+            + '<p class="note">Certificates as the head and body files name them when the report is built; the '
+              'libraries are those the report recomputed the identification with.</p>')
+
+
+def _signoff(d: ReportData) -> str:
+    what = ("a simulated run: for rehearsal only, not for sign-off" if d.simulated else
+            f"run {d.run_id} of {d.robot_name}")
+    return (f'<p class="note">Signed for {_e(what)}. Verdict: {_e(so.verdict(d))}.</p>'
+            + _table(so.SIGNATURE_HEAD, so.signature_rows(), table_id="signature-table", num_from=9)
+            .replace("<table", '<table class="signature"', 1))
+
+
 def _record(d: ReportData) -> str:
+    rounded = (f" Numbers with more digits than they mean are shown to {so.SNAPSHOT_DECIMALS} decimals; the run "
+               f"database keeps the text as it was." if so.snapshot_changed(d.config_toml) else "")
     cfg = (f'<h3>Configuration snapshot</h3><p class="note">The cell configuration the run used, as stored in '
-           f'the run database (TOML).</p><pre class="config" id="config">{_e(d.config_toml)}</pre>'
+           f'the run database (TOML).{_e(rounded)}</p><pre class="config" id="config">{_e(so.tidy_config(d.config_toml))}</pre>'
            if d.config_toml else '<p class="note">No configuration snapshot stored.</p>')
     return _kv(t.record_rows(d), table_id="record-table") + cfg
 
@@ -142,10 +211,12 @@ def _record(d: ReportData) -> str:
 def _parameters(d: ReportData) -> str:
     out = [f'<p class="note">{_e(t.parameter_line(d))} Nominal and identified values in mm and degrees; '
            f'Δ and σ in µm and arc seconds (″).</p>']
-    head = ("parameter", "unit", "nominal", "identified", "Δ", "σ")
     for key, title, what in t.groups_present(d):
         out.append(f"<h3>{_e(title)}</h3><p class=\"note\">{_e(what)}</p>")
-        out.append(_table(head, t.param_rows(d, key), table_id=f"params-{key}", num_from=2))
+        for kind, head in t.PARAM_KINDS:
+            rows = t.param_rows(d, key, kind)
+            if rows:
+                out.append(_table(head, rows, table_id=f"params-{key}-{kind}", num_from=1))
     out.append(_img(plots.plot_parameters(d, ("robot",), "the robot's own parameters"),
                     "the robot's own parameters", "The robot's own parameters, apart from the set-up and "
                     "the head so that their σ is visible; the right column shows σ alone."))
@@ -241,9 +312,13 @@ def _verification(d: ReportData) -> str:
         note += (" Oracle: the same poses after a correction built from the simulator's true parameters — "
                  "the best any identification could do here.")
     elbow_head = ("elbow", "poses", "before RMS µm", "after RMS µm", "oracle RMS µm")
+    iso = (f'<h3>ISO 9283 pose accuracy AP and repeatability RP per pose</h3><p class="note">{_e(so.ISO_NOTE)}</p>'
+           + _table(so.ISO_HEAD, so.iso_rows(d), table_id="iso-table", num_from=2,
+                    row_classes=["total" if r[0] == "largest" else "" for r in so.iso_rows(d)])
+           if d.iso_poses else "")
     return (f'<p class="note">{_e(note)}</p>' + "<h3>Per elbow</h3>"
             + _table(elbow_head, t.per_elbow_rows(d), table_id="verification-elbows")
-            + "<h3>Per pose</h3>" + table
+            + "<h3>Per pose</h3>" + table + iso
             + _img(plots.plot_verification(d), "verification errors per pose",
                    "Bars: RMS over each pose's cycles (log scale); dashed: RMS over all."))
 
@@ -303,7 +378,8 @@ def _trend(d: ReportData) -> str:
 def render_html(d: ReportData) -> str:
     title = f"Calibration report — {d.robot_name}, run {d.run_id}"
     parts = [
-        ("summary", _summary(d)), ("record", _record(d)), ("parameters", _parameters(d)),
+        ("summary", _summary(d)), ("conditions", _conditions(d)), ("traceability", _traceability(d)),
+        ("record", _record(d)), ("parameters", _parameters(d)),
         ("residuals", _residuals(d)), ("verification", _verification(d)), ("accuracy", _accuracy(d)),
         ("table", _table_section(d)), ("reversal", _reversal(d)),
     ]
@@ -311,16 +387,22 @@ def render_html(d: ReportData) -> str:
         parts.append(("tools", _tools(d)))
     if t.has_trend(d):  # one run has no history: no section
         parts.append(("trend", _trend(d)))
+    parts.append(("signoff", _signoff(d)))
     shown = {k for k, _ in parts}
     toc = "".join(f'<a href="#{k}">{_e(v)}</a>' for k, v in SECTIONS if k in shown)
-    created = f"created {_e(d.created)} UTC · " if d.created else ""
+    created = f"created {_e(t.timestamp_text(d.created))} · " if d.created else ""
     meta = (f'<p class="meta">{created}station {_e(d.station_version or "version not recorded")} · units: '
             f"µm and arc seconds (″); nominal and identified values in mm and degrees</p>")
     body = "".join(_section(k, b) for k, b in parts)
+    if d.simulated:
+        title = f"SIMULATED — {title}"
+    sim = (f'<div class="sim-banner" id="simulated-banner">{_e(so.SIMULATED_BANNER)}</div>'
+           f'<div class="watermark" aria-hidden="true">SIMULATED</div>' if d.simulated else "")
+    css = _CSS + (_SIM_CSS if d.simulated else "")
     return ("<!DOCTYPE html>\n"
             f'<html lang="en"><head><meta charset="utf-8"><meta name="viewport" content="width=device-width">'
-            f"<title>{_e(title)}</title><style>{_CSS}</style></head>\n"
-            f"<body><header><h1>{_e(title)}</h1>{meta}<nav class=\"toc\">{toc}</nav></header>\n"
+            f"<title>{_e(title)}</title><style>{css}</style></head>\n"
+            f"<body>{sim}<header><h1>{_e(title)}</h1>{meta}<nav class=\"toc\">{toc}</nav></header>\n"
             f"{body}\n<footer class=\"muted\"><p>End of report · run {_e(d.run_id)}</p></footer></body></html>\n")
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from station.ui import report_signoff as so
 from station.ui import report_tables as t
 from station.ui.report_data import HTML_NAME, ReportData
 
@@ -21,9 +22,11 @@ def _table(head: Sequence[str], rows: Sequence[Sequence[object]], num_from: int 
 
 
 def render_markdown(d: ReportData) -> str:
-    L: list[str] = [f"# Calibration report — {d.robot_name}, run {d.run_id}", ""]
+    L: list[str] = [f"# {'SIMULATED — ' if d.simulated else ''}Calibration report — {d.robot_name}, run {d.run_id}", ""]
+    if d.simulated:
+        L += [f"> **{so.SIMULATED_BANNER}**", ""]
     if d.created:
-        L += [f"Created {d.created}.", ""]
+        L += [f"Created {t.timestamp_text(d.created)}.", ""]
     L += [f"The QA record with plots is `{HTML_NAME}` beside this file. Units: lengths in µm (nominal and "
           "identified values in mm), angles in arc seconds ″ (nominal and identified values in degrees).", ""]
 
@@ -32,16 +35,34 @@ def render_markdown(d: ReportData) -> str:
     notes = [*(d.summary.notes if d.summary else ()), *d.notes]
     if notes:
         L += [f"- {n}" for n in notes] + [""]
+    acceptance = so.acceptance_rows(d)
+    if acceptance:
+        L += [f"### Acceptance: {so.verdict(d)}", ""]
+        L += _table(so.ACCEPTANCE_HEAD, acceptance, num_from=9)
+
+    L += ["## Test conditions", ""]
+    L += _table(("item", "value"), so.conditions_rows(d), num_from=9)
+    if d.iso_poses:
+        L += [so.POSES_NOTE, ""]
+        L += _table(so.POSES_HEAD, so.pose_rows(d), num_from=2)
+
+    L += ["## Traceability", ""]
+    L += _table(("item", "value"), so.traceability_rows(d), num_from=9)
 
     L += ["## Run record", ""]
     L += _table(("item", "value"), t.record_rows(d), num_from=9)
     if d.config_toml:
-        L += ["Configuration snapshot:", "", "```toml", d.config_toml.rstrip("\n"), "```", ""]
+        rounded = (f" (numbers shown to {so.SNAPSHOT_DECIMALS} decimals; the run database keeps the text as it was)"
+                   if so.snapshot_changed(d.config_toml) else "")
+        L += [f"Configuration snapshot{rounded}:", "", "```toml", so.tidy_config(d.config_toml).rstrip("\n"), "```", ""]
 
     L += ["## Identified parameters", "", t.parameter_line(d), ""]
     for key, title, what in t.groups_present(d):
         L += [f"### {title}", "", f"{what}.", ""]
-        L += _table(("parameter", "unit", "nominal", "identified", "Δ", "σ"), t.param_rows(d, key), num_from=2)
+        for kind, kind_head in t.PARAM_KINDS:
+            rows_p = t.param_rows(d, key, kind)
+            if rows_p:
+                L += _table(kind_head, rows_p)
     if d.param_correlation is not None:
         pairs = t.correlation_pairs(d)
         L += ["### Strong correlations", ""]
@@ -75,6 +96,9 @@ def render_markdown(d: ReportData) -> str:
     if not after:
         L += ["Nothing was uploaded: no 'after' measurements.", ""]
     L += _table(head, rows, num_from=2)
+    if d.iso_poses:
+        L += ["### ISO 9283 pose accuracy AP and repeatability RP per pose", "", so.ISO_NOTE, ""]
+        L += _table(so.ISO_HEAD, so.iso_rows(d), num_from=2)
 
     L += ["## Predicted accuracy over the workspace", "", f"Includes the {t.ACCURACY_SCOPE}.", ""]
     if d.accuracy_where:
@@ -105,4 +129,8 @@ def render_markdown(d: ReportData) -> str:
         this = str(d.run_id)
         L += _table(t.TREND_HEAD, [(f"**{r[0]}**" if r[0] == this else r[0], *r[1:]) for r in t.trend_rows(d)],
                     num_from=4)
+
+    L += ["## Sign-off", "", f"Verdict: {so.verdict(d)}." + (" A simulated run: for rehearsal only, not for sign-off."
+                                                             if d.simulated else ""), ""]
+    L += _table(so.SIGNATURE_HEAD, so.signature_rows(), num_from=9)
     return "\n".join(L)

@@ -8,6 +8,8 @@ table is rebuilt the same way (its CRC-32 is compared with the uploaded one).
 from __future__ import annotations
 
 import math
+import re
+import tomllib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -15,8 +17,11 @@ from typing import Any
 import numpy as np
 
 from station.cell.config import CellConfig
+from station.cell.pipeline import Options
 from station.cell.pipeline_results import build_table_for, identify_run, verification_errors
 from station.cell.plan import build_plan
+from station.cell.plan_common import head_targets_world
+from station.cell.recentring import stored_recentring
 from station.cell.run_records import MeasurementRecord
 from station.cell.rundb import RunDB
 from station.cell.runs import RunInfo, list_runs
@@ -24,22 +29,28 @@ from station.cell.steps import PlannedStep, StepKind
 from station.cell.stored_config import stored_config, stored_plan
 from station.cell.summary import RunSummary
 from station.core.identification import IdentificationResult
+from station.core.iso9283 import iso9283_pose
 from station.core.kinematics import forward, scara_ik
 from station.core.transforms import pose_to_matrix
 from station.core.uncertainty import pose_accuracy
 from station.core.units import ARCSEC, UM
 from station.errors import ConfigError, IdentificationError, StationError
 from station.ui.report import write_report
-from station.ui.report_data import ReportData, TrendRun
+from station.ui.report_data import Acceptance, IsoPose, ReportData, TestConditions, Traceability, TrendRun
+from station.ui.report_provenance import software_rows
 
-__all__ = ["report_data_for_run", "report_for_run", "correlation_from_covariance"]
+__all__ = ["report_data_for_run", "report_for_run", "correlation_from_covariance", "check_operator"]
+
+#: the run database result that keeps the operator a report named (for the rebuilt reports)
+OPERATOR_RESULT = "operator"
+_CONTROL = re.compile(r"[\x00-\x1f\x7f]")
 
 
 def _errors_um(cfg: CellConfig, steps: Sequence[PlannedStep], db: RunDB, run_id: int,
                kind: StepKind) -> tuple[np.ndarray, list[str]]:
     """Per verification pose and cycle: the position error [µm] and its label
     (``"<point> elbow <±1> #<cycle>"``)."""
-    errs = verification_errors(cfg, steps, db.measurements(run_id, kind=kind.value))
+    errs = verification_errors(cfg, steps, db.measurements(run_id, kind=kind.value), stored_recentring(db, run_id))
     labels: list[str] = []
     vals: list[float] = []
     for (pid, elbow), e in errs.items():
@@ -204,7 +215,115 @@ def _trend(db: RunDB, run_id: int, notes: list[str]) -> list[TrendRun]:
     return [_trend_run(r) for r in sorted(same, key=lambda r: r.id)]
 
 
-def report_data_for_run(db: RunDB, run_id: int) -> ReportData:
+# ----------------------------------------------------------------------------- sign-off
+def _iso_figures(e: np.ndarray | None) -> tuple[int, float | None, float | None]:
+    """(cycles, AP, RP) [µm] of one pose's ``(n, 3)`` position errors [mm]; RP needs 2 cycles."""
+    if e is None or not len(e):
+        return 0, None, None
+    if len(e) == 1:
+        return 1, float(np.linalg.norm(e[0])) * 1e3, None
+    st = iso9283_pose(np.zeros(3), e)
+    return len(e), st.AP * 1e3, st.RP * 1e3
+
+
+def _iso_poses(cfg: CellConfig, steps: Sequence[PlannedStep], db: RunDB, run_id: int) -> list[IsoPose]:
+    """ISO 9283 AP and RP per held-out pose, before and after correction, in plan order."""
+    heads = head_targets_world(cfg)
+    before = verification_errors(cfg, steps, db.measurements(run_id, kind=StepKind.VERIFY_BEFORE.value))
+    after = verification_errors(cfg, steps, db.measurements(run_id, kind=StepKind.VERIFY_AFTER.value))
+    poses: dict[tuple[str, int], int] = {}
+    for st in steps:
+        if st.kind is StepKind.VERIFY_BEFORE:
+            poses.setdefault((st.point_id, st.elbow), st.point)
+    out = []
+    for (pid, elbow), point in poses.items():
+        nb, apb, rpb = _iso_figures(before.get((pid, elbow)))
+        na, apa, rpa = _iso_figures(after.get((pid, elbow)))
+        x, y, z = (float(v) for v in heads[point][:3, 3])
+        out.append(IsoPose(pid, elbow, (x, y, z), nb, apb, rpb, na, apa, rpa))
+    return out
+
+
+def _warmup_text(cfg: CellConfig, db: RunDB, run_id: int) -> str:
+    w = cfg.warmup
+    if w is None:
+        return ""
+    what = "until the reference pose stops moving" if w.until == "converged" else f"for {w.minutes:g} min"
+    done = db.load_result(run_id, "warmup", default=None)
+    if not isinstance(done, Mapping):
+        return f"configured ({what}, {w.program_poses} poses per cycle); the run holds no record of it"
+    remaining = done.get("remaining_um")
+    rest = f", remaining drift ≈ {remaining:.1f} µm" if isinstance(remaining, (int, float)) else ""
+    ended = "criterion met" if done.get("converged") else "criterion NOT met"
+    return (f"{done.get('cycles', '?')} cycles {what} ({w.program_poses} poses per cycle), reference "
+            f"{done.get('reference', '?')}{rest} against {w.converged_um:g} µm: {ended}")
+
+
+def _conditions(cfg: CellConfig, steps: Sequence[PlannedStep], db: RunDB, run_id: int) -> TestConditions:
+    ident = [st for st in steps if st.kind in (StepKind.IDENTIFICATION, StepKind.REVERSAL)]
+    held = {(st.point_id, st.elbow) for st in steps if st.kind is StepKind.VERIFY_BEFORE}
+    p = cfg.plan
+    head = cfg.head
+    name = getattr(head, "name", "") or "probe head"
+    k = np.asarray(cfg.head_in_flange)[:3, 3] if cfg.head_in_flange is not None else None
+    load = f"the probe head '{name}'" + (f", its frame at x, y, z = {k[0]:.1f}, {k[1]:.1f}, {k[2]:.1f} mm in the "
+                                        f"flange frame" if k is not None else "")
+    return TestConditions(
+        identification_poses=len({(st.point_id, st.elbow) for st in ident}), identification_measurements=len(ident),
+        repeats=p.repeats, verification_poses=len(held), verification_cycles=p.verification_cycles, speed=p.speed,
+        settle_s=p.settle_s, samples=p.samples, elbows=p.elbows, both_directions=p.both_directions, load=load,
+        load_kg=cfg.verification.load_kg, warmup=_warmup_text(cfg, db, run_id),
+        temperature_c=cfg.verification.temperature_c)
+
+
+def check_operator(name: str) -> str:
+    """The operator's name as given (``--operator``); :class:`ConfigError` for an empty, long or
+    control-character name."""
+    text = name.strip()
+    if not text or len(text) > 256 or _CONTROL.search(text):
+        raise ConfigError(f"--operator {name!r}: give the operator's name, 1 … 256 printable characters")
+    return text
+
+
+def _operator(cfg: CellConfig, db: RunDB, run_id: int, given: str | None) -> tuple[str, str]:
+    """(name, where it came from): ``--operator``, else the one an earlier report of the run
+    recorded, else ``[cell] operator``; ("", "") when none names one."""
+    if given:
+        return given, "--operator"
+    stored = db.load_result(run_id, OPERATOR_RESULT, default=None)
+    if isinstance(stored, str) and stored.strip():
+        return stored.strip(), "recorded with the run's report"
+    if cfg.identity.operator:
+        return cfg.identity.operator, "[cell] operator"
+    return "", ""
+
+
+def _files(config_toml: str) -> tuple[str, str]:
+    """The [head] and [body] files the configuration names ("" for none)."""
+    try:
+        data = tomllib.loads(config_toml)
+    except tomllib.TOMLDecodeError:
+        return "", ""
+    head, body = data.get("head"), data.get("body")
+    return (str(head.get("file", "")) if isinstance(head, dict) else "",
+            str(body.get("file", "")) if isinstance(body, dict) else "")
+
+
+def _traceability(cfg: CellConfig, db: RunDB, run_id: int, station_version: str, config_toml: str,
+                  operator: str | None) -> Traceability:
+    name, source = _operator(cfg, db, run_id, operator)
+    head_file, body_file = _files(config_toml)
+    hc, bc = cfg.head_certificate, cfg.body_certificate
+    return Traceability(
+        robot_serial=cfg.identity.robot_serial, controller=cfg.identity.controller, operator=name, operator_from=source,
+        head=getattr(cfg.head, "name", "") or "probe head", head_file=head_file, head_certificate_id=hc.id,
+        head_certificate_date=hc.date, body=f"{len(cfg.point_ids)} measuring points", body_file=body_file,
+        body_certificate_id=bc.id, body_certificate_date=bc.date, software=software_rows(station_version))
+
+
+def report_data_for_run(db: RunDB, run_id: int, *, operator: str | None = None) -> ReportData:
+    """The report of run ``run_id``; ``operator`` (``--operator``) names the operator, else the
+    one recorded with the run, else ``[cell] operator``."""
     run = db.run(run_id)
     summary = _stored_summary(db, run_id)
     try:
@@ -249,13 +368,21 @@ def report_data_for_run(db: RunDB, run_id: int) -> ReportData:
         config_toml=run.config_toml, station_version=run.station_version,
         devices=devices if isinstance(devices, Mapping) else None, run_status=run.status,
         table_info=_table_info(cfg, table) if table is not None else None, notes=notes,
-        trend=_trend(db, run_id, notes))
+        trend=_trend(db, run_id, notes),
+        simulated=run.seed is not None or bool(oracle[0].size),  # a simulated run stores its seed
+        conditions=_conditions(cfg, steps, db, run_id), iso_poses=_iso_poses(cfg, steps, db, run_id),
+        acceptance=Acceptance(Options().min_gain, cfg.verification.max_ap_um, cfg.verification.max_rp_um),
+        traceability=_traceability(cfg, db, run_id, run.station_version, run.config_toml, operator))
 
 
-def report_for_run(db_path: str | Path, run_id: int, out_dir: Path) -> Path:
-    """Write the run's report into ``out_dir``: ``report.html`` (returned) and ``report.md``."""
+def report_for_run(db_path: str | Path, run_id: int, out_dir: Path, *, operator: str | None = None) -> Path:
+    """Write the run's report into ``out_dir``: ``report.html`` (returned) and ``report.md``.
+    ``operator`` (``--operator``) is recorded with the run, so that a rebuilt report names it."""
+    name = check_operator(operator) if operator is not None else None
     with RunDB(db_path) as db:
-        data = report_data_for_run(db, run_id)
+        data = report_data_for_run(db, run_id, operator=name)
+        if name is not None:
+            db.save_result(run_id, OPERATOR_RESULT, name)
     return write_report(Path(out_dir), data)
 
 

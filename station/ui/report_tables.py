@@ -69,6 +69,19 @@ def elbow_text(elbow: int | None) -> str:
     return "—" if elbow is None else f"{elbow:+d}"
 
 
+_TIMESTAMP = re.compile(r"^(?P<date>\d{4}-\d{2}-\d{2})[T ](?P<time>\d{2}:\d{2}:\d{2})(?:\.\d+)?(?P<z>Z|[+-]00:?00)?$")
+
+
+def timestamp_text(created: str) -> str:
+    """``2026-12-01T23:57:22.702231Z`` → ``2026-12-01 23:57:22 UTC`` (to the second: what a
+    record needs); other text as it is, "—" for none."""
+    text = created.strip()
+    m = _TIMESTAMP.match(text)
+    if not m:
+        return text or "—"
+    return f"{m['date']} {m['time']}" + (" UTC" if m["z"] else "")
+
+
 # ----------------------------------------------------------------------------- summary
 def summary_rows(d: ReportData, *, outcome: bool = True) -> list[tuple[str, str]]:
     """(quantity, value): the outcome, exit code and the summary's figures, each once
@@ -98,6 +111,8 @@ def summary_rows(d: ReportData, *, outcome: bool = True) -> list[tuple[str, str]
         elbows = sorted({e for _, e, _ in poses if e is not None}, reverse=True)
         rows.append(("verification", f"{len(poses)} held-out poses, {n_cycles} measurements; elbows "
                                      f"{', '.join(f'{e:+d}' for e in elbows) or '—'}"))
+    if s is not None and (recentred := s.recentring_text()) is not None:
+        rows.append(("re-centred readings", recentred))
     return rows
 
 
@@ -107,7 +122,7 @@ def record_rows(d: ReportData) -> list[tuple[str, str]]:
     rows = [("run", str(d.run_id)), ("robot", d.robot_name)]
     if s is not None and s.cell:
         rows.append(("cell", s.cell))
-    rows.append(("created (UTC)", d.created or "—"))
+    rows.append(("created", timestamp_text(d.created)))
     if d.run_status:
         rows.append(("run database status", d.run_status))
     rows.append(("station version", d.station_version or "not recorded"))
@@ -145,19 +160,30 @@ def param_group(name: str) -> str:
     return "robot"
 
 
-def param_rows(d: ReportData, group: str | None = None) -> list[tuple[str, str, str, str, str, str]]:
-    """(name, unit, nominal, identified, Δ, σ) with nominal/identified in mm|°, Δ and σ in µm|″."""
+#: the parameter tables' columns per kind: one unit per column (lengths and angles apart)
+PARAM_KINDS = (
+    ("lengths", ("parameter", "nominal mm", "identified mm", "Δ µm", "σ µm")),
+    ("angles", ("parameter", "nominal °", "identified °", "Δ ″", "σ ″")),
+)
+
+
+def param_rows(d: ReportData, group: str | None = None,
+               kind: str | None = None) -> list[tuple[str, str, str, str, str]]:
+    """(name, nominal, identified, Δ, σ): lengths in mm, mm, µm, µm; angles in °, °, ″, ″
+    (``kind`` "lengths" or "angles" keeps one of them, as :data:`PARAM_KINDS` heads them)."""
     rows = []
     for name, nom, ide, sig, ang in zip(d.param_names, d.param_nominal, d.param_identified,
                                         d.param_sigma, d.param_is_angle):
         if group is not None and param_group(name) != group:
             continue
+        if kind is not None and (kind == "angles") != bool(ang):
+            continue
         if ang:
-            unit, scale_val, scale_small, digits_val = "° / ″", (1 / DEG), (1 / ARCSEC), 5
+            scale_val, scale_small, digits_val = (1 / DEG), (1 / ARCSEC), 5
         else:
-            unit, scale_val, scale_small, digits_val = "mm / µm", 1.0, (1 / UM), 4
+            scale_val, scale_small, digits_val = 1.0, (1 / UM), 4
         sigma = "held" if not math.isfinite(sig) else fmt(sig * scale_small, 1)
-        rows.append((name, unit, fmt(nom * scale_val, digits_val), fmt(ide * scale_val, digits_val),
+        rows.append((name, fmt(nom * scale_val, digits_val), fmt(ide * scale_val, digits_val),
                      fmt((ide - nom) * scale_small, 1), sigma))
     return rows
 

@@ -14,7 +14,8 @@ results) and writing the report are injected callables too, run in thread worker
 How a run ended is the :class:`~station.cell.summary.RunSummary` alone: the exit code shown and
 returned is ``summary.exit_code``.  An exception that escapes ``start_run`` (the session never
 lets one) is classified by type like the session does; an internal error writes its traceback
-to a log file the UI names.
+to a log file the UI names.  A run that stopped before its end is continued with one key (c);
+what to do is told for the cell's kind of devices (:class:`~station.ui.tui_result_panel.CellContext`).
 
     app = StationApp(start_run, title="SR 800 calibration")
     app.run()
@@ -23,6 +24,7 @@ to a log file the UI names.
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 import time
 from collections.abc import Callable
@@ -34,7 +36,8 @@ from textual import events, on
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, VerticalScroll
-from textual.widgets import Button, DataTable, Footer, Header, ProgressBar, RichLog, Static
+from textual.content import Content
+from textual.widgets import Button, DataTable, Footer, Header, ProgressBar, Static
 from textual.worker import Worker, WorkerState
 
 from station.cell.events import (
@@ -56,6 +59,7 @@ from station.cell.runs import RunInfo
 from station.cell.summary import Failure, RunSummary
 from station.errors import Outcome
 from station.ui.report import ReportData
+from station.ui.tui_result_panel import CONTINUE_KEY, CellContext, advice, can_continue, summary_markup
 from station.ui.tui_side import EventMessage, QuestionMessage, SideActions
 from station.ui.tui_widgets import (
     ABORTED,
@@ -73,14 +77,14 @@ from station.ui.tui_widgets import (
     ConfirmScreen,
     DevicePanel,
     Eta,
+    NoticeLog,
     activity_text,
     esc,
     fmt_num,
     phase_markup,
-    summary_markup,
 )
 
-__all__ = ["StationApp", "EventMessage", "QuestionMessage", "ConfirmScreen", "StartRun", "PHASES"]
+__all__ = ["StationApp", "EventMessage", "QuestionMessage", "ConfirmScreen", "StartRun", "PHASES", "CellContext"]
 
 StartRun = Callable[..., RunSummary]
 """``start_run(emit, control)``; when it takes ``confirm`` and ``resume`` keywords the UI passes
@@ -110,7 +114,9 @@ class StationApp(SideActions):
     dialog and the run to resume.  ``list_runs()`` (the database's runs), ``load_results(run_id)``
     (a :class:`ReportData`) and ``write_report(run_id) -> Path`` are optional and run in worker
     threads.  ``clock`` drives the time-left estimate (injectable for tests).  ``log_dir``
-    receives the traceback of an exception that escapes ``start_run``.
+    receives the traceback of an exception that escapes ``start_run``.  ``cell`` names the cell
+    and its devices: the title, the advice for its kind of devices and the exact command lines
+    (without it the title is ``title`` and no command line is shown).
 
     After the app ends, ``app.return_code`` is the run's exit code (0 when no run was started) and
     the app's result (``app.run()``'s return) is the summary (None when no run was started).
@@ -120,6 +126,7 @@ class StationApp(SideActions):
 
     BINDINGS = [
         Binding("s", "start", "Start"),
+        Binding(CONTINUE_KEY, "continue_run", "Continue run"),
         Binding("r", "resume_run", "Resume run"),
         Binding("p", "pause", "Pause"),
         Binding("a", "abort", "Abort"),
@@ -141,10 +148,12 @@ class StationApp(SideActions):
         write_report: Callable[[int], Path] | None = None,
         db_label: str = "",
         clock: Callable[[], float] = time.monotonic,
+        cell: CellContext | None = None,
     ) -> None:
         super().__init__()
         self._start_run = start_run
-        self.title = title
+        self.cell = cell
+        self.title = title if cell is None else cell.title()
         self._autostart = autostart
         self.log_dir = Path(log_dir)
         self._list_runs = list_runs
@@ -184,6 +193,13 @@ class StationApp(SideActions):
     def running(self) -> bool:
         return self.state in ACTIVE_STATES
 
+    @property
+    def result_text(self) -> str:
+        """The result panel's text, one line per row (the panel wraps long values in their column)."""
+        if self.summary is None:
+            return ""
+        return Content.from_markup(summary_markup(self.summary, self.step_index, self.cell)).plain
+
     # ------------------------------------------------------------------ layout
     def compose(self) -> ComposeResult:
         yield Header()
@@ -205,7 +221,7 @@ class StationApp(SideActions):
             with VerticalScroll(id="summary-box") as box:
                 box.border_title = "Result"
                 yield Static("", id="summary")
-            log = RichLog(id="notices", wrap=True, min_width=20)
+            log = NoticeLog(id="notices")
             log.border_title = "Notices"
             yield log
         with Horizontal(id="buttons"):
@@ -231,6 +247,8 @@ class StationApp(SideActions):
 
     def on_resize(self, event: events.Resize) -> None:
         self._fit(event.size.width, event.size.height)
+        self.call_after_refresh(self._show_result)
+        self.call_after_refresh(self._mark_more)
 
     def _fit(self, width: int, height: int) -> None:
         # Small terminals (80×24) keep the footer's key labels and drop the button row.
@@ -238,9 +256,22 @@ class StationApp(SideActions):
         self.set_class(width >= 140, "-wide")
 
     # ------------------------------------------------------------------ helpers
+    def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
+        # the footer shows the keys that do something now (80 columns hold no more)
+        if action == "continue_run":
+            return not self.running and can_continue(self.summary)
+        if action in ("pause", "abort"):
+            return self.state in (RUNNING, PAUSING, PAUSED)
+        if action in ("start", "resume_run"):
+            return not self.running
+        return True
+
     def _set_state(self, state: str) -> None:
         self.state = state
-        self.query_one("#state", Static).update(STATE_TEXT[state])
+        text = STATE_TEXT[state]
+        if state in (ABORTED, FAILED) and can_continue(self.summary):
+            text += f" — [b]{CONTINUE_KEY}[/] continue run #{self.summary.run_id if self.summary else ''}"
+        self.query_one("#state", Static).update(text)
         self.query_one("#start", Button).disabled = state in ACTIVE_STATES
         self.query_one("#resume", Button).disabled = state in ACTIVE_STATES or self._list_runs is None
         steerable = state in (RUNNING, PAUSING, PAUSED)
@@ -248,12 +279,15 @@ class StationApp(SideActions):
         pause_btn.disabled = not steerable
         pause_btn.label = "Resume (p)" if state in (PAUSING, PAUSED) else "Pause (p)"
         self.query_one("#abort", Button).disabled = not steerable
-        if state == PAUSED or state not in ACTIVE_STATES:
+        if state in (FINISHED, FAILED, ABORTED):
+            self.eta.stop()  # no time is left of a run that has stopped
+        elif state in (PAUSED, ABORTING) or state not in ACTIVE_STATES:
             self.eta.pause()
         elif state == RUNNING and self.question is None:
             self.eta.resume()
         self._show_eta()
         self.sub_title = f"run {self.run_id} — {state}" if self.run_id is not None else state
+        self.refresh_bindings()
 
     def _show_eta(self) -> None:
         # the 1 s timer can fire once more while the app shuts down and its widgets are already
@@ -263,7 +297,7 @@ class StationApp(SideActions):
 
     def _note(self, *parts: str | tuple[str, str]) -> None:
         """Append a line to the notices log; parts are plain text or (text, rich style)."""
-        self.query_one("#notices", RichLog).write(Text.assemble(*parts))
+        self.query_one("#notices", NoticeLog).write(Text.assemble(*parts))
 
     def _emit(self, event: Event) -> None:
         """Called by the runner, from its thread: forward the event into the app's queue."""
@@ -290,7 +324,7 @@ class StationApp(SideActions):
         self.eta.reset()
         self.remove_class("-ended")
         self.query_one("#measurements", DataTable).clear()
-        self.query_one("#notices", RichLog).clear()
+        self.query_one("#notices", NoticeLog).clear()
         self.query_one("#devices", DevicePanel).show(None)
         self.query_one("#progress", ProgressBar).update(total=1, progress=0)
         self.query_one("#run-id", Static).update("run —")
@@ -299,7 +333,9 @@ class StationApp(SideActions):
         self.query_one("#step", Static).update("step —")
         self.query_one("#summary", Static).update("")
         self.query_one("#summary", Static).remove_class("-ok", "-failed")
-        self.query_one("#summary-box").remove_class("-shown", "-ok", "-failed")
+        box = self.query_one("#summary-box")
+        box.remove_class("-shown", "-ok", "-failed")
+        box.border_subtitle = ""
 
     # ------------------------------------------------------------------ actions
     def action_start(self, resume: int | None = None) -> None:
@@ -322,6 +358,11 @@ class StationApp(SideActions):
 
         self.worker = self.run_worker(work, name="calibration-run", group="run", thread=True,
                                       exit_on_error=False)
+
+    def action_continue_run(self) -> None:
+        """The one-key resume: continue the run that just stopped at its next step."""
+        if not self.running and can_continue(self.summary) and self.summary is not None:
+            self.action_start(resume=self.summary.run_id)
 
     def action_pause(self) -> None:
         if self.control is None or self.state not in (RUNNING, PAUSING, PAUSED):
@@ -472,29 +513,50 @@ class StationApp(SideActions):
             return
         first = self.summary is None
         self.summary = summary
-        panel = self.query_one("#summary", Static)
-        panel.update(summary_markup(summary, self.step_index))
-        for widget in (panel, self.query_one("#summary-box")):
+        if self.cell is not None and summary.cell and summary.cell != self.cell.name:
+            self.cell = dataclasses.replace(self.cell, name=summary.cell)  # as the session read it
+            self.title = self.cell.title()
+        self._show_result()
+        for widget in (self.query_one("#summary", Static), self.query_one("#summary-box")):
             widget.set_class(summary.ok, "-ok")
             widget.set_class(not summary.ok, "-failed")
             widget.add_class("-shown")
         self.add_class("-ended")
+        self.call_after_refresh(self._mark_more)
         if summary.failure is None:
             self._visited.add("done")
             self._show_phases("done")
             self.query_one("#phase-detail", Static).update("Done — [b]v[/] shows the results")
             self._set_state(FINISHED)
         else:
+            resume = f" — [b]{CONTINUE_KEY}[/] continues run #{summary.run_id}" if can_continue(summary) else ""
+            self.query_one("#phase-detail", Static).update(f"Stopped{resume}")
             self._set_state(ABORTED if summary.outcome is Outcome.ABORTED else FAILED)
         if first:
             self._announce(summary)
+
+    def _show_result(self) -> None:
+        """The result panel at its width (again after a resize: its long values wrap under their
+        column)."""
+        for panel in self.query("#summary").results(Static):
+            if self.summary is not None:
+                width = panel.content_region.width or None
+                panel.update(summary_markup(self.summary, self.step_index, self.cell, width))
+                if width is None:  # not laid out yet: once it is
+                    self.call_after_refresh(self._show_result)
+
+    def _mark_more(self) -> None:
+        # what does not fit says so on the frame (the first rows hold what matters)
+        for box in self.query("#summary-box").results(VerticalScroll):
+            box.border_subtitle = "more: Tab, then PgDn ↓" if box.max_scroll_y > 0 else ""
 
     def _announce(self, summary: RunSummary) -> None:
         name = summary.outcome.name
         if summary.failure is None:
             self._note(("Run finished", "bold green" if summary.ok else "bold yellow"), f": {name}")
         else:
-            self._note((f"{name} (exit code {summary.exit_code})", "bold red"), f": {summary.failure.message}")
+            message, _ = advice(summary.failure, self.cell, summary.run_id)
+            self._note((f"{name} (exit code {summary.exit_code})", "bold red"), f": {message}")
 
     def on_worker_state_changed(self, event: Worker.StateChanged) -> None:
         if event.worker is not self.worker:

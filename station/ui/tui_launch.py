@@ -5,14 +5,16 @@ devices in the worker thread the UI runs it in, and its summary is the exit code
 same UI runs a recheck (``station tui --recheck``, issue 13): its outcome and drift figures fill the
 result panel, and only rechecks are offered to resume.  The run
 database is read (the unfinished runs, a run's results) and the report written through callables
-the UI runs in worker threads; the report goes into ``report-run-N/`` next to the database.
+the UI runs in worker threads; the report goes into ``report-<db name>-run-N/`` next to the database.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import tomllib
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from station.cell.events import Event
 from station.cell.questions import Confirm
@@ -26,13 +28,17 @@ from station.cell.summary import RunSummary
 from station.ui.report import ReportData
 from station.ui.simulated_cell import load_cell
 from station.ui.tui import StationApp
+from station.ui.tui_result_panel import CellContext, device_kind
 
-__all__ = ["launch", "make_app", "recheck_run_summary", "report_dir"]
+__all__ = ["launch", "make_app", "recheck_run_summary", "report_dir", "cell_context"]
 
 
 def report_dir(db: str | Path, run_id: int) -> Path:
-    """Where the UI writes a run's report: ``report-run-N/`` next to the run database."""
-    return Path(db).resolve().parent / f"report-run-{run_id}"
+    """Where the UI writes a run's report: ``report-<db name>-run-N/`` next to the run database
+    (the one rule, :func:`station.ui.commands_cell.report_dir`)."""
+    from station.ui.commands_cell import report_dir as beside_db
+
+    return beside_db(db, run_id)
 
 
 def recheck_run_summary(s: RecheckSummary) -> RunSummary:
@@ -66,9 +72,7 @@ def make_app(request: CellRequest, title: str | None = None, app_class: type[Sta
              recheck: RecheckOptions | None = None, **kwargs: object) -> StationApp:
     """The operator UI wired to ``request``'s cell and run database; with ``recheck`` it runs a
     recheck against the baseline calibration instead of a calibration."""
-    if title is None:
-        title = (("Recheck" if recheck is not None else "Calibration") + " station — "
-                 + ("simulated cell" if request.simulated else str(request.config)))
+    cell = cell_context(request, recheck is not None)
     db = request.db
 
     def start_run(emit: Callable[[Event], None], control: RunControl, confirm: Confirm | None = None,
@@ -99,10 +103,36 @@ def make_app(request: CellRequest, title: str | None = None, app_class: type[Sta
 
     # The session writes its tracebacks next to the database; an escaping one goes there too.
     # A recheck has no calibration report: its figures are in the result panel and the database.
-    return app_class(start_run, title=title, log_dir=Path(db).resolve().parent, list_runs=runs,
-                     load_results=load_results, write_report=write_report if recheck is None else None,
-                     db_label=str(db),
-                     **kwargs)  # type: ignore[arg-type]
+    app = app_class(start_run, log_dir=Path(db).resolve().parent, list_runs=runs,
+                    load_results=load_results, write_report=write_report if recheck is None else None,
+                    db_label=str(db), cell=cell,
+                    **kwargs)  # type: ignore[arg-type]
+    if title is not None:
+        app.title = title
+    return app
+
+
+def cell_context(request: CellRequest, recheck: bool = False) -> CellContext:
+    """The cell as the UI names it and advises on it: its ``[cell] name``, the command line's
+    arguments, and each device's kind (a simulator; a serial or TCP probe interface). Read from
+    the configuration's text without validating it: the session validates it when a run starts
+    (and the title takes the name the session read)."""
+    table: dict[str, Any] = {}
+    if request.config:
+        try:
+            table = tomllib.loads(Path(request.config).read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+            table = {}
+    section = table.get("cell")
+    name = section.get("name") if isinstance(section, dict) else None
+    if not isinstance(name, str) or not name:
+        name = "simulated cell" if request.simulated and not request.config else Path(request.config or "cell").name
+    devices = table.get("devices")
+    port = devices.get("probe_head") if isinstance(devices, dict) else None
+    return CellContext(name=name, config=request.config, simulated=request.simulated, seed=request.seed,
+                       robot=request.robot, db=request.db, verb="recheck" if recheck else "calibrate",
+                       probe="simulator" if request.simulated else device_kind(str(port or "")),
+                       controller="simulator" if request.simulated else "tcp")
 
 
 def launch(request: CellRequest, title: str | None = None, recheck: RecheckOptions | None = None) -> int:

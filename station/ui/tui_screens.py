@@ -26,6 +26,7 @@ __all__ = ["HelpScreen", "ResumeScreen", "QuestionScreen", "question_markup", "H
 HELP_TEXT = """\
 [b]Keys[/]
   [b]s[/]      start a new run (clears the screen)
+  [b]c[/]      continue the run that just stopped (aborted or failed) at its next step
   [b]r[/]      resume an interrupted run: pick it from the list of unfinished runs
   [b]p[/]      pause / resume at the next safe point (never during a probe touch)
   [b]a[/]      abort at the next safe point, after a confirmation
@@ -34,13 +35,17 @@ HELP_TEXT = """\
   [b]?[/] [b]h[/] [b]F1[/] this help          [b]q[/] quit (asks while a run is in progress)
 
 [b]Screen[/]
-  Status line: run number, state, time left (it stands still while paused).
+  Status line: run number, state, time left (it stands still while paused;
+  once the run has stopped it says how long it ran).
   Phase strip: Connect › Plan › Measure › Identify › Correct › Upload › Verify › Done;
   the line below says what the station is doing.
   Measurements: one row per reading — ✓ valid, ✗ rejected, and why in [b]note[/].
   Devices: controller state and heartbeat, joints (° / mm), each probe as a bar over
   its stroke (centre ┃), a red ▒ bar when out of range.
   Notices: phases, warnings, upload read-back and activation.
+  Result (at the end): outcome, exit code, RMS before / after, gain, after /
+  oracle and the report first; what to do and the exact command line after a
+  failure. Tab, then PgDn scrolls a long one.
 
 [b]Upload[/]
   Before the table is sent the station shows it (values, grid, interpolation bound,
@@ -49,7 +54,7 @@ HELP_TEXT = """\
 
 [b]Report[/]
   After a run that reached its end the report is written next to the run database
-  (report-run-N/); the Result panel shows its path.
+  (report-<database name>-run-N/); the Result panel shows its path.
 
 Esc, q or ? closes this help."""
 

@@ -15,7 +15,6 @@ from pathlib import Path
 from textual import work
 from textual.app import App
 from textual.message import Message
-from textual.widgets import Static
 from textual.worker import get_current_worker
 
 from station.cell.events import Event
@@ -24,9 +23,10 @@ from station.cell.runcontrol import RunControl
 from station.cell.runs import RunInfo
 from station.cell.summary import RunSummary
 from station.ui.report import ReportData
+from station.ui.tui_result_panel import CellContext
 from station.ui.tui_results import ResultsScreen
 from station.ui.tui_screens import HelpScreen, QuestionScreen, ResumeScreen, question_markup
-from station.ui.tui_widgets import RUNNING, Eta, summary_markup
+from station.ui.tui_widgets import RUNNING, Eta
 
 __all__ = ["SideActions", "EventMessage", "QuestionMessage"]
 
@@ -61,6 +61,7 @@ class SideActions(App[RunSummary | None]):
     _load_results: Callable[[int], ReportData] | None
     _write_report: Callable[[int], Path] | None
     db_label: str
+    cell: CellContext | None
     eta: Eta
     control: RunControl | None
     state: str
@@ -79,6 +80,15 @@ class SideActions(App[RunSummary | None]):
         raise NotImplementedError
 
     def _note(self, *parts: str | tuple[str, str]) -> None:
+        raise NotImplementedError
+
+    def _show_result(self) -> None:
+        raise NotImplementedError
+
+    def _mark_more(self) -> None:
+        raise NotImplementedError
+
+    def _show_eta(self) -> None:
         raise NotImplementedError
 
     def _confirm(self, question: Question) -> bool:
@@ -108,7 +118,8 @@ class SideActions(App[RunSummary | None]):
         if self.running:
             self.notify("A run is in progress.", severity="warning")
         elif self._list_runs is None:
-            self.notify("No run database: resume with 'station calibrate CONFIG --resume RUN'.", severity="warning")
+            cli = self.cell.command(resume=None) if self.cell is not None else "station calibrate CONFIG"
+            self.notify(f"No run database: resume with '{cli} --resume RUN'.", severity="warning")
         else:
             self._fetch_runs()
 
@@ -163,7 +174,8 @@ class SideActions(App[RunSummary | None]):
             return
         self.report_path = path
         self.summary = self.summary.replace(report=str(path))
-        self.query_one("#summary", Static).update(summary_markup(self.summary, self.step_index))
+        self._show_result()
+        self.call_after_refresh(self._mark_more)
         self._note(("Report written: ", "bold"), str(path))
 
     # ------------------------------------------------------------------ the pipeline's questions
@@ -173,6 +185,7 @@ class SideActions(App[RunSummary | None]):
             return
         self.question = message
         self.eta.pause()  # waiting for the operator is not run time
+        self._show_eta()  # shown now, not at the next tick of the 1 s timer
         self._note(("Asked: ", "bold"), question_markup(message.question)[0])
 
         def answered(yes: bool | None) -> None:
@@ -180,6 +193,7 @@ class SideActions(App[RunSummary | None]):
             self.question = None
             if self.state == RUNNING:
                 self.eta.resume()
+            self._show_eta()
             self._note(("Answer: ", "bold"), "yes" if message.answer else "no")
 
         self.push_screen(QuestionScreen(message.question), answered)

@@ -1,10 +1,8 @@
 """Pieces of the operator UI that know nothing of a running app: the yes / no dialog, the
-markup of the status line, the phase strip, the device panel and the result panel, and the
-time-left estimate.
+markup of the status line, the phase strip, the device panel, the notices log and the time-left
+estimate (the result panel is :mod:`station.ui.tui_result_panel`).
 
-The result panel reads only the :class:`~station.cell.summary.RunSummary` — its outcome, exit
-code, figures and failure — so it shows what the CLI, ``--json`` and the report show.  The device
-panel reads only the runner's :class:`~station.cell.events.DeviceSnapshot` events.
+The device panel reads only the runner's :class:`~station.cell.events.DeviceSnapshot` events.
 """
 
 from __future__ import annotations
@@ -18,18 +16,16 @@ from rich.text import Text
 from textual import on
 from textual.app import ComposeResult, RenderResult
 from textual.binding import Binding
-from textual.containers import Horizontal, Vertical
+from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.markup import escape as _markup_escape
 from textual.screen import ModalScreen
 from textual.widget import Widget
-from textual.widgets import Button, Label
+from textual.widgets import Button, Label, Static
 
 from station.cell.events import DeviceSnapshot
-from station.cell.summary import RunSummary
-from station.errors import Outcome
 
-__all__ = ["APP_CSS", "ConfirmScreen", "DevicePanel", "Eta", "PHASES", "PHASE_NAMES", "STATE_TEXT", "ACTIVE_STATES",
-           "fmt_num", "fmt_clock", "esc", "phase_markup", "activity_text", "summary_markup", "device_text"]
+__all__ = ["APP_CSS", "ConfirmScreen", "DevicePanel", "Eta", "NoticeLog", "PHASES", "PHASE_NAMES", "STATE_TEXT",
+           "ACTIVE_STATES", "fmt_num", "fmt_clock", "esc", "phase_markup", "activity_text", "device_text"]
 
 PHASES: tuple[str, ...] = ("connect", "plan", "measure", "identify", "correct", "upload", "verify", "done")
 
@@ -55,8 +51,10 @@ APP_CSS = """
     #measurements { height: 1fr; min-height: 5; border: round $primary; }
     #bottom { height: auto; max-height: 50%; }
     #devices { width: 48; height: auto; border: round $secondary; padding: 0 1; }
-    #notices { width: 1fr; height: 100%; min-height: 6; border: round $secondary; }
-    #summary-box { width: 3fr; height: auto; max-height: 100%; border: round $accent; display: none; }
+    #notices { width: 1fr; height: 100%; min-height: 6; border: round $secondary; scrollbar-size-vertical: 1; }
+    #notices > Static { width: 100%; height: auto; }
+    #summary-box { width: 3fr; height: auto; max-height: 100%; border: round $accent; display: none;
+        scrollbar-size-vertical: 1; scrollbar-gutter: stable; }
     #summary-box.-shown { display: block; }
     #summary-box.-ok { border: round $success; }
     #summary-box.-failed { border: thick $error; }
@@ -68,6 +66,10 @@ APP_CSS = """
     .-ended #devices { display: none; }
     .-ended #bottom { height: 1fr; max-height: 100%; }
     .-ended #measurements { height: 1fr; }
+    .-ended #summary-box { width: 2fr; }
+    /* 80×24 after the end: the result and the notices take the screen (the table is in 'v') */
+    .-short.-ended #measurements, .-short.-ended #phases, .-short.-ended #step, .-short.-ended #progress {
+        display: none; }
 """
 
 # Run states shown in the status line (and readable as StationApp.state).
@@ -83,7 +85,7 @@ STATE_TEXT = {
     ABORTING: "[b $error]aborting[/] — stops at the next safe point",
     FINISHED: "[b $success]finished[/] — [b]v[/] results",
     FAILED: "[b $error]FAILED[/]",
-    ABORTED: "[b $error]ABORTED[/] by the operator — [b]r[/] to resume",
+    ABORTED: "[b $error]ABORTED[/] by the operator",
 }
 
 
@@ -141,7 +143,8 @@ class Eta:
     The clock runs only while the run runs: :meth:`pause` stops it (the estimate stands still)
     and :meth:`resume` continues it where it stopped, so the estimate neither counts down during
     a pause nor jumps on resume.  Between two steps it counts down from the last step's
-    estimate.  ``clock`` is injectable (a frozen clock gives ``--:--:--``: nothing measured).
+    estimate.  :meth:`stop` ends it with the run: no time is left, and it says how long the run
+    ran.  ``clock`` is injectable (a frozen clock gives ``--:--:--``: nothing measured).
     """
 
     def __init__(self, clock: Callable[[], float] = time.monotonic) -> None:
@@ -155,6 +158,7 @@ class Eta:
         self._done = 0
         self._total = 0
         self._active_at_done = 0.0
+        self._ended = False
 
     @property
     def running(self) -> bool:
@@ -175,8 +179,17 @@ class Eta:
             self._since = None
 
     def resume(self) -> None:
-        if self._since is None and self._total:
+        if self._since is None and self._total and not self._ended:
             self._since = self.clock()
+
+    def stop(self) -> None:
+        """The run has ended (finished, aborted or failed): the clock stops for good."""
+        self.pause()
+        self._ended = True
+
+    @property
+    def ended(self) -> bool:
+        return self._ended
 
     def update(self, done: int, total: int) -> None:
         if done != self._done:
@@ -185,6 +198,8 @@ class Eta:
 
     def remaining_s(self) -> float | None:
         n = self._done - self._base
+        if self._ended:
+            return None
         if n <= 0 or self._active_at_done <= 0.0:
             return None
         per_step = self._active_at_done / n
@@ -192,7 +207,45 @@ class Eta:
         return max(0.0, per_step * (self._total - self._done) - since_done)
 
     def text(self) -> str:
+        if self._ended:
+            return f"ran {fmt_clock(self._active)}" if self._total else ""
         return f"left {fmt_clock(self.remaining_s())}" + ("" if self.running or not self._total else " ⏸")
+
+
+# --------------------------------------------------------------------- notices
+class NoticeLog(VerticalScroll):
+    """The notices of a run, newest last, wrapped at the panel's width whatever it becomes (a
+    log that wraps when it writes keeps lines cut to an earlier, wider panel)."""
+
+    MAX_LINES = 500  # a long run's oldest notices give way; the run database keeps them all
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self._lines: list[Text] = []
+
+    def compose(self) -> ComposeResult:
+        yield Static("")
+
+    def write(self, line: Text) -> None:
+        self._lines = [*self._lines[-(self.MAX_LINES - 1):], line]
+        self._show()
+        self.call_after_refresh(self.scroll_end, animate=False)
+
+    def clear(self) -> None:
+        self._lines = []
+        self._show()
+
+    def _show(self) -> None:
+        for static in self.query(Static).results(Static):
+            static.update(Text("\n").join(self._lines))
+
+    @property
+    def lines(self) -> tuple[Text, ...]:
+        return tuple(self._lines)
+
+    @property
+    def text(self) -> str:
+        return "\n".join(line.plain for line in self._lines)
 
 
 # --------------------------------------------------------------------- device panel
@@ -245,15 +298,18 @@ def device_text(snap: DeviceSnapshot | None, width: int) -> Text:
     for start in range(0, len(cells), per_line):
         text.append("  ".join(c.ljust(cell_w - 2) for c in cells[start:start + per_line]).rstrip() + "\n")
     n = len(snap.probe_mm)
-    cols = max(1, min(3, (width + 2) // 22))
+    # the head file's ids when the runner gives them (wired channels only), else the channels
+    ids = [str(i)[:6] for i in snap.probe_ids] if len(snap.probe_ids) == n else [f"P{k + 1}" for k in range(n)]
+    id_w = max((len(i) for i in ids), default=2)
+    cols = max(1, min(3, (width + 2) // (20 + id_w)))
     cell = (width + 2) // cols - 2
-    bar_w = max(5, cell - 13)
+    bar_w = max(5, cell - 11 - id_w)
     for start in range(0, n, cols):
         for k in range(start, min(n, start + cols)):
             value, status = snap.probe_mm[k], snap.probe_status[k]
             if k > start:
                 text.append("  ")
-            text.append(f"P{k + 1} ", "bold")
+            text.append(f"{ids[k]:<{id_w}} ", "bold")
             text.append_text(_probe_bar(value, status, snap.stroke_mm, bar_w))
             word = _STATUS_WORD.get(status)
             if word is None and math.isfinite(value):
@@ -283,47 +339,6 @@ class DevicePanel(Widget):
 
     def get_content_height(self, container: Any, viewport: Any, width: int) -> int:
         return len(device_text(self.snapshot, width).wrap(self.app.console, width))
-
-
-# --------------------------------------------------------------------- result panel
-def summary_markup(summary: RunSummary, step_index: int | None = None) -> str:
-    """The result panel: for a failure what stopped the run and what to do first, then the
-    outcome, the headline figures and the exit code as aligned rows."""
-    lines: list[str] = []
-    failure = summary.failure
-    if failure is not None:
-        where = f" at step {step_index + 1}" if step_index is not None else ""
-        head = ("ABORTED by the operator" if summary.outcome is Outcome.ABORTED
-                else f"FAILED — {failure.error_type}")
-        lines.append(f"[b $error]{esc(head)}[/]{where}")
-        lines.append(esc(failure.message))
-        if failure.hint:
-            lines.append(f"[b]What to do:[/] {esc(failure.hint)}")
-        if failure.log_file and failure.log_file not in failure.message:
-            lines.append(f"traceback in {esc(failure.log_file)}")
-        lines.append("")
-    rows: list[tuple[str, str]] = [
-        ("outcome", f"[b]{summary.outcome.name}[/] — {esc(summary.outcome.description)}")]
-    if summary.run_id is not None:
-        rows.append(("run", f"#{summary.run_id}"))
-    for key in ("robot", "cell"):
-        if value := getattr(summary, key):
-            rows.append((key, esc(value)))
-    rows.extend((label, fmt_num(value, unit, digits)) for label, value, unit, digits in summary.figures())
-    if summary.upload_skipped:
-        rows.append(("upload", "skipped (the table was not sent)"))
-    for note in summary.notes:
-        rows.append(("note", esc(note)))
-    if summary.report:
-        rows.append(("report", esc(summary.report)))
-    if summary.db and (failure is not None or summary.report is None):
-        rows.append(("database", esc(summary.db)))
-    if failure is not None and summary.run_id is not None:
-        rows.append(("resume", f"press [b]r[/] and pick run #{summary.run_id}"))
-    rows.append(("exit code", f"[b]{summary.exit_code}[/]"))
-    width = max(len(label) for label, _ in rows)
-    lines.extend(f"{label:<{width}}  {value}" for label, value in rows)
-    return "\n".join(lines)
 
 
 class ConfirmScreen(ModalScreen[bool]):

@@ -68,7 +68,8 @@ def test_file_sigma_and_defaults(tmp_path):
         "default_sigma_angle_arcsec = 0.0", "default_sigma_angle_arcsec = 7.0")
     (tmp_path / "c.toml").write_text(text)
     cfg = load_config(tmp_path / "c.toml")
-    np.testing.assert_allclose(np.asarray(cfg.body_sigma), np.array([[12 * UM, 7 * ARCSEC], [4 * UM, 7 * ARCSEC], [12 * UM, 7 * ARCSEC]]))
+    np.testing.assert_allclose(np.asarray(cfg.body_sigma)[:3], np.array([[12 * UM, 7 * ARCSEC], [4 * UM, 7 * ARCSEC], [12 * UM, 7 * ARCSEC]]))
+    np.testing.assert_allclose(np.asarray(cfg.body_sigma)[3:], [[12 * UM, 7 * ARCSEC]] * (len(cfg.body_sigma) - 3))
 
 
 def test_inline_points_with_sigma():
@@ -76,7 +77,8 @@ def test_inline_points_with_sigma():
                             'pose = [11.1, -312.8, 40.0, 0.0, 0.0, 100.0], sigma_position_um = 3.0, sigma_angle_arcsec = 2.0 }')
     text = text.replace("default_sigma_position_um = 0.0", "default_sigma_position_um = 1.5")
     cfg = parse_text(text)
-    np.testing.assert_allclose(np.asarray(cfg.body_sigma), np.array([[1.5 * UM, 0.0], [3 * UM, 2 * ARCSEC], [1.5 * UM, 0.0]]))
+    np.testing.assert_allclose(np.asarray(cfg.body_sigma)[:3], np.array([[1.5 * UM, 0.0], [3 * UM, 2 * ARCSEC], [1.5 * UM, 0.0]]))
+    np.testing.assert_allclose(np.asarray(cfg.body_sigma)[3:], [[1.5 * UM, 0.0]] * (len(cfg.body_sigma) - 3))
 
 
 def test_file_and_points_together_or_neither_refused(tmp_path):

@@ -182,8 +182,8 @@ def test_the_grid_checked_is_the_grid_the_pipeline_builds():
     ('model = "sr800"', 'model = "' + "x" * 300 + '"', r"cannot open the robot file"),
     ("[cell]", "[cell]\ncolour = 1", r"cell: unknown key 'colour'; allowed: name"),
     ("[plan]", "[plan]\nsamles = 3", r"plan: unknown key 'samles'"),
-    ("[simulation]" if "[simulation]" in TEMPLATE else "[cell]", "[simulation]\nseed = -1\n[cell]",
-     r"simulation\.seed"),
+    ("[simulation]", "[simulation]\nseed = -1", r"simulation\.seed") if "[simulation]" in TEMPLATE
+    else ("[cell]", "[simulation]\nseed = -1\n[cell]", r"simulation\.seed"),
 ])
 def test_other_keys_name_the_key(old, new, pattern):
     refused(bad(old, new), pattern)

@@ -165,7 +165,7 @@ def test_plan_visits_orientations_and_configurations_at_the_corners(cfg, plan):
     assert not ident_targets & {(t.point, tuple(np.round(t.joints, 9))) for t in plan.verification}
 
 
-def test_plan_is_deterministic_and_d_optimal_selection_keeps_the_model_identifiable(cfg, plan):
+def test_plan_is_deterministic_and_the_selection_keeps_the_model_identifiable(cfg, plan):
     again = build_plan(cfg)
     assert [s.to_record() for s in again.identification] == [s.to_record() for s in plan.identification]
     n = cfg.plan.select

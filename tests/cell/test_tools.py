@@ -244,9 +244,14 @@ def test_the_tool_is_stored_reported_and_exported_the_head_table_stays_uploaded(
     assert 'id="tools-check-table"' in html and 'href="#tools"' in html
     # station export --tool writes the table the run stored (same CRC-32), read back bit for bit
     out = run["tmp"] / "gripper.json"
-    rc = station_main(["export", "--db", str(db.path), "--run", str(s.run_id), "--tool", "gripper", str(out)])
-    assert rc == 0
+    # its table's bound is beyond [correction].max_interpolation_um: refused (exit 9), nothing written ...
+    export = ["export", "--db", str(db.path), "--run", str(s.run_id), "--tool", "gripper", str(out)]
+    assert station_main(export) == 9 and not out.exists()
+    assert "--force" in capsys.readouterr().err
+    # ... unless --force, which writes the warning into the file
+    assert station_main([*export, "--force"]) == 0
     doc = json.loads(out.read_text(encoding="utf-8"))
+    assert doc["interpolation_bound_um"] > doc["max_interpolation_um"] and "--force" in doc["warning"]
     assert doc["tool"] == "gripper" and doc["tcp_mm_deg"] == [50.0, 0.0, -200.0, 0.0, 0.0, 0.0]
     data = table_from_json(doc["table"])
     assert isinstance(data, CorrectionTableData) and f"{data.crc32():08x}" == s.tools[0].crc32

@@ -133,3 +133,31 @@ def test_report_says_what_was_fitted():
     assert any(d.merges_with for d in res.identifiability.dependencies)
     assert res.registration.scale == pytest.approx(1.0, abs=0.01)
     assert "R started from the registration" in " ".join(res.notes)
+
+
+def test_distances_between_equal_nominal_points_are_dropped_not_a_crash():
+    """q4 and q4 + 360° give the same point: such a distance has no direction (SVD did not converge)."""
+    from station.core.distance_pairs import distances, make_pairs
+
+    _, data = _tracker_data(np.zeros(6), n=30)
+    q = np.vstack([data.joints, data.joints[:4] + np.array([0.0, 0.0, 0.0, 2 * np.pi])])
+    pts = np.vstack([data.measured, data.measured[:4] + 0.01])
+    pairs = make_pairs(len(q), "all")
+    d = MeasurementSet("distance", q, distances(pts, pairs), np.sqrt(2) * 0.015, pairs, point_sigma=0.015)
+    res = identify(SR800, d)
+    assert sorted(res.dropped_pairs) == [(i, 30 + i) for i in range(4)]
+    assert res.residuals.shape[0] == len(pairs) - 4
+    assert "4 of 561 distances dropped" in " ".join(res.notes)
+
+
+def test_marker_offset_refused_naming_tool_unknown_then_fitted():
+    true = _truth()
+    true[-6:-3] += [70.0, -45.0, 0.0]  # a reflector on an adapter the robot file does not know
+    _, data = _tracker_data(FRAMES["turned 120°, tilted 10°, 3 m away"], true=true)
+    with pytest.raises(ConfigError, match=r"--tool unknown") as exc:
+        identify(SR800, data)
+    assert "not a unit error" in str(exc.value)
+    res = identify(SR800, data, tool_unknown=True)
+    assert res.converged and res.rms_normalized < 2.0
+    assert res.registration is not None and res.registration.tool_undetermined == 1  # a SCARA: height open
+    np.testing.assert_allclose(res.registration.tool_offset_mm[:2] - SR800.nominal[-6:-4], [70.0, -45.0], atol=1.0)

@@ -171,7 +171,7 @@ def test_the_configured_head_is_the_simulated_head(tmp_path, capsys):
         out.mkdir()
         (out / "sim.toml").write_text(r.text)
         assert main(["check", str(out / "sim.toml")]) == 0
-        assert "channels=7" in capsys.readouterr().out
+        assert "7 probes wired" in capsys.readouterr().out
 
 
 def test_seed_order_command_line_then_file_then_default():

@@ -93,14 +93,18 @@ def test_writes_html_and_markdown(tmp_path):
 def test_parameter_tables_in_people_units_and_split(tmp_path):
     write_report(tmp_path, make_data())
     text = (tmp_path / "report.md").read_text(encoding="utf-8")
+    # lengths and angles in tables of their own: one unit per column, named in its heading
+    assert "mm / µm" not in text and "° / ″" not in text
+    assert text.count("| parameter | nominal mm | identified mm | Δ µm | σ µm |") == 3  # robot, set-up, head
+    assert text.count("| parameter | nominal ° | identified ° | Δ ″ | σ ″ |") == 2  # robot, head
     # lengths: nominal/identified mm, Δ and σ µm
-    assert "| A2.x | mm / µm | 445.0000 | 445.0123 | 12.3 | 7.0 |" in text
-    assert "| A3.x | mm / µm | 355.0000 | 354.9795 | -20.5 | 15.5 |" in text
+    assert "| A2.x | 445.0000 | 445.0123 | 12.3 | 7.0 |" in text
+    assert "| A3.x | 355.0000 | 354.9795 | -20.5 | 15.5 |" in text
     # angles: nominal/identified degrees, Δ and σ arc seconds
-    assert f"| A1.roll | ° / ″ | 0.00000 | {12.0 / 3600:.5f} | 12.0 | 0.8 |" in text
-    assert "| A2.pitch | ° / ″ | 0.00000 | -0.00097 | -3.5 | 15.0 |" in text
+    assert f"| A1.roll | 0.00000 | {12.0 / 3600:.5f} | 12.0 | 0.8 |" in text
+    assert "| A2.pitch | 0.00000 | -0.00097 | -3.5 | 15.0 |" in text
     # held parameters have no σ
-    assert "| K.yaw | ° / ″ | 0.00000 | 0.00000 | 0.0 | held |" in text
+    assert "| K.yaw | 0.00000 | 0.00000 | 0.0 | held |" in text
     assert "8 parameters, 6 identified" in text
     robot = text.index("### Robot's own parameters")
     setup = text.index("### Set-up R.*")

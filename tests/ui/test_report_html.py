@@ -19,7 +19,8 @@ from station.ui.cli import main
 from station.ui.report import write_report
 from station.ui.report_run import report_data_for_run, report_for_run
 
-SECTIONS = ["summary", "record", "parameters", "residuals", "verification", "accuracy", "table", "reversal"]
+SECTIONS = ["summary", "conditions", "traceability", "record", "parameters", "residuals", "verification", "accuracy",
+            "table", "reversal", "signoff"]
 
 
 class Page(HTMLParser):
@@ -105,9 +106,14 @@ def test_html_structure_from_data(tmp_path):
     assert page.sections == SECTIONS  # the summary first
     assert_self_contained(page)
     # parameters: set-up, robot, head apart
-    assert column(page.tables["params-setup"], "parameter") == ["R.x"]
-    assert column(page.tables["params-robot"], "parameter") == ["A2.x", "A3.x", "A3.z", "A1.roll", "A2.pitch"]
-    assert column(page.tables["params-head"], "parameter") == ["K.yaw", "K.z"]
+    # (lengths and angles apart: one unit per column)
+    assert column(page.tables["params-setup-lengths"], "parameter") == ["R.x"]
+    assert "params-setup-angles" not in page.tables
+    assert column(page.tables["params-robot-lengths"], "parameter") == ["A2.x", "A3.x", "A3.z"]
+    assert column(page.tables["params-robot-angles"], "parameter") == ["A1.roll", "A2.pitch"]
+    assert page.tables["params-robot-angles"][0] == ["parameter", "nominal °", "identified °", "Δ ″", "σ ″"]
+    assert column(page.tables["params-head-lengths"], "parameter") == ["K.z"]
+    assert column(page.tables["params-head-angles"], "parameter") == ["K.yaw"]
     # correlations: the matrix is p × p, the strong pair is listed and marked, nothing else is
     m = page.tables["correlation-matrix"]
     assert len(m) == 1 + 8 and all(len(r) == 1 + 8 for r in m)
@@ -178,9 +184,11 @@ def test_simulated_run_report(simulated_run):
     assert len({(r[0], r[1]) for r in rows}) == len(rows)
     assert [r[0] for r in page.tables["verification-elbows"][1:]] == ["+1", "-1"]
     # set-up apart from the robot: R.x (mm off) is not among the robot's own parameters
-    assert "R.x" in column(page.tables["params-setup"], "parameter")
-    assert not any(n.startswith(("R.", "K.")) for n in column(page.tables["params-robot"], "parameter"))
-    assert all(n.startswith("K.") for n in column(page.tables["params-head"], "parameter"))
+    assert "R.x" in column(page.tables["params-setup-lengths"], "parameter")
+    robot = column(page.tables["params-robot-lengths"], "parameter") + column(page.tables["params-robot-angles"], "parameter")
+    assert not any(n.startswith(("R.", "K.")) for n in robot)
+    head = column(page.tables["params-head-lengths"], "parameter") + column(page.tables["params-head-angles"], "parameter")
+    assert all(n.startswith("K.") for n in head)
     # the record
     record = dict((r[0], r[1]) for r in page.tables["record-table"])
     assert record["station version"] and "DL-RS1A" in record["probe interface"]
@@ -225,3 +233,26 @@ def test_a_run_without_identification_gives_a_clear_error(simulated_run, tmp_pat
     err = capsys.readouterr().err
     assert f"--resume {rid}" in err and "Traceback" not in err
     assert not (tmp_path / "r2" / "report.html").exists()
+
+
+def test_simulated_run_signoff(simulated_run, tmp_path):
+    """The sign-off items of a real (simulated) run: banner, conditions, AP/RP per pose, traceability;
+    an --operator is kept with the run for the rebuilt report."""
+    db, rep = simulated_run
+    page = Page((rep / "report.html").read_text(encoding="utf-8"))
+    assert "simulated-banner" in page.texts
+    iso = page.tables["iso-table"]
+    poses = page.tables["poses-table"]
+    assert len(iso) - 2 == len(poses) - 1 == len(page.tables["verification-table"]) - 2  # header, 'largest' / total
+    assert all(r[2] == "5 / 5" for r in iso[1:-1])  # the simulated cell's 5 ISO 9283 cycles, before and after
+    cond = dict(page.tables["conditions-table"])
+    assert "5 ISO 9283 cycles" in cond["verification"] and cond["speed"].endswith("of the robot's maximum")
+    tr = dict(page.tables["traceability-table"])
+    assert tr["operator"].startswith("not recorded") and tr["Python"][0].isdigit()
+    copy = tmp_path / "copy.sqlite"
+    with sqlite3.connect(db) as src, sqlite3.connect(copy) as dst:
+        src.backup(dst)
+    assert main(["report", "1", "--db", str(copy), "-o", str(tmp_path / "a"), "--operator", "J. Smith"]) == 0
+    again = report_for_run(copy, 1, tmp_path / "b")  # no --operator: the recorded one
+    tr = dict(Page(again.read_text(encoding="utf-8")).tables["traceability-table"])
+    assert tr["operator"] == "J. Smith (recorded with the run's report)"

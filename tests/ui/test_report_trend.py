@@ -50,7 +50,7 @@ def test_trend_table_and_plot_from_data(tmp_path, fast_plots):
     d = with_trend((this, *reversed(HISTORY)))  # any order in, run order out
     html = write_report(tmp_path, d).read_text(encoding="utf-8")
     page = Page(html)
-    assert page.sections[-1] == "trend"
+    assert page.sections[-2:] == ["trend", "signoff"]  # the trend last before the signatures
     assert_self_contained(page)
     table = page.tables["trend-table"]
     assert column(table, "run") == ["1", "5", "9", "42"]

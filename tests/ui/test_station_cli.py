@@ -32,7 +32,9 @@ def test_init_writes_a_template_that_validates(tmp_path, capsys):
     path = tmp_path / "cell.toml"
     assert main(["init", str(path)]) == 0
     cfg = parse_text(path.read_text())
-    assert cfg.model.name == "sr800" and len(cfg.point_ids) == 3
+    assert cfg.model.name == "sr800" and len(cfg.point_ids) == 9  # three cubes at three heights
+    assert main(["plan", str(path)]) == 0  # enough poses to plan as written
+    capsys.readouterr()
     assert main(["init", str(path)]) == 2  # never overwrites without --force
     assert "exists" in capsys.readouterr().err
 
@@ -63,6 +65,7 @@ def test_broken_toml_is_a_config_error_not_a_traceback(tmp_path, capsys):
 def test_check_connects_to_every_device(sim, tmp_path, capsys):
     cfg = tmp_path / "sim.toml"
     cfg.write_text(simulated_config_text(sim, 2))
+    # the parked head touches nothing: its plungers rest at their stops (over range), not a fault
     assert main(["check", str(cfg)]) == 0
     out = capsys.readouterr().out
     assert "probe head" in out and "controller" in out and "FAILED" not in out

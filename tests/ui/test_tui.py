@@ -126,7 +126,8 @@ def plain(widget: Static) -> str:
 
 
 def panel(app: StationApp) -> str:
-    return plain(app.query_one("#summary", Static))
+    """The result panel's rows (unwrapped: the panel wraps long values within their column)."""
+    return app.result_text
 
 
 def row(text: str, label: str) -> str:
@@ -266,7 +267,10 @@ async def test_abort_with_confirmation_is_outcome_aborted(on_abort):
         assert app.exit_code == Outcome.ABORTED == 6
         text = panel(app)
         assert "ABORTED" in text and row(text, "exit code") == "6"
-        assert "--resume 42" in text  # the hint names the run to resume
+        # the hint names the run and the one key that continues it (no CLI line: the UI was not
+        # told the command line it runs for, and a command with a placeholder is not shown)
+        assert "then press c to continue run #42" in text and "CONFIG" not in text
+        assert row(text, "continue").startswith("press c: run #42")
         await pilot.press("q")
         await wait_until(pilot, lambda: not app.is_running, "app exit")
     assert app.return_code == 6

@@ -7,8 +7,7 @@ import re
 from pathlib import Path
 
 import pytest
-from textual.content import Content
-from textual.widgets import DataTable, Static
+from textual.widgets import DataTable
 
 from station.cell.recheck import RecheckOptions
 from station.cell.session import CellRequest
@@ -20,8 +19,8 @@ from station.ui.tui_widgets import DevicePanel
 
 
 def panel(app: StationApp) -> str:
-    content = app.query_one("#summary", Static).content
-    return Content.from_markup(content).plain if isinstance(content, str) else str(content)
+    """The result panel's rows (unwrapped: the panel wraps long values within their column)."""
+    return app.result_text
 
 
 async def wait_until(pilot, cond, what: str, rounds: int = 12000) -> None:

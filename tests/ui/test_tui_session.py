@@ -7,8 +7,7 @@ import re
 from pathlib import Path
 
 import pytest
-from textual.content import Content
-from textual.widgets import DataTable, Static
+from textual.widgets import DataTable
 
 from station.cell.config import TEMPLATE
 from station.cell.session import CellRequest, run_calibration_session
@@ -22,8 +21,8 @@ LOOPBACK_CONTROLLER = '"127.0.0.1:9"'
 
 
 def panel(app: StationApp) -> str:
-    content = app.query_one("#summary", Static).content
-    return Content.from_markup(content).plain if isinstance(content, str) else str(content)
+    """The result panel's rows (unwrapped: the panel wraps long values within their column)."""
+    return app.result_text
 
 
 def exit_code_row(text: str) -> str:
@@ -132,4 +131,4 @@ async def test_operator_abort_of_the_simulated_cell_is_exit_code_6(tmp_path):
         assert app.summary is not None and app.summary.outcome is Outcome.ABORTED, panel(app)
         assert app.state == "aborted" and app.exit_code == 6
         assert app.summary.run_id is not None
-        assert f"--resume {app.summary.run_id}" in panel(app)
+        assert f"then press c to continue run #{app.summary.run_id}" in panel(app)

@@ -8,7 +8,7 @@ from textual.widgets import DataTable
 
 from station.cell.session import CellRequest
 from station.errors import Outcome
-from station.ui.tui_launch import make_app
+from station.ui.tui_launch import make_app, report_dir
 from station.ui.tui_screens import QuestionScreen, ResumeScreen
 from station.ui.tui_widgets import ConfirmScreen
 
@@ -41,7 +41,9 @@ async def test_full_simulated_run_with_pause_abort_resume_upload_and_roll_back(t
         await pilot.press("y")
         await wait_until(pilot, lambda: app.state == "aborted" and app.worker.is_finished, "aborted")
         run_id = app.summary.run_id
-        assert app.exit_code == 6 and f"pick run #{run_id}" in str(app.query_one("#summary").content)
+        text = app.result_text
+        assert app.exit_code == 6 and f"run #{run_id} goes on" in text
+        assert f"station calibrate --simulated --db {tmp_path / 'runs.sqlite'} --resume {run_id}" in " ".join(text.split())
 
         await pilot.press("r")
         await wait_until(pilot, lambda: isinstance(app.screen, ResumeScreen), "resume list")
@@ -55,4 +57,4 @@ async def test_full_simulated_run_with_pause_abort_resume_upload_and_roll_back(t
         await wait_until(pilot, lambda: app.worker.is_finished and app.summary is not None, "ended", 20000)
         await wait_until(pilot, lambda: app.report_path is not None, "report", 6000)
         assert app.summary.outcome is Outcome.NOT_UPLOADED and app.exit_code == 11
-        assert app.report_path.parent == tmp_path / f"report-run-{run_id}" and app.report_path.exists()
+        assert app.report_path.parent == report_dir(tmp_path / "runs.sqlite", run_id) and app.report_path.exists()

@@ -7,12 +7,16 @@ the SVGs in ``__snapshots__/`` before committing them.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 from test_tui_features import RUNS, FakeSession, frozen, report_data, wait_until
 
 from station.ui.tui import StationApp
+from station.ui.tui_result_panel import CellContext
 from station.ui.tui_results import ResultsScreen
 from station.ui.tui_screens import QuestionScreen, ResumeScreen
+from station.ui.tui_widgets import ConfirmScreen
 
 SIZE = (80, 24)
 pytest.importorskip("pytest_textual_snapshot")
@@ -38,7 +42,7 @@ def test_paused_with_a_rejected_reading(snap_compare):
         await pilot.press("p")
         session.open()
         await wait_until(pilot, lambda: app.state == "paused", "paused")
-        await pilot.pause()
+        await at_rest(pilot)
 
     app = app_for(session)
     assert snap_compare(app, terminal_size=SIZE, run_before=before)
@@ -57,8 +61,81 @@ def test_upload_question(snap_compare):
     app.control.abort()
 
 
-# The finished screen is pinned by the Pilot tests (test_tui_features.py) rather than a snapshot:
-# its rendering raced the worker's end in about one run in ten (styling only, the text was equal).
+CELL = CellContext(name="example SCARA 600 cell", config="examples/scara600/cell.toml", simulated=True,
+                   db="runs.sqlite", probe="simulator", controller="simulator")
+
+
+def cell_app(session: FakeSession) -> StationApp:
+    """The example cell's UI: its title, the exact command lines, its head's probe ids."""
+    return StationApp(session, clock=frozen, list_runs=lambda: RUNS, load_results=lambda run_id: report_data(),
+                      write_report=lambda run_id: Path(f"/srv/station/runs/report-runs-run-{run_id}/report.html"),
+                      db_label="runs.sqlite", cell=CELL)
+
+
+async def at_rest(pilot) -> None:
+    """The notices scrolled to their end (after a refresh) and the screen drawn again."""
+    notices = pilot.app.query_one("#notices")
+    await wait_until(pilot, lambda: notices.scroll_y == notices.max_scroll_y, "notices at their end")
+    for _ in range(2):
+        await pilot.pause()
+
+
+async def settled(pilot) -> None:
+    """Everything the end of a run changes has happened: the worker's own end (it re-renders the
+    result with its return value), the report, the notices scrolled to their end."""
+    app = pilot.app
+    await wait_until(pilot, lambda: app.worker is not None and app.worker.is_finished and app.summary is not None,
+                     "worker")
+    notices = app.query_one("#notices")
+    await wait_until(pilot, lambda: notices.scroll_y == notices.max_scroll_y, "notices at their end")
+    for _ in range(3):
+        await pilot.pause()
+
+
+def test_finished_with_report(snap_compare):
+    """The last screen at 80×24: outcome, exit code, RMS before / after, gain, after / oracle and
+    the report's path in view without scrolling (issue 20)."""
+    async def before(pilot):
+        await pilot.press("s")
+        await wait_until(pilot, lambda: pilot.app.report_path is not None, "report")
+        await settled(pilot)
+
+    assert snap_compare(cell_app(FakeSession(gated=False, ask=False)), terminal_size=SIZE, run_before=before)
+
+
+def test_aborted_continue_with_one_key(snap_compare):
+    """After an abort: c continues the run; the command line shown is the exact one."""
+    session = FakeSession(ask=False)
+
+    async def before(pilot):
+        await pilot.press("s")
+        session.open(3)
+        await wait_until(pilot, lambda: pilot.app.query_one("#measurements").row_count == 3, "3 rows")
+        await pilot.press("a")
+        await wait_until(pilot, lambda: isinstance(pilot.app.screen, ConfirmScreen), "abort?")
+        await pilot.press("y")
+        session.open()
+        await settled(pilot)
+
+    assert snap_compare(cell_app(session), terminal_size=SIZE, run_before=before)
+
+
+def test_running_with_the_heads_probes(snap_compare):
+    """The device panel shows the head file's seven probes by id, no unwired channel."""
+    session = FakeSession(head=True)
+
+    async def before(pilot):
+        await pilot.press("s")
+        session.open(4)
+        await wait_until(pilot, lambda: pilot.app.query_one("#measurements").row_count == 4, "4 rows")
+        await pilot.press("p")
+        session.open()
+        await wait_until(pilot, lambda: pilot.app.state == "paused", "paused")
+        await at_rest(pilot)
+
+    app = cell_app(session)
+    assert snap_compare(app, terminal_size=SIZE, run_before=before)
+    app.control.abort()
 
 
 def test_resume_list(snap_compare):
