@@ -49,6 +49,6 @@ def check_certificate_date(value: object) -> str:
     if isinstance(value, str) and _DATE.match(value.strip()):
         try:
             return dt.date.fromisoformat(value.strip()).isoformat()
-        except ValueError:
+        except ValueError:  # the form but no such day (2026-02-30): the same message as any other
             pass
     raise ValueError(f"the certificate date must be a date written YYYY-MM-DD, e.g. 2026-11-02, got {value!r}")

@@ -165,7 +165,10 @@ def _truth_before_um(cfg, db: RunDB, run: int, truth) -> tuple[np.ndarray, np.nd
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("seed", [1, 2, 3])
+# Seed 2: every "before" reading is re-centred there (the old calculation read 9.7 µm for 1627 µm).
+# Seeds 1 and 3 behave alike (`station calibrate examples/scara_arc/cell.toml --simulated --seed N`);
+# one seed keeps the suite short.
+@pytest.mark.parametrize("seed", [2])
 def test_the_arc_cell_rehearses_with_an_honest_before(seed, tmp_path, capsys):
     from simulators.from_config import simulated_cell_for
 
