@@ -17,6 +17,7 @@ import weakref
 import numpy as np
 
 from station.cell.config import CellConfig
+from station.cell.joint_text import joint_value
 from station.cell.plan_articulated import build_articulated_plan, preload_offset, retract_from, retract_pose
 from station.cell.plan_common import (
     Plan,
@@ -30,7 +31,6 @@ from station.cell.plan_common import (
 from station.cell.safety import MotionGuard
 from station.core.kinematics import scara_ik
 from station.core.transforms import invert
-from station.core.units import DEG
 from station.errors import ConfigError, UnreachableError
 
 # The shared pieces live in plan_common (both planners import them); they stay importable from here.
@@ -115,13 +115,13 @@ def limit_reason(cfg: CellConfig, q: np.ndarray) -> str | None:
     which limit and by how much, in the units of [limits] (deg | mm)."""
     lo, hi = cfg.soft_limits[:, 0], cfg.soft_limits[:, 1]
     for j, kind in enumerate(cfg.model.joint_types):
-        v, scale, unit = float(q[j]), (1 / DEG if kind == "revolute" else 1.0), ("°" if kind == "revolute" else " mm")
+        v = float(q[j])
         if not np.isfinite(v):
             return f"joint {j + 1} has no solution"
         if v < lo[j] or v > hi[j]:
-            side, limit = ("lower", lo[j]) if v < lo[j] else ("upper", hi[j])
-            return (f"joint {j + 1} = {v * scale:.2f}{unit} is {abs(v - limit) * scale:.2f}{unit} beyond its "
-                    f"{side} soft limit {limit * scale:.2f}{unit}")
+            side, limit = ("lower", float(lo[j])) if v < lo[j] else ("upper", float(hi[j]))
+            return (f"joint {j + 1} = {joint_value(v, kind)} is {joint_value(abs(v - limit), kind)} beyond its "
+                    f"{side} soft limit {joint_value(limit, kind)}")
     return None
 
 
