@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-STATION = [sys.executable, "-m", "station.ui.cli"]
+STATION = [sys.executable, "-m", "station.ui.cli.main"]
 BUDGET_S = 60.0  # per command: a simulated calibration takes ~5 s on an idle machine
 
 
@@ -175,7 +175,7 @@ class _Overrun(BaseException):
 
 
 def _in_process(argv: list[str], cwd: Path) -> tuple[int, str]:
-    from station.ui.cli import main
+    from station.ui.cli.main import main
 
     out, err = io.StringIO(), io.StringIO()
     here = os.getcwd()

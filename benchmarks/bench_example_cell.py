@@ -17,7 +17,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from station.cell.session import CellRequest, run_calibration_session
+from station.cell.session.calibrate import CellRequest, run_calibration_session
 from station.ui.simulated_cell import load_cell
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -13,8 +13,8 @@ import time
 import numpy as np
 
 from drivers.controller import ModbusController
-from drivers.correction_table import CorrectionTableData, TableAxis
 from simulators.controller_server import SimulatedController
+from station.core.table_data import CorrectionTableData, TableAxis
 
 
 def main() -> None:

@@ -15,12 +15,12 @@ import statistics
 import tempfile
 from pathlib import Path
 
-import station.cell.pipeline as pipeline
-import station.cell.recheck as recheck
-from station.cell.recheck import RecheckOptions
-from station.cell.recheck_session import run_recheck_session
-from station.cell.runner import Runner
-from station.cell.session import CellRequest, run_calibration_session
+import station.cell.recheck.measure as recheck
+import station.cell.results.pipeline as pipeline
+from station.cell.recheck.measure import RecheckOptions
+from station.cell.recheck.session import run_recheck_session
+from station.cell.run.runner import Runner
+from station.cell.session.calibrate import CellRequest, run_calibration_session
 from station.ui.simulated_cell import load_cell
 
 _RUNNERS: list[Runner] = []

@@ -34,7 +34,7 @@ ASSUMED_SPEED_DEG_S = 90.0
 
 
 def _request(robot: str, seed: int, db: str):
-    from station.cell.session import CellRequest
+    from station.cell.session.calibrate import CellRequest
 
     if robot.endswith(".toml"):
         return CellRequest(config=robot, simulated=True, seed=seed, db=db)
@@ -42,8 +42,8 @@ def _request(robot: str, seed: int, db: str):
 
 
 def run_seed(robot: str, seed: int, folder: Path) -> dict:
-    from station.cell.rundb import RunDB
-    from station.cell.session import run_calibration_session
+    from station.cell.records.rundb import RunDB
+    from station.cell.session.calibrate import run_calibration_session
     from station.ui.simulated_cell import load_cell
 
     db = str(folder / f"six-{seed}.sqlite")
@@ -73,7 +73,7 @@ def run_seed(robot: str, seed: int, folder: Path) -> dict:
 
 def plan_config(robot: str):
     """The cell configuration the runs plan with (seed 1)."""
-    from station.cell.config import load_config, parse_text
+    from station.cell.config.cell_config import load_config, parse_text
 
     if robot.endswith(".toml"):
         return load_config(robot)
@@ -93,7 +93,7 @@ def plan_config(robot: str):
 
 
 def plan_figures(robot: str) -> dict:
-    from station.cell.preview import motion_seconds, preview
+    from station.cell.results.preview import motion_seconds, preview
 
     cfg = plan_config(robot)
     t0 = time.perf_counter()

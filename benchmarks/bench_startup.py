@@ -35,7 +35,7 @@ SIGMA_MM = 0.010
 def _station() -> list[str]:
     """The console script beside this interpreter, as a user runs it; else the module."""
     script = Path(sys.executable).with_name("station")
-    return [str(script)] if script.exists() else [sys.executable, "-m", "station.ui.cli"]
+    return [str(script)] if script.exists() else [sys.executable, "-m", "station.ui.cli.main"]
 
 
 def write_position_file(path: Path, robot: str, n: int, seed: int) -> None:

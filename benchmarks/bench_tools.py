@@ -14,10 +14,11 @@ import time
 
 import numpy as np
 
-from station.cell.config import TEMPLATE, parse_text
-from station.cell.pipeline import grid_for
-from station.cell.plan import build_plan
-from station.cell.tools import evaluate_tool
+from drivers.controller_map import MAX_TABLE_VALUES
+from station.cell.config.cell_config import TEMPLATE, parse_text
+from station.cell.correction.tools import evaluate_tool
+from station.cell.plan.measurement_plan import build_plan
+from station.cell.results.pipeline import grid_for
 from station.core.correction_table import build_correction_table
 
 GRIPPER = '\n[[tool]]\nname = "gripper"\ntcp = [50.0, 0.0, -200.0, 0.0, 0.0, 0.0]\nz_mm = [150.0, 350.0, 200.0]\n'
@@ -33,7 +34,7 @@ def main() -> None:
     scale = np.tile([0.04, 0.04, 0.04, 7e-4, 7e-4, 7e-4], cfg.model.n_params // 6)
     p_id = cfg.model.nominal + rng.normal(size=cfg.model.n_params) * scale
     p_true = p_id + rng.normal(size=cfg.model.n_params) * scale * 0.02
-    head = build_correction_table(cfg.model, p_id, grid_for(cfg))
+    head = build_correction_table(cfg.model, p_id, grid_for(cfg), capacity=MAX_TABLE_VALUES)
     real, sim = [], []
     for _ in range(args.runs):
         t0 = time.perf_counter()

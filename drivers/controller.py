@@ -74,21 +74,27 @@ from .controller_map import (
 from .controller_status import CommandStatus, ControllerStatus, MotionStatus
 from .controller_transfer import TablePager
 from .correction_table import (
-    CorrectionTableData,
-    TableAxis,
     TableError,
     TablePageError,
-    TableRangeError,
+    TablePayload,
     TableVerifyError,
+    WireTable,
+    check_payload,
+    decode_header,
+    header_registers,
+    payload_difference,
+    table_crc32,
+    table_from_registers,
+    value_pages,
 )
 
 __all__ = [
-    "ModbusController", "ControllerStatus", "MotionStatus", "CommandStatus", "TableAxis",
-    "CorrectionTableData", "ControllerError", "RegisterDecodeError", "ModbusExceptionError",
+    "ModbusController", "ControllerStatus", "MotionStatus", "CommandStatus", "TablePayload",
+    "WireTable", "ControllerError", "RegisterDecodeError", "ModbusExceptionError",
     "RegisterWindowError", "ModbusResponseError", "MapVersionError", "WordOrderError",
     "ControllerConnectionError", "ControllerLinkLost", "CommandRejected", "MotionRejected",
     "MotionAborted", "EmergencyStop", "DriveFault", "SequenceError", "HandshakeTimeout",
-    "MotionTimeout", "TableError", "TableVerifyError", "TableRangeError", "TablePageError",
+    "MotionTimeout", "TableError", "TableVerifyError", "TablePageError",
     "CorrectionState", "WordOrder",
 ]
 
@@ -153,7 +159,7 @@ class ModbusController(TablePager):
         self._hb_stop = threading.Event()
         self._hb_counter = 0
         self._hb_last_error: BaseException | None = None
-        self._uploaded: CorrectionTableData | None = None
+        self._uploaded: TablePayload | None = None
         self._upload_failed: str | None = None
         self._readback_ok = False
         self._readback_problem = "the uploaded table was not read back yet: call read_table()"
@@ -487,50 +493,53 @@ class ModbusController(TablePager):
         self._pending = None
 
     # -- correction table ------------------------------------------------------------------
-    def upload_table(self, table: CorrectionTableData) -> None:
+    def upload_table(self, table: TablePayload) -> None:
         """Send the header page, then every value page (29 values each), each in one request
         that the controller acknowledges after checking its page CRC. A refused page raises
-        :class:`TablePageError`: the controller then holds no complete table to stage."""
-        if not isinstance(table, CorrectionTableData):
-            raise TypeError("upload_table needs a CorrectionTableData")
-        if self._n_joints and table.n_joints != self._n_joints:
-            raise TableError(f"table has {table.n_joints} joint corrections, controller {self._n_joints} joints")
+        :class:`TablePageError`: the controller then holds no complete table to stage. A table
+        the map cannot carry is refused before anything is sent (:class:`TableError`)."""
+        if not (hasattr(table, "axes") and hasattr(table, "values")):
+            raise TypeError("upload_table needs a table with axes and values (TablePayload)")
+        check_payload(table)
+        n_joints = int(table.values.shape[-1])
+        if self._n_joints and n_joints != self._n_joints:
+            raise TableError(f"table has {n_joints} joint corrections, controller {self._n_joints} joints")
         self._check_link()
         self._uploaded = None
         self._readback_ok = False
         self._readback_problem = "the uploaded table was not read back yet: call read_table()"
         self._upload_failed = "an upload is in progress"
         try:
-            self._send_table_pages(table.header_registers(self.word_order), table.value_pages(self.word_order))
+            self._send_table_pages(header_registers(table, self.word_order), value_pages(table, self.word_order))
         except ControllerError as exc:
             self._upload_failed = f"the last upload failed ({exc})"
             raise
         self._upload_failed = None
         self._uploaded = table
 
-    def read_table(self) -> CorrectionTableData:
+    def read_table(self) -> WireTable:
         """Read the header page and every value page back (each page's CRC checked, then the
         whole table's CRC-32). If a table was uploaded in this session, compare value by value;
         the result gates :meth:`stage_table` and :meth:`activate_table`."""
         self._check_link()
         try:
             header, data = self._read_table_pages()
-            h = CorrectionTableData.decode_header(header, self.word_order)
-            table = CorrectionTableData.from_registers(header, data, self.word_order)
+            h = decode_header(header, self.word_order)
+            table = table_from_registers(header, data, self.word_order)
         except ControllerError as exc:
             if self._uploaded is not None:
                 self._readback_ok = False
                 self._readback_problem = f"read-back failed: {exc}"
             raise
         if self._uploaded is not None:
-            diff = self._uploaded.first_difference(table)
-            if diff is None and h["crc"] != self._uploaded.crc32():
-                diff = f"header CRC {h['crc']:#010x} != uploaded {self._uploaded.crc32():#010x}"
+            diff = payload_difference(self._uploaded, table)
+            if diff is None and h["crc"] != table_crc32(self._uploaded):
+                diff = f"header CRC {h['crc']:#010x} != uploaded {table_crc32(self._uploaded):#010x}"
             self._readback_ok = diff is None
             self._readback_problem = "" if diff is None else f"read-back differs from upload: {diff}"
         return table
 
-    def verify_table(self) -> CorrectionTableData:
+    def verify_table(self) -> WireTable:
         """read_table() and raise :class:`TableVerifyError` if it differs from the upload."""
         if self._uploaded is None:
             raise TableVerifyError("no table uploaded in this session: call upload_table() first")
@@ -564,7 +573,7 @@ class ModbusController(TablePager):
             raise TableVerifyError("no table uploaded in this session: upload, read back, stage, then activate")
         if not self._readback_ok:
             raise TableVerifyError(f"activation refused: {self._readback_problem}")
-        crc = self._uploaded.crc32()
+        crc = table_crc32(self._uploaded)
         staged = int(self._read_entry("table_staged_crc"))
         st = self.status()
         if not st.table_staged or staged != crc:

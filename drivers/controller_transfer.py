@@ -35,7 +35,7 @@ from .controller_map import (
     encode,
     registers_crc32,
 )
-from .correction_table import CorrectionTableData, TablePageError, n_value_pages
+from .correction_table import TablePageError, WireTable, n_value_pages, table_from_registers
 
 __all__ = ["TablePager", "PageRead"]
 
@@ -167,7 +167,7 @@ class TablePager:
             data += self._read_page(op_page, k).data
         return header, data
 
-    def read_slot_table(self, slot: str) -> CorrectionTableData | None:
+    def read_slot_table(self, slot: str) -> WireTable | None:
         """The table the controller holds in ``slot`` (``staged``, ``active`` or ``previous``),
         each page's CRC and the whole table's CRC-32 checked; None when the slot is empty. Reads
         only: the upload interlock is not touched."""
@@ -177,4 +177,4 @@ class TablePager:
         if not self.table_crcs()[slot]:
             return None
         header, data = self._read_table_pages(slot)
-        return CorrectionTableData.from_registers(header, data, self.word_order)
+        return table_from_registers(header, data, self.word_order)

@@ -129,7 +129,7 @@ def _start_from_config(args: argparse.Namespace) -> SimulatedCellServers:
     """The simulators on the cell of ``--config`` (an invalid configuration: exit 2 with the
     station's message); ``--write-config`` written once they run."""
     from simulators.from_config import simulate_config
-    from station.cell.config import load_config  # the station's own reading of the file
+    from station.cell.config.cell_config import load_config  # the station's own reading of the file
     from station.errors import StationError
 
     try:

@@ -12,7 +12,7 @@ motion-time model scaled by ``time_scale`` (0 = instant), and reports done or er
 same sequence number. Cartesian moves use the controller's NOMINAL kinematics in the robot base
 frame (``station.core.kinematics.scara_ik``; for an articulated arm general inverse kinematics
 from the joints the robot stands at, which keeps its configuration) plus the multilinear table correction
-(:meth:`drivers.correction_table.CorrectionTableData.interpolate`) when a table is active; the
+(:meth:`station.core.table_data.CorrectionTableData.interpolate`) when a table is active; the
 table area itself is :class:`simulators.controller_tables.TableSlots`.
 
 Faults are injected at run time through methods of :class:`SimulatedController` (thread-safe).
@@ -54,11 +54,11 @@ from drivers.controller_map import (
     encode,
     register_span,
 )
-from drivers.correction_table import CorrectionTableData, TableRangeError
 from simulators.controller_faults import QUIRKS, ModbusFault
 from simulators.controller_tables import TableSlots, serve_transfer
 from station.core.kinematics import forward, inverse_kinematics, scara_ik
 from station.core.model import RobotModel
+from station.core.table_data import CorrectionTableData, TableRangeError
 from station.core.transforms import matrix_to_pose, pose_to_matrix
 from station.errors import UnreachableError
 from station.io.robot_files import load_robot

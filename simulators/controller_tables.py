@@ -32,7 +32,8 @@ from drivers.controller_map import (
     raw_crc32,
     registers_crc32,
 )
-from drivers.correction_table import CorrectionTableData, TableError, n_value_pages
+from drivers.correction_table import TableError, decode_header, header_registers, n_value_pages, value_pages
+from station.core.table_data import CorrectionTableData, TableAxis
 
 __all__ = ["TableSlots", "serve_transfer"]
 
@@ -76,8 +77,8 @@ class TableSlots:
         if table is None:
             return None
         if header:
-            return table.header_registers(word_order) if index == 0 else None
-        pages = table.value_pages(word_order)
+            return header_registers(table, word_order) if index == 0 else None
+        pages = value_pages(table, word_order)
         return pages[index] if 0 <= index < len(pages) else None
 
     def stored(self, header: bool, index: int) -> list[int] | None:
@@ -92,7 +93,7 @@ class TableSlots:
         if self.header is None:
             return ErrorCode.TABLE_SHAPE_INVALID
         try:
-            h = CorrectionTableData.decode_header(self.header, word_order)
+            h = decode_header(self.header, word_order)
         except TableError:
             return ErrorCode.TABLE_SHAPE_INVALID
         n_pages = n_value_pages(h["n_values"])
@@ -108,7 +109,8 @@ class TableSlots:
             return ErrorCode.TABLE_CRC_MISMATCH
         shape = (h["n_configs"], *[a.count for a in h["axes"]], h["n_joints"])
         vals = (raw.astype(np.float64) * TABLE_VALUE_SCALE).astype(np.float32)
-        self.staged = CorrectionTableData(h["axes"], vals.reshape(shape))
+        axes = tuple(TableAxis(a.start, a.step, a.count, a.periodic) for a in h["axes"])
+        self.staged = CorrectionTableData(axes, vals.reshape(shape))
         return ErrorCode.NONE
 
     def corrupt_value(self, index: int, delta: float, word_order: WordOrder) -> None:
@@ -159,7 +161,7 @@ class TableSlots:
 
     def correct(self, q: np.ndarray, pose: np.ndarray, elbow: int) -> np.ndarray:
         """Nominal IK joints ``q`` for ``pose`` plus the active table's correction (``q`` itself
-        when no table is active). Raises :class:`drivers.correction_table.TableRangeError`."""
+        when no table is active). Raises :class:`station.core.table_data.TableRangeError`."""
         table = self.active
         if table is None:
             return q

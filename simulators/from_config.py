@@ -1,7 +1,7 @@
 """Rehearse a cell: the simulated cell that a cell configuration describes (issue 8, point 4).
 
 :func:`simulate_config` starts the simulators on the user's own cell, from the validated
-configuration the station itself reads (``station.cell.config.CellConfig``):
+configuration the station itself reads (``station.cell.config.cell_config.CellConfig``):
 
 * the true robot: the configuration's robot (its robot file with the configured nominal set-up)
   plus seeded errors of the ``[simulation]`` magnitudes (:class:`SimulationPhysics`);

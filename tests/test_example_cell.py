@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from station.cell.config import load_config
-from station.ui.cli import main
+from station.cell.config.cell_config import load_config
+from station.ui.cli.main import main
 
 CELL = Path(__file__).resolve().parents[1] / "examples" / "scara600" / "cell.toml"
 
@@ -20,7 +20,7 @@ CELL = Path(__file__).resolve().parents[1] / "examples" / "scara600" / "cell.tom
 def test_the_example_cell_shares_nothing_with_the_built_in_one():
     from simulators import start_simulated_cell
     from simulators.reference_cell import cell_config_text
-    from station.cell.config import parse_text
+    from station.cell.config.cell_config import parse_text
 
     cfg = load_config(CELL)
     with start_simulated_cell(seed=1) as sim:

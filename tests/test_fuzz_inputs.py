@@ -29,7 +29,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from station.cell.config import TEMPLATE, parse_config, parse_text
+from station.cell.config.cell_config import TEMPLATE, parse_config, parse_text
 from station.errors import StationError
 
 #: seconds one input may take before it counts as a hang (a parse takes milliseconds; an
@@ -79,7 +79,7 @@ def call_typed(fn: Callable[[], Any]) -> str:
 def run_cli(argv: list[str], workdir: Path) -> str:
     """``station ARGV`` in ``workdir`` (internal-error logs land there): ``accepted`` (exit 0),
     ``refused`` (another documented exit code, no traceback); exit 1 or a traceback raises."""
-    from station.ui.cli import main
+    from station.ui.cli.main import main
 
     out, err = io.StringIO(), io.StringIO()
     cwd = os.getcwd()
@@ -397,7 +397,7 @@ def check_robot_file(case: tuple[str, bytes], d: Path) -> str:
 
 def check_config_file(case: tuple[str, bytes], d: Path) -> str:
     """A configuration whose robot is the fuzzed robot file, read through load_config."""
-    from station.cell.config import load_config
+    from station.cell.config.cell_config import load_config
 
     robot = _write(d, *case)
     cfg = _write(d, "cell.toml", TEMPLATE.replace('model = "sr800"', f'model = "{robot.name}"').encode())

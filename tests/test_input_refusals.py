@@ -1,6 +1,6 @@
 """Issue 19, inputs: bad inputs that gave exit 1 (or were silently accepted) are refused with the
 exit code of their outcome and a message that says what to change; no numpy or scipy warning
-reaches stderr on the way. Each case calls ``station.ui.cli.main`` in-process."""
+reaches stderr on the way. Each case calls ``station.ui.cli.main.main`` in-process."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from station.ui.cli import main
+from station.ui.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pytest
 
-from station.cell.config import load_config
-from station.ui.cli import main
+from station.cell.config.cell_config import load_config
+from station.ui.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[1]
 CELL = ROOT / "examples" / "scara600" / "cell.toml"
@@ -31,9 +31,9 @@ def test_the_example_cell_is_a_dl_rs1a_at_9600_8n1_and_a_window_at_128():
 
 def test_a_rehearsal_of_the_example_cell_stays_inside_registers_128_to_255(tmp_path):
     from simulators.from_config import simulate_config
-    from station.cell.pipeline import Options, run_calibration
-    from station.cell.rundb import RunDB
-    from station.cell.session import open_cell
+    from station.cell.records.rundb import RunDB
+    from station.cell.results.pipeline import Options, run_calibration
+    from station.cell.session.calibrate import open_cell
     from station.errors import Outcome
 
     with ExitStack() as stack:
@@ -60,7 +60,7 @@ def test_station_check_passes_against_a_dl_rs1a_that_answers_only_its_manual(tmp
         line = json.loads(sim.stdout.readline())  # printed once both endpoints accept traffic
         assert line["probe_protocol"] == "keyence-dl-rs1a" and line["probe_line"] == "9600 8N1"
         assert line["register_base"] == 128
-        check = subprocess.run([sys.executable, "-m", "station.ui.cli", "check", str(out)], capture_output=True,
+        check = subprocess.run([sys.executable, "-m", "station.ui.cli.main", "check", str(out)], capture_output=True,
                                text=True, cwd=ROOT, timeout=120)
     finally:
         sim.terminate()
@@ -113,7 +113,7 @@ def test_simulated_cells_allow_for_a_loaded_machine_and_a_real_cell_keeps_its_de
     """The simulators share the CPU with the station: their cells widen the station's device
     deadlines (and the session says so); a real cell's configuration keeps what it gives."""
     from simulators.from_config import SIMULATOR_CONTROLLER_DEADLINE_S, station_config_text
-    from station.cell.config import parse_text
+    from station.cell.config.cell_config import parse_text
 
     sim = parse_text(builtin_sim).devices
     assert sim.controller_timeout_s >= SIMULATOR_CONTROLLER_DEADLINE_S

@@ -10,7 +10,7 @@ a table of joint corrections::
 (revolute differences wrapped to (−π, π]), so that the real robot — described by the identified
 model — reaches what the nominal model promised. The grid and the interpolation rule are in
 :mod:`station.core.table_grid`; robots without a table use :mod:`station.core.compensation`;
-the verified upload is the cell's (:mod:`station.cell.upload`). Pure numerics: mm and rad
+the verified upload is the cell's (:mod:`station.cell.correction.upload`). Pure numerics: mm and rad
 inside, µm and arc seconds only in reported figures.
 
 Frames: targets are in the robot base frame as the *identified* chain defines it (the chain
@@ -24,9 +24,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drivers.correction_table import CorrectionTableData, TableAxis
 from station.core.kinematics import forward, scara_ik
 from station.core.model import RobotModel
+from station.core.table_data import CorrectionTableData, TableAxis
 from station.core.table_grid import GridSpec, _cell_coords, interpolate_table
 from station.core.transforms import pose_to_matrix, rotation_log
 from station.core.units import ARCSEC, wrap_angle
@@ -285,7 +285,7 @@ def _edge_bound(data: CorrectionTableData, nominal: RobotModel, identified: np.n
 
 
 def build_correction_table(nominal: RobotModel, identified_params, grid: GridSpec | None = None,
-                           *, n_check: int = 4000, seed: int = 0) -> CorrectionTable:
+                           *, n_check: int = 4000, seed: int = 0, capacity: int | None = None) -> CorrectionTable:
     """Joint-correction table for a SCARA: Δq = IK_identified − IK_nominal at every node.
 
     ``nominal``: the model the controller uses (its ``nominal`` parameters); ``identified_params``:
@@ -309,7 +309,8 @@ def build_correction_table(nominal: RobotModel, identified_params, grid: GridSpe
     if identified.shape != nominal.nominal.shape or not np.all(np.isfinite(identified)):
         raise ConfigError(f"identified parameters must be a finite vector of {nominal.n_params} values")
     g = nominal.n_joints
-    grid.check_capacity(g)
+    if capacity is not None:  # the controller's limit: the caller knows its controller
+        grid.check_capacity(g, capacity)
     axes = grid.axes()
     shape = tuple(a.count for a in axes)
     pts = _node_points(axes)

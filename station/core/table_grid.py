@@ -1,10 +1,10 @@
 """The grid of a correction table and the controller's interpolation rule, vectorised.
 
-The table format itself (axes, values, CRC-32, register encoding) is the controller's contract
-and lives in :mod:`drivers.correction_table`, which the controller simulator imports too; this
-module computes on it without any I/O. :func:`interpolate_table` is the controller's rule
-(:meth:`drivers.correction_table.CorrectionTableData.interpolate`) vectorised in float64, and is
-checked against it in the tests.
+The table's data (axes, values, their resolution) is :mod:`station.core.table_data`; its register
+encoding is the driver's. :func:`interpolate_table` is the controller's rule
+(:meth:`station.core.table_data.CorrectionTableData.interpolate`) vectorised in float64, and is
+checked against it in the tests. How many values a controller holds is the controller's: the
+caller passes that capacity in.
 """
 
 from __future__ import annotations
@@ -15,13 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from drivers.correction_table import (
-    MAX_TABLE_VALUES,
-    CorrectionTableData,
-    TableAxis,
-    TableError,
-    TableRangeError,
-)
+from station.core.table_data import CorrectionTableData, TableAxis, TableError, TableRangeError
 from station.core.units import TWO_PI
 from station.errors import ConfigError
 
@@ -160,7 +154,8 @@ class GridSpec:
         """Values the table holds: configurations × nodes × joints."""
         return len(self.elbows) * self.n_nodes * n_joints
 
-    def check_capacity(self, n_joints: int = 4, capacity: int = MAX_TABLE_VALUES) -> None:
+    def check_capacity(self, n_joints: int, capacity: int) -> None:
+        """Refuse (:class:`ConfigError`) a grid of more values than ``capacity`` (the controller's)."""
         n = self.n_values(n_joints)
         if n > capacity:
             raise ConfigError(

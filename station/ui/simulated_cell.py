@@ -1,6 +1,6 @@
 """The cell a command asked for, composed above the cell layer: a real cell's configuration is
-read by :func:`station.cell.session.load_cell`; ``--simulated`` starts the simulators here and
-hands the session a :class:`~station.cell.session.LoadedCell` whose ``[devices]`` point at them
+read by :func:`station.cell.session.calibrate.load_cell`; ``--simulated`` starts the simulators here and
+hands the session a :class:`~station.cell.session.calibrate.LoadedCell` whose ``[devices]`` point at them
 (the configuration, the simulator's truth for the oracle, its endpoints).
 
 The session functions take :func:`load_cell` as their ``load`` argument, so the cell layer
@@ -21,9 +21,9 @@ from typing import Any
 
 import tomli_w
 
-from station.cell import session
-from station.cell.config import MAX_CONFIG_BYTES, parse_text, simulation_settings
-from station.cell.session import CellRequest, LoadedCell
+from station.cell.config.cell_config import MAX_CONFIG_BYTES, parse_text, simulation_settings
+from station.cell.session import calibrate as session
+from station.cell.session.calibrate import CellRequest, LoadedCell
 from station.errors import ConfigError
 from station.io.robot_files import read_user_text
 
@@ -44,7 +44,7 @@ def load_cell(request: CellRequest, stack: ExitStack) -> LoadedCell:
     simulators; without CONFIG, or with one holding only [simulation], [recheck] and [warmup],
     the built-in cell is started with those. The seed: ``request.seed`` (``--seed``) when given,
     else ``[simulation].seed``, else 1. ``LoadedCell.truth`` is the oracle. Without
-    ``simulated``: the configuration file (:func:`station.cell.session.load_cell`)."""
+    ``simulated``: the configuration file (:func:`station.cell.session.calibrate.load_cell`)."""
     if request.simulated and request.robot not in (None, "sr800"):  # another robot's built-in cell (issue 9)
         return _load_builtin_robot_cell(request, stack)
     if request.simulated:

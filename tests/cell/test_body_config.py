@@ -14,10 +14,10 @@ import pytest
 from simulators import SimulatedCellServers
 from simulators.cell import SimulatedCell
 from simulators.reference_cell import cell_config_text
-from station.cell.config import TEMPLATE, load_config, parse_text
-from station.cell.pipeline import identify_run
-from station.cell.plan import build_plan, retracted
-from station.cell.runner import Checkpoint, MoveJoints, ReadJoints, ReadProbes, Settle, approach_and_read
+from station.cell.config.cell_config import TEMPLATE, load_config, parse_text
+from station.cell.plan.measurement_plan import build_plan, retracted
+from station.cell.results.pipeline import identify_run
+from station.cell.run.runner import Checkpoint, MoveJoints, ReadJoints, ReadProbes, Settle, approach_and_read
 from station.core.transforms import matrix_to_pose
 from station.core.units import ARCSEC, UM
 from station.errors import ConfigError
@@ -168,7 +168,7 @@ def test_example_body_file_reads_as_the_builtin_cells_body(tmp_path):
 
 def test_an_edited_body_file_changes_the_fingerprint(tmp_path):
     """A resume refuses a run whose body file was edited since (the file name alone is the same)."""
-    from station.cell.fingerprint import check_same_cell, fingerprint
+    from station.cell.records.fingerprint import check_same_cell, fingerprint
 
     inline = parse_text(TEMPLATE)
     assert "body points" not in fingerprint(inline)  # inline points: the [body] section is the digest

@@ -12,10 +12,11 @@ import re
 import numpy as np
 import pytest
 
-from station.cell import config as cfgmod
-from station.cell.config import TEMPLATE, correction_grid, load_config, parse_config, parse_text
-from station.cell.run_export import csv_text, export_csv
-from station.cell.rundb import RunDB
+from drivers.controller_map import MAX_TABLE_VALUES
+from station.cell.config import cell_config as cfgmod
+from station.cell.config.cell_config import TEMPLATE, correction_grid, load_config, parse_config, parse_text
+from station.cell.records.run_export import csv_text, export_csv
+from station.cell.records.rundb import RunDB
 from station.errors import ConfigError
 from station.io.robot_files import load_robot
 
@@ -160,7 +161,7 @@ def test_grid_and_sigma_refused_when_the_file_is_read(old, new, pattern):
 def test_the_grid_checked_is_the_grid_the_pipeline_builds():
     cfg = parse_text(TEMPLATE)
     grid = correction_grid(cfg.correction, cfg.plan.elbows)
-    grid.check_capacity(cfg.model.n_joints)
+    grid.check_capacity(cfg.model.n_joints, MAX_TABLE_VALUES)
     assert grid.shape == (11, 15, 2, 12)
 
 

@@ -17,12 +17,12 @@ import pytest
 
 from drivers.controller import ModbusController
 from drivers.controller_map import REGISTERS, Command, ErrorCode, StatusBit, WordOrder
-from drivers.correction_table import CorrectionTableData, TableAxis
 from simulators.controller_server import QUIRKS, SimulatedController
-from station.cell import conformance as cf
-from station.cell.config import parse_text
+from station.cell.config.cell_config import parse_text
+from station.cell.conformance import suite as cf
+from station.core.table_data import CorrectionTableData, TableAxis
 from station.errors import ConfigError
-from station.ui.cli import main
+from station.ui.cli.main import main
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "robot-program.md"
 PARK = "[0.0, 0.0, -1.0, 0.0]"  # joint 3 (the quill) 1 mm below its upper limit 0 mm: inside the 2 mm zone

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from station.ui.cli import main
+from station.ui.cli.main import main
 
 
 @pytest.fixture(scope="module")

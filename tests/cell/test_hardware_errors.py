@@ -13,8 +13,8 @@ from drivers.controller_map import REG
 from simulators import start_simulated_cell
 from simulators.probe_head_sim import FaultKind
 from simulators.reference_cell import cell_config_text
-from station.cell.config import parse_text
-from station.cell.session import CellRequest, check_cell, run_calibration_session
+from station.cell.config.cell_config import parse_text
+from station.cell.session.calibrate import CellRequest, check_cell, run_calibration_session
 from station.errors import Outcome
 
 

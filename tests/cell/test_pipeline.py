@@ -10,13 +10,13 @@ from drivers.controller import EmergencyStop, HandshakeTimeout, TableVerifyError
 from drivers.probe_protocol import ProbeDisconnected
 from simulators import start_simulated_cell
 from simulators.reference_cell import cell_config_text
-from station.cell.config import parse_text
-from station.cell.events import MeasurementRecorded, Notice, PhaseChanged, RunFinished
-from station.cell.outcomes import classify
-from station.cell.pipeline import Options, run_calibration
-from station.cell.rundb import RunDB
-from station.cell.session import open_cell
-from station.cell.steps import StepKind
+from station.cell.config.cell_config import parse_text
+from station.cell.plan.steps import StepKind
+from station.cell.records.rundb import RunDB
+from station.cell.results.outcomes import classify
+from station.cell.results.pipeline import Options, run_calibration
+from station.cell.run.events import MeasurementRecorded, Notice, PhaseChanged, RunFinished
+from station.cell.session.calibrate import open_cell
 from station.errors import Outcome
 
 
@@ -105,7 +105,7 @@ def test_emergency_stop_ends_cleanly_and_the_run_resumes(cell, tmp_path, capsys)
     # the station never resets an e-stop by itself: moves stay refused until the operator does
     assert cell.ctrl.status().estop or cell.ctrl.status().error
     # the documented, confirmed reset path: 'station reset CONFIG' (here confirmed with --yes)
-    from station.ui.cli import main
+    from station.ui.cli.main import main
 
     cfg_file = tmp_path / "cell.toml"
     cfg_file.write_text(cell.cfg.source_text)
@@ -170,7 +170,7 @@ def test_a_motion_outside_the_soft_limits_is_refused_before_the_plan_runs(tmp_pa
     # joint 2 limited so that every elbow -1 pose is out: the plan drops them, nothing moves there
     c = Cell(tmp_path, **{"[-140.0, 140.0]": "[0.0, 140.0]"})
     try:
-        from station.cell.plan import all_motion_poses, build_plan, check_joints
+        from station.cell.plan.measurement_plan import all_motion_poses, build_plan, check_joints
 
         plan = build_plan(c.cfg)
         n_points = len(c.cfg.point_ids)
@@ -186,7 +186,7 @@ def test_a_motion_outside_the_soft_limits_is_refused_before_the_plan_runs(tmp_pa
 
 
 def test_operator_abort_stops_at_a_safe_point_and_the_run_resumes(cell):
-    from station.cell.runcontrol import RunAborted, RunControl
+    from station.cell.run.runcontrol import RunAborted, RunControl
 
     control = RunControl()
     emit = _after_n_measurements(cell, 6, control.abort)
@@ -236,7 +236,7 @@ def test_a_probe_that_dies_stops_the_run_names_it_and_uploads_nothing(cell):
 
 
 def test_too_few_valid_identification_poses_are_refused_before_identifying(cell, monkeypatch):
-    import station.cell.pipeline as pipeline
+    import station.cell.results.pipeline as pipeline
     from station.errors import IdentificationError
 
     monkeypatch.setattr(pipeline, "MIN_VALID_FRACTION", 1.01)  # one more than the plan holds
@@ -247,7 +247,7 @@ def test_too_few_valid_identification_poses_are_refused_before_identifying(cell,
 
 
 def test_a_model_that_fits_garbage_is_refused(cell, monkeypatch):
-    import station.cell.pipeline as pipeline
+    import station.cell.results.pipeline as pipeline
     from station.errors import IdentificationError
 
     monkeypatch.setattr(pipeline, "MAX_RMS_NORMALIZED", 0.1)  # the real fit (≈ 0.85) now counts as garbage
@@ -289,7 +289,7 @@ def test_resume_refuses_another_cell_and_names_what_changed(tmp_path, change, wh
 
 
 def test_the_operator_declines_the_upload(cell):
-    from station.cell.questions import UploadProposal
+    from station.cell.run.questions import UploadProposal
 
     asked = []
 
@@ -306,7 +306,7 @@ def test_the_operator_declines_the_upload(cell):
 
 
 def test_the_operator_rolls_the_new_table_back(cell):
-    from station.cell.questions import KeepCorrection, UploadProposal
+    from station.cell.run.questions import KeepCorrection, UploadProposal
 
     asked = []
 

@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 
 from simulators.six_axis_cell import six_axis_cell, six_axis_config_text
-from station.cell.config import CellConfig, parse_text
-from station.cell.plan import all_motion_poses, build_plan, order_by_travel, retracted
-from station.cell.plan_articulated import (
+from station.cell.config.cell_config import CellConfig, parse_text
+from station.cell.plan.articulated import (
     OUTWARD_DIAGONAL,
     articulated_candidates,
     head_orientations,
     retract_pose,
 )
+from station.cell.plan.measurement_plan import all_motion_poses, build_plan, order_by_travel, retracted
 from station.core.identifiability import analyze
 from station.core.ik import configuration
 from station.core.kinematics import forward

@@ -14,12 +14,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from station.cell.config import load_config
-from station.cell.grid_precheck import GridTooCoarse, check_grid
-from station.cell.plan import build_plan
-from station.cell.rundb import RunDB
+from station.cell.config.cell_config import load_config
+from station.cell.correction.grid_precheck import GridTooCoarse, check_grid
+from station.cell.plan.measurement_plan import build_plan
+from station.cell.records.rundb import RunDB
 from station.errors import ConfigError, Outcome
-from station.ui.cli import main
+from station.ui.cli.main import main
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "scara600"
 #: two points far beyond the 600 mm arm (body frame; the robot base stands at x = -300)

@@ -9,11 +9,11 @@ import pytest
 
 from simulators import start_simulated_cell
 from simulators.reference_cell import cell_config_text
-from station.cell.config import parse_text
-from station.cell.plan import build_plan
-from station.cell.preview import describe, preview
-from station.cell.steps import StepKind
-from station.ui.cli import main
+from station.cell.config.cell_config import parse_text
+from station.cell.plan.measurement_plan import build_plan
+from station.cell.plan.steps import StepKind
+from station.cell.results.preview import describe, preview
+from station.ui.cli.main import main
 
 
 @pytest.fixture(scope="module")
@@ -59,7 +59,7 @@ def test_preview_estimates_the_motion_time_from_the_robot_files_speeds(text):
 
     import numpy as np
 
-    from station.cell.preview import motion_seconds
+    from station.cell.results.preview import motion_seconds
 
     cfg = parse_text(text)
     p = preview(cfg)
@@ -75,7 +75,7 @@ def test_preview_estimates_the_motion_time_from_the_robot_files_speeds(text):
     # one step's moves: approach, above, touch, retract, each at its slowest joint
     one = steps[:1]
     q = np.array(one[0].q)
-    from station.cell.plan import all_motion_poses, retracted
+    from station.cell.plan.measurement_plan import all_motion_poses, retracted
     path = np.array([*all_motion_poses(cfg, q, 1), retracted(cfg, q)])
     expect = np.sum(np.max(np.abs(np.diff(path, axis=0)) / (cfg.model.max_speed * cfg.plan.speed), axis=1))
     assert motion_seconds(cfg, one) == pytest.approx(expect)
@@ -87,7 +87,7 @@ def test_the_bodys_cmm_uncertainty_widens_the_predicted_accuracy():
 
     import numpy as np
 
-    from station.cell.config import load_config
+    from station.cell.config.cell_config import load_config
 
     cfg = load_config(Path(__file__).resolve().parents[2] / "examples" / "scara600" / "cell.toml")
     assert cfg.body_sigma is not None and np.all(cfg.body_sigma > 0)

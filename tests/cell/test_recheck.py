@@ -11,15 +11,23 @@ import pytest
 
 from simulators.cell import SimulatedCell
 from simulators.thermal import ThermalModel
-from station.cell.config import parse_text
-from station.cell.pipeline import identify_run
-from station.cell.plan import build_plan, retracted
-from station.cell.recheck import Baseline, Tolerances, analyse_recheck, plan_recheck
-from station.cell.runner import Checkpoint, MoveCartesian, MoveJoints, ReadJoints, ReadProbes, Settle, approach_and_read
-from station.cell.steps import StepKind
-from station.cell.warmup import remaining_drift_um, run_warmup
+from station.cell.config.cell_config import parse_text
+from station.cell.plan.measurement_plan import build_plan, retracted
+from station.cell.plan.steps import StepKind
+from station.cell.recheck.measure import Baseline, Tolerances, analyse_recheck, plan_recheck
+from station.cell.results.pipeline import identify_run
+from station.cell.run.runner import (
+    Checkpoint,
+    MoveCartesian,
+    MoveJoints,
+    ReadJoints,
+    ReadProbes,
+    Settle,
+    approach_and_read,
+)
+from station.cell.run.warmup import remaining_drift_um, run_warmup
 from station.errors import Outcome
-from station.ui.cli import main
+from station.ui.cli.main import main
 
 
 # ------------------------------------------------------------------ in-process measurement

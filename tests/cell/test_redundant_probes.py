@@ -17,14 +17,14 @@ from simulators import start_simulated_cell
 from simulators.cell import CellTruth, SimulatedCell
 from simulators.probe_head_sim import ProbeHeadPhysics
 from simulators.reference_cell import cell_config_text
-from station.cell.config import CellConfig, parse_text
-from station.cell.events import MeasurementRecorded, Notice
-from station.cell.pipeline import Options, run_calibration
-from station.cell.run_records import MeasurementRecord
-from station.cell.rundb import RunDB
-from station.cell.runner import Reading, failure_cause, probe_readings
-from station.cell.session import open_cell
-from station.cell.summary import RunSummary
+from station.cell.config.cell_config import CellConfig, parse_text
+from station.cell.records.run_records import MeasurementRecord
+from station.cell.records.rundb import RunDB
+from station.cell.records.summary import RunSummary
+from station.cell.results.pipeline import Options, run_calibration
+from station.cell.run.events import MeasurementRecorded, Notice
+from station.cell.run.runner import Reading, failure_cause, probe_readings
+from station.cell.session.calibrate import open_cell
 from station.core.kinematics import forward
 from station.core.probe_geometry import FACE_NORMALS, ProbeHeadGeometry
 from station.core.transforms import pose_to_matrix

@@ -13,11 +13,11 @@ import numpy as np
 import pytest
 
 from simulators.cell import CalibrationBody, CellTruth, CubeSpec
-from station.cell.rundb import RunDB
-from station.cell.session import CellRequest, run_calibration_session
+from station.cell.records.rundb import RunDB
+from station.cell.session.calibrate import CellRequest, run_calibration_session
 from station.core.transforms import matrix_to_pose
 from station.errors import ConfigError, Outcome
-from station.ui.cli import main
+from station.ui.cli.main import main
 from station.ui.simulated_cell import load_cell
 
 # five 40 mm cubes in a layout of their own (not the built-in body), 20 corners

@@ -17,7 +17,7 @@ import pytest
 
 from simulators.cell import SimulatedCell
 from simulators.reference_cell import cell_config_text as simulated_config_text
-from station.cell.rundb import RunDB
+from station.cell.records.rundb import RunDB
 
 ROOT = Path(__file__).resolve().parents[2]
 SEED = 3
@@ -53,7 +53,7 @@ class Simulator:
 
 
 def _station(*args) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "station.ui.cli", *map(str, args)], cwd=ROOT, env=ENV,
+    return subprocess.Popen([sys.executable, "-m", "station.ui.cli.main", *map(str, args)], cwd=ROOT, env=ENV,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
 
 

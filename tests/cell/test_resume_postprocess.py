@@ -12,11 +12,11 @@ from types import SimpleNamespace
 
 import pytest
 
-from station.cell.fingerprint import POST_PROCESSING, check_same_cell, resume_note
-from station.cell.rundb import RunDB
-from station.cell.stored_config import stored_config
+from station.cell.records.fingerprint import POST_PROCESSING, check_same_cell, resume_note
+from station.cell.records.rundb import RunDB
+from station.cell.records.stored_config import stored_config
 from station.errors import ConfigError, Outcome
-from station.ui.cli import main
+from station.ui.cli.main import main
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "scara600"
 FP = {"[robot]": "a", "[body]": "b", "[correction]": "c", "[identification]": "d", "robot model": "e"}

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from station.cell.rundb import RunDB, RunLockedError
-from station.ui.cli import main
+from station.cell.records.rundb import RunDB, RunLockedError
+from station.ui.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIG = '[cell]\nname = "lock test"\n'
@@ -21,7 +21,7 @@ PLAN = [{"index": 0, "kind": "identification", "point": 0, "point_id": "P1", "el
 
 HOLDER = """
 import sys, time
-from station.cell.rundb import RunDB
+from station.cell.records.rundb import RunDB
 with RunDB(sys.argv[1]) as db, db.lock_run(1):
     print("locked", flush=True)
     time.sleep(120)
@@ -121,7 +121,7 @@ def test_lock_of_another_host_is_cleared_by_hand(db_path):
 
 
 def test_station_runs_unlock_clears_another_hosts_lock(db_path, capsys):
-    from station.ui.cli import main
+    from station.ui.cli.main import main
 
     with RunDB(db_path) as db:
         db._c().execute("INSERT INTO run_locks(run_id, host, pid, pid_start, since_utc, token) "

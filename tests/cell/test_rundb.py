@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from station.cell.run_export import export_csv
-from station.cell.rundb import (
+from station.cell.records.run_export import export_csv
+from station.cell.records.rundb import (
     SCHEMA_VERSION,
     DuplicateMeasurementError,
     MeasurementRecord,
@@ -81,7 +81,7 @@ fields = _ns["fields"]
 
 WRITER_SRC = FIELDS_SRC + r'''
 import sys, time
-from station.cell.rundb import RunDB
+from station.cell.records.rundb import RunDB
 
 db_path, run_id, pause_s, max_new = sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), int(sys.argv[4])
 with RunDB(db_path) as db:

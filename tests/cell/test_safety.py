@@ -1,4 +1,4 @@
-"""The motion guard (station.cell.safety): property-based tests of the safety invariants."""
+"""The motion guard (station.cell.limits.motion_guard): property-based tests of the safety invariants."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from drivers.correction_table import CorrectionTableData, TableAxis
-from station.cell.safety import MotionGuard
+from station.cell.limits.motion_guard import MotionGuard
+from station.core.table_data import CorrectionTableData, TableAxis
 from station.errors import ConfigError, UnreachableError
 
 LIMITS = np.array([[-2.0, 2.0], [-2.4, 2.4], [-190.0, -10.0], [-6.0, 6.0]])
@@ -96,8 +96,8 @@ def test_plan_refuses_a_point_whose_later_repetitions_would_leave_the_soft_limit
 
     from simulators import start_simulated_cell
     from simulators.reference_cell import cell_config_text
-    from station.cell.config import parse_text
-    from station.cell.plan import all_motion_poses, approach_pose, build_plan, widest_motion_poses
+    from station.cell.config.cell_config import parse_text
+    from station.cell.plan.measurement_plan import all_motion_poses, approach_pose, build_plan, widest_motion_poses
 
     with start_simulated_cell(seed=1) as sim:
         cfg = parse_text(cell_config_text(sim, 1))

@@ -1,4 +1,4 @@
-"""Opening a cell from its configuration (station.cell.session): word order, device protocols,
+"""Opening a cell from its configuration (station.cell.session.calibrate): word order, device protocols,
 and every failure returned as a typed outcome."""
 
 from __future__ import annotations
@@ -12,10 +12,10 @@ import pytest
 from drivers.controller_map import WordOrder
 from simulators import start_simulated_cell
 from simulators.reference_cell import cell_config_text
-from station.cell import devices
-from station.cell.config import TEMPLATE, parse_text
-from station.cell.events import RunFailed
-from station.cell.session import CellRequest, check_cell, open_cell, run_calibration_session
+from station.cell.config.cell_config import TEMPLATE, parse_text
+from station.cell.run import devices
+from station.cell.run.events import RunFailed
+from station.cell.session.calibrate import CellRequest, check_cell, open_cell, run_calibration_session
 from station.errors import Outcome
 
 # the template's example controller is on a private network: tests never reach out to it
@@ -74,7 +74,7 @@ def test_missing_probe_interface_is_a_device_fault_not_a_traceback(tmp_path):
 
 
 def test_an_internal_error_is_logged_with_its_traceback(tmp_path, monkeypatch):
-    import station.cell.session as session
+    import station.cell.session.calibrate as session
 
     def broken(*args, **kwargs):
         raise ZeroDivisionError("a bug")

@@ -4,9 +4,9 @@ verify — the figures of the issue's checks on seed 1 (benchmarks/bench_six_axi
 
 from __future__ import annotations
 
-from station.cell.rundb import RunDB
-from station.cell.session import CellRequest, run_calibration_session
-from station.cell.steps import StepKind
+from station.cell.plan.steps import StepKind
+from station.cell.records.rundb import RunDB
+from station.cell.session.calibrate import CellRequest, run_calibration_session
 from station.errors import Outcome
 from station.ui.simulated_cell import load_cell
 
@@ -58,7 +58,7 @@ def test_simulated_robot_without_a_built_in_cell_is_refused(tmp_path):
 
 def _cfg_and_cell(seed: int = 2):
     from simulators.six_axis_cell import six_axis_cell, six_axis_config_text
-    from station.cell.config import parse_text
+    from station.cell.config.cell_config import parse_text
 
     class S:
         def __init__(self) -> None:
@@ -77,7 +77,7 @@ def test_oracle_folds_the_half_backlash_into_the_joint_zeros_of_tilted_frames():
     joint's zero is not the transform's yaw)."""
     import numpy as np
 
-    from station.cell.pipeline import oracle_params
+    from station.cell.results.pipeline import oracle_params
     from station.core.kinematics import forward
 
     cfg, cell = _cfg_and_cell()
@@ -92,8 +92,8 @@ def test_compensated_verification_targets_put_the_true_robot_on_target():
     joints at which the true robot's head lies on the wanted world pose (the oracle's premise)."""
     import numpy as np
 
-    from station.cell.pipeline import articulated_targets, oracle_params
-    from station.cell.plan import build_plan, head_targets_world
+    from station.cell.plan.measurement_plan import build_plan, head_targets_world
+    from station.cell.results.pipeline import articulated_targets, oracle_params
     from station.core.kinematics import forward
     from station.core.transforms import pose_to_matrix
 

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from station.cell.config import load_config
-from station.cell.rundb import RunDB
-from station.cell.stored_config import config_source, stored_config
+from station.cell.config.cell_config import load_config
+from station.cell.records.rundb import RunDB
+from station.cell.records.stored_config import config_source, stored_config
 from station.errors import ConfigError
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "scara600" / "cell.toml"
@@ -44,8 +44,8 @@ def test_a_recheck_refuses_a_baseline_whose_body_report_was_edited_since(tmp_pat
     held, not only the configuration's text (which names them and does not change)."""
     import shutil
 
-    from station.cell.fingerprint import fingerprint
-    from station.cell.recheck import check_baseline_cell
+    from station.cell.recheck.measure import check_baseline_cell
+    from station.cell.records.fingerprint import fingerprint
 
     cell = tmp_path / "cell"
     shutil.copytree(EXAMPLE.parent, cell)

@@ -15,14 +15,14 @@ import numpy as np
 import pytest
 
 from simulators.from_config import simulate_config
-from station.cell.config import parse_text
-from station.cell.events import MeasurementRecorded, Notice
-from station.cell.pipeline import Options, run_calibration
-from station.cell.run_records import MeasurementRecord
-from station.cell.rundb import RunDB
-from station.cell.session import open_cell
-from station.cell.stuck_probes import StuckLog, still_stuck, usable_head
-from station.cell.summary import RunSummary
+from station.cell.config.cell_config import parse_text
+from station.cell.records.run_records import MeasurementRecord
+from station.cell.records.rundb import RunDB
+from station.cell.records.summary import RunSummary
+from station.cell.results.pipeline import Options, run_calibration
+from station.cell.run.events import MeasurementRecorded, Notice
+from station.cell.run.stuck_probes import StuckLog, still_stuck, usable_head
+from station.cell.session.calibrate import open_cell
 from station.core.probe_check import diagnose, residual_test
 from station.core.probe_geometry import readings_from_pose, solve_pose
 from station.core.transforms import pose_to_matrix

@@ -1,4 +1,4 @@
-"""The run summary (station.cell.summary): statistics, JSON round trip, figures."""
+"""The run summary (station.cell.records.summary): statistics, JSON round trip, figures."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from station.cell.summary import (
+from station.cell.records.summary import (
     CorrectionSummary,
     ErrorStats,
     Failure,

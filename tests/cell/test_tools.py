@@ -1,4 +1,4 @@
-"""Tools after the head ([[tool]], station/cell/tools.py): the schema, the per-tool correction,
+"""Tools after the head ([[tool]], station/cell/correction/tools.py): the schema, the per-tool correction,
 and one simulated calibration that checks a 200 mm gripper against the simulator's true robot."""
 
 from __future__ import annotations
@@ -11,17 +11,10 @@ from contextlib import ExitStack
 import numpy as np
 import pytest
 
-from drivers.correction_table import CorrectionTableData
 from simulators import start_simulated_cell
 from simulators.reference_cell import cell_config_text
-from station.cell.config import TEMPLATE, parse_text
-from station.cell.events import Notice
-from station.cell.pipeline import Options, oracle_params, run_calibration, stored_plan
-from station.cell.rundb import RunDB
-from station.cell.session import open_cell
-from station.cell.steps import PlannedStep, StepKind
-from station.cell.summary import RunSummary
-from station.cell.tools import (
+from station.cell.config.cell_config import TEMPLATE, parse_text
+from station.cell.correction.tools import (
     check_tools,
     evaluate_tool,
     find_tool,
@@ -29,15 +22,22 @@ from station.cell.tools import (
     table_from_json,
     tool_export,
 )
+from station.cell.plan.steps import PlannedStep, StepKind
+from station.cell.records.rundb import RunDB
+from station.cell.records.summary import RunSummary
+from station.cell.results.pipeline import Options, oracle_params, run_calibration, stored_plan
+from station.cell.run.events import Notice
+from station.cell.session.calibrate import open_cell
 from station.core.kinematics import forward
 from station.core.model import robot_from_dict
+from station.core.table_data import CorrectionTableData
 from station.core.tool_frame import tool_params
 from station.core.transforms import matrix_to_pose, pose_to_matrix, rot_z
 from station.errors import ConfigError, Outcome
-from station.ui.cli import main as station_main
-from station.ui.report_html import render_html
-from station.ui.report_md import render_markdown
-from station.ui.report_run import report_data_for_run
+from station.ui.cli.main import main as station_main
+from station.ui.report.html_page import render_html
+from station.ui.report.markdown_page import render_markdown
+from station.ui.report.run import report_data_for_run
 
 GRIPPER = """
 [[tool]]

@@ -1,4 +1,4 @@
-"""The verified upload (station.cell.upload): sequence, events, roll back policy; against a
+"""The verified upload (station.cell.correction.upload): sequence, events, roll back policy; against a
 fake controller that mirrors the driver's gates, and against the simulated controller."""
 
 from __future__ import annotations
@@ -8,10 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from drivers.correction_table import CorrectionTableData, TableAxis, TableError, TableVerifyError
-from station.cell.events import Event, Notice, PhaseChanged
-from station.cell.upload import verified_upload
+from drivers.correction_table import TableError, TableVerifyError
+from station.cell.correction.upload import verified_upload
+from station.cell.run.events import Event, Notice, PhaseChanged
 from station.core.correction_table import build_correction_table
+from station.core.table_data import CorrectionTableData, TableAxis
 from station.core.table_grid import GridSpec
 from station.io.robot_files import load_robot
 

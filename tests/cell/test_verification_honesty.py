@@ -19,12 +19,15 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from station.cell.config import load_config
-from station.cell.pipeline_results import oracle_params, verification_errors
-from station.cell.plan import head_targets_world, joints_for
-from station.cell.recentring import RESULT_KEY, RecentringLog, head_as_commanded, stored_recentring
-from station.cell.rundb import RunDB
-from station.cell.runner import (
+from station.cell.config.cell_config import load_config
+from station.cell.plan.measurement_plan import head_targets_world, joints_for
+from station.cell.plan.steps import StepKind
+from station.cell.records.rundb import RunDB
+from station.cell.records.stored_config import stored_plan
+from station.cell.records.summary import ErrorStats, RecentringStats, RunSummary
+from station.cell.results.pipeline_results import oracle_params, verification_errors
+from station.cell.run.recentring import RESULT_KEY, RecentringLog, head_as_commanded, stored_recentring
+from station.cell.run.runner import (
     Checkpoint,
     MoveCartesian,
     MoveJoints,
@@ -35,14 +38,11 @@ from station.cell.runner import (
     approach_and_read,
     head_of,
 )
-from station.cell.steps import StepKind
-from station.cell.stored_config import stored_plan
-from station.cell.summary import ErrorStats, RecentringStats, RunSummary
 from station.core.kinematics import forward
 from station.core.probe_geometry import readings_from_pose
 from station.core.transforms import invert, matrix_to_pose, pose_to_matrix
 from station.errors import Outcome
-from station.ui.cli import main
+from station.ui.cli.main import main
 
 ARC = Path(__file__).resolve().parents[2] / "examples" / "scara_arc" / "cell.toml"
 

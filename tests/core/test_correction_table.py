@@ -93,7 +93,28 @@ def test_grid_validation(kw, match):
 def test_grid_over_capacity_is_refused(robot, identified):
     g = GridSpec(x_step=10.0)
     with pytest.raises(ConfigError, match="exceeds the controller's 32000"):
-        build_correction_table(robot, identified, g)
+        build_correction_table(robot, identified, g, capacity=MAX_TABLE_VALUES)
+
+
+def test_the_table_resolution_is_the_wire_resolution():
+    """The core holds a table on the grid the register map carries it on (station.core.table_data's
+    docstring): the two statements of the format must agree, or a read back would not compare."""
+    from drivers import controller_map as cm
+    from station.core import table_data as td
+
+    assert td.VALUE_RESOLUTION == cm.TABLE_VALUE_SCALE and td.AXIS_RESOLUTION == cm.TABLE_AXIS_SCALE
+    assert td.MAX_AXES == cm.MAX_TABLE_AXES
+
+
+def test_a_table_over_the_controller_capacity_is_refused_before_sending():
+    from drivers.correction_table import TableError, check_payload, header_registers
+    from station.core.table_data import CorrectionTableData, TableAxis
+
+    big = CorrectionTableData((TableAxis(0.0, 1.0, MAX_TABLE_VALUES + 1),), np.zeros((1, MAX_TABLE_VALUES + 1, 1)))
+    with pytest.raises(TableError, match="holds at most 32000"):
+        check_payload(big)
+    with pytest.raises(TableError, match="holds at most 32000"):
+        header_registers(big)
 
 
 def test_full_workspace_grid_fits():

@@ -310,13 +310,13 @@ def test_contact_jacobian_is_the_reading_derivative():
 # --- [head] in the cell configuration --------------------------------------------------------------
 
 def _config_text(head_line: str = "") -> str:
-    from station.cell.config import TEMPLATE
+    from station.cell.config.cell_config import TEMPLATE
 
     return TEMPLATE + head_line
 
 
 def test_config_without_head_keeps_the_built_in_head():
-    from station.cell.config import parse_text
+    from station.cell.config.cell_config import parse_text
 
     cfg = parse_text(_config_text(), "cell.toml")
     d = default_probe_head(cube_edge_mm=cfg.cube_edge_mm)
@@ -326,7 +326,7 @@ def test_config_without_head_keeps_the_built_in_head():
 
 
 def test_config_head_file_beside_the_config_sets_geometry_and_nominal_k(tmp_path):
-    from station.cell.config import load_config
+    from station.cell.config.cell_config import load_config
 
     (tmp_path / "head.toml").write_text(SEVEN.read_text(encoding="utf-8"), encoding="utf-8")
     cfg_path = tmp_path / "cell.toml"
@@ -336,13 +336,13 @@ def test_config_head_file_beside_the_config_sets_geometry_and_nominal_k(tmp_path
     frame = load_head(SEVEN).frame_pose
     np.testing.assert_allclose(cfg.model.nominal[cfg.model.param_index("K.x"):][:6], frame)
     np.testing.assert_allclose(cfg.head_in_flange, pose_to_matrix(frame))
-    from station.cell.plan import nominal_contact
+    from station.cell.plan.measurement_plan import nominal_contact
 
     np.testing.assert_array_equal(nominal_contact(cfg), cfg.head.nominal_contact_pose())
 
 
 def test_config_head_errors_name_the_key(tmp_path):
-    from station.cell.config import load_config
+    from station.cell.config.cell_config import load_config
 
     cfg_path = tmp_path / "cell.toml"
     cfg_path.write_text(_config_text('\n[head]\nfile = "missing.toml"\n'), encoding="utf-8")
@@ -360,7 +360,7 @@ def test_config_head_errors_name_the_key(tmp_path):
 def test_plan_prints_the_heads_check_and_sensitivity(tmp_path, capsys):
     import json
 
-    from station.ui.cli import main
+    from station.ui.cli.main import main
 
     (tmp_path / "head.toml").write_text(SEVEN.read_text(encoding="utf-8"), encoding="utf-8")
     cfg_path = tmp_path / "cell.toml"
@@ -387,8 +387,8 @@ def test_a_probe_no_other_probe_checks_is_reported():
 
 
 def test_an_edited_head_file_changes_the_runs_fingerprint(tmp_path):
-    from station.cell.config import load_config
-    from station.cell.fingerprint import fingerprint
+    from station.cell.config.cell_config import load_config
+    from station.cell.records.fingerprint import fingerprint
 
     head = tmp_path / "head.toml"
     head.write_text(SEVEN.read_text(encoding="utf-8"), encoding="utf-8")

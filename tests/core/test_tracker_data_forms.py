@@ -23,7 +23,7 @@ from station.core.transforms import matrix_to_pose
 from station.core.units import DEG
 from station.io.datafile import read_measurement_file, read_table
 from station.io.robot_files import load_robot
-from station.ui.cli import main
+from station.ui.cli.main import main
 
 IRB = load_robot("irb2600")
 SR800 = load_robot("sr800")

@@ -17,9 +17,10 @@ from drivers.controller import (
     MotionRejected,
 )
 from drivers.controller_map import REG, Command, WordOrder
-from drivers.correction_table import CorrectionTableData, TableAxis, TableError, TableVerifyError
+from drivers.correction_table import TableError, TableVerifyError
 from simulators.controller_server import SimulatedController
 from station.core.kinematics import forward, scara_ik
+from station.core.table_data import CorrectionTableData, TableAxis
 from station.core.transforms import matrix_to_pose, pose_to_matrix
 
 

@@ -27,8 +27,15 @@ from drivers.controller_map import (
     encode_i32_array,
     registers_crc32,
 )
-from drivers.correction_table import CorrectionTableData, TableAxis, TableError, TablePageError, TableVerifyError
+from drivers.correction_table import (
+    TableError,
+    TablePageError,
+    TableVerifyError,
+    data_registers,
+    header_registers,
+)
 from simulators.controller_tables import TableSlots, serve_transfer
+from station.core.table_data import CorrectionTableData, TableAxis
 
 BASE = 128
 LIMITS = [-2, 2, -2.5, 2.5, -200, 0, -6, 6]
@@ -219,9 +226,9 @@ def test_table_upload_page_and_readback_transcript():
     t = _table(3)  # 36 values = 72 registers: pages of 29 + 7 values
     fake.log.clear()
     c.upload_table(t)
-    data = t.data_registers()
-    assert len(t.header_registers()) == TABLE_HEADER_REGISTERS
-    assert fake.log == [_page_request(2, XferOp.WRITE_HEADER, 0, t.header_registers()),
+    data = data_registers(t)
+    assert len(header_registers(t)) == TABLE_HEADER_REGISTERS
+    assert fake.log == [_page_request(2, XferOp.WRITE_HEADER, 0, header_registers(t)),
                         ("read", BASE + 43, 84, 7),
                         _page_request(3, XferOp.WRITE_PAGE, 0, data[:58]),
                         ("read", BASE + 43, 84, 7),

@@ -17,9 +17,9 @@ from drivers.controller import (
     TableVerifyError,
 )
 from drivers.controller_map import CorrectionState
-from drivers.correction_table import CorrectionTableData, TableAxis
 from simulators import start_simulated_cell
 from simulators.controller_server import SimulatedController
+from station.core.table_data import CorrectionTableData, TableAxis
 
 
 def _table(g: int = 4, n: int = 12) -> CorrectionTableData:

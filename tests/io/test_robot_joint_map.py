@@ -22,7 +22,7 @@ from station.core.transforms import matrix_to_pose
 from station.errors import ConfigError
 from station.io.datafile import write_csv
 from station.io.robot_files import load_mapped_robot, load_robot
-from station.ui.cli import main
+from station.ui.cli.main import main
 
 JOINTS = ["q1 [deg]", "q2 [deg]", "q3 [mm]", "q4 [deg]"]
 POSE = ["x [mm]", "y [mm]", "z [mm]", "roll [deg]", "pitch [deg]", "yaw [deg]"]
@@ -111,7 +111,7 @@ def test_the_cell_refuses_a_mapped_robot_file(tmp_path):
 
 
 def test_a_cell_configuration_with_a_mapped_robot_exits_2_at_config_check(capsys, tmp_path):
-    from station.cell.config import TEMPLATE, load_config
+    from station.cell.config.cell_config import TEMPLATE, load_config
 
     _mapped_file(tmp_path)
     cell = tmp_path / "cell.toml"

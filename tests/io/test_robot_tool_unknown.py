@@ -19,7 +19,7 @@ from station.core.poses import spread_joints
 from station.core.units import DEG
 from station.io.datafile import write_csv
 from station.io.robot_files import load_mapped_robot, load_robot, tool_marked_unknown
-from station.ui.cli import main
+from station.ui.cli.main import main
 
 IRB = load_robot("irb2600")
 TRACKER = np.array([2100.0, -1500.0, 600.0, 3 * DEG, -2 * DEG, 120 * DEG])  # robot base in the tracker frame

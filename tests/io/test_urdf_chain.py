@@ -15,7 +15,7 @@ from station.core.kinematics import forward
 from station.core.transforms import matrix_to_pose
 from station.io.datafile import write_csv
 from station.io.robot_files import load_mapped_robot
-from station.ui.cli import main
+from station.ui.cli.main import main
 
 # name, type, parent, child, xyz [m], rpy [rad], axis, limits [rad | m]
 JOINTS = [

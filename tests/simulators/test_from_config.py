@@ -29,12 +29,12 @@ from simulators.from_config import (
     toml_text,
 )
 from simulators.reference_cell import cell_config_text
-from station.cell import config as cfgmod
-from station.cell.config import parse_text
+from station.cell.config import cell_config as cfgmod
+from station.cell.config.cell_config import parse_text
 from station.core.transforms import matrix_to_pose
 from station.core.units import ARCSEC, DEG
 from station.io.robot_files import load_robot
-from station.ui.cli import main
+from station.ui.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[2]
 

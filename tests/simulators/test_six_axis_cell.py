@@ -14,7 +14,7 @@ from simulators.six_axis_cell import (
     six_axis_truth,
     start_six_axis_cell,
 )
-from station.cell.config import parse_text
+from station.cell.config.cell_config import parse_text
 from station.core.ik import configuration
 from station.core.kinematics import forward
 from station.core.transforms import matrix_to_pose

@@ -16,7 +16,7 @@ from station.core.poses import spread_joints
 from station.core.transforms import matrix_to_pose
 from station.io.datafile import write_csv
 from station.io.robot_files import load_robot
-from station.ui.cli import main
+from station.ui.cli.main import main
 
 SR800 = load_robot("sr800")
 ROOT = Path(__file__).resolve().parents[2]
@@ -283,12 +283,12 @@ def test_argparse_errors_exit_2(capsys):
 
 
 def test_console_script_subprocess():
-    r = subprocess.run([sys.executable, "-m", "station.ui.cli", "--help"], cwd=ROOT,
+    r = subprocess.run([sys.executable, "-m", "station.ui.cli.main", "--help"], cwd=ROOT,
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 0
     for cmd in ("analyze", "identify", "predict", "study"):
         assert cmd in r.stdout
-    r = subprocess.run([sys.executable, "-m", "station.ui.cli", "analyze", "--robot", "nope"], cwd=ROOT,
+    r = subprocess.run([sys.executable, "-m", "station.ui.cli.main", "analyze", "--robot", "nope"], cwd=ROOT,
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2
     assert "station: error:" in r.stderr and "Traceback" not in r.stderr

@@ -18,7 +18,7 @@ from station.core.poses import spread_joints
 from station.core.transforms import matrix_to_pose, pose_error, pose_to_matrix
 from station.core.units import ARCSEC
 from station.io.robot_files import load_robot
-from station.ui.cli import main
+from station.ui.cli.main import main
 
 HEADER = "x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg"
 

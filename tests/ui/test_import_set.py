@@ -20,7 +20,7 @@ from station.core.measurements import synthetic_set
 from station.core.poses import spread_joints
 from station.io.datafile import write_csv
 from station.io.robot_files import load_robot
-from station.ui.cli import build_parser
+from station.ui.cli.main import build_parser
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -32,7 +32,7 @@ FORBIDDEN = ("station.cell", "drivers", "simulators", "pymodbus", "serial", "tex
 # belongs to the command.
 RUNNER = """
 import json, sys
-from station.ui.cli import main
+from station.ui.cli.main import main
 out, argv = sys.argv[1], sys.argv[2:]
 try:
     rc = main(argv)
@@ -83,12 +83,12 @@ def test_identify_loads_the_core_only(tmp_path, position_file):
     assert rc == 0 and "identified" in out
     assert "station.core.identification" in modules  # it did fit
     assert _forbidden(modules) == []
-    assert not any(m.startswith("station.ui.commands_") and m != "station.ui.commands_core" for m in modules)
+    assert not any(m.startswith("station.ui.commands_") and m != "station.ui.cli.commands_core" for m in modules)
 
 
 def test_every_command_names_a_function_that_exists():
     """The commands are imported by name when they run: a misspelt name fails here, not for a user."""
-    from station.ui.cli import _command
+    from station.ui.cli.main import _command
 
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
     assert {"identify", "calibrate", "recheck", "tui", "compensate", "conformance"} <= set(sub.choices)

@@ -19,11 +19,11 @@ from drivers.controller import (
     TableVerifyError,
 )
 from drivers.probe_protocol import ProbeDisconnected, ProbeTimeout
-from station.cell.config import TEMPLATE
-from station.cell.outcomes import classify, hint_for
-from station.cell.rundb import RunDatabaseError
+from station.cell.config.cell_config import TEMPLATE
+from station.cell.records.rundb import RunDatabaseError
+from station.cell.results.outcomes import classify, hint_for
 from station.errors import ConfigError, IdentificationError, Outcome, RunAborted, UnreachableError
-from station.ui.cli import main
+from station.ui.cli.main import main
 
 # the template's example controller is on a private network: tests never reach out to it
 LOOPBACK_CONTROLLER = '"127.0.0.1:9"'

@@ -1,7 +1,7 @@
 """The station as a process among others (issue 19): closed pipes, stop signals at any moment,
 ``--json`` answering usage errors, and command-line values refused before anything starts.
 
-Every test runs ``python -m station.ui.cli`` as a subprocess on the built-in simulated cell at
+Every test runs ``python -m station.ui.cli.main`` as a subprocess on the built-in simulated cell at
 time scale 0, and checks the exit code, the one JSON object on stdout and the run database.
 """
 
@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from station.cell.rundb import RunDB
+from station.cell.records.rundb import RunDB
 from station.core.measurements import synthetic_set
 from station.core.poses import spread_joints
 from station.core.transforms import matrix_to_pose
@@ -28,7 +28,7 @@ from station.io.robot_files import load_robot
 
 ROOT = Path(__file__).resolve().parents[2]
 ENV = dict(os.environ, PYTHONPATH=str(ROOT))
-STATION = [sys.executable, "-m", "station.ui.cli"]
+STATION = [sys.executable, "-m", "station.ui.cli.main"]
 SHORT = ["calibrate", "--simulated", "--no-upload", "--json"]  # NOT_UPLOADED (11) when it completes
 ABORTED, CONFIG_ERROR, NOT_UPLOADED = 6, 2, 11
 
@@ -282,7 +282,7 @@ def test_a_descriptor_closed_before_start_is_not_a_crash(tmp_path):
     sh = _shutil.which("sh")
     assert sh is not None
     for redirect in (">&-", "2>&-", ">&- 2>&-"):
-        r = subprocess.run([sh, "-c", f'exec "{sys.executable}" -m station.ui.cli --help {redirect}'],
+        r = subprocess.run([sh, "-c", f'exec "{sys.executable}" -m station.ui.cli.main --help {redirect}'],
                            cwd=tmp_path, capture_output=True, text=True, timeout=60)
         assert r.returncode == 0, (redirect, r.stderr)
         assert "Traceback" not in r.stderr and not list(tmp_path.glob("station-error-*.log"))

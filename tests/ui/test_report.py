@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from station.cell.summary import (
+from station.cell.records.summary import (
     ErrorStats,
     IdentificationSummary,
     ParameterEstimate,
@@ -17,9 +17,9 @@ from station.cell.summary import (
 )
 from station.core.units import ARCSEC
 from station.errors import ConfigError, Outcome
-from station.ui.report import ReportData, write_report
-from station.ui.report_run import correlation_from_covariance
-from station.ui.report_tables import split_label
+from station.ui.report.run import correlation_from_covariance
+from station.ui.report.tables import split_label
+from station.ui.report.writer import ReportData, write_report
 
 
 def make_data(*, oracle: bool = True, residual_cols: int = 6, seed: int = 1, after: bool = True) -> ReportData:

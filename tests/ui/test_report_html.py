@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 from test_report import make_data
 
-from station.cell.rundb import RunDB
-from station.cell.summary import ReversalSummary
+from station.cell.records.rundb import RunDB
+from station.cell.records.summary import ReversalSummary
 from station.errors import IdentificationError
-from station.ui.cli import main
-from station.ui.report import write_report
-from station.ui.report_run import report_data_for_run, report_for_run
+from station.ui.cli.main import main
+from station.ui.report.run import report_data_for_run, report_for_run
+from station.ui.report.writer import write_report
 
 SECTIONS = ["summary", "conditions", "traceability", "record", "parameters", "residuals", "verification", "accuracy",
             "table", "reversal", "signoff"]

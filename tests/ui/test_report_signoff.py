@@ -13,17 +13,17 @@ import pytest
 from test_report import make_data
 from test_report_html import Page
 
-from station.cell.config import TEMPLATE, parse_text
-from station.cell.config_schema import _Simulation
+from station.cell.config.cell_config import TEMPLATE, parse_text
+from station.cell.config.schema import _Simulation
 from station.errors import ConfigError
 from station.io.body_file import read_body_file
 from station.io.head_file import parse_head
-from station.ui import report_signoff as so
-from station.ui.report import write_report
-from station.ui.report_data import Acceptance, IsoPose, ReportData, TestConditions, Traceability
-from station.ui.report_provenance import git_commit, software_rows
-from station.ui.report_run import check_operator
-from station.ui.report_tables import timestamp_text
+from station.ui.report import signoff as so
+from station.ui.report.data import Acceptance, IsoPose, ReportData, TestConditions, Traceability
+from station.ui.report.provenance import git_commit, software_rows
+from station.ui.report.run import check_operator
+from station.ui.report.tables import timestamp_text
+from station.ui.report.writer import write_report
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -10,12 +10,12 @@ import pytest
 from test_report import make_data
 from test_report_html import Page, assert_self_contained, column
 
-from station.cell.rundb import RunDB
-from station.ui import report_plots
-from station.ui.cli import main
-from station.ui.report import ReportData, TrendRun, write_report
-from station.ui.report_run import report_data_for_run
-from station.ui.report_tables import has_trend
+from station.cell.records.rundb import RunDB
+from station.ui.cli.main import main
+from station.ui.report import plots as report_plots
+from station.ui.report.run import report_data_for_run
+from station.ui.report.tables import has_trend
+from station.ui.report.writer import ReportData, TrendRun, write_report
 
 HISTORY = (
     TrendRun(1, "2026-01-10T08:00:00Z", "calibration", "SUCCESS", rms_after_um=12.5),

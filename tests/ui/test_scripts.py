@@ -13,14 +13,14 @@ from pathlib import Path
 
 import pytest
 
-from station.ui.cli import main
+from station.ui.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[2]
 ENV = {**os.environ, "PYTHONUNBUFFERED": "1"}
 
 
 def _calibrate(db: Path, *extra: str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "station.ui.cli", "calibrate", "--simulated", "--seed", "1",
+    return subprocess.Popen([sys.executable, "-m", "station.ui.cli.main", "calibrate", "--simulated", "--seed", "1",
                              "--db", str(db), "--json", *extra], cwd=ROOT, env=ENV, text=True,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
 
@@ -53,12 +53,12 @@ def test_sigterm_stops_at_a_safe_point_and_resume_gives_the_uninterrupted_result
     assert stopped["outcome"] == "ABORTED" and stopped["run_id"] == 1
     assert "--resume 1" in stopped["failure"]["hint"] and "Traceback" not in err
 
-    resumed = subprocess.run([sys.executable, "-m", "station.ui.cli", "calibrate", "--simulated", "--seed", "1",
+    resumed = subprocess.run([sys.executable, "-m", "station.ui.cli.main", "calibrate", "--simulated", "--seed", "1",
                               "--db", str(db), "--json", "--resume", "1"], cwd=ROOT, env=ENV, text=True,
                              capture_output=True, timeout=300)
     assert resumed.returncode == 0, resumed.stderr[-2000:]
     done = json.loads(resumed.stdout)
-    whole = subprocess.run([sys.executable, "-m", "station.ui.cli", "calibrate", "--simulated", "--seed", "1",
+    whole = subprocess.run([sys.executable, "-m", "station.ui.cli.main", "calibrate", "--simulated", "--seed", "1",
                             "--db", str(tmp_path / "whole.sqlite"), "--json"], cwd=ROOT, env=ENV, text=True,
                            capture_output=True, timeout=300)
     reference = json.loads(whole.stdout)

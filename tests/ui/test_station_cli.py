@@ -13,10 +13,10 @@ import pytest
 
 from simulators import start_simulated_cell
 from simulators.reference_cell import cell_config_text as simulated_config_text
-from station.cell.config import TEMPLATE, parse_text
-from station.cell.plan import build_plan
+from station.cell.config.cell_config import TEMPLATE, parse_text
+from station.cell.plan.measurement_plan import build_plan
 from station.errors import ConfigError
-from station.ui.cli import main
+from station.ui.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -89,7 +89,7 @@ def test_calibrate_json_summary_export_and_reversal(sim, tmp_path, capsys):
     assert rev["n"] > 10 and 30.0 < rev["rms_um"] < 250.0
     assert main(["export", "--db", str(db), str(tmp_path / "m.csv")]) == 0
     rows = list(csv.reader(open(tmp_path / "m.csv")))
-    from station.cell.rundb import RunDB
+    from station.cell.records.rundb import RunDB
 
     with RunDB(db) as d:
         n = len(d.measurements(summary["run_id"]))
@@ -119,7 +119,7 @@ def test_d_optimal_selection_keeps_the_most_informative_steps(sim):
 
 
 def test_simulated_calibration_console_script_exit_code(tmp_path):
-    p = subprocess.run([sys.executable, "-m", "station.ui.cli", "calibrate", "--simulated", "--seed", "2",
+    p = subprocess.run([sys.executable, "-m", "station.ui.cli.main", "calibrate", "--simulated", "--seed", "2",
                         "--no-upload", "--db", str(tmp_path / "r.sqlite"), "--json"],
                        cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert p.returncode == 11, p.stderr  # its own outcome: a script tells it from a correction

@@ -17,7 +17,15 @@ import pytest
 from textual.content import Content
 from textual.widgets import DataTable, ProgressBar, Static
 
-from station.cell.events import (
+from station.cell.records.summary import (
+    ErrorStats,
+    Failure,
+    IdentificationSummary,
+    RunSummary,
+    UploadSummary,
+)
+from station.cell.results.outcomes import hint_for
+from station.cell.run.events import (
     MeasurementRecorded,
     Notice,
     PhaseChanged,
@@ -26,17 +34,9 @@ from station.cell.events import (
     RunStarted,
     StepStarted,
 )
-from station.cell.outcomes import hint_for
-from station.cell.runcontrol import RunAborted, RunControl
-from station.cell.summary import (
-    ErrorStats,
-    Failure,
-    IdentificationSummary,
-    RunSummary,
-    UploadSummary,
-)
+from station.cell.run.runcontrol import RunAborted, RunControl
 from station.errors import ConfigError, Outcome
-from station.ui.tui import ConfirmScreen, StationApp
+from station.ui.tui.app import ConfirmScreen, StationApp
 
 N = 5
 LABELS = [f"point C{i}.a, elbow +1" for i in range(N)]
@@ -479,11 +479,11 @@ def test_runcontrol_checkpoint_semantics():
     assert info.value.outcome is Outcome.ABORTED and info.value.exit_code == 6
 
 
-UI = Path(__file__).resolve().parents[2] / "station" / "ui"
-FORBIDDEN = ("drivers", "pymodbus", "serial", "sqlite3", "station.cell.pipeline")
+UI = Path(__file__).resolve().parents[2] / "station" / "ui" / "tui"
+FORBIDDEN = ("drivers", "pymodbus", "serial", "sqlite3", "station.cell.results.pipeline")
 
 
-@pytest.mark.parametrize("name", ["tui.py", "tui_widgets.py", "tui_launch.py"])
+@pytest.mark.parametrize("name", ["app.py", "widgets.py", "launch.py"])
 def test_the_tui_reaches_devices_only_through_the_session(name):
     tree = ast.parse((UI / name).read_text(encoding="utf-8"))
     imported = [a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names]

@@ -7,7 +7,9 @@ import threading
 
 import numpy as np
 
-from station.cell.events import (
+from station.cell.records.run_list import RunInfo
+from station.cell.records.summary import ErrorStats, Failure, IdentificationSummary, RunSummary, UploadSummary
+from station.cell.run.events import (
     DeviceSnapshot,
     MeasurementRecorded,
     Notice,
@@ -17,12 +19,10 @@ from station.cell.events import (
     RunStarted,
     StepStarted,
 )
-from station.cell.questions import KeepCorrection, UploadProposal
-from station.cell.runcontrol import RunAborted
-from station.cell.runs import RunInfo
-from station.cell.summary import ErrorStats, Failure, IdentificationSummary, RunSummary, UploadSummary
+from station.cell.run.questions import KeepCorrection, UploadProposal
+from station.cell.run.runcontrol import RunAborted
 from station.errors import Outcome
-from station.ui.report import ReportData
+from station.ui.report.writer import ReportData
 
 N = 6
 LABELS = [f"C{i}.a elbow {'+1' if i % 2 else '-1'} reverse cycle {i + 1}" for i in range(N)]
@@ -168,10 +168,10 @@ import pytest  # noqa: E402
 from textual.content import Content  # noqa: E402
 from textual.widgets import DataTable, Static  # noqa: E402
 
-from station.ui.tui import StationApp  # noqa: E402
-from station.ui.tui_results import ResultsScreen, parameter_rows  # noqa: E402
-from station.ui.tui_screens import HelpScreen, QuestionScreen, ResumeScreen  # noqa: E402
-from station.ui.tui_widgets import ConfirmScreen, DevicePanel, Eta, activity_text, device_text, phase_markup  # noqa: E402
+from station.ui.tui.app import StationApp  # noqa: E402
+from station.ui.tui.results import ResultsScreen, parameter_rows  # noqa: E402
+from station.ui.tui.screens import HelpScreen, QuestionScreen, ResumeScreen  # noqa: E402
+from station.ui.tui.widgets import ConfirmScreen, DevicePanel, Eta, activity_text, device_text, phase_markup  # noqa: E402
 
 
 def plain(widget: Static) -> str:
@@ -384,11 +384,11 @@ def test_parameter_rows_units_and_held_parameters():
     assert rows[3][4] == "held" and rows[1][5] == ""
 
 
-UI = Path(__file__).resolve().parents[2] / "station" / "ui"
-FORBIDDEN = ("drivers", "pymodbus", "serial", "sqlite3", "station.cell.pipeline")
+UI = Path(__file__).resolve().parents[2] / "station" / "ui" / "tui"
+FORBIDDEN = ("drivers", "pymodbus", "serial", "sqlite3", "station.cell.results.pipeline")
 
 
-@pytest.mark.parametrize("path", sorted(UI.glob("tui*.py")), ids=lambda p: p.name)
+@pytest.mark.parametrize("path", sorted(UI.glob("*.py")), ids=lambda p: p.name)
 def test_no_tui_module_reaches_a_device(path):
     tree = ast.parse(path.read_text(encoding="utf-8"))
     imported = [a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names]

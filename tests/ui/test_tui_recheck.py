@@ -9,13 +9,13 @@ from pathlib import Path
 import pytest
 from textual.widgets import DataTable
 
-from station.cell.recheck import RecheckOptions
-from station.cell.session import CellRequest
+from station.cell.recheck.measure import RecheckOptions
+from station.cell.session.calibrate import CellRequest
 from station.errors import Outcome
-from station.ui import tui_launch
-from station.ui.cli import main
-from station.ui.tui import StationApp
-from station.ui.tui_widgets import DevicePanel
+from station.ui.cli.main import main
+from station.ui.tui import launch as tui_launch
+from station.ui.tui.app import StationApp
+from station.ui.tui.widgets import DevicePanel
 
 
 def panel(app: StationApp) -> str:

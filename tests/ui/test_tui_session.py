@@ -9,12 +9,12 @@ from pathlib import Path
 import pytest
 from textual.widgets import DataTable
 
-from station.cell.config import TEMPLATE
-from station.cell.session import CellRequest, run_calibration_session
+from station.cell.config.cell_config import TEMPLATE
+from station.cell.session.calibrate import CellRequest, run_calibration_session
 from station.errors import Outcome
-from station.ui import tui_launch
 from station.ui.simulated_cell import load_cell
-from station.ui.tui import ConfirmScreen, StationApp
+from station.ui.tui import launch as tui_launch
+from station.ui.tui.app import ConfirmScreen, StationApp
 
 # the template's example controller is on a private network: tests never reach out to it
 LOOPBACK_CONTROLLER = '"127.0.0.1:9"'

@@ -17,15 +17,15 @@ from textual.widget import Widget
 
 from drivers.controller import ControllerLinkLost
 from drivers.probe_protocol import ProbeTimeout
-from station.cell.events import Notice, RunFinished, RunStarted
-from station.cell.outcomes import failure_summary
-from station.cell.session import CellRequest
-from station.cell.summary import Failure, RunSummary
+from station.cell.records.summary import Failure, RunSummary
+from station.cell.results.outcomes import failure_summary
+from station.cell.run.events import Notice, RunFinished, RunStarted
+from station.cell.session.calibrate import CellRequest
 from station.errors import Outcome
-from station.ui.tui import StationApp
-from station.ui.tui_launch import cell_context, make_app
-from station.ui.tui_result_panel import CellContext, advice, device_kind
-from station.ui.tui_widgets import ConfirmScreen, DevicePanel, device_text
+from station.ui.tui.app import StationApp
+from station.ui.tui.launch import cell_context, make_app
+from station.ui.tui.result_panel import CellContext, advice, device_kind
+from station.ui.tui.widgets import ConfirmScreen, DevicePanel, device_text
 
 ROOT = Path(__file__).resolve().parents[2]
 SCARA600 = ROOT / "examples" / "scara600"

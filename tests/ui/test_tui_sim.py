@@ -6,11 +6,11 @@ from __future__ import annotations
 import pytest
 from textual.widgets import DataTable
 
-from station.cell.session import CellRequest
+from station.cell.session.calibrate import CellRequest
 from station.errors import Outcome
-from station.ui.tui_launch import make_app, report_dir
-from station.ui.tui_screens import QuestionScreen, ResumeScreen
-from station.ui.tui_widgets import ConfirmScreen
+from station.ui.tui.launch import make_app, report_dir
+from station.ui.tui.screens import QuestionScreen, ResumeScreen
+from station.ui.tui.widgets import ConfirmScreen
 
 
 async def wait_until(pilot, cond, what: str, rounds: int = 4000) -> None:

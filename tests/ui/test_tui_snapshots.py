@@ -12,11 +12,11 @@ from pathlib import Path
 import pytest
 from test_tui_features import RUNS, FakeSession, frozen, report_data, wait_until
 
-from station.ui.tui import StationApp
-from station.ui.tui_result_panel import CellContext
-from station.ui.tui_results import ResultsScreen
-from station.ui.tui_screens import QuestionScreen, ResumeScreen
-from station.ui.tui_widgets import ConfirmScreen
+from station.ui.tui.app import StationApp
+from station.ui.tui.result_panel import CellContext
+from station.ui.tui.results import ResultsScreen
+from station.ui.tui.screens import QuestionScreen, ResumeScreen
+from station.ui.tui.widgets import ConfirmScreen
 
 SIZE = (80, 24)
 pytest.importorskip("pytest_textual_snapshot")

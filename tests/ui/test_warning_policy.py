@@ -7,7 +7,7 @@ import warnings
 import numpy as np
 import pytest
 
-from station.ui import cli
+from station.ui.cli import main as cli
 
 
 def _command_warning(kind: str):

@@ -1,0 +1,575 @@
+"""Cell configuration (TOML): robot, calibration body, probe head, devices, limits, plan,
+identification and correction settings. ``station init`` writes :data:`TEMPLATE`.
+
+Validation names the key and the fix. Inside, everything is mm and rad; the file holds degrees
+where people write angles (keys ending in ``_deg``), µm and arc seconds for uncertainties.
+
+Every key is checked before anything moves, in two stages:
+
+1. The file's schema (:class:`_CellFile`, pydantic v2 in strict mode, in
+   :mod:`station.cell.config.schema`): types, bounds and unknown keys. Every numeric key has
+   bounds (the template states them); an integer is never a bool or a float, a float is finite.
+   The bounds are the one source: the error messages and the test that reads the template's
+   comments take them from the schema.
+2. What needs the robot: the robot file, ``[limits]`` (one finite, ordered pair per joint, inside
+   the robot's limits), the parameter names of ``prefer``/``fix``/``exclude``, and the correction
+   grid (whole number of steps, the controller's capacity for this robot's joints).
+
+Every failure is a :class:`ConfigError` (exit code 2); a malformed file never gives a traceback.
+
+This module holds the validated configuration (the frozen dataclasses), stage 2 and the loading;
+the template is :mod:`station.cell.config.template`. The names of both stay importable from here.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pydantic import ValidationError
+
+# The schema's names stay importable from here (tests and tools read the schema through this
+# module); the loading below uses only a few of them.
+from drivers.controller_map import MAX_TABLE_VALUES
+from station.cell.config.schema import (
+    _CONTROLLER,
+    _NO_CONTROL,
+    _POSE_WHAT,
+    _PROBLEM,
+    MAX_MM,
+    MAX_TOOLS,
+    Deg,
+    GridAxis,
+    GridStep,
+    Mm,
+    ParamName,
+    PathText,
+    PointId,
+    Pose,
+    Text,
+    ToolMm,
+    ToolName,
+    ToolPose,
+    _absent,
+    _Body,
+    _Cell,
+    _CellFile,
+    _Conformance,
+    _Correction,
+    _describe,
+    _Devices,
+    _field_info,
+    _Head,
+    _Identification,
+    _key,
+    _Limits,
+    _num,
+    _Plan,
+    _Point,
+    _Recheck,
+    _Robot,
+    _Section,
+    _section_of,
+    _short,
+    _Simulation,
+    _Tool,
+    _validate_schema,
+    _Verification,
+    _Warmup,
+    bounds_text,
+)
+from station.cell.config.template import TEMPLATE
+from station.core.model import RobotModel
+from station.core.table_grid import GridSpec
+from station.core.transforms import pose_to_matrix
+from station.core.units import ARCSEC, DEG, UM
+from station.errors import ConfigError
+from station.io.certificate import Certificate
+from station.io.robot_files import load_robot, read_user_text
+
+#: a configuration file larger than this is refused before it is read (a real one is a few kB;
+#: a body of 5 000 points is ~0.5 MB)
+MAX_CONFIG_BYTES = 4 * 1024 * 1024
+
+
+@dataclass(frozen=True)
+class DeviceConfig:
+    probe_head: str
+    baudrate: int  # checked against the dialect's unit; the factory default when the file gives none
+    probe_timeout_s: float
+    controller_host: str
+    controller_port: int
+    device_id: int
+    word_order: str
+    controller_timeout_s: float
+    motion_timeout_s: float
+    probe_protocol: str = "keyence-dl-rs1a"
+    probe_bytesize: int = 8
+    probe_parity: str = "none"
+    controller_register_base: int = 0
+    probe_refresh_s: float | None = None  # None: the dialect's
+    controller_link_timeout_s: float = 1.0
+
+
+@dataclass(frozen=True)
+class PlanConfig:
+    elbows: tuple[int, ...]
+    approach_deg: float
+    approach_mm: float
+    clearance_mm: float
+    speed: float
+    settle_s: float
+    samples: int
+    max_spread_um: float
+    both_directions: bool
+    verification_every: int  # every k-th (point, elbow) is held out for verification
+    verification_cycles: int
+    select: int  # > 0: keep this many identification steps, chosen by D-optimality
+    repeats: int  # visits per identification target (each with a slightly varied approach)
+    recenter_attempts: int
+    recenter_margin_mm: float
+    max_residual_um: float
+    remeasure_attempts: int = 1  # re-touches when a redundant head's probes disagree
+
+
+@dataclass(frozen=True)
+class IdentificationConfig:
+    objective: str
+    sigma_position_um: float
+    sigma_angle_arcsec: float
+    prefer: tuple[str, ...]
+    fix: tuple[str, ...]
+    exclude: tuple[str, ...]
+
+    def pose_sigma(self) -> np.ndarray:
+        """σ of the six pose residual rows (x, y, z [mm], rx, ry, rz [rad])."""
+        s, a = self.sigma_position_um * 1e-3, self.sigma_angle_arcsec * ARCSEC
+        return np.array([s, s, s, a, a, a])
+
+
+@dataclass(frozen=True)
+class CorrectionConfig:
+    x_mm: tuple[float, float, float]
+    y_mm: tuple[float, float, float]
+    z_mm: tuple[float, float, float]
+    yaw_step_deg: float
+    max_interpolation_um: float
+
+
+@dataclass(frozen=True)
+class RecheckConfig:
+    """``station recheck``: how many poses, and the tolerances (0: derived from the baseline)."""
+
+    poses: int = 10
+    tolerance_um: float = 0.0  # RMS position drift accepted; 0: 3× the baseline's accuracy
+    offset_tolerance_arcsec: float = 0.0  # 0: tolerance_um over a 500 mm lever
+    length_tolerance_um: float = 0.0  # 0: tolerance_um
+    repeat_tolerance_um: float = 0.0  # first pose vs its repeat at the end; 0: tolerance_um
+
+
+@dataclass(frozen=True)
+class VerificationConfig:
+    """``[verification]``: the accuracy specification the report judges the held-out poses by
+    after correction (ISO 9283 AP and RP per pose [µm]; None: not judged) and the test conditions
+    it states (air temperature [°C], mass on the flange [kg]; None: not recorded)."""
+
+    max_ap_um: float | None = None
+    max_rp_um: float | None = None
+    temperature_c: float | None = None
+    load_kg: float | None = None
+
+
+@dataclass(frozen=True)
+class CellIdentity:
+    """``[cell]``'s traceability: the robot's serial number, the controller (make, model, serial)
+    and the operator, as the report names them ("": not given)."""
+
+    robot_serial: str = ""
+    controller: str = ""
+    operator: str = ""
+
+
+@dataclass(frozen=True)
+class WarmupConfig:
+    """A warm-up before measuring: cycles of a motion program over the workspace, each ended by
+    a measurement of one reference pose, until its extrapolated remaining drift is below
+    ``converged_um`` (``until = "converged"``) or for ``minutes`` (``until = "time"``)."""
+
+    until: str = "converged"
+    minutes: float = 20.0
+    max_cycles: int = 200
+    converged_um: float = 2.0
+    program_poses: int = 8
+
+
+@dataclass(frozen=True, eq=False)
+class ConformanceConfig:
+    """``station conformance``: where the robot is parked and how far the kit may move it.
+    ``park_joints`` [rad | mm]; the park zone is ``park_joints ± test_move_joint`` per joint."""
+
+    park_joints: np.ndarray
+    test_move_joint: np.ndarray  # test_move in joint units (rad for revolute, mm for prismatic)
+    move_speed: float
+    position_tolerance_joint: np.ndarray  # in joint units
+
+    def zone(self) -> np.ndarray:
+        """The park zone ``(n_joints, 2)`` [lower, upper] (rad | mm)."""
+        return np.stack([self.park_joints - self.test_move_joint, self.park_joints + self.test_move_joint], axis=1)
+
+
+@dataclass(frozen=True, eq=False)
+class ToolConfig:
+    """A tool that replaces the probe head after the calibration (``[[tool]]``).
+
+    ``tcp``: ``(6,)`` x, y, z [mm], roll, pitch, yaw [rad] of the tool centre point in the flange
+    (tool-mount) frame, from the tool's own measurement (the file holds degrees).
+    ``correction``: the grid its table is built on: ``[correction]`` with the tool's own
+    ``x_mm`` / ``y_mm`` / ``z_mm`` where it gives them (a tool works at other heights than the head).
+    """
+
+    name: str
+    tcp: np.ndarray
+    correction: CorrectionConfig
+
+    @property
+    def tcp_matrix(self) -> np.ndarray:
+        """``(4, 4)`` flange ← TCP [mm]."""
+        return pose_to_matrix(self.tcp)
+
+
+@dataclass(frozen=True, eq=False)  # identity: it holds arrays, and caches key on it
+class CellConfig:
+    """A validated cell configuration. ``body_points``: ``(n, 4, 4)`` KKS←MPKS nominal
+    (CMM) poses, ``point_ids`` their names. ``model``: robot with the configured nominal set-up."""
+
+    name: str
+    model: RobotModel
+    soft_limits: np.ndarray
+    point_ids: tuple[str, ...]
+    body_points: np.ndarray
+    cube_edge_mm: float
+    devices: DeviceConfig
+    plan: PlanConfig
+    identification: IdentificationConfig
+    correction: CorrectionConfig
+    source_text: str = field(repr=False, default="")
+    simulated_seed: int | None = None
+    recheck: RecheckConfig = RecheckConfig()
+    warmup: WarmupConfig | None = None  # None: no warm-up ([warmup] absent or enabled = false)
+    conformance: ConformanceConfig | None = None  # None: no [conformance].park_joints
+    # --- one field per owner; each is filled in parse_config on its own line below ---
+    head: Any = None  # ProbeHeadGeometry of the [head] file (None: not yet given)
+    head_in_flange: np.ndarray | None = None  # (4,4) MKKS in the flange frame, from the head's CMM report
+    body_sigma: np.ndarray | None = None  # (n_points, 2) σ of each body point: position [mm], angle [rad]
+    tools: tuple[ToolConfig, ...] = ()  # the tools that replace the head ([[tool]])
+    simulation: Any = None  # the validated [simulation] table (what --simulated CONFIG simulates)
+    source: str = ""  # the file it was read from (or a label such as "<simulated cell>")
+    verification: VerificationConfig = VerificationConfig()  # [verification]: the report's specification
+    identity: CellIdentity = CellIdentity()  # [cell] robot_serial, controller, operator (the report's)
+    head_certificate: Certificate = Certificate()  # the [head] file's CMM certificate (empty: none given)
+    body_certificate: Certificate = Certificate()  # the [body] file's CMM certificate (empty: none given)
+
+
+# --------------------------------------------------------------------------------------------
+# stage 2: what needs the robot
+# --------------------------------------------------------------------------------------------
+
+def _pose_deg(v) -> np.ndarray:
+    return np.array([*v[:3], *(a * DEG for a in v[3:])], dtype=float)
+
+
+def _robot_path(model_name: str, source: str) -> str:
+    if Path(model_name).is_absolute():
+        return model_name
+    beside = Path(source).parent / model_name
+    try:
+        return str(beside) if beside.exists() else model_name
+    except (OSError, ValueError):  # a name too long for the file system: load_robot says why
+        return model_name
+
+
+def _body_points(b: _Body, source: str) -> tuple[tuple[str, ...], np.ndarray, np.ndarray, Certificate]:
+    """ids, ``(n, 6)`` poses [mm, rad] and ``(n, 2)`` σ [mm, rad] of the body's measuring points,
+    and the CMM certificate the file names: from ``[body] file`` (the CMM report, relative to the
+    configuration file) or inline (no certificate); a point without σ takes ``default_sigma_*``."""
+    default = (b.default_sigma_position_um * UM, b.default_sigma_angle_arcsec * ARCSEC)
+    if b.file is not None:
+        from station.io.body_file import read_body_file
+
+        path = Path(b.file)
+        if not path.is_absolute():
+            path = Path(source).parent / path
+        try:
+            report = read_body_file(path)
+        except ConfigError as exc:
+            raise ConfigError(f"{source}: body.file: {exc}") from None
+        return report.ids, np.array(report.poses), report.sigma_with_default(*default), report.certificate
+    assert b.points is not None  # the schema allows exactly one of the two
+    ids = tuple(pt.id for pt in b.points)
+    poses = np.array([_pose_deg(pt.pose) for pt in b.points])
+    sigma = np.array([[default[0] if pt.sigma_position_um is None else pt.sigma_position_um * UM,
+                       default[1] if pt.sigma_angle_arcsec is None else pt.sigma_angle_arcsec * ARCSEC]
+                      for pt in b.points])
+    return ids, poses, sigma, Certificate()
+
+
+def _head(file: str | None, cube_edge_mm: float, model: RobotModel,
+          source: str) -> tuple[Any, np.ndarray, RobotModel, Certificate]:
+    """``[head] file``: the head's geometry, MKKS in the flange (4,4), the robot model with the
+    head frame as its nominal K, and the head's CMM certificate. Without it: the built-in
+    reference head on the robot file's K (no certificate)."""
+    from station.core.probe_geometry import default_probe_head
+    from station.io.head_file import load_head
+
+    if file is None:
+        return default_probe_head(cube_edge_mm=cube_edge_mm), pose_to_matrix(model.nominal[-6:]), model, Certificate()
+    path = file if Path(file).is_absolute() else str(Path(source).parent / file)
+    try:
+        h = load_head(path, cube_edge_mm)
+    except ConfigError as exc:
+        raise ConfigError(f"{source}: head.file: {exc}") from None
+    return h.geometry, h.frame_in_flange, model.with_tool(h.frame_pose), h.certificate
+
+
+def _soft_limits(raw: list | None, model: RobotModel, source: str) -> np.ndarray:
+    """``[limits].joints`` in rad / mm: one finite, ordered pair per joint inside the robot's."""
+    n = model.n_joints
+    units = ["deg" if k == "revolute" else "mm" for k in model.joint_types]
+    if raw is None:
+        return np.array(model.joint_limits, dtype=float)
+    if len(raw) != n:
+        raise ConfigError(f"{source}: limits.joints lists {len(raw)} joints; the robot {model.name!r} has {n}: "
+                          f"write [lower, upper] for each joint (deg for revolute, mm for prismatic)")
+    soft = np.zeros((n, 2))
+    for j, (pair, unit) in enumerate(zip(raw, units)):
+        label = f"{source}: limits.joints: joint {j + 1} = {_short.repr(pair)}"
+        if not (isinstance(pair, list) and len(pair) == 2
+                and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in pair)):
+            raise ConfigError(f"{label}: write [lower, upper] as two numbers ({unit})")
+        lo, hi = float(pair[0]), float(pair[1])
+        if not (math.isfinite(lo) and math.isfinite(hi)):
+            raise ConfigError(f"{label}: lower and upper must be finite numbers ({unit}); a NaN or "
+                              f"infinite limit would switch the soft-limit check off")
+        if not lo < hi:
+            raise ConfigError(f"{label}: lower must be < upper; write [{hi:g}, {lo:g}]" if lo > hi
+                              else f"{label}: lower must be < upper")
+        scale = DEG if unit == "deg" else 1.0
+        soft[j] = lo * scale, hi * scale
+        rlo, rhi = model.joint_limits[j] / scale
+        if soft[j, 0] < model.joint_limits[j, 0] - 1e-9 or soft[j, 1] > model.joint_limits[j, 1] + 1e-9:
+            raise ConfigError(f"{label}: joint {j + 1}'s soft limits exceed the robot's limits "
+                              f"[{rlo:g}, {rhi:g}] {unit}; narrow them")
+    return soft
+
+
+def correction_grid(correction: CorrectionConfig, elbows: tuple[int, ...]) -> GridSpec:
+    """The configured correction grid (robot base frame) for the given plan elbows."""
+    c = correction
+    return GridSpec(x_range=(c.x_mm[0], c.x_mm[1]), x_step=c.x_mm[2], y_range=(c.y_mm[0], c.y_mm[1]),
+                    y_step=c.y_mm[2], z_range=(c.z_mm[0], c.z_mm[1]), z_step=c.z_mm[2],
+                    yaw_step=float(np.deg2rad(c.yaw_step_deg)), elbows=tuple(elbows))
+
+
+_GRID_KEY = {"x": "correction.x_mm", "y": "correction.y_mm", "z": "correction.z_mm", "yaw": "correction.yaw_step_deg"}
+
+
+def _check_grid(corr: CorrectionConfig, elbows: tuple[int, ...], n_joints: int, source: str) -> None:
+    """The grid's ranges and steps and the controller's capacity, before anything moves (the
+    same :class:`GridSpec` the pipeline builds the table on)."""
+    for key in ("x_mm", "y_mm", "z_mm"):
+        lo, hi, step = getattr(corr, key)
+        if not hi > lo:
+            raise ConfigError(f"{source}: correction.{key} = [{lo:g}, {hi:g}, {step:g}]: [start, stop, step] needs "
+                              f"stop > start")
+    n = 360.0 / corr.yaw_step_deg
+    if abs(n - round(n)) > 1e-9 * n:
+        steps = [360.0 / k for k in range(2, 361) if (3600 % k) == 0]  # divisors to 0.1 deg
+        lower = max((v for v in steps if v < corr.yaw_step_deg), default=1.0)
+        upper = min((v for v in steps if v > corr.yaw_step_deg), default=180.0)
+        hint = f"{lower:g} or {upper:g}"
+        raise ConfigError(f"{source}: correction.yaw_step_deg = {corr.yaw_step_deg:g}: must divide 360 deg "
+                          f"({n:.4g} steps); use e.g. {hint}")
+    try:
+        correction_grid(corr, elbows).check_capacity(n_joints, MAX_TABLE_VALUES)
+    except ConfigError as exc:
+        m = re.match(r"grid (yaw|x|y|z)", str(exc))
+        key = _GRID_KEY[m.group(1)] if m else "correction (x_mm, y_mm, z_mm, yaw_step_deg)"
+        raise ConfigError(f"{source}: {key}: {exc}") from None
+    except ValueError as exc:  # TableError: a node count the controller cannot hold
+        raise ConfigError(f"{source}: correction (x_mm, y_mm, z_mm, yaw_step_deg): {exc}; use larger steps") from None
+
+
+def _conformance(c: _Conformance, model: RobotModel, soft: np.ndarray, source: str) -> ConformanceConfig | None:
+    """``[conformance]`` in rad / mm: one park value per joint, inside the soft limits (None
+    without ``park_joints``: the cell has not been prepared for ``station conformance``)."""
+    if c.park_joints is None:
+        return None
+    n = model.n_joints
+    if len(c.park_joints) != n:
+        raise ConfigError(f"{source}: conformance.park_joints lists {len(c.park_joints)} joints; the robot "
+                          f"{model.name!r} has {n}: give one value per joint (deg for revolute, mm for prismatic)")
+    scale = np.array([DEG if k == "revolute" else 1.0 for k in model.joint_types])
+    park = np.asarray(c.park_joints, dtype=float) * scale
+    for j in range(n):
+        if not soft[j, 0] <= park[j] <= soft[j, 1]:
+            unit = "deg" if model.joint_types[j] == "revolute" else "mm"
+            raise ConfigError(f"{source}: conformance.park_joints: joint {j + 1} = {c.park_joints[j]:g} {unit} is outside "
+                              f"the soft limits [{soft[j, 0] / scale[j]:g}, {soft[j, 1] / scale[j]:g}] {unit}; park "
+                              f"the robot inside [limits]")
+    return ConformanceConfig(park, c.test_move * scale, c.move_speed, c.position_tolerance * scale)
+
+
+def _tools(tools: list[_Tool], corr: CorrectionConfig, elbows: tuple[int, ...], n_joints: int,
+           source: str) -> tuple[ToolConfig, ...]:
+    """``[[tool]]`` in mm / rad, each with its grid (``[correction]`` with the tool's overrides),
+    checked like the head's grid (whole steps, the controller's capacity)."""
+    out = []
+    for t in tools:
+        c = CorrectionConfig(x_mm=t.x_mm or corr.x_mm, y_mm=t.y_mm or corr.y_mm, z_mm=t.z_mm or corr.z_mm,
+                             yaw_step_deg=corr.yaw_step_deg, max_interpolation_um=corr.max_interpolation_um)
+        if c != corr:
+            _check_grid(c, elbows, n_joints, f"{source}: tool {t.name!r} (its x_mm, y_mm, z_mm replace [correction]'s)")
+        out.append(ToolConfig(t.name, _pose_deg(t.tcp), c))
+    return tuple(out)
+
+
+def _probe_line(d: Any, source: str) -> Any:
+    """The probe port's line settings: the file's, each absent one the dialect's factory default,
+    refused (naming what the unit offers) where the dialect's unit does not offer them."""
+    from drivers.probe_dialects import check_line_settings
+    from drivers.probe_protocol import ProbeConfigError
+
+    try:
+        return check_line_settings(d.probe_protocol, d.baudrate, d.probe_bytesize, d.probe_parity)
+    except ProbeConfigError as exc:
+        raise ConfigError(f"{source}: [devices]: {exc}") from None
+
+
+def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellConfig:
+    """A validated :class:`CellConfig` from parsed TOML; :class:`ConfigError` names the key."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: a configuration is a TOML document of tables, got {type(data).__name__}")
+    f = _validate_schema(data, source)
+
+    model = load_robot(_robot_path(f.robot.model, source)).with_setup(_pose_deg(f.robot.setup))
+    head, head_in_flange, model, head_cert = _head(f.head.file, f.body.cube_edge_mm, model, source)  # [head]
+    soft = _soft_limits(f.limits.joints, model, source)
+
+    d = f.devices
+    host, _, port = d.controller.rpartition(":")
+    line = _probe_line(d, source)
+    devices = DeviceConfig(
+        probe_head=d.probe_head, baudrate=line.baudrate, probe_timeout_s=d.probe_timeout_s,
+        controller_host=host, controller_port=int(port), device_id=d.device_id, word_order=d.word_order,
+        controller_timeout_s=d.controller_timeout_s, motion_timeout_s=d.motion_timeout_s,
+        probe_protocol=d.probe_protocol, probe_bytesize=line.bytesize, probe_parity=line.parity,
+        controller_register_base=d.controller_register_base,
+        probe_refresh_s=None if d.probe_refresh_ms is None else d.probe_refresh_ms / 1000.0,
+        controller_link_timeout_s=d.controller_link_timeout_s)
+    p = f.plan
+    plan = PlanConfig(
+        elbows=tuple(p.elbows), approach_deg=p.approach_deg, approach_mm=p.approach_mm,
+        clearance_mm=p.clearance_mm, speed=p.speed, settle_s=p.settle_s, samples=p.samples,
+        max_spread_um=p.max_spread_um, both_directions=p.both_directions,
+        verification_every=p.verification_every, verification_cycles=p.verification_cycles,
+        select=p.select, repeats=p.repeats, recenter_attempts=p.recenter_attempts,
+        recenter_margin_mm=p.recenter_margin_mm, max_residual_um=p.max_residual_um,
+        remeasure_attempts=p.remeasure_attempts)
+
+    i = f.identification
+    ident = IdentificationConfig(
+        objective=i.objective, sigma_position_um=i.sigma_position_um,
+        sigma_angle_arcsec=i.sigma_angle_arcsec,
+        prefer=tuple(model.prefer if i.prefer is None else i.prefer), fix=tuple(i.fix), exclude=tuple(i.exclude))
+    for key in ("prefer", "fix", "exclude"):
+        for n in getattr(ident, key):
+            try:
+                model.param_index(n)
+            except ConfigError as exc:
+                raise ConfigError(f"{source}: identification.{key}: {exc}") from None
+
+    c = f.correction
+    corr = CorrectionConfig(x_mm=c.x_mm, y_mm=c.y_mm, z_mm=c.z_mm, yaw_step_deg=c.yaw_step_deg,
+                            max_interpolation_um=c.max_interpolation_um)
+    if model.is_scara:  # an articulated arm gets compensated targets, not a table (issue 9)
+        _check_grid(corr, plan.elbows, model.n_joints, source)
+
+    ids, poses, body_sigma, body_cert = _body_points(f.body, source)
+    r, w = f.recheck, f.warmup
+    recheck = RecheckConfig(poses=r.poses, tolerance_um=r.tolerance_um, offset_tolerance_arcsec=r.offset_tolerance_arcsec,
+                            length_tolerance_um=r.length_tolerance_um, repeat_tolerance_um=r.repeat_tolerance_um)
+    warmup = (WarmupConfig(until=w.until, minutes=w.minutes, max_cycles=w.max_cycles, converged_um=w.converged_um,
+                           program_poses=w.program_poses) if w.enabled else None)
+    sim = f.simulation
+    if sim.step_joint > model.n_joints:
+        raise ConfigError(f"{source}: simulation.step_joint = {sim.step_joint}: the robot has {model.n_joints} joints")
+    if sim.joint_backlash_um is not None and len(sim.joint_backlash_um) != model.n_joints:
+        raise ConfigError(f"{source}: simulation.joint_backlash_um has {len(sim.joint_backlash_um)} values: give one "
+                          f"per joint of the robot ({model.n_joints})")
+    return CellConfig(
+        f.cell.name, model, soft, ids, pose_to_matrix(poses), f.body.cube_edge_mm,
+        devices, plan, ident, corr, text, f.simulation.seed, recheck, warmup,
+        conformance=_conformance(f.conformance, model, soft, source),
+        head=head,  # ProbeHeadGeometry of the [head] file, or the built-in reference head
+        head_in_flange=head_in_flange,  # (4,4) MKKS in the flange frame (the robot model's nominal K)
+        body_sigma=body_sigma,  # (n, 2) [mm, rad] from the CMM report or the inline points (0: exact)
+        tools=_tools(f.tool, corr, plan.elbows, model.n_joints, source),  # [[tool]] (station/cell/correction/tools.py)
+        simulation=f.simulation,  # the validated [simulation] table (simulators/from_config.py reads it)
+        source=source,  # where it was read: relative robot, head and body files resolve beside it
+        verification=VerificationConfig(**f.verification.model_dump()),  # [verification] (the report's)
+        identity=CellIdentity(f.cell.robot_serial or "", f.cell.controller or "", f.cell.operator or ""),
+        head_certificate=head_cert, body_certificate=body_cert,  # the CMM certificates, for the report
+    )
+
+
+def simulation_settings(text: str, source: str = "<config>") -> dict[str, Any]:
+    """The ``[simulation]`` table of a configuration (or of a file holding only that table), validated:
+    what ``station … --simulated CONFIG`` passes to the simulated cell (seed, the true errors'
+    magnitudes, the physics, thermal model, step), in the file's units."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{source}: not valid TOML ({exc}); fix the syntax there") from None
+    raw = data.get("simulation", {})
+    try:
+        sim = _Simulation.model_validate(raw)
+    except ValidationError as exc:
+        msgs = [_describe({**dict(e), "loc": ("simulation", *e["loc"])}) for e in exc.errors(include_url=False)]
+        raise ConfigError(f"{source}: " + "; ".join(msgs[:5])) from None
+    return sim.model_dump()
+
+
+def load_config(path: str | Path) -> CellConfig:
+    """Read and validate a configuration file: only a regular file of at most
+    :data:`MAX_CONFIG_BYTES`, UTF-8 (a device, FIFO or directory is refused before reading)."""
+    p = Path(path)
+    text = read_user_text(p, MAX_CONFIG_BYTES, "configuration file",
+                          missing=f"no such configuration file; 'station init {p}' writes a template")
+    return parse_text(text, str(p))
+
+
+def parse_text(text: str, source: str = "<config>") -> CellConfig:
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{source}: not valid TOML ({exc}); fix the syntax there") from None
+    except RecursionError:
+        raise ConfigError(f"{source}: not valid TOML (nested too deeply); fix the syntax there") from None
+    return parse_config(data, source, text)
+
+
+__all__ = [  # the loading's names, the template, and the schema's (config_schema) re-exported
+    "MAX_CONFIG_BYTES", "DeviceConfig", "PlanConfig", "IdentificationConfig", "CorrectionConfig", "RecheckConfig",
+    "WarmupConfig", "VerificationConfig", "CellIdentity", "ConformanceConfig", "ToolConfig", "CellConfig", "correction_grid", "parse_config",
+    "simulation_settings", "load_config", "parse_text", "TEMPLATE", "MAX_MM", "_NO_CONTROL", "Text", "PathText",
+    "PointId", "ParamName", "Mm", "Deg", "Pose", "GridStep", "GridAxis", "_POSE_WHAT", "_num", "_absent", "_Section",
+    "_Cell", "_Robot", "_Limits", "_Point", "_Body", "_CONTROLLER", "_Devices", "_Plan", "_Identification",
+    "_Correction", "_Simulation", "_Verification", "_Recheck", "_Warmup", "_Conformance", "ToolName", "ToolMm", "ToolPose",
+    "MAX_TOOLS", "_Tool", "_Head", "_CellFile", "_short", "_key", "_section_of", "_field_info", "bounds_text",
+    "_PROBLEM", "_describe", "_validate_schema",
+]

@@ -1,0 +1,569 @@
+"""Per-tool corrections: the working tools that replace the probe head after a calibration
+(``[[tool]]`` in the cell configuration; chapter §7.2, ``docs/correction.md`` "Tools after the head").
+
+For each configured tool the station derives the tool on the identified robot
+(:func:`station.core.tool_frame.derive_tool`: ``K_tool = K_id · H⁻¹ · T``, ``H`` the head in the
+flange frame, ``T`` the tool's TCP) and builds the tool's own correction for the controller's
+nominal model with that tool (``K_nom · H⁻¹ · T``):
+
+* a SCARA: a correction table on the tool's grid (``[correction]`` with the tool's overrides),
+  :func:`station.core.correction_table.build_correction_table`;
+* other robots: compensated targets (:mod:`station.core.compensation`) for the tool's
+  verification targets.
+
+The verification targets of a tool are the plan's held-out verification poses re-expressed as
+where the tool's TCP is at the same joints: the nominal forward kinematics of those joints with
+the tool's nominal K (robot base frame), placed in the body frame with the identified set-up.
+
+Figures per tool (:func:`evaluate_tools`):
+
+* always: what the head's correction (its table used as it is) would leave at the tool's targets,
+  *predicted* from the identified model (the reason to switch tables when the tool goes on);
+* in simulation (the simulator's truth known): the real robot's position error at the tool's
+  targets with the tool's own correction, with the oracle's (the correction built from the true
+  parameters with the true ``K_tool = K_true · H⁻¹ · T``) and with the head's correction. The
+  real robot's joints scatter with the simulator's repeatability over
+  ``[plan].verification_cycles`` cycles per target (the same scatter for all three), as the
+  head's own verification does; nothing moves for it.
+
+Nothing here uploads: the head's table stays the one the pipeline uploads; ``station export
+--tool NAME`` writes a tool's table for the controller.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from drivers.controller_map import MAX_TABLE_VALUES
+from station.cell.config.cell_config import CellConfig, ToolConfig, correction_grid
+from station.cell.plan.steps import PlannedStep
+from station.cell.records.rundb import RunDB
+from station.cell.records.stored_config import stored_config
+from station.cell.records.summary import ToolSummary
+from station.cell.run.events import Event, Notice
+from station.core.compensation import compensated_targets
+from station.core.correction_table import CorrectionTable, build_correction_table
+from station.core.kinematics import forward, inverse_kinematics, scara_ik
+from station.core.model import RobotModel
+from station.core.table_data import CorrectionTableData, TableRangeError
+from station.core.table_grid import GridSpec, interpolate_table
+from station.core.tool_frame import (
+    ToolKinematics,
+    derive_tool,
+    nominal_head_in_flange,
+    tool_params,
+    tool_transform,
+)
+from station.core.transforms import invert, matrix_to_pose, pose_to_matrix
+from station.errors import ConfigError, Outcome, StationError, UnreachableError
+
+__all__ = [
+    "ToolCorrection",
+    "ToolTableBeyondBound",
+    "ToolEvaluation",
+    "ToolTargets",
+    "build_tool_correction",
+    "check_tools",
+    "evaluate_tools",
+    "find_tool",
+    "head_in_flange",
+    "result_key",
+    "run_tools",
+    "tool_grid",
+    "tool_targets",
+]
+
+#: a SCARA table corrects x, y, z and yaw of a tool whose axis is parallel to the last joint's
+MAX_SCARA_TOOL_TILT_DEG = 10.0
+#: salt of the seeded joint scatter of the simulated tool verification
+_SCATTER_SALT = 0x7001
+
+
+def result_key(name: str) -> str:
+    """The run-database result key of a tool's correction and figures."""
+    return f"tool:{name}"
+
+
+def head_in_flange(cfg: CellConfig) -> np.ndarray:
+    """``H`` ``(4, 4)``: MKKS in the flange frame from the head's CMM report
+    (``cfg.head_in_flange``); without one, the robot model's nominal K (the nominal flange is then
+    the last joint frame, and the tools' TCPs are given in it)."""
+    if cfg.head_in_flange is None:
+        return nominal_head_in_flange(cfg.model)
+    return np.asarray(cfg.head_in_flange, dtype=float)
+
+
+def find_tool(cfg: CellConfig, name: str) -> ToolConfig:
+    """The configured tool called ``name``; :class:`ConfigError` naming the configured ones."""
+    for t in cfg.tools:
+        if t.name == name:
+            return t
+    have = ", ".join(repr(t.name) for t in cfg.tools) or "none"
+    raise ConfigError(f"no tool {name!r} in the configuration (configured: {have}); add a [[tool]] table "
+                      f"with name = {name!r} and its tcp")
+
+
+def tool_grid(cfg: CellConfig, tool: ToolConfig) -> GridSpec:
+    """The grid of the tool's table: ``[correction]`` with the tool's own x_mm / y_mm / z_mm."""
+    return correction_grid(tool.correction, tuple(cfg.plan.elbows))
+
+
+def check_tools(cfg: CellConfig) -> None:
+    """Before anything moves: every tool can be corrected on this robot. For a SCARA the tool's
+    axis must be parallel to the last joint's (within :data:`MAX_SCARA_TOOL_TILT_DEG`): its table
+    corrects x, y, z and yaw, and a tilted TCP frame has no yaw the controller and the table share."""
+    if not cfg.model.is_scara:
+        return
+    H = head_in_flange(cfg)
+    K = pose_to_matrix(cfg.model.nominal[-6:])
+    for t in cfg.tools:
+        R = tool_transform(K, H, t.tcp_matrix)[:3, :3]
+        tilt = float(np.degrees(np.arccos(np.clip(R[2, 2], -1.0, 1.0))))
+        if tilt > MAX_SCARA_TOOL_TILT_DEG:
+            raise ConfigError(
+                f"tool {t.name!r}: its TCP frame's z axis is tilted {tilt:.1f} deg against the robot's last axis "
+                f"(at most {MAX_SCARA_TOOL_TILT_DEG:g} deg): a SCARA's correction table corrects x, y, z and yaw "
+                f"of a tool along its last axis. Give [[tool]].tcp roll and pitch in the flange frame so that the "
+                f"TCP's z axis runs along the last axis (check the head file's flange frame)")
+
+
+# --------------------------------------------------------------------------------------------
+# targets
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class ToolTargets:
+    """The tool's verification targets. ``joints`` ``(n, g)`` [rad | mm]: the plan's held-out
+    verification joints; ``elbows`` ``(n,)`` ±1; ``labels`` ``(n,)`` "<point> elbow ±1";
+    ``base`` ``(n, 4, 4)``: the TCP there with the nominal tool, robot base frame [mm];
+    ``world`` ``(n, 4, 4)``: the same in the body frame through the identified set-up."""
+
+    joints: np.ndarray
+    elbows: np.ndarray
+    labels: tuple[str, ...]
+    base: np.ndarray
+    world: np.ndarray
+
+
+def _verification_poses(steps: Sequence[PlannedStep]) -> list[PlannedStep]:
+    seen: set[tuple[int, int]] = set()
+    out = []
+    for st in steps:
+        if st.kind.is_verification and (st.point, st.elbow) not in seen:
+            seen.add((st.point, st.elbow))
+            out.append(st)
+    return out
+
+
+def tool_targets(kin: ToolKinematics, steps: Sequence[PlannedStep], setup: np.ndarray) -> ToolTargets:
+    """The tool's verification targets (see :class:`ToolTargets`); ``setup`` ``(6,)``: the
+    identified set-up R [mm, rad]."""
+    poses = _verification_poses(steps)
+    g = kin.nominal.n_joints
+    q = np.array([st.q for st in poses], dtype=float).reshape(-1, g)
+    base = forward(kin.nominal, q, setup=False) if len(q) else np.zeros((0, 4, 4))
+    return ToolTargets(q, np.array([st.elbow for st in poses], dtype=int),
+                       tuple(f"{st.point_id} elbow {st.elbow:+d}" for st in poses),
+                       base, pose_to_matrix(np.asarray(setup, dtype=float)) @ base)
+
+
+# --------------------------------------------------------------------------------------------
+# the correction of one tool
+# --------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class ToolCorrection:
+    """One tool's correction. ``kin``: the tool on the identified robot; ``table``: its
+    correction table (SCARA) or None; ``commands`` ``(n, 4, 4)``: compensated Cartesian targets
+    for its verification targets (other robots) or None; ``targets``: those targets."""
+
+    tool: ToolConfig
+    kin: ToolKinematics
+    targets: ToolTargets
+    table: CorrectionTable | None = None
+    commands: np.ndarray | None = None
+    commanded_joints: np.ndarray | None = None
+
+    @property
+    def kind(self) -> str:
+        return "table" if self.table is not None else "targets"
+
+
+def build_tool_correction(cfg: CellConfig, tool: ToolConfig, params: np.ndarray,
+                          steps: Sequence[PlannedStep]) -> ToolCorrection:
+    """The tool's correction from the identified ``params`` ``(n_params,)`` [mm, rad]: a table on
+    the tool's grid for a SCARA, compensated targets for its verification targets otherwise."""
+    kin = derive_tool(cfg.model, params, head_in_flange(cfg), tool.tcp_matrix)
+    targets = tool_targets(kin, steps, np.asarray(params, dtype=float)[:6])
+    if cfg.model.is_scara:
+        try:
+            table = build_correction_table(kin.nominal, kin.params, tool_grid(cfg, tool), capacity=MAX_TABLE_VALUES)
+        except ConfigError as exc:
+            raise ConfigError(f"tool {tool.name!r}: {exc} ([[tool]] x_mm, y_mm, z_mm give the tool its own grid)") from None
+        return ToolCorrection(tool, kin, targets, table=table)
+    if not len(targets.joints):
+        return ToolCorrection(tool, kin, targets, commands=np.zeros((0, 4, 4)), commanded_joints=targets.joints)
+    comp = compensated_targets(kin.nominal, kin.params, targets.base, targets.joints)
+    return ToolCorrection(tool, kin, targets, commands=comp.commands, commanded_joints=comp.joints)
+
+
+# --------------------------------------------------------------------------------------------
+# what the controller commands, and where the robot ends
+# --------------------------------------------------------------------------------------------
+
+def _in_grid(data: CorrectionTableData, point: np.ndarray) -> bool:
+    for k, a in enumerate(data.axes):
+        if a.periodic or a.count == 1:
+            continue
+        u = (point[k] - a.start) / a.step
+        if u < -1e-6 or u > a.count - 1 + 1e-6:
+            return False
+    return True
+
+
+def _scara_commands(nominal: RobotModel, X: np.ndarray, elbows: np.ndarray,
+                    data: CorrectionTableData | None, table_elbows: tuple[int, ...]) -> np.ndarray:
+    """Joints ``(n, g)`` the controller commands for base-frame targets ``X`` with the table
+    ``data`` active (NaN rows: outside the table's grid or out of reach)."""
+    q = np.full((len(X), nominal.n_joints), np.nan)
+    for i, (T, e) in enumerate(zip(X, elbows)):
+        p = matrix_to_pose(T)
+        pt = np.array([p[0], p[1], p[2], p[5]])
+        if data is not None and (int(e) not in table_elbows or not _in_grid(data, pt)):
+            continue  # the controller refuses a target outside the active table's grid
+        try:
+            qi = scara_ik(nominal, T[None], int(e), setup=False, check_limits=False)[0]
+        except (UnreachableError, np.linalg.LinAlgError):
+            continue
+        if data is not None:
+            try:
+                qi = qi + interpolate_table(data, pt[None], table_elbows.index(int(e)))[0]
+            except TableRangeError:
+                continue
+        q[i] = qi
+    return q
+
+
+def _exact_correction_joints(nominal: RobotModel, params: np.ndarray, X: np.ndarray, q0: np.ndarray) -> np.ndarray:
+    """Joints ``(n, g)`` that put the robot ``params`` on ``X`` (compensated targets; NaN rows where
+    it cannot reach one)."""
+    q = np.full((len(X), nominal.n_joints), np.nan)
+    for i in range(len(X)):
+        try:
+            q[i] = compensated_targets(nominal, params, X[i:i + 1], q0[i:i + 1]).joints[0]
+        except (UnreachableError, np.linalg.LinAlgError):
+            continue
+    return q
+
+
+def _head_correction_joints(cfg: CellConfig, kin: ToolKinematics, p_head: np.ndarray, X: np.ndarray,
+                            q0: np.ndarray, elbows: np.ndarray, head_table: CorrectionTable | None) -> np.ndarray:
+    """Joints the controller commands for the tool's targets with the HEAD's correction as it is:
+    its table (SCARA); for other robots the head's joint correction at the nominal tool's joints
+    ``q_n = IK_nom_tool(x)``: the joints that put the identified head where the nominal head is at
+    ``q_n`` (the head is corrected there, the tool's own lever is not)."""
+    if cfg.model.is_scara:
+        if head_table is None:
+            return np.full((len(X), kin.nominal.n_joints), np.nan)
+        return _scara_commands(kin.nominal, X, elbows, head_table.data, head_table.elbows)
+    q = np.full((len(X), kin.nominal.n_joints), np.nan)
+    for i in range(len(X)):
+        try:
+            q_n = inverse_kinematics(kin.nominal, X[i:i + 1], q0[i:i + 1])
+            q[i] = inverse_kinematics(cfg.model, forward(cfg.model, q_n, setup=False), q_n, params=p_head)[0]
+        except (UnreachableError, np.linalg.LinAlgError):
+            continue
+    return q
+
+
+def _errors(model: RobotModel, p_real: np.ndarray, q_cmd: np.ndarray, world: np.ndarray,
+            scatter: np.ndarray) -> np.ndarray:
+    """``(n, cycles)`` position error [µm] of the robot ``p_real`` (set-up included) driven to
+    ``q_cmd`` plus each cycle's joint scatter ``scatter`` ``(cycles, n, g)``, against ``world``
+    (NaN rows where nothing was commanded)."""
+    out = np.full((len(q_cmd), scatter.shape[0]), np.nan)
+    ok = np.all(np.isfinite(q_cmd), axis=1)
+    if ok.any():
+        reached = forward(model, q_cmd[ok][None] + scatter[:, ok], p_real)  # (cycles, m, 4, 4)
+        d = reached[..., :3, 3] - world[ok][None, :, :3, 3]
+        out[ok] = np.linalg.norm(d, axis=-1).T * 1e3
+    return out
+
+
+def _rms_max(e: np.ndarray | None) -> tuple[float | None, float | None, int]:
+    if e is None:
+        return None, None, 0
+    rows = e[np.all(np.isfinite(e), axis=1)]
+    if not rows.size:
+        return None, None, 0
+    return float(np.sqrt(np.mean(rows**2))), float(rows.max()), int(rows.shape[0])
+
+
+@dataclass(frozen=True, eq=False)
+class ToolEvaluation:
+    """One tool's correction and figures. Error arrays ``(n_targets, cycles)`` [µm], NaN rows for
+    targets a correction does not cover; None where unknown (no truth: a real cell)."""
+
+    correction: ToolCorrection
+    head_predicted_um: np.ndarray
+    own_um: np.ndarray | None = None
+    oracle_um: np.ndarray | None = None
+    head_um: np.ndarray | None = None
+    notes: tuple[str, ...] = field(default=())
+
+    def summary(self) -> ToolSummary:
+        c = self.correction
+        t = c.tool
+        own_rms, own_max, n_own = _rms_max(self.own_um)
+        or_rms, or_max, _ = _rms_max(self.oracle_um)
+        hd_rms, hd_max, n_head = _rms_max(self.head_um)
+        pr_rms, pr_max, n_pred = _rms_max(self.head_predicted_um)
+        tcp = (*(float(v) for v in t.tcp[:3]), *(float(np.degrees(v)) for v in t.tcp[3:]))
+        return ToolSummary(
+            name=t.name, tcp_mm_deg=tcp, kind=c.kind, n_targets=len(c.targets.labels),
+            crc32=f"{c.table.data.crc32():08x}" if c.table is not None else None,
+            n_values=int(c.table.data.n_values) if c.table is not None else None,
+            interpolation_bound_um=float(c.table.interpolation_bound_um) if c.table is not None else None,
+            flange_shift_um=c.kin.flange_shift_um, flange_rotation_arcsec=c.kin.flange_rotation_arcsec,
+            head_predicted_rms_um=pr_rms, head_predicted_max_um=pr_max,
+            after_rms_um=own_rms, after_max_um=own_max, oracle_rms_um=or_rms, oracle_max_um=or_max,
+            head_rms_um=hd_rms, head_max_um=hd_max, n_after=n_own, n_head=n_head)
+
+    def result(self) -> dict[str, Any]:
+        """The run-database result (``tool:<name>``): JSON types, units in the keys."""
+        c = self.correction
+        s = self.summary()
+        out: dict[str, Any] = {
+            "name": s.name, "tcp_mm_deg": list(s.tcp_mm_deg), "kind": c.kind,
+            "tool_params_identified": [float(v) for v in c.kin.params],
+            "tool_params_nominal": [float(v) for v in c.kin.nominal.nominal],
+            "flange_identified_pose_mm_rad": [float(v) for v in matrix_to_pose(c.kin.flange_identified)],
+            "flange_nominal_pose_mm_rad": [float(v) for v in matrix_to_pose(c.kin.flange_nominal)],
+            "flange_shift_um": s.flange_shift_um, "flange_rotation_arcsec": s.flange_rotation_arcsec,
+            "targets": list(c.targets.labels),
+            "head_predicted_um": _listed(self.head_predicted_um),
+            "after_um": _listed(self.own_um), "oracle_um": _listed(self.oracle_um), "head_um": _listed(self.head_um),
+            "summary": _json_summary(s), "notes": list(self.notes)}
+        if c.table is not None:
+            out["table"] = c.table.summary()
+        if c.commands is not None:
+            out["commands_pose_mm_rad"] = [[float(v) for v in matrix_to_pose(T)] for T in c.commands]
+        return out
+
+
+def _listed(e: np.ndarray | None) -> list[list[float | None]] | None:
+    if e is None:
+        return None
+    return [[None if not np.isfinite(v) else float(v) for v in row] for row in e]
+
+
+def _json_summary(s: ToolSummary) -> dict[str, Any]:
+    import dataclasses
+
+    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(s).items()}
+
+
+def _scatter(truth: Any, n: int, g: int, cycles: int) -> np.ndarray:
+    """``(cycles, n, g)`` seeded joint scatter with the simulator's repeatability σ per joint."""
+    sigma = np.asarray(getattr(truth, "repeatability", np.zeros(g)), dtype=float).reshape(-1)
+    if sigma.shape != (g,):
+        sigma = np.zeros(g)
+    rng = np.random.default_rng([int(getattr(truth, "seed", 0)), _SCATTER_SALT])
+    return rng.normal(0.0, 1.0, (cycles, n, g)) * sigma
+
+
+def evaluate_tool(cfg: CellConfig, tool: ToolConfig, params: np.ndarray, steps: Sequence[PlannedStep],
+                  head_table: CorrectionTable | None, p_true: np.ndarray | None = None,
+                  truth: Any = None) -> ToolEvaluation:
+    """One tool: its correction, the head correction's predicted error at its targets, and — with
+    the true parameters ``p_true`` ``(n_params,)`` (simulation; ``truth`` the simulator's
+    :class:`~simulators.cell.CellTruth` for the repeatability) — the real robot's errors with
+    its own, the oracle's and the head's correction."""
+    p_id = np.asarray(params, dtype=float)
+    corr = build_tool_correction(cfg, tool, p_id, steps)
+    kin, tg = corr.kin, corr.targets
+    n, g = len(tg.labels), cfg.model.n_joints
+    notes: list[str] = []
+    if n == 0:
+        empty = np.zeros((0, 1))
+        return ToolEvaluation(corr, empty, notes=("the plan has no verification poses",))
+    H = head_in_flange(cfg)
+    scara = cfg.model.is_scara
+    # the commands with the tool's own correction (base frame of the identified chain)
+    own_table = corr.table
+    if own_table is not None:
+        q_own = _scara_commands(kin.nominal, tg.base, tg.elbows, own_table.data, own_table.elbows)
+        if own_table.interpolation_bound_um > tool.correction.max_interpolation_um:
+            notes.append(f"its table interpolates with up to {own_table.interpolation_bound_um:.1f} µm, above "
+                         f"correction.max_interpolation_um = {tool.correction.max_interpolation_um:g} (the bound "
+                         f"covers the whole grid; a finer or smaller grid for this tool: [[tool]] x_mm, y_mm, z_mm)")
+        if head_table is not None and head_table.grid != own_table.grid:
+            # the head's correction as it is, on the tool's grid so that it covers the tool's targets
+            head_table = build_correction_table(cfg.model, p_id, own_table.grid, capacity=MAX_TABLE_VALUES)
+    else:
+        assert corr.commanded_joints is not None
+        q_own = corr.commanded_joints
+    with_head = head_table is not None or not scara  # a SCARA's head correction is its table
+    q_head = _head_correction_joints(cfg, kin, p_id, tg.base, tg.joints, tg.elbows, head_table)
+    outside = int(np.sum(~np.all(np.isfinite(q_own), axis=1)))
+    if outside:
+        notes.append(f"{outside} of {n} targets lie outside the tool's grid or reach and are not counted")
+    missed_head = int(np.sum(~np.all(np.isfinite(q_head), axis=1) & np.all(np.isfinite(q_own), axis=1)))
+    if missed_head and with_head:
+        notes.append(f"{missed_head} of its targets are out of the head's correction's reach; the head's "
+                     f"figures leave them out")
+    no_scatter = np.zeros((1, n, g))
+    # what the identified model says the head's correction leaves for this tool (a real cell's figure)
+    head_predicted = _errors(cfg.model, kin.params, q_head, tg.world, no_scatter)
+    if p_true is None:
+        return ToolEvaluation(corr, head_predicted, notes=tuple(notes))
+    p_true = np.asarray(p_true, dtype=float)
+    p_true_tool = tool_params(cfg.model, p_true, H, tool.tcp_matrix)
+    X_oracle = invert(pose_to_matrix(p_true[:6]))[None] @ tg.world
+    if scara:
+        oracle_table = build_correction_table(kin.nominal, p_true_tool, tool_grid(cfg, tool), capacity=MAX_TABLE_VALUES)
+        q_oracle = _scara_commands(kin.nominal, X_oracle, tg.elbows, oracle_table.data, oracle_table.elbows)
+    else:
+        q_oracle = _exact_correction_joints(kin.nominal, p_true_tool, X_oracle, tg.joints)
+    scatter = _scatter(truth, n, g, max(int(cfg.plan.verification_cycles), 1))
+    own = _errors(cfg.model, p_true_tool, q_own, tg.world, scatter)
+    oracle = _errors(cfg.model, p_true_tool, q_oracle, tg.world, scatter)
+    head = _errors(cfg.model, p_true_tool, q_head, tg.world, scatter) if with_head else None
+    return ToolEvaluation(corr, head_predicted, own, oracle, head, tuple(notes))
+
+
+def evaluate_tools(cfg: CellConfig, params: np.ndarray, steps: Sequence[PlannedStep],
+                   head_table: CorrectionTable | None, p_true: np.ndarray | None = None,
+                   truth: Any = None) -> tuple[ToolEvaluation, ...]:
+    """:func:`evaluate_tool` for every configured tool, in the configuration's order."""
+    return tuple(evaluate_tool(cfg, t, params, steps, head_table, p_true, truth) for t in cfg.tools)
+
+
+
+def run_tools(cfg: CellConfig, db: RunDB, run_id: int, steps: Sequence[PlannedStep], params: np.ndarray,
+              head_table: CorrectionTable | None, p_true: np.ndarray | None, truth: Any,
+              emit: Callable[[Event], None]) -> tuple[ToolSummary, ...]:
+    """The pipeline's step after the head's table: every tool's correction and figures, stored as
+    ``tool:<name>`` results; returns their summaries. Nothing is uploaded."""
+    out = []
+    for tool in cfg.tools:
+        try:
+            ev = evaluate_tool(cfg, tool, params, steps, head_table, p_true, truth)
+        except (StationError, np.linalg.LinAlgError, ValueError) as exc:  # a tool never stops the head's run
+            emit(Notice("warning", f"tool {tool.name!r}: no correction was built ({exc}); the head's calibration "
+                                   f"goes on"))
+            db.save_result(run_id, result_key(tool.name), {"name": tool.name, "error": str(exc)})
+            continue
+        s = ev.summary()
+        db.save_result(run_id, result_key(s.name), ev.result())
+        what = (f"table {s.crc32}, interpolation bound {s.interpolation_bound_um:.1f} µm"
+                if s.crc32 is not None and s.interpolation_bound_um is not None else f"{s.n_targets} compensated targets")
+        line = f"tool {s.name!r}: own correction built ({what})"
+        if s.head_predicted_rms_um is not None:
+            line += f"; the head's correction would leave {s.head_predicted_rms_um:.1f} µm RMS at its targets"
+        if s.after_rms_um is not None and s.oracle_rms_um is not None:
+            line += f"; simulated: {s.after_rms_um:.1f} µm with its own, {s.oracle_rms_um:.1f} µm with the oracle's"
+            if s.head_rms_um is not None:
+                line += f", {s.head_rms_um:.1f} µm with the head's"
+        emit(Notice("info", line + f". 'station export --tool {s.name}' writes its table"
+                    if s.kind == "table" else line))
+        for n in ev.notes:
+            emit(Notice("warning", f"tool {s.name!r}: {n}"))
+        out.append(s)
+    return tuple(out)
+
+
+# --------------------------------------------------------------------------------------------
+# export: a tool's correction as a file for the controller (station export --tool NAME)
+# --------------------------------------------------------------------------------------------
+
+#: the format tag of an exported tool correction
+EXPORT_FORMAT = "station-tool-correction/1"
+_AXIS_NAMES = ("x_mm", "y_mm", "z_mm", "yaw_rad")
+
+
+def table_to_json(data: CorrectionTableData) -> dict[str, Any]:
+    """A correction table as JSON types: its axes (x, y, z [mm], yaw [rad]) and the float32
+    values ``(n_configs, nx, ny, nz, nyaw, n_joints)`` [rad | mm] written exactly (read back by
+    :func:`table_from_json` they give the same CRC-32)."""
+    return {"axes": [{"name": _AXIS_NAMES[k] if k < len(_AXIS_NAMES) else f"axis{k}", "start": a.start,
+                      "step": a.step, "count": a.count, "periodic": a.periodic} for k, a in enumerate(data.axes)],
+            "shape": list(data.values.shape), "crc32": f"{data.crc32():08x}",
+            "values": [float(v) for v in data.values.ravel()]}
+
+
+def table_from_json(obj: dict[str, Any]) -> CorrectionTableData:
+    """The table of :func:`table_to_json` (its CRC-32 checked)."""
+    from station.core.table_data import TableAxis
+
+    axes = tuple(TableAxis(float(a["start"]), float(a["step"]), int(a["count"]), bool(a["periodic"]))
+                 for a in obj["axes"])
+    data = CorrectionTableData(axes, np.asarray(obj["values"], dtype=np.float32).reshape(obj["shape"]))
+    if f"{data.crc32():08x}" != obj["crc32"]:
+        raise ValueError(f"table CRC-32 {data.crc32():08x} differs from the stated {obj['crc32']}")
+    return data
+
+
+class ToolTableBeyondBound(StationError):
+    """``station export --tool``: the tool's table interpolates beyond its
+    ``correction.max_interpolation_um``; nothing was written (``--force`` writes it with the
+    warning inside). Exit 9, as a table the controller must not get."""
+
+    outcome = Outcome.UPLOAD_FAILED
+
+
+def tool_export(db: RunDB, run_id: int, name: str, force: bool = False) -> dict[str, Any]:
+    """The tool's correction of run ``run_id`` as JSON types: for a SCARA its table, rebuilt from
+    the run's configuration snapshot and identification and checked against the CRC-32 the run
+    stored; for other robots the compensated targets the run stored. :class:`ConfigError` when the
+    run has no such tool or no identification; :class:`ToolTableBeyondBound` when the table's
+    interpolation bound exceeds the tool's ``max_interpolation_um`` and ``force`` is not given
+    (with ``force`` the export carries that ``warning``)."""
+    stored = db.load_result(run_id, result_key(name), default=None)
+    ident = db.load_result(run_id, "identification", default=None)
+    cfg = stored_config(db, run_id)
+    tool = find_tool(cfg, name)
+    if stored is None or ident is None:
+        raise ConfigError(f"run {run_id} has no correction for tool {name!r} (it did not reach the correction "
+                          f"step, or ran before tools were configured); run 'station calibrate' with the tool "
+                          f"configured")
+    if "error" in stored:
+        raise ConfigError(f"run {run_id}: no correction was built for tool {name!r}: {stored['error']}")
+    tcp = [float(v) for v in tool.tcp[:3]] + [float(np.degrees(v)) for v in tool.tcp[3:]]
+    out: dict[str, Any] = {"format": EXPORT_FORMAT, "run_id": run_id, "tool": name, "tcp_mm_deg": tcp,
+                           "robot": cfg.model.name, "joint_types": list(cfg.model.joint_types),
+                           "joint_units": ["rad" if k == "revolute" else "mm" for k in cfg.model.joint_types],
+                           "tool_params_nominal": stored.get("tool_params_nominal"),
+                           "tool_params_identified": stored.get("tool_params_identified"),
+                           "units": "lengths mm, angles rad; the controller's nominal model takes tool_params_nominal's "
+                                    "last six values (x, y, z, roll, pitch, yaw) as its tool"}
+    if cfg.model.is_scara:
+        table = build_correction_table(derive_tool(cfg.model, np.asarray(ident["params"], dtype=float),
+                                                   head_in_flange(cfg), tool.tcp_matrix).nominal,
+                                       np.asarray(stored["tool_params_identified"], dtype=float), tool_grid(cfg, tool), capacity=MAX_TABLE_VALUES)
+        want = str(stored.get("summary", {}).get("crc32"))
+        if f"{table.data.crc32():08x}" != want:
+            raise ConfigError(f"run {run_id}: the rebuilt table of tool {name!r} has CRC-32 {table.data.crc32():08x}, "
+                              f"the run stored {want}; this station version builds it differently: re-run the "
+                              f"calibration to export it")
+        out["elbows"] = list(table.elbows)
+        out["interpolation_bound_um"] = float(table.interpolation_bound_um)
+        limit = float(tool.correction.max_interpolation_um)
+        out["max_interpolation_um"] = limit
+        if table.interpolation_bound_um > limit:
+            why = (f"tool {name!r}: its table interpolates with up to {table.interpolation_bound_um:.1f} µm, "
+                   f"{table.interpolation_bound_um / limit:.1f}× its correction.max_interpolation_um = {limit:g}")
+            if not force:
+                raise ToolTableBeyondBound(f"run {run_id}: {why}; nothing was written. Give the tool a finer or "
+                                           f"smaller grid ([[tool]] x_mm, y_mm, z_mm) and calibrate again, or pass "
+                                           f"--force to write it with this warning inside")
+            out["warning"] = f"{why}; written with --force: the controller's correction may miss by that much"
+        out["table"] = table_to_json(table.data)
+    else:
+        out["targets"] = stored.get("targets")
+        out["commands_pose_mm_rad"] = stored.get("commands_pose_mm_rad")
+    return out

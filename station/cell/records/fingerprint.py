@@ -1,0 +1,132 @@
+"""Which cell a run was measured on: a fingerprint stored with the run, so that a resume can
+refuse data from another cell (another body, set-up, robot file, head, limits or simulated seed).
+What only post-processes the measurements (``POST_PROCESSING``: the identification's settings,
+the correction grid, tolerances, names in the report) may change: a resume then reuses every
+measurement and says so (:func:`resume_note`).
+
+The fingerprint hashes every section of the configuration except ``[devices]`` (a port may be
+renamed between two attempts without changing the cell) plus the robot model as loaded (so an
+edited robot file counts even though the configuration names the same path).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import tomllib
+from collections.abc import Collection, Iterable
+from typing import Any
+
+import numpy as np
+
+from station.cell.config.cell_config import CellConfig
+from station.cell.plan.steps import StepKind
+from station.errors import ConfigError
+
+#: sections of the configuration that may change between attempts of one run
+_IGNORED = ("devices",)
+
+
+def _digest(obj: Any) -> str:
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def fingerprint(cfg: CellConfig) -> dict[str, str]:
+    """Section name → digest, plus ``robot model`` for the loaded robot."""
+    try:
+        data = tomllib.loads(cfg.source_text) if cfg.source_text else {}
+    except tomllib.TOMLDecodeError:  # pragma: no cover - a CellConfig was parsed from this text
+        data = {}
+    out = {f"[{k}]": _digest(v) for k, v in data.items() if k not in _IGNORED}
+    m = cfg.model
+    out["robot model"] = _digest({"name": m.name, "types": list(m.joint_types),
+                                  "nominal": np.round(np.asarray(m.nominal), 12).tolist(),
+                                  "limits": np.round(np.asarray(m.joint_limits), 12).tolist()})
+    body = data.get("body")
+    if isinstance(body, dict) and "file" in body:  # the CMM report as read: an edited body file counts
+        out["body points"] = _digest({"ids": list(cfg.point_ids), "poses": np.round(cfg.body_points, 9).tolist(),
+                                      "sigma": np.round(np.asarray(cfg.body_sigma), 12).tolist()})
+    head = data.get("head")
+    if isinstance(head, dict) and "file" in head and cfg.head is not None:  # the head file as read
+        g = cfg.head
+        out["probe head"] = _digest({k: np.round(np.asarray(v, dtype=float), 9).tolist() for k, v in (
+            ("mount", g.mount_points), ("dir", g.directions), ("faces", g.faces), ("tip", g.tip_radii),
+            ("stroke", g.strokes), ("channels", g.probe_channels), ("scales", g.probe_scales),
+            ("contact", g.nominal_contact_pose()), ("sigma", g.reading_sigma_mm))} | {"ids": list(g.probe_ids)})
+    return out
+
+
+#: what a recheck may change against its baseline calibration: its own settings and the warm-up
+#: (sections), and in simulation the drift it injects (keys of ``[simulation]``; the seed stays)
+_BASELINE_IGNORED = ("devices", "recheck", "warmup")
+_SIMULATED_DRIFT_KEYS = ("thermal_length_um", "thermal_offset_arcsec", "thermal_time_constant_s",
+                         "step_joint", "step_offset_deg", "step_tool_um")
+
+
+def baseline_fingerprint(config_toml: str) -> dict[str, str]:
+    """Section name → digest of a configuration text as a recheck compares it with its baseline:
+    ``[devices]``, ``[recheck]`` and ``[warmup]`` left out, and the simulated drift keys of
+    ``[simulation]`` (the robot moved; that is what a recheck is for)."""
+    try:
+        data = tomllib.loads(config_toml) if config_toml else {}
+    except tomllib.TOMLDecodeError:
+        data = {}
+    out = {}
+    for k, v in data.items():
+        if k in _BASELINE_IGNORED:
+            continue
+        if k == "simulation" and isinstance(v, dict):
+            v = {kk: vv for kk, vv in v.items() if kk not in _SIMULATED_DRIFT_KEYS}
+        out[f"[{k}]"] = _digest(v)
+    return out
+
+
+#: what only post-processes the measurements (the identification, the correction grid, tolerances,
+#: the report's names, the tools' tables): a resume with only these changed reuses every measurement
+POST_PROCESSING = ("[identification]", "[correction]", "[recheck]", "[tool]", "[cell]", "[verification]")
+
+
+def post_processing_only(changed: Collection[str]) -> bool:
+    """True when every changed key of a fingerprint only post-processes the measurements."""
+    return all(k in POST_PROCESSING for k in changed)
+
+
+def check_same_cell(stored: dict[str, str], current: dict[str, str], run_id: int,
+                    records: Iterable[Any] = ()) -> tuple[str, ...]:
+    """Refuse (:class:`ConfigError`) to resume ``run_id`` on a cell whose fingerprint differs in
+    what changes measurements (robot, set-up, head, body, plan, limits, simulation), naming what
+    changed. Returns the post-processing sections that changed (``POST_PROCESSING``): the
+    measurements stay valid and are reused, except verification readings (``records``: the run's
+    measurements) made with the old identification or table, which refuse the resume."""
+    changed = sorted(k for k in stored.keys() | current.keys() if stored.get(k) != current.get(k))
+    measuring = [k for k in changed if k not in POST_PROCESSING]
+    if measuring:
+        raise ConfigError(
+            f"run {run_id} was measured on a different cell: {', '.join(changed)} changed since. Resuming would "
+            f"mix data of two cells, so it was refused ({', '.join(POST_PROCESSING)} may change: they only "
+            f"post-process the measurements). Restore the configuration the run started with "
+            f"(its snapshot is in the run database), or start a new run (leave out --resume)")
+    kinds = {str(getattr(r, "kind", "")) for r in records}
+    for inputs, measured in _MEASURED_WITH:
+        late = [k for k in changed if k in inputs]
+        done = sorted(kinds & measured)
+        if late and done:
+            raise ConfigError(
+                f"run {run_id}: {', '.join(late)} changed since, but its {', '.join(done)} poses were already "
+                f"measured with the old {'table' if '[correction]' in late and len(late) == 1 else 'identification'}, "
+                f"so they would not show the new one. Restore {', '.join(late)} to resume, or start a new run")
+    return tuple(changed)
+
+
+#: (sections, step kinds measured with them): the before poses are commanded through the identified
+#: set-up, the after and oracle poses also through the uploaded table
+_MEASURED_WITH = (({"[identification]"}, {StepKind.VERIFY_BEFORE.value}),
+                  ({"[identification]", "[correction]"}, {StepKind.VERIFY_AFTER.value, StepKind.ORACLE.value}))
+
+
+def resume_note(changed: Collection[str]) -> str | None:
+    """What a resume tells the operator when only post-processing sections changed."""
+    if not changed:
+        return None
+    return (f"{', '.join(changed)} changed since the run was measured; they only post-process the "
+            f"measurements, so every measurement on disk is reused and the results are computed anew")

@@ -1,0 +1,176 @@
+"""What a run's stored measurements give, recomputed the same way by the pipeline, the report and
+the recheck: the identification, the verification errors, the reversal error, the correction
+table on the configured grid, and (in simulation) the oracle's true parameters.
+
+Everything here is a pure function of the configuration and the records (with the re-centring
+displacements stored beside them, :mod:`station.cell.run.recentring`); nothing moves or writes, so the report of a stored run shows exactly what its run computed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from drivers.controller_map import MAX_TABLE_VALUES
+from station.cell.config.cell_config import CellConfig, correction_grid
+from station.cell.plan.measurement_plan import head_targets_world
+from station.cell.plan.steps import PlannedStep
+from station.cell.records.run_records import MeasurementRecord
+from station.cell.records.summary import ReversalSummary, RunSummary
+from station.cell.run.recentring import head_as_commanded
+from station.core.correction_table import CorrectionTable, build_correction_table
+from station.core.identification import IdentificationResult, identify
+from station.core.measurements import MeasurementSet
+from station.core.table_grid import GridSpec
+from station.core.transforms import invert
+from station.errors import IdentificationError, Outcome
+
+__all__ = ["verified_outcome", "reversal_error", "identify_run", "verification_errors", "verification_orientation_errors",
+           "oracle_params", "grid_for", "build_table_for"]
+
+
+def _world_heads(cfg: CellConfig, records: Sequence[MeasurementRecord]) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    """Measured KKS←MKKS poses and joints of the valid identification records."""
+    index = {pid: i for i, pid in enumerate(cfg.point_ids)}
+    T, q, pts = [], [], []
+    for r in records:
+        if not r.ok or r.pose is None or r.joints_read is None:
+            continue
+        j = index[r.point_id]
+        T.append(cfg.body_points[j] @ invert(r.pose))
+        q.append(r.joints_read)
+        pts.append(j)
+    return np.array(T), np.array(q), pts
+
+
+def reversal_error(cfg: CellConfig, forward_records: Sequence[MeasurementRecord],
+                   reverse_records: Sequence[MeasurementRecord],
+                   recentring: Mapping[int, np.ndarray] | None = None) -> ReversalSummary | None:
+    """Position difference [µm] between approaching each pose from below and from above (the
+    robot's reversal error, brief §8); None without reversal measurements. A re-centred reading
+    is moved back to its command (``recentring``, as in :func:`verification_errors`)."""
+    index = {pid: i for i, pid in enumerate(cfg.point_ids)}
+    moved = recentring or {}
+
+    def heads(records: Sequence[MeasurementRecord]) -> dict[tuple[str, str], np.ndarray]:
+        # keyed by (point, label without the direction) so each reverse step meets its forward twin
+        return {(r.point_id, r.label.replace(" reverse", "")):
+                head_as_commanded(cfg.body_points[index[r.point_id]] @ invert(r.pose), moved.get(r.step_index))[:3, 3]
+                for r in records if r.ok and r.pose is not None}
+
+    fwd, rev = heads(forward_records), heads(reverse_records)
+    d = np.array([np.linalg.norm(fwd[k] - rev[k]) for k in sorted(fwd.keys() & rev.keys())]) * 1e3
+    if not d.size:
+        return None
+    return ReversalSummary(n=int(d.size), rms_um=float(np.sqrt(np.mean(d**2))), max_um=float(d.max()))
+
+
+def identify_run(cfg: CellConfig, records: Sequence[MeasurementRecord]) -> IdentificationResult:
+    """Identification from the run's stored measurements (pose or distance objective), with the
+    body's CMM uncertainty (``cfg.body_sigma``) in the weights and the σ when it is not 0."""
+    T, q, pts = _world_heads(cfg, records)
+    if len(T) < 5:
+        raise IdentificationError(
+            f"only {len(T)} valid measurements on disk; check the warnings of the measurement "
+            f"phase (probes out of range, residuals) and re-run")
+    sig = cfg.identification.pose_sigma()
+    sp = sig[0]
+    if cfg.identification.objective == "pose":
+        data = MeasurementSet("pose", q, T, sig)
+    else:
+        pos = T[:, :3, 3]
+        iu = np.array(np.triu_indices(len(pos), 1)).T
+        iu = iu[[pts[i] != pts[j] for i, j in iu]]
+        d = np.linalg.norm(pos[iu[:, 0]] - pos[iu[:, 1]], axis=1)
+        data = MeasurementSet("distance", q, d, np.sqrt(2) * sp, iu)
+    if cfg.body_sigma is not None and np.any(cfg.body_sigma > 0):
+        # the CMM's σ of each measurement's body point: shared by all measurements of that point;
+        # the lever runs from the point's origin to the measured head frame
+        idx = np.asarray(pts, dtype=int)
+        data = data.with_body(idx, cfg.body_sigma, T[:, :3, 3] - cfg.body_points[idx, :3, 3])
+    return identify(cfg.model, data, prefer=cfg.identification.prefer or None,
+                    fix=cfg.identification.fix, exclude=cfg.identification.exclude)
+
+
+def verification_errors(cfg: CellConfig, steps: Sequence[PlannedStep], records: Sequence[MeasurementRecord],
+                        recentring: Mapping[int, np.ndarray] | None = None) -> dict[tuple[str, int], np.ndarray]:
+    """Per held-out pose (point id, elbow): the ``(n_cycles, 3)`` position errors [mm] of the
+    measured head against its target, one row per valid cycle. ``recentring``: the run's
+    re-centring displacements by step (:func:`station.cell.run.recentring.stored_recentring`); a
+    re-centred reading is moved back to where the robot stood at its command, so the error is
+    the robot's, not what is left after the re-centring."""
+    heads = head_targets_world(cfg)
+    moved = recentring or {}
+    out: dict[tuple[str, int], list[np.ndarray]] = {}
+    for r in records:
+        if not r.ok or r.pose is None:
+            continue
+        st = steps[r.step_index]
+        meas = head_as_commanded(cfg.body_points[st.point] @ invert(r.pose), moved.get(r.step_index))
+        out.setdefault((st.point_id, st.elbow), []).append(meas[:3, 3] - heads[st.point][:3, 3])
+    return {k: np.array(v) for k, v in out.items()}
+
+
+def oracle_params(cfg: CellConfig, truth: Any) -> np.ndarray:
+    """The simulator's true parameters as seen through the station's approach: every joint
+    arrives from the same side, so half the reversal error is a constant joint offset (revolute
+    joints from below, the quill from above), which belongs to the true model of this cell."""
+    p = np.array(truth.params, dtype=float)
+    if not cfg.model.is_scara:  # a tilted joint frame: the zero offset is folded in as C·Rz(δ)
+        from station.core.joint_offsets import apply_joint_offsets
+
+        half = 0.5 * np.asarray(truth.backlash, dtype=float)
+        return apply_joint_offsets(cfg.model, p, np.where(np.array(cfg.model.joint_types) == "revolute", -half, half))
+    for k, (t, kind) in enumerate(zip(cfg.model.joint_transforms, cfg.model.joint_types)):
+        direction = 1.0 if kind == "revolute" else -1.0
+        p[6 * t + (5 if kind == "revolute" else 2)] -= 0.5 * truth.backlash[k] * direction
+    return p
+
+
+def grid_for(cfg: CellConfig) -> GridSpec:
+    """The configured correction grid: the one the configuration was checked against."""
+    return correction_grid(cfg.correction, tuple(cfg.plan.elbows))
+
+
+def build_table_for(cfg: CellConfig, params: np.ndarray) -> CorrectionTable:
+    """The correction table of ``params`` on the configured grid (the controller's nominal model)."""
+    return build_correction_table(cfg.model, params, grid_for(cfg), capacity=MAX_TABLE_VALUES)
+
+
+def verification_orientation_errors(cfg: CellConfig, steps: Sequence[PlannedStep], records: Sequence[MeasurementRecord],
+                                    recentring: Mapping[int, np.ndarray] | None = None) -> np.ndarray:
+    """Orientation error [rad] ``(n,)`` of every valid verification record: the angle between the
+    measured head frame and its target (a re-centred one moved back, as in :func:`verification_errors`)."""
+    from station.core.transforms import rotation_log
+
+    heads = head_targets_world(cfg)
+    moved = recentring or {}
+    out = []
+    for r in records:
+        if not r.ok or r.pose is None:
+            continue
+        st = steps[r.step_index]
+        meas = head_as_commanded(cfg.body_points[st.point] @ invert(r.pose), moved.get(r.step_index))
+        out.append(float(np.linalg.norm(rotation_log(heads[st.point][:3, :3].T @ meas[:3, :3]))))
+    return np.array(out)
+
+
+
+def verified_outcome(cfg: CellConfig, summary: RunSummary, min_gain: float) -> tuple[Outcome, tuple[str, ...]]:
+    """A verified run's outcome: SUCCESS when the gain reaches ``min_gain`` and the held-out poses
+    meet ``[verification]``'s accuracy specification (ISO 9283 AP and RP of every pose after
+    correction, where configured); else TARGET_MISSED, with a note for each limit missed."""
+    gain = summary.gain
+    notes: list[str] = []
+    after, spec = summary.after, cfg.verification
+    if after is not None and spec.max_ap_um is not None and after.ap_max_um > spec.max_ap_um:
+        notes.append(f"AP after correction reaches {after.ap_max_um:.1f} µm at its worst pose, above "
+                     f"[verification] max_ap_um = {spec.max_ap_um:g} µm")
+    if after is not None and spec.max_rp_um is not None and after.rp_max_um is not None \
+            and after.rp_max_um > spec.max_rp_um:
+        notes.append(f"RP after correction reaches {after.rp_max_um:.1f} µm at its worst pose, above "
+                     f"[verification] max_rp_um = {spec.max_rp_um:g} µm")
+    ok = gain is not None and gain >= min_gain and not notes
+    return (Outcome.SUCCESS if ok else Outcome.TARGET_MISSED), tuple(notes)

@@ -1,0 +1,374 @@
+"""The cell commands of ``station``: ``init``, ``check``, ``calibrate``, ``export``, ``tui``.
+
+``station calibrate`` prints progress on stderr and its result on stdout, as Unix tools do
+(``station calibrate … > out.txt`` keeps the summary); with ``--json`` stdout holds only the one
+JSON summary and the readable one goes to stderr. Its exit code is the run's
+:class:`~station.errors.Outcome`. Devices are opened by
+:mod:`station.cell.session.calibrate`, never here; a simulated cell is composed by
+:mod:`station.ui.simulated_cell`; the parser is :mod:`station.ui.cli.main`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import TextIO
+
+from station.cell.config.cell_config import TEMPLATE, load_config
+from station.cell.records.run_list import list_runs
+from station.cell.records.rundb import RunDB
+from station.cell.records.summary import RunSummary
+from station.cell.results.outcomes import failure_summary, write_traceback
+from station.cell.run import events as ev
+from station.cell.run.runcontrol import RunControl
+from station.cell.session.calibrate import CellRequest, check_cell, reset_controller, run_calibration_session
+from station.core.probe_check import check_head
+from station.errors import ConfigError, Outcome, RunAborted, StationError
+from station.ui.cli.stop_signals import current as current_stop_signals
+from station.ui.cli.stop_signals import safe_stop_on_signals
+from station.ui.report.paths import report_dir
+from station.ui.simulated_cell import load_cell
+
+
+def request_from(args: argparse.Namespace) -> CellRequest:
+    """The cell request of a ``calibrate`` or ``tui`` command line."""
+    return CellRequest(config=args.config, simulated=args.simulated, seed=args.seed,
+                       time_scale=getattr(args, "time_scale", 0.0), db=args.db,
+                       resume=getattr(args, "resume", None), upload=not getattr(args, "no_upload", False),
+                       robot=getattr(args, "robot", None))
+
+
+#: what a phase does, for a phase announced without a detail of its own (no empty header)
+PHASE_DETAIL = {
+    "connect": "connecting the devices",
+    "plan": "planning the poses and checking every motion against the soft limits",
+    "measure": "measuring",
+    "identify": "identifying the parameters from the measurements",
+    "correct": "building the correction from the identified model",
+    "upload": "uploading the correction table",
+    "verify": "verifying",
+}
+
+
+def result_stream(args: argparse.Namespace) -> TextIO:
+    """Where a command's readable result goes: stdout, or stderr when ``--json`` owns stdout."""
+    return sys.stderr if getattr(args, "json", False) else sys.stdout
+
+
+def progress_printer(stream: TextIO) -> Callable[[ev.Event], None]:
+    """Progress on ``stream``: a progress bar that redraws one line at a terminal, plain lines
+    otherwise (a log file, a scheduler's journal)."""
+    tty = stream.isatty()
+    bar_shown = False
+
+    def line(text: str) -> None:
+        nonlocal bar_shown
+        if bar_shown:  # finish the bar's line before a message of its own
+            print(file=stream)
+            bar_shown = False
+        print(text, file=stream, flush=True)
+
+    def emit(e: ev.Event) -> None:
+        nonlocal bar_shown
+        if isinstance(e, ev.PhaseChanged):
+            line(f"[{e.phase}] {e.detail or PHASE_DETAIL.get(e.phase, e.phase)}")
+        elif isinstance(e, ev.RunStarted):
+            line(f"run {e.run_id}: {e.n_steps} steps ({e.resumed_from} already on disk)")
+        elif isinstance(e, ev.MeasurementRecorded):
+            res = "" if math.isnan(e.residual_um) else f" residual {e.residual_um:.2f} µm"
+            state = "ok" if e.ok else "NOT OK " + e.message
+            if tty and e.ok:
+                done = (e.index + 1) / max(e.total, 1)
+                filled = int(round(30 * done))
+                print(f"\r  [{'#' * filled}{'.' * (30 - filled)}] {e.index + 1:4d}/{e.total} {e.label[:32]:32s}",
+                      end="", file=stream, flush=True)
+                bar_shown = True
+            else:
+                line(f"  {e.index + 1:4d}/{e.total} {e.label}: {state}{res}")
+        elif isinstance(e, ev.Notice):
+            line(f"  {e.level}: {e.message}")
+        elif isinstance(e, (ev.RunFinished, ev.RunFailed)) and bar_shown:
+            line("")
+    return emit
+
+
+def print_summary(s: RunSummary, stream: TextIO) -> None:
+    """The human-readable end of a run (the same figures the TUI and the report show). A failure's
+    reason also goes to stderr when the summary goes elsewhere: ``> out.txt`` still shows the
+    operator why the run stopped."""
+    run = f"run {s.run_id}" if s.run_id is not None else "no run"
+    print(f"\n{run}: {s.outcome.name} (exit code {s.exit_code})", file=stream)
+    if s.failure is not None and stream is not sys.stderr:
+        print(f"station: error: {s.failure.message}", file=sys.stderr)
+    if s.failure is not None:
+        print(f"  {s.failure.error_type}: {s.failure.message}", file=stream)
+        if s.run_id is not None:
+            print(f"  everything measured so far is in {s.db} (run {s.run_id})", file=stream)
+        if s.failure.hint:
+            print(f"  what to do: {s.failure.hint}", file=stream)
+        return
+    idn = s.identification
+    if idn is not None:
+        print(f"  identified {idn.n_parameters} parameters from {idn.n_measurements} measurements, "
+              f"RMS residual {idn.rms_residual_um:.1f} µm", file=stream)
+    print_error_table(s, stream)
+    if s.upload_skipped:
+        print("  upload skipped (--no-upload): no correction is active", file=stream)
+    if s.upload is not None:
+        print(f"  table {s.upload.crc32} uploaded, read back and activated in {s.upload.seconds:.2f} s", file=stream)
+    if s.gain is not None:
+        extra = f"; after/oracle {s.after_vs_oracle:.2f}" if s.after_vs_oracle is not None else ""
+        print(f"  improvement ×{s.gain:.1f}{extra}", file=stream)
+    if (recentred := s.recentring_text()) is not None:
+        print(f"  {recentred}", file=stream)
+    if s.report:
+        print(f"  report: {s.report}", file=stream)
+    for note in s.notes:
+        print(f"  note: {note}", file=stream)
+
+
+def print_error_table(s: RunSummary, stream: TextIO) -> None:
+    """Before / after / oracle as a table. AP and RP are ISO 9283's pose accuracy and
+    repeatability of one pose (station/core/iso9283.py); the summary holds the largest over
+    the held-out poses, so the columns say "worst pose" rather than a bound sign."""
+    rows = [(key, v) for key in ("before", "after", "oracle") if (v := getattr(s, key)) is not None and v.n]
+    if not rows:
+        return
+    print(f"  {'':7s} {'RMS µm':>9s} {'max µm':>9s}  {'AP µm, worst pose':>17s}  {'RP µm, worst pose':>17s}",
+          file=stream)
+    for key, v in rows:
+        rp = "—" if v.rp_max_um is None else f"{v.rp_max_um:.1f}"
+        print(f"  {key:7s} {v.rms_um:9.1f} {v.max_um:9.1f}  {v.ap_max_um:17.1f}  {rp:>17s}", file=stream)
+    print("  AP: ISO 9283 pose accuracy, |mean attained − commanded position| of a pose's cycles; "
+          "RP: its repeatability, l̄ + 3·S_l (— with one cycle per pose)", file=stream)
+
+
+def cmd_init(args: argparse.Namespace) -> int:
+    p = Path(args.path)
+    if p.exists() and not args.force:
+        raise ConfigError(f"{p} exists; pass --force to overwrite it")
+    p.write_text(TEMPLATE, encoding="utf-8")
+    print(f"wrote a commented template to {p}; edit [body], [devices] and [robot].setup")
+    return 0
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    cfg = load_config(args.config)
+    print(f"configuration {args.config}: valid ({len(cfg.point_ids)} measuring points, robot {cfg.model.name})")
+    print("\n".join(check_head(cfg.head).lines()))  # the probe head (docs/probe-head.md)
+    report = check_cell(cfg)
+    for line in report.lines:
+        print(line)
+    return int(report.outcome)
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    request = request_from(args)
+    if not request.simulated and not request.config:
+        raise ConfigError("give a configuration file, or --simulated for the built-in simulated cell")
+    if args.report:  # checked before the first motion, not after an hour of measuring
+        _check_report_dir(Path(args.report))
+    if args.operator is not None:  # likewise the name the report will carry
+        from station.ui.report.run import check_operator
+
+        check_operator(args.operator)
+    control = RunControl()
+    summary = stopped_before_start(request)
+    if summary is None:
+        with safe_stop_on_signals(control):
+            summary = run_calibration_session(request, progress_printer(sys.stderr), control, load=load_cell)
+    if args.report and summary.run_id is not None and summary.outcome is not Outcome.ABORTED:
+        from station.ui.report.run import report_for_run
+
+        try:
+            path = report_for_run(args.db, summary.run_id, Path(args.report), operator=args.operator)
+            summary = summary.replace(report=str(path))
+        except StationError as exc:  # e.g. the run stopped before there was anything to report
+            summary = summary.replace(notes=(*summary.notes, f"no report: {exc}"))
+        except Exception as exc:  # noqa: BLE001 - the run's result stands; say why the report is missing
+            log = write_traceback(exc, Path(args.report))
+            summary = summary.replace(notes=(*summary.notes, f"the report could not be written ({exc}); "
+                                                              f"traceback in {log}; rebuild it with 'station report'"))
+    print_summary(summary, result_stream(args))
+    if args.json:
+        print(json.dumps(summary.to_json()), flush=True)
+    return summary.exit_code
+
+
+def stopped_before_start(request: CellRequest) -> RunSummary | None:
+    """The ABORTED summary of a command that SIGTERM or SIGINT stopped before its session began
+    (nothing was opened, nothing moved); None when no signal came."""
+    stops = current_stop_signals()
+    if stops is None or not stops.requested:
+        return None
+    exc = RunAborted(f"stopped by {stops.name} before the session started; nothing was opened or moved")
+    return failure_summary(exc, run_id=request.resume, log_dir=".", db=request.db)
+
+
+def cmd_reset(args: argparse.Namespace) -> int:
+    """Clear the controller's latched e-stop or fault after the operator confirmed the cell is safe."""
+    cfg = load_config(args.config)
+
+    def confirm(question: str) -> bool:
+        if args.yes:
+            print(f"{question} yes (--yes)")
+            return True
+        if not sys.stdin.isatty():
+            raise ConfigError("the reset needs the operator's confirmation: run it at a terminal, or pass --yes "
+                              "once the e-stop is released and the cell is clear")
+        return input(f"{question} [y/N] ").strip().lower() in ("y", "yes")
+
+    for line in reset_controller(cfg, confirm):
+        print(line)
+    return 0
+
+
+def _check_report_dir(path: Path) -> None:
+    if path.exists() and not path.is_dir():
+        raise ConfigError(f"--report {path}: that is a file; give a folder for the report (it is created if missing)")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / ".station-write-test"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as exc:
+        raise ConfigError(f"--report {path}: cannot write there ({exc.strerror or exc}); choose another folder") from None
+
+
+def cmd_plan(args: argparse.Namespace) -> int:
+    """The plan preview: nothing moves."""
+    from station.cell.results.preview import describe, preview
+
+    cfg = load_config(args.config)
+    p = preview(cfg, with_upload=not args.no_upload)
+    head = check_head(cfg.head)  # the probe head's arrangement and sensitivity (docs/probe-head.md)
+    warnings = plan_warnings(p, cfg)
+    if args.json:
+        print(json.dumps({**p.to_json(), "head": head.to_json(), "warnings": warnings}))
+    else:
+        lines = describe(p)
+        at = next((i + 1 for i, ln in enumerate(lines) if ln.lstrip().startswith("predicted accuracy")), len(lines))
+        print("\n".join([*lines[:at], *(f"  warning: {w}" for w in warnings), *lines[at:], *head.lines()]))
+    return 0
+
+
+#: a predicted σ after correction beyond this many times the measurement σ means the planned
+#: poses do not determine the parameters: the figure is an artefact of the plan, not an accuracy
+IMPLAUSIBLE_SIGMA_RATIO = 10.0
+
+
+def plan_warnings(p, cfg) -> list[str]:
+    """What in a plan preview is implausible, and which value to check (exit stays 0)."""
+    sig = cfg.identification.sigma_position_um
+    worst = p.sigma_position_um[2]
+    if not (math.isfinite(worst) and worst <= IMPLAUSIBLE_SIGMA_RATIO * sig):
+        n_points = len(cfg.point_ids)
+        return [f"the predicted position σ of up to {worst:.1f} µm is implausible for [identification]."
+                f"sigma_position_um = {sig:g} µm (over {IMPLAUSIBLE_SIGMA_RATIO:g}×): the planned poses do not "
+                f"determine the parameters (condition {p.condition:.3g}). Check [body]: {n_points} measuring "
+                f"point{'s' if n_points != 1 else ''} (give every corner of the body, from its CMM report), then "
+                f"[plan] elbows and [correction]'s workspace; also check that sigma_position_um is the probe "
+                f"head's σ in µm"]
+    return []
+
+
+def cmd_runs(args: argparse.Namespace) -> int:
+    """The runs of a run database: a table for people, one JSON object for scripts."""
+    if not Path(args.db).exists():
+        raise ConfigError(f"{args.db}: no run database here; give it with --db")
+    if getattr(args, "unlock", None) is not None:
+        with RunDB(args.db) as db:
+            holder = db.unlock_run(args.unlock)
+        print(f"run {args.unlock}: " + (f"lock of {holder.describe()} cleared" if holder else "was not locked"))
+        return 0
+    with RunDB(args.db) as db:
+        runs = list_runs(db)
+    if args.json:
+        print(json.dumps({"db": str(args.db), "runs": [r.to_json() for r in runs]}))
+        return 0
+    print(f"{'run':>4}  {'created (UTC)':20}  {'cell':24}  {'robot':8}  {'status':10}  {'steps':>9}  "
+          f"{'outcome':22}  {'before':>8}  {'after':>8}  resume?")
+    for r in runs:
+        def um(v: float | None) -> str:
+            return "—" if v is None else f"{v:.1f}"
+        print(f"{r.id:>4}  {r.created_utc[:19]:20}  {r.cell[:24]:24}  {r.robot[:8]:8}  {r.status:10}  "
+              f"{r.steps_done:>4}/{r.steps_total:<4}  {(r.outcome or 'unfinished'):22}  {um(r.rms_before_um):>8}  "
+              f"{um(r.rms_after_um):>8}  {'--resume ' + str(r.id) if r.resumable else ''}")
+        if r.kind == "recheck":  # the trend: a recheck's drift beside the calibrations
+            moved = f"; moved: {', '.join(r.moved)}" if r.moved else ""
+            tol = "" if r.drift_tolerance_um is None else f" (tolerance {r.drift_tolerance_um:.1f})"
+            print(f"        recheck of run {r.baseline}: drift RMS {um(r.drift_rms_um)} µm{tol}, "
+                  f"max {um(r.drift_max_um)} µm{moved}")
+    if not runs:
+        print("(no runs yet)")
+    return 0
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    """Rebuild a run's report from the run database."""
+    from station.ui.report.run import report_for_run
+
+    out = Path(args.output) if args.output else report_dir(args.db, args.run)
+    _check_report_dir(out)
+    with RunDB(args.db) as db:
+        db.run(args.run)  # a clear error for a run that is not there
+    path = report_for_run(args.db, args.run, out, operator=args.operator)
+    print(f"report of run {args.run}: {path}")
+    return 0
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    with RunDB(args.db) as db:
+        run = db.run(args.run) if args.run else db.latest_run()
+        if run is None:
+            raise ConfigError(f"{args.db} holds no runs")
+        if getattr(args, "tool", None):  # a [[tool]]'s own correction (docs/correction.md, "Tools after the head")
+            from station.cell.correction.tools import tool_export
+
+            out = tool_export(db, run.id, args.tool, force=getattr(args, "force", False))
+            try:
+                Path(args.output).write_text(json.dumps(out), encoding="utf-8")
+            except OSError as exc:
+                raise ConfigError(f"cannot write {args.output}: {exc.strerror or exc}; choose another path") from None
+            what = f"table CRC-32 {out['table']['crc32']}" if "table" in out else "compensated targets"
+            print(f"run {run.id}: tool {args.tool!r} correction ({what}) written to {args.output}")
+            if "warning" in out:
+                print(f"station: warning: {out['warning']}", file=sys.stderr)
+            return 0
+        if getattr(args, "force", False):
+            raise ConfigError("--force goes with --tool NAME")
+        from station.cell.records.run_export import export_csv, export_pose_file
+
+        if getattr(args, "format", "record") == "identify":
+            _, n, robot = export_pose_file(db, run.id, args.output)
+            print(f"run {run.id}: {n} identification measurements written to {args.output} as a pose file; "
+                  f"identify with: station identify {args.output} --robot {robot}")
+            return 0
+        export_csv(db, run.id, args.output)
+    print(f"run {run.id} exported to {args.output} (every measurement with its status); for 'station identify' "
+          f"export a pose file: station export --db {args.db} --run {run.id} --format identify OUT.csv")
+    return 0
+
+
+def cmd_tui(args: argparse.Namespace) -> int:
+    from station.cell.recheck.measure import RecheckOptions
+    from station.ui.tui.launch import launch
+
+    recheck = getattr(args, "recheck", False)
+    baseline, poses = getattr(args, "baseline", None), getattr(args, "poses", None)
+    if not recheck and (baseline is not None or poses is not None):
+        raise ConfigError("--baseline and --poses go with --recheck")
+    if poses is not None and not 3 <= poses <= 100:
+        raise ConfigError(f"--poses {poses}: give 3 … 100 poses")
+    if args.config and not Path(args.config).is_file():  # before the full-screen UI takes the terminal
+        raise ConfigError(f"no such configuration file: {args.config}; give the path of a cell configuration "
+                          f"('station init' writes one)")
+    return launch(request_from(args), recheck=RecheckOptions(baseline=baseline, poses=poses) if recheck else None)
+
+
+__all__ = ["cmd_calibrate", "print_summary", "progress_printer", "request_from", "safe_stop_on_signals",
+           "stopped_before_start"]

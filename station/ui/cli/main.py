@@ -1,0 +1,334 @@
+"""``station`` command line: the one parser. Readable output by default, ``--json`` for scripts.
+
+Every error ends the program with its message and the exit code of its
+:class:`~station.errors.Outcome`, never with a traceback; an unexpected error (a bug) writes its
+traceback to a log file the message names and exits 1.
+
+Each subcommand names its function as ``"module:function"``, imported only when that command
+runs: ``station --help`` or ``station identify`` must not pay for the cell layer, its drivers,
+pymodbus, serial or textual (tests/ui/test_import_set.py checks the import set).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import math
+import sys
+from collections.abc import Callable, Sequence
+from typing import NoReturn
+
+from station.errors import ConfigError, Outcome, StationError
+from station.ui.cli.output import guarded_streams
+from station.ui.cli.stop_signals import catch_stop_signals
+from station.ui.cli.warning_policy import station_warnings
+
+#: the commands that run a session: their SIGTERM and SIGINT are caught from main()'s first line
+SESSION_COMMANDS = ("calibrate", "recheck")
+
+
+class UsageError(Exception):
+    """A command line argparse refused; main() turns it into a message (and JSON) and exit 2."""
+
+
+class StationArgumentParser(argparse.ArgumentParser):
+    """argparse's parser whose errors come back to main() instead of exiting, so that ``--json``
+    still gets its one JSON object (the subcommands' parsers are of this class too)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.print_usage(sys.stderr)
+        raise UsageError(f"{self.prog}: error: {message}")
+
+
+def time_scale(text: str) -> float:
+    """``--time-scale``: 0 (instant) or a positive, finite factor."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"{text!r}: give 0 (instant motion) or a positive number "
+                                         f"(1 = real time)")
+    return value
+
+
+def _command(spec: str) -> Callable[[argparse.Namespace], int | None]:
+    """The function a ``"module:function"`` spec names, its module imported now."""
+    module, _, name = spec.partition(":")
+    func: Callable[[argparse.Namespace], int | None] = getattr(importlib.import_module(module), name)
+    return func
+
+
+def _add_cell(p):
+    """The cell a session runs on: a configuration, or a simulated cell (CONFIG's or the built-in)."""
+    p.add_argument("config", nargs="?", help="cell configuration; with --simulated: the cell to rehearse "
+                   "(a file with only [simulation], [recheck], [warmup]: the built-in cell with those)")
+    p.add_argument("--simulated", action="store_true", help="run against a simulated cell: CONFIG's (rehearse "
+                   "your cell), or the built-in one")
+    p.add_argument("--seed", type=int, default=None, help="simulated cell seed (default [simulation].seed, else 1)")
+    p.add_argument("--time-scale", type=time_scale, default=0.0, help="simulated motion time scale (0 = instant)")
+
+
+def _add_robot(p):
+    p.add_argument("--robot", default="sr800", help="built-in robot name or robot file (default sr800)")
+    _add_chain(p)
+
+
+def _add_chain(p, short: bool = True):
+    """``--base LINK`` / ``--tip LINK``: the chain of a URDF robot (``--base-link``/``--tip-link``
+    where ``--base`` already means the robot base frame)."""
+    base, tip = (["--base", "--base-link"], ["--tip", "--tip-link"]) if short else (["--base-link"], ["--tip-link"])
+    p.add_argument(*base, dest="base_link", metavar="LINK", help="URDF: the link the chain starts at (default the root)")
+    p.add_argument(*tip, dest="tip_link", metavar="LINK", help="URDF: the link the chain ends at (needed where it branches)")
+
+
+def _add_prefs(p):
+    p.add_argument("--prefer", default="", help="comma-separated parameters to prefer in the minimal set")
+    p.add_argument("--fix", default="", help="comma-separated parameters held at their values")
+    p.add_argument("--exclude", default="", help="comma-separated parameters left out of the model")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = StationArgumentParser(prog="station", description="Robot calibration station")
+    sub = ap.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("analyze", help="identifiability of a robot's parameters")
+    _add_robot(p)
+    p.add_argument("--objective", "--kind", dest="objective", choices=["pose", "position", "distance"],
+                   default="pose", help="what is measured (--kind: the former name)")
+    p.add_argument("--planar", action="store_true", help="all poses in one plane normal to z")
+    p.add_argument("--poses", type=int, default=30)
+    p.add_argument("--distances", "--max-pairs", dest="distances", type=int, default=200,
+                   help="distances (pairs) formed from the poses (default 200)")
+    p.add_argument("--joints", help="joint file (CSV with units) instead of random poses")
+    p.add_argument("--seed", type=int, default=0)
+    _add_prefs(p)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func="station.ui.cli.commands_core:cmd_analyze")
+
+    p = sub.add_parser("identify", help="identify a robot from a measurement file")
+    p.add_argument("data", help="measurement CSV (docs/data-files.md)")
+    _add_robot(p)
+    p.add_argument("--objective", choices=["pose", "position", "distance"])
+    p.add_argument("--sigma-position", type=float, default=15.0, help="µm per coordinate of a measured point (default 15)")
+    p.add_argument("--sigma-angle", type=float, default=20.0, help="arc seconds (default 20)")
+    p.add_argument("--pairs", choices=["cap", "all", "independent"], default="cap",
+                   help="distance objective: which pairs of points (default cap)")
+    p.add_argument("--max-pairs", type=int, default=20_000, help="distance objective: the cap (default 20000)")
+    p.add_argument("--output", "-o", help="write the identified robot file here")
+    p.add_argument("--tool", choices=["file", "unknown"], default=None,
+                   help="unknown: fit the tool/marker point too (a reflector or marker offset); file: hold the robot "
+                        "file's (default: file, or unknown where the robot file has [tool] unknown = true)")
+    p.add_argument("--loss", choices=["linear", "huber"], default="linear",
+                   help="huber: robust fit for outliers, listing the rows it down-weighted (default linear)")
+    _add_prefs(p)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func="station.ui.cli.commands_core:cmd_identify")
+
+    p = sub.add_parser("validate", help="held-out errors of a model on measurements it was not fitted on")
+    p.add_argument("model", help="identified robot file (or built-in robot)")
+    p.add_argument("data", help="measurement CSV (docs/data-files.md)")
+    p.add_argument("--robot", default=None, help="nominal robot shown beside (default: the model's name)")
+    _add_chain(p)
+    p.add_argument("--sigma-position", type=float, default=15.0, help="µm (default 15), for the registration check")
+    p.add_argument("--calibration", metavar="DATA",
+                   help="the measurement CSV the model was fitted on: model and nominal are registered on it")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func="station.ui.cli.commands_core:cmd_validate")
+
+    p = sub.add_parser("export-model", help="a model as MDH, DH, URDF or TOML")
+    p.add_argument("model", help="identified robot file (or built-in robot)")
+    p.add_argument("--format", choices=["mdh", "dh", "urdf", "toml"], required=True)
+    p.add_argument("--output", "-o", required=True, help="file to write")
+    p.add_argument("--base", action="store_true", help="robot base frame (leave out the set-up R)")
+    _add_chain(p, short=False)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func="station.ui.cli.commands_core:cmd_export_model")
+
+    p = sub.add_parser("predict", help="poses of a model for given joint values")
+    p.add_argument("model", help="built-in robot name or robot file")
+    p.add_argument("joints", help="joint CSV with units")
+    p.add_argument("--base", action="store_true", help="robot base frame (leave out the set-up R)")
+    _add_chain(p, short=False)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func="station.ui.cli.commands_core:cmd_predict")
+
+    p = sub.add_parser("compensate", help="compensated targets: filter a target list through the identified model "
+                       "(robots without a correction table)")
+    p.add_argument("model", help="identified robot file (station identify --output)")
+    p.add_argument("targets", help="target CSV: x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg[,shoulder,elbow,wrist]")
+    p.add_argument("--output", "-o", required=True, help="CSV to write: every row, compensated or marked failed")
+    p.add_argument("--robot", default=None, help="the controller's nominal robot (default: the model's name)")
+    p.add_argument("--setup", action="store_true", help="targets in the measurement frame (default: robot base)")
+    p.add_argument("--allow-singular", action="store_true", help="compensate targets near a singularity too")
+    p.add_argument("--joint-offsets", action="store_true",
+                   help="also fit joint-zero offsets only and show their accuracy beside the full model's")
+    _add_chain(p)  # the chain of whichever of MODEL and --robot is a URDF; --base is free here
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func="station.ui.cli.commands_compensate:cmd_compensate")
+
+    p = sub.add_parser("study", help="re-run the chapter's simulation studies (§7.5)")
+    _add_robot(p)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--sets", type=int, default=1000, help="Monte Carlo data sets for pose studies")
+    p.add_argument("--quick", action="store_true", help="fewer Monte Carlo sets and seeds (a smoke run)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func="station.ui.cli.commands_core:cmd_study")
+
+
+    p = sub.add_parser("init", help="write a commented cell configuration template")
+    p.add_argument("path")
+    p.add_argument("--force", action="store_true")
+    p.set_defaults(func="station.ui.cli.commands_cell:cmd_init")
+
+    p = sub.add_parser("check", help="validate a configuration and connect to every device")
+    p.add_argument("config")
+    p.set_defaults(func="station.ui.cli.commands_cell:cmd_check")
+
+    p = sub.add_parser("conformance", help="check the robot program against the register map and handshake "
+                       "(the robot parked at [conformance].park_joints)")
+    p.add_argument("config")
+    p.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    p.set_defaults(func="station.ui.cli.commands_conformance:cmd_conformance")
+
+    p = sub.add_parser("calibrate", help="measure, identify, correct, upload, verify")
+    _add_cell(p)
+    p.add_argument("--robot", metavar="NAME", help="with --simulated: the built-in simulated cell of this robot "
+                   "(sr800, the default; irb2600: a six-axis arm)")
+    p.add_argument("--db", default="runs.sqlite", help="run database (default runs.sqlite)")
+    p.add_argument("--resume", type=int, metavar="RUN", help="continue an interrupted run")
+    p.add_argument("--no-upload", action="store_true", help="identify and verify 'before' only")
+    p.add_argument("--report", metavar="DIR", help="write the run's report here: one self-contained report.html (printable), report.md beside it")
+    p.add_argument("--operator", metavar="NAME", help="the operator the report names (default [cell] operator)")
+    p.add_argument("--json", action="store_true", help="JSON summary on stdout")
+    p.set_defaults(func="station.ui.cli.commands_cell:cmd_calibrate")
+
+    p = sub.add_parser("recheck", help="a short accuracy check against the last calibration (drift)")
+    _add_cell(p)
+    p.add_argument("--db", default="runs.sqlite", help="run database (default runs.sqlite)")
+    p.add_argument("--baseline", type=int, metavar="RUN", help="calibration to compare with (default: the latest "
+                   "successful calibration of this cell)")
+    p.add_argument("--poses", type=int, metavar="N", help="poses to measure (default [recheck].poses, 10)")
+    p.add_argument("--resume", type=int, metavar="RUN", help="continue an interrupted recheck")
+    p.add_argument("--json", action="store_true", help="JSON summary on stdout")
+    p.set_defaults(func="station.ui.cli.commands_recheck:cmd_recheck")
+
+    p = sub.add_parser("reset", help="clear the controller's latched e-stop or fault (asks for confirmation)")
+    p.add_argument("config")
+    p.add_argument("--yes", action="store_true", help="confirm without asking: the e-stop is released, the cell clear")
+    p.set_defaults(func="station.ui.cli.commands_cell:cmd_reset")
+
+    p = sub.add_parser("plan", help="preview a calibration's plan: steps, margins, expected accuracy (nothing moves)")
+    p.add_argument("config")
+    p.add_argument("--no-upload", action="store_true", help="the plan of a run without the upload")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func="station.ui.cli.commands_cell:cmd_plan")
+
+    p = sub.add_parser("runs", help="list the runs of a run database (status, outcome, figures, resumable)")
+    p.add_argument("--db", default="runs.sqlite")
+    p.add_argument("--unlock", type=int, metavar="RUN",
+                   help="clear RUN's run lock (its process is gone, e.g. on another PC)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func="station.ui.cli.commands_cell:cmd_runs")
+
+    p = sub.add_parser("report", help="rebuild a run's report from the run database")
+    p.add_argument("run", type=int)
+    p.add_argument("--db", default="runs.sqlite")
+    p.add_argument("--output", "-o", metavar="DIR", help="report folder (default report-DB-run-RUN beside the "
+                   "database, DB its file name without .sqlite)")
+    p.add_argument("--operator", metavar="NAME", help="the operator the report names (default: the one "
+                   "recorded with the run, else [cell] operator)")
+    p.set_defaults(func="station.ui.cli.commands_cell:cmd_report")
+
+    p = sub.add_parser("export", help="export a run's measurements to CSV")
+    p.add_argument("--db", default="runs.sqlite")
+    p.add_argument("--run", type=int)
+    p.add_argument("--tool", metavar="NAME", help="instead: the correction of the [[tool]] NAME (JSON, for its controller)")
+    p.add_argument("--force", action="store_true", help="with --tool: write a table beyond its max_interpolation_um "
+                   "(the warning is written into the file)")
+    p.add_argument("--format", choices=["record", "identify"], default="record",
+                   help="record: every measurement with its status (default); identify: the valid identification "
+                        "measurements as a pose file that 'station identify' reads")
+    p.add_argument("output")
+    p.set_defaults(func="station.ui.cli.commands_cell:cmd_export")
+
+    p = sub.add_parser("tui", help="terminal UI for the operator")
+    p.add_argument("config", nargs="?")
+    p.add_argument("--simulated", action="store_true", help="a simulated cell: CONFIG's, or the built-in one")
+    p.add_argument("--seed", type=int, default=None, help="simulated cell seed (default [simulation].seed, else 1)")
+    p.add_argument("--db", default="runs.sqlite")
+    p.add_argument("--recheck", action="store_true", help="run a recheck against the last calibration (drift)")
+    p.add_argument("--baseline", type=int, metavar="RUN", help="with --recheck: the calibration run to compare with")
+    p.add_argument("--poses", type=int, metavar="N", help="with --recheck: poses to measure (default [recheck].poses)")
+    p.set_defaults(func="station.ui.cli.commands_cell:cmd_tui")
+    return ap
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    words = list(sys.argv[1:] if argv is None else argv)
+    # the handlers first: a SIGTERM while the modules load is an ABORTED run, not a death by signal
+    with catch_stop_signals(enabled=words[:1] != [] and words[0] in SESSION_COMMANDS):
+        if words[:1] == ["tui"]:  # the full-screen UI owns the terminal: its streams stay as they are
+            return _main(words)
+        with guarded_streams():  # a closed stdout or stderr (| head) never stops or fails a command
+            return _main(words)
+
+
+def _main(words: list[str]) -> int:
+    try:
+        args = build_parser().parse_args(words)
+    except UsageError as exc:
+        print(exc, file=sys.stderr)
+        if "--json" in words:
+            print(json.dumps(_usage_json(str(exc))), flush=True)
+        return int(Outcome.CONFIG_ERROR)
+    try:
+        with station_warnings():  # numpy's and scipy's warnings: the station's policy, not their two lines
+            return int(_command(args.func)(args) or 0)
+    except StationError as exc:
+        print(f"station: error: {exc}", file=sys.stderr)
+        if getattr(args, "json", False):  # a script still gets one JSON object with the reason
+            # the mapping knows the drivers' errors: imported only when there is an error to map
+            from station.cell.results.outcomes import failure_summary
+
+            print(json.dumps(failure_summary(exc, run_id=None, log_dir=".").to_json()))
+        return exc.exit_code
+    except OSError as exc:
+        if exc.filename is not None:
+            # A file the user named cannot be read or written: a usage error, not a bug.
+            print(f"station: error: {exc.strerror or exc}: {exc.filename}; check the path", file=sys.stderr)
+            return int(Outcome.CONFIG_ERROR)
+        return _internal_error(exc, args)
+    except KeyboardInterrupt:
+        print("station: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # a bug: keep the traceback for the report, not on the screen
+        return _internal_error(exc, args)
+
+
+def _usage_json(message: str) -> dict:
+    from station.cell.results.outcomes import failure_summary
+
+    out: dict = failure_summary(ConfigError(message), run_id=None, log_dir=".").to_json()
+    return out
+
+
+def _internal_error(exc: Exception, args: argparse.Namespace) -> int:
+    from station.cell.results.outcomes import failure_summary
+
+    summary = failure_summary(exc, run_id=None, log_dir=".")
+    failure = summary.failure
+    if summary.outcome is not Outcome.INTERNAL_ERROR:  # a device's typed error (a driver's): its outcome
+        hint = f"\n  what to do: {failure.hint}" if failure is not None and failure.hint else ""
+        print(f"station: error: {failure.message if failure else exc}{hint}", file=sys.stderr)
+    else:
+        print(f"station: internal error {type(exc).__name__}: {exc}\n  the traceback is in "
+              f"{failure.log_file if failure else '?'}; please report it with that file", file=sys.stderr)
+    if getattr(args, "json", False):
+        print(json.dumps(summary.to_json()))
+    return int(summary.outcome)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
