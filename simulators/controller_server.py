@@ -184,9 +184,16 @@ class SimulatedController:
         words = encode(r, value, self.word_order)
         self._regs[r.address:r.address + len(words)] = words
 
+    @staticmethod
+    def _word(v: int) -> int:
+        return v + 0x10000 if v < 0 else v
+
     def _get(self, name: str):
+        # read as a UR's read_port_register returns a register, "signed ... (-32768 : 32767)" (Script Directory
+        # §17.38), then made the map's word, as robot-programs/ur does (tests/robot_programs/test_sim_signed_words.py)
         r = REG[name]
-        return decode(r, self._regs[r.address:r.end], self.word_order)
+        signed = [w - 0x10000 if w >= 0x8000 else w for w in self._regs[r.address:r.end]]
+        return decode(r, [self._word(v) for v in signed], self.word_order)
 
     def _init_registers(self) -> None:
         self._set("map_version", self.map_version)

@@ -1,75 +1,160 @@
 ' =============================================================================================
-' StationLink.prg - the calibration station's robot program for an Epson SCARA (RC700 / RC90
-' family, Epson RC+ 7 / 8, SPEL+), register map version 2 (drivers/controller_map.py,
+' StationLink.prg - the calibration station's robot program for an Epson SCARA (RC700 / RC90 /
+' RC800 family, Epson RC+ 7 / 8, SPEL+), register map version 2 (drivers/controller_map.py,
 ' docs/protocols.md, docs/robot-program.md).
 '
+' HOW THE PROGRAM SERVES THE STATION
+'   The station's driver is a Modbus TCP client of the controller's holding registers. No
+'   document in reach (list below) describes a Modbus TCP server in a standard RC700 / RC90
+'   controller. Epson documents two remote interfaces instead - the remote Ethernet / RS-232
+'   command set ($Login, $Start, $GetVariable, ... [RC5-UG11], [UG-RS232]) and the command words
+'   of the Remote Control Reference 8.0 [RCREF80] - and neither speaks Modbus, so either would
+'   need a new driver (drivers/ is not ours to change). The PC as Modbus server with the robot
+'   as client would likewise need a new driver. So the program keeps the one design that serves
+'   the register map unchanged: it is itself the Modbus TCP server, framing Modbus by hand over
+'   a SPEL+ TCP/IP port (OpenNet ... As Server, WaitNet, ChkNet, ReadBin, WriteBin [TCP-14.3]).
+'   The communication side runs as BACKGROUND TASKS (Function BgMain = task 65, the Modbus server
+'   task Xqt'd from it), which Epson documents for "communicating with external devices" and
+'   which do not stop at an emergency stop or a safeguard input [UG-BG]. Background tasks may not
+'   execute manipulator commands [UG-BG], so the motion side (main, MoveTask, the inverse
+'   kinematics, reading the joints) is a normal task. Nothing uses NoEmgAbort any more.
+'
 ' WHAT IT IMPLEMENTS
-'   * TRANSPORT: the program is itself the Modbus TCP server. Task ModbusServer opens TCP/IP
-'     port #NET_PORT of the controller's Ethernet (Standard Ethernet, no option) as a server and
-'     speaks Modbus TCP in binary (ReadBin / WriteBin): function codes 3 and 4 (read), 6 and 16
-'     (write), exception 1 for any other function, exception 2 for an address outside the window
-'     BASE .. BASE+127 and for a PC write to a register the program writes, exception 3 for a bad
-'     count. The window image is Regs(0..127). Chosen because every RC700/RC90 has SPEL+ TCP/IP
-'     sockets, while the fieldbus / Modbus slave options differ per controller.
-'   * Identification, heartbeat task (0.1 s, hb_robot, watchdog on hb_pc, act_joints), the command
-'     handshake with the sequence rule, MOVE_JOINTS, MOVE_CARTESIAN (the controller's inverse
-'     kinematics, then the active correction table added by the interpolation rule of
-'     docs/protocols.md exactly as drivers/correction_table.py CorrectionTableData.interpolate),
-'     STOP, RESET, soft limits checked on what WILL be commanded, e-stop / drive fault / watchdog
-'     latching until RESET.
-'   * The transfer block (served inside the Modbus request that starts it, as the simulator
-'     does): WRITE_HEADER / WRITE_PAGE with the page CRC-32 checked (table-driven CRC-32, the
-'     zlib polynomial 0xEDB88320, kept in two 16-bit halves so that no value needs an unsigned
-'     32-bit type), READ_HEADER / READ_PAGE of the stored pages, READ_INFO (soft limits, actual
-'     pose), READ_{STAGED,ACTIVE,PREVIOUS}_{HEADER,PAGE} of the table in a slot.
-'   * Three tables (staged, active, previous) and the commands TABLE_STAGE, TABLE_ACTIVATE,
-'     TABLE_DEACTIVATE, TABLE_ROLLBACK, TABLE_DISCARD_PREVIOUS with the slot rules of
-'     simulators/controller_tables.py (TableSlots.switch): ACTIVATE over no active table keeps
-'     the previous one.
-'
-' INSTALL AND CONFIGURE
-'   1. Add this file to an Epson RC+ project (Project > Edit > add StationLink.prg), build, and
-'      set Function main as the program the controller starts (Auto mode or the Run window).
-'   2. RC+ Setup > System Configuration > Controller > TCP/IP: port #201 (NET_PORT) as Server,
-'      local port 502 (or the port of [devices] controller), binary data, no terminator.
-'   3. Set the configuration #defines below: BASE (= [devices] controller_register_base, 0 by
-'      default), WORD_ORDER_BIG (1 = "big", 0 = "little", = [devices] word_order), WATCHDOG_MS,
-'      TOOL_NO (a Tool defined with TLSet as the station's probe head K), CORRECTION_STATE, and
-'      the soft limits in InitConfig (station units: rad, rad, mm, rad; inside the Range).
-'   4. The station's robot file must describe this robot as Epson does: joints J1, J2, J4 in
-'      Epson's zero and sign (deg in SPEL+, rad on the wire), J3 in mm, base frame = Epson's robot
-'      coordinates, nominal arm lengths from the manipulator manual, the elbow flag +1 = J2 > 0;
-'      the table then corrects what the controller's own kinematics miss.
-'   5. With the robot parked at [conformance].park_joints run `station conformance CONFIG` before
-'      the first calibration.
-'
-' WHAT WAS CHECKED
-'   * The logic was traced by hand against the simulated program (simulators/controller_server.py,
-'     simulators/controller_tables.py, drivers/correction_table.py): the order of the checks, the
-'     error codes, the slot rules, the interpolation (periodic axes, single-node axes, the 1e-6
-'     node tolerance and the clamp), results written before the sequence number that announces
-'     them.
-'   * tests/test_robot_programs.py checks that every register offset, header offset, command
-'     code, error code, transfer operation, status bit and the map version #defined below equal
-'     drivers/controller_map.py, and that every entry of the map is declared here.
-'   * The JA function (joint angles -> point) was checked against Epson's SPEL+ Language
-'     Reference (download.epson.biz, SPEL, "JA Function"). Every other statement - Function /
-'     Fend, Xqt ... NoEmgAbort, Do / Loop, Select / Send, Wait, Go ... Till, TillOn, MemOn /
-'     MemOff / MemSw, Agl, PAgl, XY(...) /L /R, CX / CY / CZ / CU, Here, Tool, Speed, Accel,
-'     EStopOn, OnErr / Err / ErrAxis / EResume, TmReset / Tmr, OpenNet / WaitNet / ChkNet /
-'     ReadBin / WriteBin / CloseNet, LShift / RShift, Int32 / Long / Double arrays - is written
-'     from the SPEL+ Language Reference as remembered: CONFIRM each in the reference of your RC+
-'     version, in particular ReadBin / WriteBin on a TCP/IP port, the Byte type's range, the size
-'     allowed for Global arrays (the table store needs about 160 000 Long elements) and that a
-'     NoEmgAbort task keeps running during an emergency stop on your controller.
+'   * Modbus TCP on port #NET_PORT: function codes 3 and 4 (read), 6 and 16 (write), exception
+'     1 for any other function, 2 for an address outside BASE .. BASE+127 or a PC write to a
+'     register the program writes, 3 for a bad count. One client at a time.
+'   * Identification (re-published every heartbeat), heartbeat (0.1 s), watchdog on hb_pc, the
+'     command handshake with the sequence rule, MOVE_JOINTS, MOVE_CARTESIAN (the controller's own
+'     inverse kinematics plus the active correction table by the interpolation rule of
+'     docs/protocols.md), STOP, RESET, soft limits checked on what WILL be commanded, e-stop /
+'     drive fault / watchdog latching until RESET.
+'   * The transfer block (served inside the Modbus request that starts it): WRITE_HEADER /
+'     WRITE_PAGE with the page CRC-32 checked, READ_HEADER / READ_PAGE, READ_INFO (soft limits,
+'     actual pose), READ_{STAGED,ACTIVE,PREVIOUS}_{HEADER,PAGE}. Page CRC-32 = zlib CRC-32
+'     (polynomial 0xEDB88320, init and final xor 0xFFFFFFFF) over the page's registers as
+'     big-endian bytes, exactly as the map defines it; computed table-driven with the state kept
+'     in two 16-bit halves, so no value needs an unsigned 32-bit type.
+'   * Staged / active / previous tables, TABLE_STAGE / ACTIVATE / DEACTIVATE / ROLLBACK /
+'     DISCARD_PREVIOUS with the slot rules of simulators/controller_tables.py.
+'   * All-zero globals are a valid empty state (no table, no latch), because Epson clears
+'     Globals whenever a function is started from the Run or Operator window [REF-GLOBAL]; the
+'     heartbeat re-publishes the identification registers and rebuilds the CRC table.
 '
 ' WHAT WAS NOT DONE
 '   * This program has NOT run on a real controller, nor in the RC+ simulator. It was not
 '     compiled. Build it in RC+ first and fix what the compiler says.
 '   * One Modbus client at a time (the station); a second connection waits.
 '   * The controller's own kinematics and any arm calibration set with ArmSet are the "nominal"
-'     inverse kinematics here: CORRECTION_STATE defaults to 2 (unknown); set 0 once you have
-'     checked that no arm calibration is set.
+'     kinematics here: CORRECTION_STATE defaults to 2 (unknown).
+'
+' INSTALL AND CONFIGURE
+'   1. Add this file to an Epson RC+ project and build. Enable background tasks in the
+'      controller preferences so that BgMain starts when the project loads [UG-BG]; start main
+'      (Auto mode or the Run window) for the motion side.
+'   2. Controller TCP/IP port #201 (NET_PORT): server, local port 502 (or the port of
+'      [devices] controller), no terminator.
+'   3. Set the #defines below: BASE (= [devices] controller_register_base), WORD_ORDER_BIG
+'      (1 = "big", 0 = "little"), WATCHDOG_MS, TOOL_NO (a Tool defined as the probe head K),
+'      CORRECTION_STATE, MAIN_TASK (main's task number, 1 when started normally), and the soft
+'      limits in InitConfig (station units: rad, rad, mm, rad).
+'   4. The station's robot file must describe the robot as Epson does: J1, J2, J4 in Epson's
+'      zero and sign (deg in SPEL+, rad on the wire), J3 in mm, base frame = Epson's robot
+'      coordinates, the elbow flag +1 = J2 > 0.
+'   5. With the robot parked at [conformance].park_joints run `station conformance CONFIG`
+'      before the first calibration.
+'
+' WHAT WAS CHECKED (document, page; sources are listed under SOURCES at the end of this header)
+'   * Function main ... Fend, Xqt funcName, Do ... Loop, Wait <seconds> (fractions), ' comments,
+'     On / Off: the example of [REF-HALT]. Task numbers (normal 1-32, background 65-80):
+'     [REF-HALT], [REF-TASKINFO].
+'   * If ... Then / Else / EndIf, TaskInfo(task, 3) = -1 when a task does not execute:
+'     [REF-TASKINFO] (used to see that main no longer runs).
+'   * Go ... Till MemSw(bit) = On, TillOn: [REF-TILL] (MemSw is one of the functions a Till
+'     condition may use; TillOn tells whether the condition stopped the motion).
+'   * JA(j1, j2, j3, j4) in deg / mm, Go JA(...), point assignment P10 = JA(...): [REF-JA].
+'   * Global <type> name(dims): [REF-GLOBAL]; at most 100,000 elements per global array and 3
+'     dimensions [REF-GLOBAL], [UG-ARRAYS]: TBuf 3 x 32,000 = 96,000, StoreReg 1,104 x 58 =
+'     64,032; local arrays stay under 2,000 elements [UG-ARRAYS].
+'   * Types Boolean, Byte (-128..127), Integer (16 bit), Long (32 bit), Double: [UG-TYPES].
+'   * Background tasks: BgMain is task 65, starts when the project loads, Xqt from it makes
+'     background tasks, not stopped by emergency stop or safeguard, no manipulator commands:
+'     [UG-BG]. Program lines are at most 512 characters: [UG-RULES].
+'   * OpenNet #p As Server, WaitNet #p, ChkNet(p) (no #; returns the byte count, or -1 open
+'     but not connected, -2 used by another task, -3 not open), CloseNet #p, ReadBin # / WriteBin #
+'     (receive / send one or more bytes), ports 201-216: [TCP-14.3] - a third-party reprint of
+'     Epson's chapter, not Epson's own page (see NOT CONFIRMED).
+'   * Speed and Accel are whole percents 1..100: the station's cmd_speed (1..1000, 0.1 %) is
+'     rounded and clamped to 1..100 before use; [RCREF80] Command 1 gives PTP acceleration as a
+'     whole percent >= 1 (the Accel statement's own page was not found).
+'   * The logic was traced against simulators/controller_server.py, controller_tables.py and
+'     drivers/correction_table.py; tests/test_robot_programs.py checks every map constant and
+'     the CRC polynomial halves against drivers/controller_map.py and zlib.
+'
+' REPLACED (the constructs issue 28 doubted)
+'   * ErrAxis (no page found): a drive fault now reports error_joint 0 ("0 if none", map).
+'   * Case 3, 4 (comma list, no Select page found): Select ... Send is no longer used at all;
+'     every dispatch is If / ElseIf.
+'   * ChkNet(NET_PORT): kept - [TCP-14.3] shows ChkNet(201) without #; NET_PORT is a #define.
+'   * User function Exception: renamed MbException.
+'   * ~160,000 Long elements: kept, each global array is under the documented 100,000-element
+'     limit per array; the total controller memory for globals is NOT CONFIRMED.
+'   * Till MemSw(...): kept, confirmed by [REF-TILL].
+'   * Accel below 1 %: cannot happen (clamped to 1..100, see above).
+'   * NoEmgAbort tasks during an e-stop: replaced by background tasks [UG-BG].
+'   * Also removed: TmReset / Tmr (the watchdog counts 0.1 s heartbeat cycles), Mod in the
+'     heartbeat, ByRef array parameters (a global Dq() instead), several statements on one
+'     line ("a = 1: b = 2"), the ReadOnly() array (a range test, so that zeroed globals are safe).
+'   * Fixed: after EResume Next, MoveTask overwrote the error result with 1 or 2 and NominalIK
+'     could accept a stale P900; both now flag the error and test the flag.
+'
+' NOT CONFIRMED (no Epson page for them was found in the stores searched; confirm each in the
+'   SPEL+ Language Reference of your RC+ version before the first run)
+'   * ReadBin / WriteBin argument form "#port, ByteArray(), count", Epson's Byte arrays for it,
+'     and ChkNet / WaitNet / OpenNet / CloseNet beyond the reprint [TCP-14.3]. Public SPEL+ code
+'     uses the same form (e.g. WriteBin #204, modMessage(), 8), which is not a confirmation.
+'   * Function ... (x As T) As T, return by assigning the function name, Exit Function, Exit
+'     Do / Exit For, For ... Next [Step], Do While, ElseIf, single-line If, #define in a .prg.
+'   * Operators And / Or / Xor / Not on integers, Mod, Int, Abs, LShift, RShift, &H literals.
+'   * MemOn / MemOff, OnErr GoTo label / EResume Next (MoveTask, NominalIK), EStopOn (main's
+'     command loop), Agl, PAgl, XY(...) /L /R, P900 = ..., CX / CY / CZ / CU, Here, Tool, Speed,
+'     Accel, DegToRad, RadToDeg, True / False; that a background task may call TaskInfo.
+'   * Whether a normal task survives an emergency stop (if main is aborted, the background side
+'     reports the running motion as E_ESTOP and refuses new commands with E_NOT_READY until
+'     main runs again); whether the controller has memory for all globals together; whether
+'     starting main really clears the Globals that BgMain uses (see [REF-GLOBAL]).
+'   * No SPEL+ executor was added to the tests: the pages found do not define ReadBin, Xqt,
+'     OnErr or the expression rules well enough to build one that would prove anything.
+'
+' SOURCES (download.epson.biz/robots/ww/data/html/... is Epson's online manual set)
+'   [REF-HALT]     SPEL+ Language Reference, "Halt Statement", SPEL/en/030/030-120/030-120-010/
+'                  030-120-010-010.html (syntax, task numbers, example program).
+'   [REF-TASKINFO] SPEL+ Language Reference, "TaskInfo Function", SPEL/en/030/030-230/
+'                  030-230-010/030-230-010-050.html (task types Normal / NoPause / NoEmgAbort,
+'                  index 3 = -1 when not executing, If / Else / EndIf example).
+'   [REF-TILL]     SPEL+ Language Reference, "Till", SPEL/sc/030/030-230/030-230-010/
+'                  030-230-010-170.html (condition functions incl. MemSw; TillOn / Stat).
+'   [REF-JA]       SPEL+ Language Reference, "JA Function", SPEL_RC800/ja/030/030-140/
+'                  030-140-010/030-140-010-130.html and SPEL/tc/... same path.
+'   [REF-GLOBAL]   SPEL+ Language Reference (RC800), "Global", SPEL_RC800/ja/030/030-110/
+'                  030-110-010/030-110-010-040.html (types, 100,000 elements, Preserve 4,000,
+'                  Globals cleared when a function starts from the Run / Operator window).
+'   [UG-TYPES]     Epson RC+ User's Guide, "Data types", UsersGuide/ja/070/070-010/
+'                  070-010-050.html.
+'   [UG-ARRAYS]    Epson RC+ User's Guide, "Arrays", UsersGuide/ja/070/070-010/070-010-070/
+'                  070-010-070-060.html.
+'   [UG-BG]        Epson RC+ User's Guide, "Primary features of background task" and "Holding
+'                  background task", UsersGuide/en/070/070-010/070-010-230/070-010-230-010.html
+'                  and -030.html.
+'   [UG-RULES]     Epson RC+ User's Guide, "Program rules", UsersGuide/en/080/080-010/
+'                  080-010-030/080-010-030-010.html.
+'   [UG-RS232]     Epson RC+ User's Guide, "Remote RS232 Command", UsersGuide/en/130/130-010/
+'                  130-010-030/130-010-030-050.html.
+'   [RC5-UG11]     EPSON RC+ 5.0 (Ver.5.4) User's Guide Rev.4, ch. 11 "Remote Control",
+'                  pp. 263-275 (remote Ethernet commands; copy at manualshelf.com, rc170).
+'   [RCREF80]      Epson RC+ 8.0 Remote Control Reference, RemoteControl_Ref80/.../090-010-010-020
+'                  ("Command 1", PTP accel / decel in %) and 090-310-010-120 ("Command 2111").
+'   [TCP-14.3]     "14.3 TCP/IP commands" of Epson's manual as reprinted in Chinese at
+'                  blog.csdn.net/pinbodexiaozhu/article/details/43565205 (secondary source).
 ' =============================================================================================
 
 ' ---------------- configuration (the integrator sets these) ---------------------------------
@@ -81,6 +166,8 @@
 #define TOOL_NO 1
 #define CORRECTION_STATE 2
 #define STOP_BIT 0
+' the task number of main (the motion side), for TaskInfo [REF-TASKINFO]
+#define MAIN_TASK 1
 
 ' ---------------- register map 2 (tests/test_robot_programs.py keeps these true) -------------
 #define MAP_VERSION 2
@@ -193,9 +280,10 @@
 #define SLOT_PREVIOUS 2
 
 ' ---------------- global state ----------------------------------------------------------
-' the window image (offsets 0..127), and which offsets the PC may not write
+' Every Global is zero after a start from the Run / Operator window [REF-GLOBAL]; zero is a
+' valid state for all of them (no table, no latch, CRC table rebuilt by the heartbeat).
+' the window image (offsets 0..127)
 Global Long Regs(127)
-Global Boolean ReadOnly(127)
 ' the command block as it arrived (offsets 8..35), and that a write covered cmd_seq
 Global Long CmdSnap(27)
 Global Boolean CmdWritten
@@ -204,75 +292,80 @@ Global Long StoreHdr(29)
 Global Integer StoreHdrLen
 Global Long StoreReg(1103, 57)
 Global Integer StoreLen(1103)
-' three table buffers: raw i32 values, canonical header page; SlotBuf(slot) = buffer or -1
+' three table buffers (raw i32 values, canonical header page); SlotRef(slot) = buffer + 1,
+' 0 = no table in that slot
 Global Long TBuf(2, 31999)
 Global Long THdr(2, 29)
-Global Integer SlotBuf(2)
+Global Integer SlotRef(2)
 ' CRC-32 table in two 16-bit halves, and the running CRC
 Global Long CrcTabHi(255), CrcTabLo(255)
 Global Long CrcHi, CrcLo
 ' robot state
 Global Double SoftLo(3), SoftHi(3)
 Global Long Status
-Global Boolean Latched, Moving, InPosition, WdFired
-Global Long LastSeq, MotionSeq, HbRobot, LastXfer
-Global Double Tq(3)
+Global Boolean Latched, Moving, InPosition, WdFired, MainUp
+Global Long LastSeq, MotionSeq, HbRobot, LastXfer, HbIdle
+Global Double Tq(3), Dq(3)
+' the controller's pose of the tool (x, y, z mm, u deg), kept by main for READ_INFO
+Global Double ActPose(3)
 Global Integer MoveSpeedPct
 ' 0 running, 1 arrived, 2 stopped by STOP (Till), 3 error
 Global Integer MoveResult
-Global Integer MoveErrAxis
 ' Modbus frame buffers (bytes as 0..255 in Long; ReadBin / WriteBin use the Byte arrays)
 Global Byte RxB(299), TxB(299)
 Global Long Rx(299), Tx(299)
 
-' ---------------- start ---------------------------------------------------------------
-Function main
-    Integer i
-    InitConfig
+' ---------------- the communication side: background tasks [UG-BG] -----------------------
+' BgMain starts as task 65 when the controller loads the project; the Modbus server task
+' Xqt'd from it is a background task too. Neither executes a manipulator command.
+Function BgMain
     CrcInit
-    For i = 0 To 127
-        Regs(i) = 0
-        ReadOnly(i) = False
-    Next
-    ' what the program writes: hb_robot .. order_check and ack_seq .. table_previous_crc
-    For i = R_HB_ROBOT To R_ORDER_CHECK + 1
-        ReadOnly(i) = True
-    Next
-    For i = R_ACK_SEQ To R_TABLE_PREVIOUS_CRC + 1
-        ReadOnly(i) = True
-    Next
-    For i = 0 To 2
-        SlotBuf(i) = -1
-    Next
-    StoreHdrLen = 0
-    For i = 0 To MAX_PAGES - 1
-        StoreLen(i) = 0
-    Next
+    PublishIdent
+    LastXfer = Regs(R_XFER_SEQ)
+    Xqt ModbusServer
+    Heartbeat
+Fend
+
+' the identification registers (re-written every heartbeat)
+Function PublishIdent
     Regs(R_MAP_VERSION) = MAP_VERSION
     Regs(R_N_JOINTS) = N_JOINTS
     Regs(R_WATCHDOG_MS) = WATCHDOG_MS
     Regs(R_CORRECTION_STATE) = CORRECTION_STATE
     PutI32 R_ORDER_CHECK, ORDER_CHECK_VALUE
-    Latched = False
-    Moving = False
-    InPosition = True
-    LastSeq = 0
-    LastXfer = 0
-    HbRobot = 0
-    Tool TOOL_NO
-    WriteActJoints
-    PublishStatus
-    Xqt ModbusServer, NoEmgAbort
-    Xqt Heartbeat, NoEmgAbort
-    Xqt CommandLoop, NoEmgAbort
 Fend
 
-' soft limits in station units (rad, rad, mm, rad): set them for your robot
-Function InitConfig
-    SoftLo(0) = DegToRad(-130): SoftHi(0) = DegToRad(130)
-    SoftLo(1) = DegToRad(-145): SoftHi(1) = DegToRad(145)
-    SoftLo(2) = -200: SoftHi(2) = 0
-    SoftLo(3) = DegToRad(-360): SoftHi(3) = DegToRad(360)
+' every 0.1 s, also while moving: hb_robot, identification, the watchdog on hb_pc (counted in
+' heartbeat cycles), and whether main (the motion side) still runs [REF-TASKINFO]
+Function Heartbeat
+    Long hbPcLast
+    hbPcLast = Regs(R_HB_PC)
+    HbIdle = 0
+    Do
+        HbRobot = HbRobot + 1
+        If HbRobot > 65535 Then HbRobot = 0
+        Regs(R_HB_ROBOT) = HbRobot
+        If CrcTabLo(1) = 0 Then CrcInit
+        PublishIdent
+        If Regs(R_HB_PC) <> hbPcLast Then
+            hbPcLast = Regs(R_HB_PC)
+            HbIdle = 0
+        ElseIf HbIdle < 100000 Then
+            HbIdle = HbIdle + 1
+        EndIf
+        If Moving And HbIdle * 100 > WATCHDOG_MS Then WdFired = True
+        If TaskInfo(MAIN_TASK, 3) = -1 Then
+            MainUp = False
+        Else
+            MainUp = True
+        EndIf
+        ' main no longer runs (an emergency stop or an abort ended it): the motion it ran is over
+        If Moving And Not MainUp And Not Latched Then
+            Moving = False
+            Refuse MotionSeq, E_ESTOP, 0, 0
+        EndIf
+        Wait 0.1
+    Loop
 Fend
 
 ' ---------------- words and scaled integers --------------------------------------------
@@ -301,18 +394,6 @@ Function JoinI32(hi As Long, lo As Long) As Long
     EndIf
 Fend
 
-Function GetI32(off As Integer) As Long
-    GetI32 = JoinI32(U32Hi(off), U32Lo(off))
-Fend
-
-Function GetI16(off As Integer) As Long
-    If Regs(off) >= 32768 Then
-        GetI16 = Regs(off) - 65536
-    Else
-        GetI16 = Regs(off)
-    EndIf
-Fend
-
 Function HiWord(v As Long) As Long
     HiWord = RShift(v, 16) And &HFFFF
 Fend
@@ -323,9 +404,11 @@ Fend
 
 Function PutWords(off As Integer, hi As Long, lo As Long)
     If WORD_ORDER_BIG = 1 Then
-        Regs(off) = hi: Regs(off + 1) = lo
+        Regs(off) = hi
+        Regs(off + 1) = lo
     Else
-        Regs(off) = lo: Regs(off + 1) = hi
+        Regs(off) = lo
+        Regs(off + 1) = hi
     EndIf
 Fend
 
@@ -355,11 +438,15 @@ Function Counts(x As Double, perUnit As Double) As Long
 Fend
 
 ' ---------------- CRC-32 (zlib / ISO-HDLC), table-driven in 16-bit halves ----------------
+' The page CRC of the map: CRC-32 with the reflected polynomial 0xEDB88320, start 0xFFFFFFFF,
+' final xor 0xFFFFFFFF, over each register high byte first (= zlib.crc32 of the big-endian
+' bytes). CrcHi / CrcLo are its high and low 16 bits.
 Function CrcInit
     Integer n, k
     Long hi, lo, c
     For n = 0 To 255
-        hi = 0: lo = n
+        hi = 0
+        lo = n
         For k = 1 To 8
             c = lo And 1
             lo = RShift(lo, 1) Or LShift(hi And 1, 15)
@@ -369,12 +456,14 @@ Function CrcInit
                 lo = lo Xor &H8320
             EndIf
         Next
-        CrcTabHi(n) = hi: CrcTabLo(n) = lo
+        CrcTabHi(n) = hi
+        CrcTabLo(n) = lo
     Next
 Fend
 
 Function CrcStart
-    CrcHi = &HFFFF: CrcLo = &HFFFF
+    CrcHi = &HFFFF
+    CrcLo = &HFFFF
 Fend
 
 Function CrcByte(b As Long)
@@ -391,10 +480,16 @@ Function CrcWord(w As Long)
 Fend
 
 Function CrcEnd
-    CrcHi = CrcHi Xor &HFFFF: CrcLo = CrcLo Xor &HFFFF
+    CrcHi = CrcHi Xor &HFFFF
+    CrcLo = CrcLo Xor &HFFFF
 Fend
 
 ' ---------------- status and results ---------------------------------------------------
+' the buffer a slot holds, -1 for none
+Function SlotOf(slot As Integer) As Integer
+    SlotOf = SlotRef(slot) - 1
+Fend
+
 Function PublishStatus
     Long s
     s = 0
@@ -403,9 +498,9 @@ Function PublishStatus
     If InPosition Then s = s + S_IN_POSITION
     If Latched Then s = s + S_ERROR
     If (Status And S_ESTOP) <> 0 And Latched Then s = s + S_ESTOP
-    If SlotBuf(SLOT_ACTIVE) >= 0 Then s = s + S_TABLE_ACTIVE
-    If SlotBuf(SLOT_STAGED) >= 0 Then s = s + S_TABLE_STAGED
-    If SlotBuf(SLOT_PREVIOUS) >= 0 Then s = s + S_TABLE_PREVIOUS
+    If SlotRef(SLOT_ACTIVE) <> 0 Then s = s + S_TABLE_ACTIVE
+    If SlotRef(SLOT_STAGED) <> 0 Then s = s + S_TABLE_STAGED
+    If SlotRef(SLOT_PREVIOUS) <> 0 Then s = s + S_TABLE_PREVIOUS
     Status = s
     Regs(R_STATUS) = s
     PublishCrc SLOT_STAGED, R_TABLE_STAGED_CRC
@@ -416,7 +511,7 @@ Fend
 ' the slot's whole-table CRC (its header's, checked at TABLE_STAGE), 0 for an empty slot
 Function PublishCrc(slot As Integer, off As Integer)
     Integer b
-    b = SlotBuf(slot)
+    b = SlotOf(slot)
     If b < 0 Then
         PutWords off, 0, 0
     ElseIf WORD_ORDER_BIG = 1 Then
@@ -439,10 +534,37 @@ Function Refuse(seq As Long, code As Integer, joint As Integer, bound As Integer
     Regs(R_ERROR_SEQ) = seq
 Fend
 
-Function Done(seq As Long)
+Function ReportDone(seq As Long)
     Regs(R_DONE_SEQ) = seq
 Fend
 
+' ---------------- the motion side: main, a normal task ----------------------------------
+Function main
+    InitConfig
+    Tool TOOL_NO
+    MoveResult = 1
+    Moving = False
+    InPosition = True
+    CmdWritten = False
+    LastSeq = Regs(R_CMD_SEQ)
+    WriteActJoints
+    PublishStatus
+    CommandLoop
+Fend
+
+' soft limits in station units (rad, rad, mm, rad): set them for your robot
+Function InitConfig
+    SoftLo(0) = DegToRad(-130)
+    SoftHi(0) = DegToRad(130)
+    SoftLo(1) = DegToRad(-145)
+    SoftHi(1) = DegToRad(145)
+    SoftLo(2) = -200
+    SoftHi(2) = 0
+    SoftLo(3) = DegToRad(-360)
+    SoftHi(3) = DegToRad(360)
+Fend
+
+' act_joints (J3 in mm, the others deg -> rad) and the pose READ_INFO reports
 Function WriteActJoints
     Integer j
     Double v
@@ -450,46 +572,35 @@ Function WriteActJoints
         v = 0
         If j < N_JOINTS Then
             v = Agl(j + 1)
-            ' J3 is prismatic (mm); the others deg -> rad
             If j <> 2 Then v = DegToRad(v)
         EndIf
         PutI32 R_ACT_JOINTS + 2 * j, Counts(v, 1000000)
     Next
+    ActPose(0) = CX(Here)
+    ActPose(1) = CY(Here)
+    ActPose(2) = CZ(Here)
+    ActPose(3) = CU(Here)
 Fend
 
-' ---------------- heartbeat: every 0.1 s, also while moving -----------------------------
-Function Heartbeat
-    Long hbPcLast
-    hbPcLast = Regs(R_HB_PC)
-    TmReset 0
-    Do
-        HbRobot = (HbRobot + 1) Mod 65536
-        Regs(R_HB_ROBOT) = HbRobot
-        If Regs(R_HB_PC) <> hbPcLast Then
-            hbPcLast = Regs(R_HB_PC)
-            TmReset 0
-        EndIf
-        If Moving And Tmr(0) * 1000 > WATCHDOG_MS Then WdFired = True
-        WriteActJoints
-        Wait 0.1
-    Loop
-Fend
-
-' ---------------- the motion task (one per move) -------------------------------------------
+' one move, started by Xqt from Dispatch; STOP sets memory bit STOP_BIT, which the Till
+' condition watches [REF-TILL]. The error handler only flags: EResume Next continues after Go.
 Function MoveTask
+    Boolean failed
+    failed = False
     OnErr GoTo MoveErr
     Speed MoveSpeedPct
     Accel MoveSpeedPct, MoveSpeedPct
     Go JA(RadToDeg(Tq(0)), RadToDeg(Tq(1)), Tq(2), RadToDeg(Tq(3))) Till MemSw(STOP_BIT) = On
-    If TillOn Then
+    If failed Then
+        MoveResult = 3
+    ElseIf TillOn Then
         MoveResult = 2
     Else
         MoveResult = 1
     EndIf
     Exit Function
 MoveErr:
-    MoveErrAxis = ErrAxis
-    MoveResult = 3
+    failed = True
     EResume Next
 Fend
 
@@ -504,10 +615,12 @@ Function StopMotion
     PublishStatus
 Fend
 
-' ---------------- the command loop ---------------------------------------------------------
+' the command loop: motion results, then a new command block, every 2 ms; act_joints about
+' every 0.1 s
 Function CommandLoop
     Long seq, expected, code
-    LastSeq = Regs(R_CMD_SEQ)
+    Integer tick
+    tick = 0
     Do
         If Moving And EStopOn And Not Latched Then
             Moving = False
@@ -521,24 +634,32 @@ Function CommandLoop
             InPosition = True
             WriteActJoints
             PublishStatus
-            Done MotionSeq
+            ReportDone MotionSeq
         ElseIf Moving And MoveResult = 3 Then
+            ' the axis is not reported: ErrAxis is not confirmed (error_joint 0 = none, map)
             Moving = False
             WriteActJoints
-            Refuse MotionSeq, E_DRIVE_FAULT, MoveErrAxis, 0
+            Refuse MotionSeq, E_DRIVE_FAULT, 0, 0
         EndIf
-        If CmdWritten And CmdSnap(R_CMD_SEQ - R_CMD_CODE) <> LastSeq Then
+        If CmdWritten Then
             CmdWritten = False
             seq = CmdSnap(R_CMD_SEQ - R_CMD_CODE)
-            expected = LastSeq Mod 65535 + 1
-            LastSeq = seq
-            code = CmdSnap(0)
-            Regs(R_ACK_SEQ) = seq
-            If seq <> expected Then
-                Refuse seq, E_SEQUENCE_ERROR, 0, 0
-            Else
-                Dispatch seq, code
+            If seq <> LastSeq Then
+                expected = LastSeq Mod 65535 + 1
+                LastSeq = seq
+                code = CmdSnap(0)
+                Regs(R_ACK_SEQ) = seq
+                If seq <> expected Then
+                    Refuse seq, E_SEQUENCE_ERROR, 0, 0
+                Else
+                    Dispatch seq, code
+                EndIf
             EndIf
+        EndIf
+        tick = tick + 1
+        If tick >= 50 Then
+            tick = 0
+            WriteActJoints
         EndIf
         Wait 0.002
     Loop
@@ -554,16 +675,17 @@ Function SnapI32(off As Integer) As Long
     EndIf
 Fend
 
+' one command (If / ElseIf: no Select ... Send, whose page was not found)
 Function Dispatch(seq As Long, code As Long)
     Long elbow, speed
     Integer j, err, bound
-    Double pose(5), dq(3)
+    Double pose(5)
     If code = C_STOP Then
         If Moving Then
             StopMotion
             Refuse MotionSeq, E_MOTION_ABORTED, 0, 0
         EndIf
-        Done seq
+        ReportDone seq
         Exit Function
     EndIf
     ' only STOP while a motion runs
@@ -574,118 +696,126 @@ Function Dispatch(seq As Long, code As Long)
     elbow = CmdSnap(R_CMD_ELBOW - R_CMD_CODE)
     If elbow >= 32768 Then elbow = elbow - 65536
     speed = CmdSnap(R_CMD_SPEED - R_CMD_CODE)
-    Select code
-        Case C_RESET
-            Latched = False
-            Status = Status And Not S_ESTOP
-            Regs(R_ERROR_CODE) = E_NONE
-            PutI16 R_ERROR_JOINT, 0
-            PutI16 R_ERROR_BOUND, 0
-            PublishStatus
-            Done seq
-        Case C_MOVE_JOINTS, C_MOVE_CARTESIAN
-            If Latched Then
-                Refuse seq, E_NOT_READY, 0, 0
-                Exit Function
-            EndIf
-            If speed < 1 Or speed > 1000 Then
+    If code = C_RESET Then
+        Latched = False
+        Status = Status And Not S_ESTOP
+        Regs(R_ERROR_CODE) = E_NONE
+        PutI16 R_ERROR_JOINT, 0
+        PutI16 R_ERROR_BOUND, 0
+        PublishStatus
+        ReportDone seq
+    ElseIf code = C_MOVE_JOINTS Or code = C_MOVE_CARTESIAN Then
+        If Latched Then
+            Refuse seq, E_NOT_READY, 0, 0
+            Exit Function
+        EndIf
+        If speed < 1 Or speed > 1000 Then
+            Refuse seq, E_BAD_COMMAND, 0, 0
+            Exit Function
+        EndIf
+        If code = C_MOVE_JOINTS Then
+            For j = 0 To N_JOINTS - 1
+                Tq(j) = SnapI32(R_CMD_JOINTS + 2 * j) * 0.000001
+            Next
+        Else
+            If elbow <> 1 And elbow <> -1 Then
                 Refuse seq, E_BAD_COMMAND, 0, 0
                 Exit Function
             EndIf
-            If code = C_MOVE_JOINTS Then
-                For j = 0 To N_JOINTS - 1
-                    Tq(j) = SnapI32(R_CMD_JOINTS + 2 * j) * 0.000001
-                Next
-            Else
-                If elbow <> 1 And elbow <> -1 Then
-                    Refuse seq, E_BAD_COMMAND, 0, 0
-                    Exit Function
-                EndIf
-                For j = 0 To 5
-                    pose(j) = SnapI32(R_CMD_POSE + 2 * j) * 0.000001
-                Next
-                If Not NominalIK(pose(0), pose(1), pose(2), pose(5), elbow) Then
-                    Refuse seq, E_UNREACHABLE, 0, 0
-                    Exit Function
-                EndIf
-                If SlotBuf(SLOT_ACTIVE) >= 0 Then
-                    err = Interpolate(SlotBuf(SLOT_ACTIVE), pose(0), pose(1), pose(2), pose(5), elbow, dq())
-                    If err <> E_NONE Then
-                        Refuse seq, err, 0, 0
-                        Exit Function
-                    EndIf
-                    For j = 0 To N_JOINTS - 1
-                        Tq(j) = Tq(j) + dq(j)
-                    Next
-                EndIf
-            EndIf
-            ' the limit check on what WILL be commanded; a NaN fails it too
-            For j = 0 To N_JOINTS - 1
-                If Not (SoftLo(j) <= Tq(j) And Tq(j) <= SoftHi(j)) Then
-                    bound = 1
-                    If Tq(j) < SoftLo(j) Then bound = -1
-                    Refuse seq, E_SOFT_LIMIT, j + 1, bound
-                    Exit Function
-                EndIf
+            For j = 0 To 5
+                pose(j) = SnapI32(R_CMD_POSE + 2 * j) * 0.000001
             Next
-            MoveSpeedPct = Int(speed / 10 + 0.5)
-            If MoveSpeedPct < 1 Then MoveSpeedPct = 1
-            MoveResult = 0
-            WdFired = False
-            MotionSeq = seq
-            Moving = True
-            InPosition = False
-            PublishStatus
-            MemOff STOP_BIT
-            Xqt MoveTask
-        Case C_TABLE_STAGE
-            err = StageTable
-            PublishStatus
-            If err <> E_NONE Then
-                Refuse seq, err, 0, 0
-            Else
-                Done seq
+            If Not NominalIK(pose(0), pose(1), pose(2), pose(5), elbow) Then
+                Refuse seq, E_UNREACHABLE, 0, 0
+                Exit Function
             EndIf
-        Case C_TABLE_ACTIVATE, C_TABLE_DEACTIVATE, C_TABLE_ROLLBACK, C_TABLE_DISCARD_PREVIOUS
-            err = SwitchTables(code)
-            PublishStatus
-            If err <> E_NONE Then
-                Refuse seq, err, 0, 0
-            Else
-                Done seq
+            If SlotRef(SLOT_ACTIVE) <> 0 Then
+                err = Interpolate(SlotOf(SLOT_ACTIVE), pose(0), pose(1), pose(2), pose(5), elbow)
+                If err <> E_NONE Then
+                    Refuse seq, err, 0, 0
+                    Exit Function
+                EndIf
+                For j = 0 To N_JOINTS - 1
+                    Tq(j) = Tq(j) + Dq(j)
+                Next
             EndIf
-        Default
-            ' also NONE (0) and unknown codes
-            Refuse seq, E_BAD_COMMAND, 0, 0
-    Send
+        EndIf
+        ' the limit check on what WILL be commanded; a NaN fails it too
+        For j = 0 To N_JOINTS - 1
+            If Not (SoftLo(j) <= Tq(j) And Tq(j) <= SoftHi(j)) Then
+                bound = 1
+                If Tq(j) < SoftLo(j) Then bound = -1
+                Refuse seq, E_SOFT_LIMIT, j + 1, bound
+                Exit Function
+            EndIf
+        Next
+        ' cmd_speed is 0.1 % steps: Speed and Accel take whole percents 1..100
+        MoveSpeedPct = Int(speed / 10 + 0.5)
+        If MoveSpeedPct < 1 Then MoveSpeedPct = 1
+        If MoveSpeedPct > 100 Then MoveSpeedPct = 100
+        MoveResult = 0
+        WdFired = False
+        MotionSeq = seq
+        Moving = True
+        InPosition = False
+        PublishStatus
+        MemOff STOP_BIT
+        Xqt MoveTask
+    ElseIf code = C_TABLE_STAGE Then
+        err = StageTable
+        PublishStatus
+        If err <> E_NONE Then
+            Refuse seq, err, 0, 0
+        Else
+            ReportDone seq
+        EndIf
+    ElseIf code = C_TABLE_ACTIVATE Or code = C_TABLE_DEACTIVATE Or code = C_TABLE_ROLLBACK Or code = C_TABLE_DISCARD_PREVIOUS Then
+        err = SwitchTables(code)
+        PublishStatus
+        If err <> E_NONE Then
+            Refuse seq, err, 0, 0
+        Else
+            ReportDone seq
+        EndIf
+    Else
+        ' also NONE (0) and unknown codes
+        Refuse seq, E_BAD_COMMAND, 0, 0
+    EndIf
 Fend
 
 ' the controller's own inverse kinematics of (x, y, z mm, yaw rad) in the configuration whose J2
-' has the sign of elbow; the joints in Tq (station units). False: not reachable.
+' has the sign of elbow; the joints in Tq (station units). False: not reachable. The error
+' handler only flags (EResume Next continues after the statement that failed).
 Function NominalIK(x As Double, y As Double, z As Double, yaw As Double, elbow As Long) As Boolean
     Integer j, tries
     Double j2
+    Boolean failed
     OnErr GoTo IkErr
     NominalIK = False
     For tries = 1 To 2
+        failed = False
         If tries = 1 Then
             P900 = XY(x, y, z, RadToDeg(yaw)) /L
         Else
             P900 = XY(x, y, z, RadToDeg(yaw)) /R
         EndIf
-        j2 = PAgl(P900, 2)
-        If (elbow = 1 And j2 > 0) Or (elbow = -1 And j2 < 0) Then
-            For j = 0 To N_JOINTS - 1
-                Tq(j) = PAgl(P900, j + 1)
-                If j <> 2 Then Tq(j) = DegToRad(Tq(j))
-            Next
-            NominalIK = True
-            Exit Function
+        If Not failed Then
+            j2 = PAgl(P900, 2)
+            If Not failed And ((elbow = 1 And j2 > 0) Or (elbow = -1 And j2 < 0)) Then
+                For j = 0 To N_JOINTS - 1
+                    Tq(j) = PAgl(P900, j + 1)
+                    If j <> 2 Then Tq(j) = DegToRad(Tq(j))
+                Next
+                If Not failed Then
+                    NominalIK = True
+                    Exit Function
+                EndIf
+            EndIf
         EndIf
     Next
     Exit Function
 IkErr:
-    NominalIK = False
+    failed = True
     EResume Next
 Fend
 
@@ -746,28 +876,32 @@ Function StageTable As Integer
     For k = 0 To nPages - 1
         For i = 0 To StoreLen(k) - 1 Step 2
             If WORD_ORDER_BIG = 1 Then
-                CrcWord StoreReg(k, i): CrcWord StoreReg(k, i + 1)
+                CrcWord StoreReg(k, i)
+                CrcWord StoreReg(k, i + 1)
             Else
-                CrcWord StoreReg(k, i + 1): CrcWord StoreReg(k, i)
+                CrcWord StoreReg(k, i + 1)
+                CrcWord StoreReg(k, i)
             EndIf
         Next
     Next
     CrcEnd
     If WORD_ORDER_BIG = 1 Then
-        crcHi = StoreHdr(H_TABLE_CRC): crcLo = StoreHdr(H_TABLE_CRC + 1)
+        crcHi = StoreHdr(H_TABLE_CRC)
+        crcLo = StoreHdr(H_TABLE_CRC + 1)
     Else
-        crcHi = StoreHdr(H_TABLE_CRC + 1): crcLo = StoreHdr(H_TABLE_CRC)
+        crcHi = StoreHdr(H_TABLE_CRC + 1)
+        crcLo = StoreHdr(H_TABLE_CRC)
     EndIf
     If CrcHi <> crcHi Or CrcLo <> crcLo Then
         StageTable = E_TABLE_CRC_MISMATCH
         Exit Function
     EndIf
     ' second pass: into the staged slot's buffer, or one no slot uses
-    b = SlotBuf(SLOT_STAGED)
+    b = SlotOf(SLOT_STAGED)
     If b < 0 Then
         For b = 0 To 2
             used = 0
-            If SlotBuf(SLOT_ACTIVE) = b Or SlotBuf(SLOT_PREVIOUS) = b Then used = 1
+            If SlotOf(SLOT_ACTIVE) = b Or SlotOf(SLOT_PREVIOUS) = b Then used = 1
             If used = 0 Then Exit For
         Next
     EndIf
@@ -775,9 +909,11 @@ Function StageTable As Integer
     For k = 0 To nPages - 1
         For i = 0 To StoreLen(k) - 1 Step 2
             If WORD_ORDER_BIG = 1 Then
-                hi = StoreReg(k, i): lo = StoreReg(k, i + 1)
+                hi = StoreReg(k, i)
+                lo = StoreReg(k, i + 1)
             Else
-                hi = StoreReg(k, i + 1): lo = StoreReg(k, i)
+                hi = StoreReg(k, i + 1)
+                lo = StoreReg(k, i)
             EndIf
             TBuf(b, v) = JoinI32(hi, lo)
             v = v + 1
@@ -789,54 +925,60 @@ Function StageTable As Integer
     Next
     For i = nAxes To 3
         THdr(b, H_TABLE_SHAPE + i) = 0
-        THdr(b, H_TABLE_START + 2 * i) = 0: THdr(b, H_TABLE_START + 2 * i + 1) = 0
-        THdr(b, H_TABLE_STEP + 2 * i) = 0: THdr(b, H_TABLE_STEP + 2 * i + 1) = 0
+        THdr(b, H_TABLE_START + 2 * i) = 0
+        THdr(b, H_TABLE_START + 2 * i + 1) = 0
+        THdr(b, H_TABLE_STEP + 2 * i) = 0
+        THdr(b, H_TABLE_STEP + 2 * i + 1) = 0
     Next
     THdr(b, H_TABLE_PERIODIC) = StoreHdr(H_TABLE_PERIODIC) And (LShift(1, nAxes) - 1)
-    SlotBuf(SLOT_STAGED) = b
+    SlotRef(SLOT_STAGED) = b + 1
     StageTable = E_NONE
 Fend
 
-' the slot rules of simulators/controller_tables.py TableSlots.switch
+' the slot rules of simulators/controller_tables.py TableSlots.switch (SlotRef: buffer + 1,
+' 0 = none)
 Function SwitchTables(code As Long) As Integer
     Integer t
     SwitchTables = E_NONE
-    Select code
-        Case C_TABLE_ACTIVATE
-            If SlotBuf(SLOT_STAGED) < 0 Then
-                SwitchTables = E_TABLE_NOT_STAGED
-                Exit Function
-            EndIf
-            ' activating over none keeps the previous table (the one a deactivation set aside)
-            If SlotBuf(SLOT_ACTIVE) >= 0 Then SlotBuf(SLOT_PREVIOUS) = SlotBuf(SLOT_ACTIVE)
-            SlotBuf(SLOT_ACTIVE) = SlotBuf(SLOT_STAGED)
-            SlotBuf(SLOT_STAGED) = -1
-        Case C_TABLE_DISCARD_PREVIOUS
-            SlotBuf(SLOT_PREVIOUS) = -1
-        Case C_TABLE_DEACTIVATE
-            If SlotBuf(SLOT_ACTIVE) >= 0 Then
-                SlotBuf(SLOT_PREVIOUS) = SlotBuf(SLOT_ACTIVE)
-                SlotBuf(SLOT_ACTIVE) = -1
-            EndIf
-        Case C_TABLE_ROLLBACK
-            If SlotBuf(SLOT_PREVIOUS) < 0 Then
-                SwitchTables = E_NO_PREVIOUS_TABLE
-                Exit Function
-            EndIf
-            t = SlotBuf(SLOT_ACTIVE)
-            SlotBuf(SLOT_ACTIVE) = SlotBuf(SLOT_PREVIOUS)
-            SlotBuf(SLOT_PREVIOUS) = t
-    Send
+    If code = C_TABLE_ACTIVATE Then
+        If SlotRef(SLOT_STAGED) = 0 Then
+            SwitchTables = E_TABLE_NOT_STAGED
+            Exit Function
+        EndIf
+        ' activating over none keeps the previous table (the one a deactivation set aside)
+        If SlotRef(SLOT_ACTIVE) <> 0 Then SlotRef(SLOT_PREVIOUS) = SlotRef(SLOT_ACTIVE)
+        SlotRef(SLOT_ACTIVE) = SlotRef(SLOT_STAGED)
+        SlotRef(SLOT_STAGED) = 0
+    ElseIf code = C_TABLE_DISCARD_PREVIOUS Then
+        SlotRef(SLOT_PREVIOUS) = 0
+    ElseIf code = C_TABLE_DEACTIVATE Then
+        If SlotRef(SLOT_ACTIVE) <> 0 Then
+            SlotRef(SLOT_PREVIOUS) = SlotRef(SLOT_ACTIVE)
+            SlotRef(SLOT_ACTIVE) = 0
+        EndIf
+    ElseIf code = C_TABLE_ROLLBACK Then
+        If SlotRef(SLOT_PREVIOUS) = 0 Then
+            SwitchTables = E_NO_PREVIOUS_TABLE
+            Exit Function
+        EndIf
+        t = SlotRef(SLOT_ACTIVE)
+        SlotRef(SLOT_ACTIVE) = SlotRef(SLOT_PREVIOUS)
+        SlotRef(SLOT_PREVIOUS) = t
+    EndIf
 Fend
 
 ' The interpolation rule of docs/protocols.md (CorrectionTableData.interpolate) on buffer b at
-' the target (x, y, z, yaw): dq(0..n_joints-1) in rad or mm. E_TARGET_OUTSIDE_TABLE when a
+' the target (x, y, z, yaw): Dq(0..n_joints-1) in rad or mm. E_TARGET_OUTSIDE_TABLE when a
 ' non-periodic axis with more than one node does not hold the coordinate (tolerance 1e-6 node).
-Function Interpolate(b As Integer, x As Double, y As Double, z As Double, yaw As Double, elbow As Long, ByRef dq() As Double) As Integer
+' The result goes to the global Dq() (no ByRef array parameter).
+Function Interpolate(b As Integer, x As Double, y As Double, z As Double, yaw As Double, elbow As Long) As Integer
     Integer nAxes, nJoints, nConfigs, cfg, k, j, corner, hiBit, periodic
     Long cnt(3), i0(3), i1(3), idx
     Double u, t(3), w, p(3), start, stp
-    p(0) = x: p(1) = y: p(2) = z: p(3) = yaw
+    p(0) = x
+    p(1) = y
+    p(2) = z
+    p(3) = yaw
     nAxes = THdr(b, H_TABLE_N_AXES)
     nJoints = THdr(b, H_TABLE_N_JOINTS)
     nConfigs = THdr(b, H_TABLE_N_CONFIGS)
@@ -856,7 +998,9 @@ Function Interpolate(b As Integer, x As Double, y As Double, z As Double, yaw As
             t(k) = u - i0(k)
             i1(k) = (i0(k) + 1) Mod cnt(k)
         ElseIf cnt(k) = 1 Then
-            i0(k) = 0: i1(k) = 0: t(k) = 0
+            i0(k) = 0
+            i1(k) = 0
+            t(k) = 0
         Else
             If Not (-0.000001 <= u And u <= cnt(k) - 1 + 0.000001) Then
                 Interpolate = E_TARGET_OUTSIDE_TABLE
@@ -871,7 +1015,7 @@ Function Interpolate(b As Integer, x As Double, y As Double, z As Double, yaw As
         EndIf
     Next
     For j = 0 To nJoints - 1
-        dq(j) = 0
+        Dq(j) = 0
     Next
     For corner = 0 To LShift(1, nAxes) - 1
         w = 1
@@ -889,7 +1033,7 @@ Function Interpolate(b As Integer, x As Double, y As Double, z As Double, yaw As
         Next
         If w <> 0 Then
             For j = 0 To nJoints - 1
-                dq(j) = dq(j) + w * (TBuf(b, idx * nJoints + j) * 0.00000001)
+                Dq(j) = Dq(j) + w * (TBuf(b, idx * nJoints + j) * 0.00000001)
             Next
         EndIf
     Next
@@ -915,7 +1059,9 @@ Function ServeTransfer
     Integer op, k, n, i, j, b, slot, nValues, first, count
     Integer err
     Double v
-    op = Regs(R_XFER_OP): k = Regs(R_PAGE_INDEX): n = Regs(R_PAGE_LEN)
+    op = Regs(R_XFER_OP)
+    k = Regs(R_PAGE_INDEX)
+    n = Regs(R_PAGE_LEN)
     err = E_NONE
     If op = X_WRITE_HEADER Or op = X_WRITE_PAGE Then
         If n > PAGE_DATA_REGISTERS Then
@@ -982,19 +1128,19 @@ Function ServeTransfer
         Next
         PageOut 24
     ElseIf op = X_READ_INFO And k = INFO_ACT_POSE Then
-        ' the controller's forward kinematics of the current position, tool TOOL_NO; a SCARA's
-        ' roll and pitch are 0
-        PutI32 R_PAGE_DATA, Counts(CX(Here), 1000000)
-        PutI32 R_PAGE_DATA + 2, Counts(CY(Here), 1000000)
-        PutI32 R_PAGE_DATA + 4, Counts(CZ(Here), 1000000)
+        ' the controller's pose of tool TOOL_NO as main last read it (this runs in a background
+        ' task, which executes no manipulator command); a SCARA's roll and pitch are 0
+        PutI32 R_PAGE_DATA, Counts(ActPose(0), 1000000)
+        PutI32 R_PAGE_DATA + 2, Counts(ActPose(1), 1000000)
+        PutI32 R_PAGE_DATA + 4, Counts(ActPose(2), 1000000)
         PutI32 R_PAGE_DATA + 6, 0
         PutI32 R_PAGE_DATA + 8, 0
-        PutI32 R_PAGE_DATA + 10, Counts(DegToRad(CU(Here)), 1000000)
+        PutI32 R_PAGE_DATA + 10, Counts(DegToRad(ActPose(3)), 1000000)
         PageOut 12
     ElseIf op >= X_READ_STAGED_HEADER And op <= X_READ_PREVIOUS_PAGE Then
         ' the table in a slot, regenerated as the PC sent it: staged 6/7, active 8/9, previous 10/11
         slot = Int((op - X_READ_STAGED_HEADER) / 2)
-        b = SlotBuf(slot)
+        b = SlotOf(slot)
         If b < 0 Then
             err = E_PAGE_INVALID
         ElseIf ((op - X_READ_STAGED_HEADER) Mod 2) = 0 Then
@@ -1028,7 +1174,10 @@ Function ServeTransfer
     Regs(R_XFER_ACK) = Regs(R_XFER_SEQ)
 Fend
 
-' ---------------- Modbus TCP server -----------------------------------------------------
+
+' ---------------- Modbus TCP server (a background task) ---------------------------------
+' ChkNet(port) without "#", as in [TCP-14.3]: the bytes waiting, or < 0 when the connection is
+' gone (-1 open but not connected, -2 another task uses the port, -3 not open).
 Function RecvBytes(n As Integer) As Boolean
     Integer i
     Long v
@@ -1039,6 +1188,7 @@ Function RecvBytes(n As Integer) As Boolean
     Loop
     ReadBin #NET_PORT, RxB(), n
     For i = 0 To n - 1
+        ' Byte is -128..127 [UG-TYPES]
         v = RxB(i)
         If v < 0 Then v = v + 256
         Rx(i) = v
@@ -1058,19 +1208,30 @@ Function SendBytes(n As Integer)
     WriteBin #NET_PORT, TxB(), n
 Fend
 
-' MBAP header (transaction id, protocol 0, length, unit id) + function code
+' MBAP header (transaction id, protocol 0, length, unit id) + the PDU already in Tx(7..)
 Function Reply(tid As Long, unit As Long, pduLen As Integer)
-    Tx(0) = RShift(tid, 8) And &HFF: Tx(1) = tid And &HFF
-    Tx(2) = 0: Tx(3) = 0
-    Tx(4) = RShift(pduLen + 1, 8) And &HFF: Tx(5) = (pduLen + 1) And &HFF
+    Tx(0) = RShift(tid, 8) And &HFF
+    Tx(1) = tid And &HFF
+    Tx(2) = 0
+    Tx(3) = 0
+    Tx(4) = RShift(pduLen + 1, 8) And &HFF
+    Tx(5) = (pduLen + 1) And &HFF
     Tx(6) = unit
     SendBytes 7 + pduLen
 Fend
 
-Function Exception(tid As Long, unit As Long, fc As Long, code As Integer)
+' a Modbus exception response (function code + 0x80, exception code)
+Function MbException(tid As Long, unit As Long, fc As Long, code As Integer)
     Tx(7) = fc Or &H80
     Tx(8) = code
     Reply tid, unit, 2
+Fend
+
+' offsets the PC may write: all but hb_robot .. order_check and ack_seq .. table_previous_crc
+Function PcMayWrite(off As Integer) As Boolean
+    PcMayWrite = True
+    If off >= R_HB_ROBOT And off <= R_ORDER_CHECK + 1 Then PcMayWrite = False
+    If off >= R_ACK_SEQ And off <= R_TABLE_PREVIOUS_CRC + 1 Then PcMayWrite = False
 Fend
 
 Function ModbusServer
@@ -1091,68 +1252,69 @@ Function ModbusServer
             addr = Rx(1) * 256 + Rx(2)
             cnt = Rx(3) * 256 + Rx(4)
             off = addr - BASE
-            Select fc
-                Case 3, 4
-                    If cnt < 1 Or cnt > 125 Then
-                        Exception tid, unit, fc, 3
-                    ElseIf off < 0 Or off + cnt > WINDOW_SIZE Then
-                        Exception tid, unit, fc, 2
+            If fc = 3 Or fc = 4 Then
+                If cnt < 1 Or cnt > 125 Then
+                    MbException tid, unit, fc, 3
+                ElseIf off < 0 Or off + cnt > WINDOW_SIZE Then
+                    MbException tid, unit, fc, 2
+                Else
+                    Tx(7) = fc
+                    Tx(8) = 2 * cnt
+                    For i = 0 To cnt - 1
+                        Tx(9 + 2 * i) = RShift(Regs(off + i), 8) And &HFF
+                        Tx(10 + 2 * i) = Regs(off + i) And &HFF
+                    Next
+                    Reply tid, unit, 2 + 2 * cnt
+                EndIf
+            ElseIf fc = 6 Then
+                ' the register's value is in the count field's bytes
+                val = cnt
+                If off < 0 Or off >= WINDOW_SIZE Then
+                    MbException tid, unit, fc, 2
+                ElseIf Not PcMayWrite(off) Then
+                    MbException tid, unit, fc, 2
+                Else
+                    Regs(off) = val
+                    AfterWrite off, 1
+                    For i = 0 To 4
+                        Tx(7 + i) = Rx(i)
+                    Next
+                    Reply tid, unit, 5
+                EndIf
+            ElseIf fc = 16 Then
+                If cnt < 1 Or cnt > 123 Or Rx(5) <> 2 * cnt Then
+                    MbException tid, unit, fc, 3
+                ElseIf off < 0 Or off + cnt > WINDOW_SIZE Then
+                    MbException tid, unit, fc, 2
+                Else
+                    bad = False
+                    For i = 0 To cnt - 1
+                        If Not PcMayWrite(off + i) Then bad = True
+                    Next
+                    If bad Then
+                        MbException tid, unit, fc, 2
                     Else
-                        Tx(7) = fc: Tx(8) = 2 * cnt
                         For i = 0 To cnt - 1
-                            Tx(9 + 2 * i) = RShift(Regs(off + i), 8) And &HFF
-                            Tx(10 + 2 * i) = Regs(off + i) And &HFF
+                            Regs(off + i) = Rx(6 + 2 * i) * 256 + Rx(7 + 2 * i)
                         Next
-                        Reply tid, unit, 2 + 2 * cnt
-                    EndIf
-                Case 6
-                    ' the register's value is in the count field's bytes
-                    val = cnt
-                    If off < 0 Or off >= WINDOW_SIZE Then
-                        Exception tid, unit, fc, 2
-                    ElseIf ReadOnly(off) Then
-                        Exception tid, unit, fc, 2
-                    Else
-                        Regs(off) = val
-                        AfterWrite off, 1
+                        AfterWrite off, cnt
                         For i = 0 To 4
                             Tx(7 + i) = Rx(i)
                         Next
                         Reply tid, unit, 5
                     EndIf
-                Case 16
-                    If cnt < 1 Or cnt > 123 Or Rx(5) <> 2 * cnt Then
-                        Exception tid, unit, fc, 3
-                    ElseIf off < 0 Or off + cnt > WINDOW_SIZE Then
-                        Exception tid, unit, fc, 2
-                    Else
-                        bad = False
-                        For i = 0 To cnt - 1
-                            If ReadOnly(off + i) Then bad = True
-                        Next
-                        If bad Then
-                            Exception tid, unit, fc, 2
-                        Else
-                            For i = 0 To cnt - 1
-                                Regs(off + i) = Rx(6 + 2 * i) * 256 + Rx(7 + 2 * i)
-                            Next
-                            AfterWrite off, cnt
-                            For i = 0 To 4
-                                Tx(7 + i) = Rx(i)
-                            Next
-                            Reply tid, unit, 5
-                        EndIf
-                    EndIf
-                Default
-                    Exception tid, unit, fc, 1
-            Send
+                EndIf
+            Else
+                MbException tid, unit, fc, 1
+            EndIf
         Loop
         CloseNet #NET_PORT
     Loop
 Fend
 
 ' what a PC write starts: the transfer request (xfer_seq changed) at once, and the command block
-' handed to CommandLoop when the write covered cmd_seq (the block is written in one request)
+' handed to main when the write covered cmd_seq (the block is written in one request). While
+' main does not run, the command is acknowledged and refused here.
 Function AfterWrite(off As Integer, cnt As Integer)
     Integer i
     If off <= R_XFER_SEQ And R_XFER_SEQ < off + cnt Then
@@ -1165,6 +1327,25 @@ Function AfterWrite(off As Integer, cnt As Integer)
         For i = 0 To 27
             CmdSnap(i) = Regs(R_CMD_CODE + i)
         Next
-        CmdWritten = True
+        If MainUp Then
+            CmdWritten = True
+        Else
+            RefuseWhileDown
+        EndIf
+    EndIf
+Fend
+
+' main (the motion side) does not run: acknowledge, keep the sequence rule, refuse NOT_READY
+Function RefuseWhileDown
+    Long seq, expected
+    seq = CmdSnap(R_CMD_SEQ - R_CMD_CODE)
+    If seq = LastSeq Then Exit Function
+    expected = LastSeq Mod 65535 + 1
+    LastSeq = seq
+    Regs(R_ACK_SEQ) = seq
+    If seq <> expected Then
+        Refuse seq, E_SEQUENCE_ERROR, 0, 0
+    Else
+        Refuse seq, E_NOT_READY, 0, 0
     EndIf
 Fend

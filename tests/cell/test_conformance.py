@@ -289,7 +289,8 @@ def test_robot_program_document_lists_every_register_and_code():
 
 def test_a_six_axis_cell_needs_no_table_on_its_controller():
     """An articulated arm gets compensated targets and no table (robot-programs/ur holds none): the
-    table requirements are not checked, with the reason, and every other one passes."""
+    table requirements are not applicable, with the reason, and every other one passes: exit 0
+    (issue 28)."""
     from simulators.six_axis_cell import six_axis_config_text, start_six_axis_cell
 
     with start_six_axis_cell(seed=1) as srv:
@@ -299,8 +300,32 @@ def test_a_six_axis_cell_needs_no_table_on_its_controller():
         assert srv.controller_server.active_table is None  # the kit sent no table
     by_id = {r.id: r for r in report.requirements}
     for rid in cf._TABLE_REQUIREMENTS:
-        assert by_id[rid].status == cf.NOT_CHECKED and "compensated targets" in " ".join(by_id[rid].detail)
+        assert by_id[rid].status == cf.NOT_APPLICABLE and "compensated targets" in " ".join(by_id[rid].detail)
     # the handshake is checked as on a SCARA (the soft-limit refusal needs a joint parked at a limit)
     assert not [r for r in report.requirements if r.status == cf.FAILED], "\n".join(report.describe())
     for rid in ("identification", "word_order", "heartbeat", "ack", "done", "sequence", "error_codes"):
         assert by_id[rid].status == cf.PASSED, rid
+    # the only requirement left is the soft-limit refusal (no joint parked at a limit): not checked
+    assert by_id["soft_limit"].status == cf.NOT_CHECKED and report.outcome.value == 7
+    assert "7 of 8 requirements passed (7 not applicable to this cell)" in "\n".join(report.describe())
+
+
+def test_the_kits_own_safety_refusal_is_a_failed_requirement_not_an_abort(monkeypatch):
+    """When the kit's motion guard refuses a target (the robot is not where the program was sent),
+    the requirement being checked fails with the guard's words and what to fix, no further motion
+    is commanded, and the exit code is the documented 7 - never 4 (issue 28)."""
+    from station.cell.conformance import checks
+    from station.errors import UnreachableError
+
+    def refused(self):
+        raise UnreachableError("conformance test move back (park zone): joint 2 = 0.4 is outside the soft limits "
+                               "[0.5, 0.6]; the motion was not commanded")
+
+    monkeypatch.setattr(checks._HandshakeChecks, "test_move", refused)
+    with SimulatedController(time_scale=1.0) as sim:
+        report = cf.run_conformance(parse_text(config_text(sim.port)))
+    done, soft = report.requirement("done"), report.requirement("soft_limit")
+    assert done.status == cf.FAILED and "joint 2 = 0.4" in " ".join(done.detail)
+    assert any("park_joints" in f for f in done.fix)
+    assert soft.status == cf.NOT_CHECKED and "no further motion" in " ".join(soft.detail)
+    assert int(report.outcome) == 7

@@ -171,12 +171,38 @@ class _HandshakeChecks(_KitBase):
             return
         self.may_move = True
 
+    def moved(self, r, q0: np.ndarray, what: str) -> bool:
+        """Fail ``r`` if the robot moved from ``q0`` (beyond the position tolerance), naming the
+        joint and the distance, and stop commanding motions: the program moves where it was not
+        sent. True when it moved."""
+        q1 = self._joints()
+        d = np.abs(q1 - q0)
+        if not np.any(d > self.conf.position_tolerance_joint):
+            return False
+        j = int(np.argmax(d))
+        r.failed(f"{what} moved the robot: joint {j + 1} by {d[j]:.6g} (rad | mm), from {q0[j]:.6g} to {q1[j]:.6g}",
+                 "a refused command, and a move to the joints the robot stands at, must not move it: decode cmd_joints "
+                 "as the map's scaled signed i32 in the link's word order (a UR's read_port_register returns the "
+                 "signed value -32768 .. 32767, docs/robot-program.md); jog the robot back to "
+                 "[conformance].park_joints before the next run")
+        self.stop_moving(f"joint {j + 1} moved by {d[j]:.6g} on a command that must not move it")
+        return True
+
+    def stop_moving(self, why: str) -> None:
+        """Command no further motion (the robot is not where the program reported it)."""
+        if self.may_move:
+            self.notes.append(f"the kit commanded no further motion: {why}; the robot may have left the park zone")
+        self.may_move = False
+        self.why_not_move = f"{why}: the kit commanded no further motion: jog the robot back to [conformance].park_joints"
+
     def sequence(self) -> None:
         r = self.req["sequence"]
         q = self._joints()
         wrong = _next(_next(self.link.last_seq))
         a = self._command(Command.MOVE_JOINTS, seq=wrong, target=q, speed=self.conf.move_speed,
                           what="sequence check (no motion)")
+        if self.moved(r, q, f"MOVE_JOINTS seq {wrong} with a skipped number (refused: nothing may move)"):
+            return
         fix = ("when cmd_seq changes, acknowledge it, then refuse it with SEQUENCE_ERROR unless it is the "
                "previous number + 1 (65535 wraps to 1); take the refused number as the previous one")
         if a.error_is(ErrorCode.SEQUENCE_ERROR):
@@ -186,6 +212,8 @@ class _HandshakeChecks(_KitBase):
         right = _next(wrong)
         b = self._command(Command.MOVE_JOINTS, seq=right, target=q, speed=self.conf.move_speed,
                           what="sequence check (no motion)")
+        if self.moved(r, q, f"MOVE_JOINTS seq {right} to the joints the robot stands at"):
+            return
         if b.result == "done":
             r.passed(f"seq {right} (the next one) accepted")
         else:

@@ -12,10 +12,13 @@ from typing import Any
 
 from station.errors import Outcome
 
-__all__ = ["REQUIREMENTS", "Requirement", "ConformanceReport", "PASSED", "FAILED", "NOT_CHECKED"]
+__all__ = ["REQUIREMENTS", "Requirement", "ConformanceReport", "PASSED", "FAILED", "NOT_CHECKED", "NOT_APPLICABLE"]
 
 
 PASSED, FAILED, NOT_CHECKED = "passed", "failed", "not checked"
+#: a requirement this cell does not ask of its program (the table requirements on a cell whose
+#: station uploads no table): it neither passes nor fails, and does not stop the kit's exit 0
+NOT_APPLICABLE = "not applicable"
 
 #: The requirements, in report order: (id, what the robot program must do).
 REQUIREMENTS: tuple[tuple[str, str], ...] = (
@@ -25,7 +28,8 @@ REQUIREMENTS: tuple[tuple[str, str], ...] = (
     ("heartbeat", "heartbeat both ways: hb_robot advances every period, hb_pc is taken from the PC"),
     ("ack", "every command is acknowledged with its sequence number in ack_seq"),
     ("done", "done_seq is set to the command's number only after the motion has arrived"),
-    ("sequence", "a wrong sequence number is refused with SEQUENCE_ERROR, the next right one accepted"),
+    ("sequence", "a wrong sequence number is refused with SEQUENCE_ERROR, the next right one accepted; neither "
+                 "moves the robot"),
     ("soft_limit", "an out-of-limits target is refused with SOFT_LIMIT, error_joint and error_bound; "
                    "the robot does not move"),
     ("error_codes", "the documented error codes: BAD_COMMAND for an unknown command and a bad speed, "
@@ -75,6 +79,11 @@ class Requirement:
         if fix and fix not in self.fix:
             self.fix.append(fix)
 
+    def not_applicable(self, why: str) -> None:
+        if self.status != FAILED:
+            self.status = NOT_APPLICABLE
+        self.detail.append(f"not applicable: {why}")
+
     def to_json(self) -> dict[str, Any]:
         return {"id": self.id, "requirement": self.title, "status": self.status, "detail": list(self.detail),
                 "fix": list(self.fix)}
@@ -90,12 +99,13 @@ class ConformanceReport:
 
     @property
     def passed(self) -> bool:
-        return all(r.status == PASSED for r in self.requirements)
+        """Every requirement passed, or does not apply to this cell."""
+        return all(r.status in (PASSED, NOT_APPLICABLE) for r in self.requirements)
 
     @property
     def outcome(self) -> Outcome:
-        """SUCCESS when every requirement passed; DEVICE_FAULT otherwise (the controller's
-        program does not conform, or a requirement could not be checked)."""
+        """SUCCESS when every requirement that applies passed; DEVICE_FAULT otherwise (the
+        controller's program does not conform, or a requirement could not be checked)."""
         return Outcome.SUCCESS if self.passed else Outcome.DEVICE_FAULT
 
     def requirement(self, rid: str) -> Requirement:
@@ -110,13 +120,16 @@ class ConformanceReport:
     def describe(self) -> list[str]:
         lines = [f"conformance of the robot program at {self.controller}:"]
         for r in self.requirements:
-            mark = {PASSED: "passed", FAILED: "FAILED", NOT_CHECKED: "NOT CHECKED"}[r.status]
+            mark = {PASSED: "passed", FAILED: "FAILED", NOT_CHECKED: "NOT CHECKED",
+                    NOT_APPLICABLE: "not applicable"}[r.status]
             lines.append(f"  [{mark}] {r.id}: {r.title}")
             lines += [f"      {d}" for d in r.detail]
-            if r.status != PASSED:
+            if r.status not in (PASSED, NOT_APPLICABLE):
                 lines += [f"      what to fix: {f}" for f in r.fix]
         lines += [f"  note: {n}" for n in self.notes]
         n_ok = sum(r.status == PASSED for r in self.requirements)
-        lines.append(f"{n_ok} of {len(self.requirements)} requirements passed"
+        n_na = sum(r.status == NOT_APPLICABLE for r in self.requirements)
+        lines.append(f"{n_ok} of {len(self.requirements) - n_na} requirements passed"
+                     + (f" ({n_na} not applicable to this cell)" if n_na else "")
                      + ("" if self.passed else "; see docs/robot-program.md"))
         return lines

@@ -35,6 +35,7 @@ from station.cell.conformance.checks import _HandshakeChecks
 from station.cell.conformance.kit import _Link
 from station.cell.conformance.report import (
     FAILED,
+    NOT_APPLICABLE,
     NOT_CHECKED,
     PASSED,
     REQUIREMENTS,
@@ -43,7 +44,7 @@ from station.cell.conformance.report import (
 )
 from station.cell.conformance.slots import _SlotKeeper
 from station.cell.conformance.table import _TableChecks
-from station.errors import ConfigError
+from station.errors import ConfigError, UnreachableError
 
 # The requirements and the report live in conformance_report, the link in conformance_kit; they
 # stay importable from here.
@@ -52,7 +53,14 @@ from station.errors import ConfigError
 _TABLE_REQUIREMENTS = ("table", "pages", "slot_reads", "activation", "discard_previous", "keep_previous",
                        "slots_restored")
 
-__all__ = ["REQUIREMENTS", "Requirement", "ConformanceReport", "run_conformance", "PASSED", "FAILED", "NOT_CHECKED"]
+__all__ = ["REQUIREMENTS", "Requirement", "ConformanceReport", "run_conformance", "PASSED", "FAILED", "NOT_CHECKED",
+           "NOT_APPLICABLE"]
+
+#: what to do when the kit's own motion guard refuses a target (the robot left the park zone)
+_GUARD_FIX = ("the robot is not where the kit sent it: a program that decodes the command registers wrongly "
+              "(signed 16-bit words read as unsigned, the word order) moves where it was not sent - decode cmd_joints "
+              "as the map's scaled signed i32 (docs/robot-program.md); jog the robot back to [conformance].park_joints "
+              "and run the kit again")
 
 
 class _Kit(_HandshakeChecks, _TableChecks, _SlotKeeper):
@@ -66,6 +74,9 @@ class _Kit(_HandshakeChecks, _TableChecks, _SlotKeeper):
             fn()
         except ControllerConnectionError:
             raise
+        except UnreachableError as exc:  # the kit's own safety refusal: a failed requirement, no abort
+            self.stop_moving(f"the kit's motion guard refused a target ({exc})")
+            self.req[rid].failed(f"the kit refused to command a motion: {exc}", _GUARD_FIX)
         except ControllerError as exc:
             self.req[rid].failed(f"{type(exc).__name__}: {exc}",
                                  "serve every register of the map (docs/robot-program.md) as documented")
@@ -77,17 +88,16 @@ class _Kit(_HandshakeChecks, _TableChecks, _SlotKeeper):
 
     def _checks(self) -> None:
         self.prepare_motion()
-        if self.may_move:
-            self.emit("sequence numbers")
-            self._step("sequence", self.sequence)
-            self.emit("test move (ack and done)")
-            self._step("done", self.test_move)
-            self._step("done", self.judge_done)
-            self.emit("soft-limit refusal")
-            self._step("soft_limit", self.soft_limit)
-        else:
-            for rid in ("sequence", "done", "soft_limit"):
-                self.req[rid].not_checked(self.why_not_move, self.why_not_move.rpartition(": ")[2])
+        steps = (("sequence", "sequence numbers", self.sequence), ("done", "test move (ack and done)", self.test_move),
+                 ("done", "", self.judge_done), ("soft_limit", "soft-limit refusal", self.soft_limit))
+        for rid, title, fn in steps:
+            if not self.may_move:  # never moved, or stopped moving: the robot went where it was not sent
+                if self.req[rid].status == NOT_CHECKED and not any(d.startswith("not checked") for d in self.req[rid].detail):
+                    self.req[rid].not_checked(self.why_not_move, self.why_not_move.rpartition(": ")[2])
+                continue
+            if title:
+                self.emit(title)
+            self._step(rid, fn)
         self.emit("error codes")
         self._step("error_codes", self.error_codes)
         if not self.uses_table:
@@ -118,9 +128,8 @@ class _Kit(_HandshakeChecks, _TableChecks, _SlotKeeper):
         self._step("heartbeat", self.heartbeat)
         if not self.uses_table:  # compensated targets: the program holds no table (robot-programs/ur)
             for rid in _TABLE_REQUIREMENTS:
-                self.req[rid].not_checked("this cell's robot is not a SCARA: the station sends compensated targets "
-                                          "and uploads no correction table", "nothing: the robot program need "
-                                          "hold no table")
+                self.req[rid].not_applicable("this cell's robot is not a SCARA: the station sends compensated "
+                                             "targets and uploads no correction table, so the program need hold none")
             self._checks()
         else:
             self.emit("table slots as found")  # before the first command: nothing has changed them yet
