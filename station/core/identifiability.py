@@ -108,34 +108,39 @@ def _rank(Js: np.ndarray) -> tuple[int, np.ndarray]:
     return int(np.sum(s > RANK_RTOL * s[0])) if s[0] > 0 else 0, s
 
 
-def analyze(model: RobotModel, data: MeasurementSet, params=None, prefer=(), fix=(), exclude=(),
-            describe: bool = True) -> Identifiability:
-    """Identifiability of ``model``'s parameters from ``data`` at ``params`` (default nominal).
+def _greedy(J: np.ndarray, norms: np.ndarray, order: list[int], rank: int) -> list[int]:
+    """The columns of ``J`` taken in ``order`` when each is taken whose unit column has a part
+    outside the span of those taken before it above ``GS_RTOL``, up to ``rank`` of them: the
+    incremental, twice re-orthogonalised Gram-Schmidt choice.
 
-    ``describe=False`` skips naming the dependencies (a least-squares fit per parameter left
-    out), which identification does not need.
-    """
-    names = model.param_names
-    for n in (*prefer, *fix, *exclude):
-        model.param_index(n)
-    J = weighted_jacobian(model, data, params)
-    # Everything below depends only on inner products of columns, which the triangular factor
-    # R of J = QR keeps: work on the (P, P) factor instead of the (rows, P) Jacobian.
-    if J.shape[0] > J.shape[1]:
-        J = np.linalg.qr(J, mode="r")  # type: ignore[assignment]  # numpy stubs: mode="r" returns R alone, not QRResult
-    norms = np.linalg.norm(J, axis=0)
-    zero = norms <= ZERO_COLUMN_RTOL * norms.max()
-    held = set(fix) | set(exclude)
-    cand = [i for i in range(len(names)) if not zero[i] and names[i] not in held]
-    Js = J[:, cand] / norms[cand]
-    rank, s = _rank(Js)
-    # Preference order: user's list first, then column-pivoted QR order (strongest first).
-    _, _, piv = scipy.linalg.qr(Js, mode="economic", pivoting=True)
-    qr_order = [cand[k] for k in piv]
-    pref = [model.param_index(n) for n in prefer if model.param_index(n) in cand]
-    order = pref + [i for i in qr_order if i not in pref]
-    # Greedy selection by incremental (twice re-orthogonalised) Gram-Schmidt: a candidate is
-    # taken when the part of its unit column outside the span of those taken is not round-off.
+    Fast path: one Householder QR of the unit columns in that order gives every column's distance
+    from the span of *all* columns before it, taken or not. A column taken by that (distance above
+    the limit) is taken by Gram-Schmidt too, whose span is a part of that one; a column left out
+    is checked against the span of those taken before it, as Gram-Schmidt measures it. Where every
+    check agrees, the choice is Gram-Schmidt's; otherwise Gram-Schmidt itself decides."""
+    if order and J.shape[0] >= len(order):
+        V = J[:, order] / norms[order]
+        d = np.abs(np.diagonal(np.linalg.qr(V, mode="r"))).tolist()
+        taken: list[int] = []  # positions in order
+        left: list[tuple[int, int]] = []  # (position, number taken before it)
+        for k, dk in enumerate(d):
+            if dk > GS_RTOL:
+                taken.append(k)
+            else:
+                left.append((k, len(taken)))
+            if len(taken) == rank:
+                break
+        if not left:
+            return [order[k] for k in taken]
+        if taken:
+            Q = np.linalg.qr(V[:, taken])[0]
+            W = V[:, [k for k, _ in left]]
+            before = np.array([j for _, j in left])
+            mask = np.arange(len(taken))[:, None] < before[None, :]  # the basis vectors before each
+            for _ in range(2):
+                W = W - Q @ ((Q.T @ W) * mask)
+            if np.all(np.linalg.norm(W, axis=0) <= GS_RTOL):
+                return [order[k] for k in taken]
     chosen: list[int] = []
     basis = np.zeros((J.shape[0], 0))
     for i in order:
@@ -148,24 +153,66 @@ def analyze(model: RobotModel, data: MeasurementSet, params=None, prefer=(), fix
             basis = np.column_stack([basis, v / nv])
         if len(chosen) == rank:
             break
-    chosen.sort()
-    Jc = J[:, chosen] / norms[chosen]
+    return chosen
+
+
+def analyze(model: RobotModel, data: MeasurementSet, params=None, prefer=(), fix=(), exclude=(),
+            describe: bool = True, jacobian: np.ndarray | None = None) -> Identifiability:
+    """Identifiability of ``model``'s parameters from ``data`` at ``params`` (default nominal).
+
+    ``describe=False`` skips naming the dependencies (a least-squares fit per parameter left
+    out), which identification does not need. ``jacobian``: :func:`weighted_jacobian` at
+    ``params`` when the caller already has it.
+    """
+    names = model.param_names
+    for n in (*prefer, *fix, *exclude):
+        model.param_index(n)
+    J = weighted_jacobian(model, data, params) if jacobian is None else jacobian
+    # Everything below depends only on inner products of columns, which the triangular factor
+    # R of J = QR keeps: work on the (P, P) factor instead of the (rows, P) Jacobian.
+    if J.shape[0] > J.shape[1]:
+        J = np.linalg.qr(J, mode="r")  # type: ignore[assignment]  # numpy stubs: mode="r" returns R alone, not QRResult
+    norms = np.linalg.norm(J, axis=0)
+    zero = norms <= ZERO_COLUMN_RTOL * norms.max()
+    held = set(fix) | set(exclude)
+    cand = [i for i in range(len(names)) if not zero[i] and names[i] not in held]
+    Js = J[:, cand] / norms[cand]
+    rank, s = _rank(Js)
+    # Preference order: user's list first, then column-pivoted QR order (strongest first).
+    _, piv = scipy.linalg.qr(Js, mode="r", pivoting=True, check_finite=False)  # the order only
+    index = {n: i for i, n in enumerate(names)}
+    in_cand = set(cand)
+    pref = [index[n] for n in prefer if index[n] in in_cand]
+    taken = set(pref)
+    order = pref + [cand[k] for k in piv if cand[k] not in taken]
+    chosen = sorted(_greedy(J, norms, order, rank))
+    nc = norms[chosen]
+    Jc = J[:, chosen] / nc
     sc = np.linalg.svd(Jc, compute_uv=False)
     deps = []
+    chosen_set = set(chosen)
+    left = [i for i in range(len(names)) if describe and i not in chosen_set and not zero[i]]
+    fits: dict[int, tuple[float, list[float], list[bool]]] = {}
+    if left:
+        # Solve on unit columns (mm and rad comparable), all left-out columns at once; report
+        # in physical units (column l: cs · norms[i] / norms[chosen], term k kept where |cs_k| > 1e-6).
+        B = J[:, left] / norms[left]
+        CS = np.linalg.lstsq(Jc, B, rcond=None)[0]
+        resid = np.linalg.norm(Jc @ CS - B, axis=0).tolist()
+        coef = (CS * norms[left] / nc[:, None]).T.tolist()
+        keep = (np.abs(CS) > 1e-6).T.tolist()
+        fits = {i: (resid[k], coef[k], keep[k]) for k, i in enumerate(left)}
+    chosen_names = [names[c] for c in chosen]
     for i in range(len(names) if describe else 0):
-        if i in chosen:
+        if i in chosen_set:
             continue
         if zero[i]:
             deps.append(Dependency(names[i], ()))
             continue
-        # Solve on unit columns (mm and rad comparable), report in physical units.
-        cs, *_ = np.linalg.lstsq(Jc, J[:, i] / norms[i], rcond=None)
-        resid = np.linalg.norm(Jc @ cs - J[:, i] / norms[i])
-        if resid > 1e-6:
+        res_i, coef_i, keep_i = fits[i]
+        if res_i > 1e-6:
             continue  # held by the user but not a combination: identifiable, just not chosen
-        coef = cs * norms[i] / norms[chosen]
-        terms = tuple((names[c], float(v)) for c, v, w in zip(chosen, coef, cs) if abs(w) > 1e-6)
-        deps.append(Dependency(names[i], terms))
+        deps.append(Dependency(names[i], tuple((n, c) for n, c, k in zip(chosen_names, coef_i, keep_i) if k)))
     cond = float(s[0] / s[rank - 1]) if rank else float("inf")
     return Identifiability(
         param_names=names,

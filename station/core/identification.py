@@ -10,9 +10,13 @@ data are aligned to the nominal model by a similarity fit (a scale far from 1 is
 refused with the likely unit) and a rigid fit, which starts the set-up R wherever the instrument
 stands (turned, flipped, metres away); the rank and condition are taken at the data.
 
-Solved by Levenberg–Marquardt (scipy ``least_squares``, MINPACK) on the minimal set chosen by
-:mod:`station.core.identifiability`, with the analytic Jacobian. Everything reported is recomputed at
-the returned parameters (MINPACK does not always evaluate last at its result). The parameter
+Solved by Levenberg–Marquardt (MINPACK's ``lmder``, exactly as scipy ``least_squares(method="lm")``
+calls it) on the minimal set chosen by :mod:`station.core.identifiability`, with the analytic
+Jacobian. The residuals and Jacobian come from :mod:`station.core.fit_kernel` (the joints' motions
+computed once, one chain per evaluation, the Jacobian at a point built from the frames its residuals
+left; the same arithmetic as :func:`~station.core.measurements.residuals_and_jacobian`, bit for
+bit), and the fit runs with one BLAS thread (:mod:`station.core.blas_threads`). Everything reported
+is taken at the returned parameters (MINPACK does not always evaluate last at its result). The parameter
 covariance is the linear propagation of the measurement covariance: diag(σ²) for pose and
 position rows, and for distances the covariance built from the measured points, whose shared
 points correlate the distances (:func:`station.core.uncertainty.distance_sandwich`).
@@ -35,10 +39,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
+from station.core.blas_threads import single_blas_thread
 from station.core.distance_pairs import coincident_pairs, shares_points
+from station.core.fit_kernel import DataEvaluator, FitProblem, minpack_lm
 from station.core.identifiability import Identifiability, analyze, structural_params
 from station.core.kinematics import forward
-from station.core.measurements import MeasurementSet, residuals_and_jacobian
+from station.core.measurements import MeasurementSet
 from station.core.model import RobotModel
 from station.core.registration import DataInformation, Registration, data_information, likely_unit, register
 from station.core.transforms import pose_to_matrix
@@ -135,9 +141,20 @@ def body_note(data: MeasurementSet) -> str:
             f"(weights and σ; measurements of one point share its error)")
 
 
+def _median(x: np.ndarray) -> float:
+    """``np.median`` of all of ``x`` (the middle value, or the mean of the two middle values), by
+    one sort: the same number without np.median's layers (a NaN anywhere: np.median's NaN)."""
+    v = np.sort(x, axis=None)
+    n = v.size
+    if n == 0 or np.isnan(v[-1]):
+        return float(np.median(x))
+    h = n // 2
+    return float(v[h]) if n % 2 else float((v[h - 1] + v[h]) / 2.0)
+
+
 def _position_sigma(data: MeasurementSet) -> float:
     s = data.sigma.reshape(data.n_items, data.rows_per_item)
-    return float(np.median(s[:, :3]))
+    return float(_median(s[:, :3]))
 
 
 _DESIGN_RANKS: dict[tuple, int] = {}
@@ -183,6 +200,14 @@ def identify(model: RobotModel, data: MeasurementSet, start=None, prefer=None, f
     rows, too few configurations) and :class:`IdentificationError` on a registration residual
     far above an uncalibrated robot's, rank deficiency or divergence.
     """
+    with single_blas_thread():  # tall, narrow factorisations: one thread is faster (blas_threads)
+        return _identify(model, data, start, prefer, fix, exclude, chosen, max_nfev, max_rms_normalized,
+                         register_frame, tool_unknown, loss)
+
+
+def _identify(model: RobotModel, data: MeasurementSet, start, prefer, fix, exclude, chosen, max_nfev: int,
+              max_rms_normalized: float, register_frame: bool, tool_unknown: bool,
+              loss: str) -> IdentificationResult:
     p0 = np.array(model.nominal if start is None else start, dtype=float)
     if p0.shape != (model.n_params,) or not np.all(np.isfinite(p0)):
         raise IdentificationError("start parameters must be a finite vector of the model's size")
@@ -232,15 +257,18 @@ def identify(model: RobotModel, data: MeasurementSet, start=None, prefer=None, f
                 p0[:6] = reg.setup_pose
                 notes.append(f"set-up R started from the registration (the robot file's R is turned "
                              f"{np.degrees(angle):.0f}° from the instrument's frame)")
-    ident = analyze(model, data, structural_params(model, p0), prefer=model.prefer if prefer is None else prefer,
-                    fix=fix, exclude=exclude, describe=True)
+    evaluator = DataEvaluator(model, data)  # one chain for the analysis, the fit and its result
+    p_struct = structural_params(model, p0)
+    ident = analyze(model, data, p_struct, prefer=model.prefer if prefer is None else prefer,
+                    fix=fix, exclude=exclude, describe=True,
+                    jacobian=evaluator.residuals_and_jacobian(p_struct)[1] / data.sigma[:, None])
     d_rank = design_rank(model, data.kind)
     if ident.rank < d_rank and not (fix or exclude or chosen is not None):
         notes.append(f"the data determine {ident.rank} of the {d_rank} parameters that a workspace-wide "
                      f"design determines (e.g. poses in one plane); the rest merge as listed")
     if chosen is not None:
         idx = np.array(model.param_indices(chosen), dtype=int)
-        J = residuals_and_jacobian(model, data, p0)[1][:, idx] / data.sigma[:, None]
+        J = evaluator.residuals_and_jacobian(p0)[1][:, idx] / data.sigma[:, None]
         Js = J / np.maximum(np.linalg.norm(J, axis=0), 1e-300)
         s = np.linalg.svd(Js, compute_uv=False)
         if s[-1] <= 1e-9 * s[0]:
@@ -260,28 +288,14 @@ def identify(model: RobotModel, data: MeasurementSet, start=None, prefer=None, f
     # measuring point's CMM uncertainty adds to it); exactly data.sigma without body σ
     w = 1.0 / data.fit_sigma(pair_units(model, data, p0) if data.has_body_sigma else None)
 
-    def full(x):
-        p = p0.copy()
-        p[idx] = x
-        return p
-
-    def fun(x):
-        r, _ = residuals_and_jacobian(model, data, full(x), with_jacobian=False)
-        return r * w
-
-    def jac(x):
-        _, J = residuals_and_jacobian(model, data, full(x))
-        return J[:, idx] * w[:, None]
-
+    prob = FitProblem(evaluator, p0, idx, w)
     if loss == "huber":  # MINPACK's LM knows only plain least squares
-        sol = least_squares(fun, p0[idx], jac=jac, method="trf", x_scale="jac", max_nfev=max_nfev,
+        sol = least_squares(prob.fun, p0[idx], jac=prob.jac, method="trf", x_scale="jac", max_nfev=max_nfev,
                             loss="huber", f_scale=HUBER_SCALE, xtol=1e-15, ftol=1e-15, gtol=1e-15)
-    else:
-        method = "lm" if n_rows >= len(idx) else "trf"
-        sol = least_squares(fun, p0[idx], jac=jac, method=method, x_scale="jac", max_nfev=max_nfev,
-                            xtol=1e-15, ftol=1e-15, gtol=1e-15)
-    p = full(sol.x)
-    r, J = residuals_and_jacobian(model, data, p)  # recomputed at the result, on purpose
+    else:  # n_rows >= len(idx) here: Levenberg–Marquardt
+        sol = minpack_lm(prob, p0[idx], max_nfev)
+    p = prob.full(sol.x)
+    r, J = evaluator.residuals_and_jacobian(p)  # at the result (MINPACK may not have evaluated last there)
     Jw = J[:, idx] * w[:, None]
     downweighted: tuple[tuple[int, float], ...] = ()
     if loss == "huber":
@@ -292,7 +306,7 @@ def identify(model: RobotModel, data: MeasurementSet, start=None, prefer=None, f
         downweighted = tuple((int(i), float(item_w[i])) for i in np.argsort(item_w) if item_w[i] < 1.0)
         notes.append(f"robust loss huber (corner {HUBER_SCALE:g} σ): {len(downweighted)} of {data.n_items} "
                      f"measurements down-weighted")
-    names = tuple(model.param_names[i] for i in idx)
+    names = tuple(model.param_names[i] for i in idx.tolist())
     if data.kind == "distance":
         pts = forward(model, data.joints, p, setup=False)[:, :3, 3]
         pr = data.distance_pairs()
@@ -325,14 +339,14 @@ def identify(model: RobotModel, data: MeasurementSet, start=None, prefer=None, f
             f"rank deficient at the solution ({unc.rank} of {len(idx)} parameters determined); "
             f"spread the poses over the workspace or identify fewer parameters"
         )
-    med = np.median(per_item)
-    mad = 1.4826 * np.median(np.abs(per_item - med)) or 1.0
+    med = _median(per_item)
+    mad = 1.4826 * _median(np.abs(per_item - med)) or 1.0
     outliers = tuple(int(i) for i in np.nonzero((per_item - med) / mad > OUTLIER_SIGMAS)[0]
                      if per_item[i] > 3.0)
     converged = bool(sol.status > 0)
     return IdentificationResult(
         model=model, kind=data.kind, params=p, start=p0,
-        chosen=tuple(model.param_names[i] for i in idx), chosen_index=idx,
+        chosen=names, chosen_index=idx,
         residuals=r.reshape(data.n_items, data.rows_per_item), normalized=per_item,
         rms_normalized=rms, outliers=outliers, iterations=int(sol.nfev), converged=converged,
         message=str(sol.message), identifiability=ident, uncertainty=unc,

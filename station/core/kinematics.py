@@ -80,8 +80,9 @@ def _chain(model: RobotModel, joints, params, setup: bool, keep_frames: bool):
     T = np.broadcast_to(np.eye(4), batch + (n, 4, 4))
     pres, consts = [], []
     j = 0
+    Cs = pose_to_matrix(p.reshape(p.shape[:-1] + (len(model.transforms), 6)))  # (..., nt, 4, 4) at once
     for t, spec in enumerate(model.transforms):
-        C = pose_to_matrix(p[..., 6 * t: 6 * t + 6])[..., None, :, :]  # (..., 1, 4, 4)
+        C = Cs[..., t, None, :, :]  # (..., 1, 4, 4)
         if keep_frames:
             pres.append(T)
             consts.append(C)

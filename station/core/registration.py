@@ -100,7 +100,8 @@ def likely_unit(scale: float) -> tuple[str, str] | None:
 
 
 def _similarity(b: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
-    """Rotation (3, 3), scale and translation (3,) with ``m ≈ s R b + t`` (least squares)."""
+    """Rotation (3, 3), scale and translation (3,) with ``m ≈ s R b + t`` (least squares). The
+    rotation is also the rigid fit's (the same centred points): ``m ≈ R b + mc − R bc``."""
     bc, mc = b.mean(axis=0), m.mean(axis=0)
     B, M = b - bc, m - mc
     rot, _ = Rotation.align_vectors(M, B)
@@ -192,15 +193,14 @@ def register(model: RobotModel, joints: np.ndarray, measured_mm: np.ndarray, sig
                 f"the joint order and units of the data file and that the robot file is this robot")
         p[-6:-3] = marker.offset_mm
         b = forward(model, q, p, setup=False)[:, :3, 3]
-    _, s, _ = _similarity(b, m)
+    R_sim, s, _ = _similarity(b, m)
     # Rigid fit: the start of the set-up transform, and the residual check.
     if marker is not None:
         T = marker.transform
     else:
         bc, mc = b.mean(0), m.mean(0)
-        rot, _ = Rotation.align_vectors(m - mc, b - bc)
         T = np.eye(4)
-        T[:3, :3] = rot.as_matrix()
+        T[:3, :3] = R_sim  # Rotation.align_vectors(m - mc, b - bc): the similarity fit's rotation
         T[:3, 3] = mc - T[:3, :3] @ bc
     res = np.linalg.norm(m - (b @ T[:3, :3].T + T[:3, 3]), axis=1)
     rms = float(np.sqrt(np.mean(res**2)))
@@ -260,6 +260,24 @@ class DataInformation:
                 "point_spread_mm": self.point_spread_mm}
 
 
+def _first_equal_row(a: np.ndarray) -> np.ndarray:
+    """``(n,)`` for every row of ``a`` ``(n, k)`` the index of the first row equal to it (itself
+    when none before it is): ``np.unique(a, axis=0, return_index=True, return_inverse=True)``'s
+    ``first[inverse]``, by one stable lexicographic sort."""
+    n = a.shape[0]
+    if n == 0:
+        return np.zeros(0, dtype=int)
+    order = np.lexsort(a.T[::-1])
+    s = a[order]
+    start = np.empty(n, dtype=bool)
+    start[0] = True
+    np.any(s[1:] != s[:-1], axis=1, out=start[1:])
+    group_first = order[np.flatnonzero(start)]  # stable sort: the smallest index of each group
+    first = np.empty(n, dtype=int)
+    first[order] = group_first[np.cumsum(start) - 1]
+    return first
+
+
 def data_information(model: RobotModel, joints: np.ndarray, measured: np.ndarray | None = None,
                      rows_per_item: int = 3) -> DataInformation:
     """Count distinct joint configurations and duplicate rows, and the spread of the data.
@@ -285,10 +303,9 @@ def data_information(model: RobotModel, joints: np.ndarray, measured: np.ndarray
                           f"repair the data file")
     dup: tuple[tuple[int, int], ...] = ()
     if measured is not None:  # equal joints alone are a legitimate repeat; equal readings are not
-        _, first, inv = np.unique(rows, axis=0, return_index=True, return_inverse=True)
-        inv = np.asarray(inv).reshape(-1)
-        dup = tuple((int(first[inv[i]]), i) for i in range(n) if first[inv[i]] != i)
-    n_distinct = len(np.unique(q, axis=0))
+        first = _first_equal_row(rows)
+        dup = tuple((int(first[i]), i) for i in np.flatnonzero(first != np.arange(n)).tolist())
+    n_distinct = int(np.count_nonzero(_first_equal_row(q) == np.arange(n)))
     spread = q.max(axis=0) - q.min(axis=0) if n else np.zeros(q.shape[1])
     pts = None if measured is None else np.asarray(measured, dtype=float).reshape(n, -1)[:, :3]
     ps = 0.0 if pts is None else float(np.sqrt(np.mean(np.sum((pts - pts.mean(0)) ** 2, axis=1))))
