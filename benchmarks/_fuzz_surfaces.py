@@ -34,6 +34,7 @@ class Family:
     by_exit: Counter[int] = field(default_factory=Counter)
     internal: int = 0
     hangs: int = 0
+    silent: int = 0  # exit 0 where the input must be refused (issue 33's families count it)
     failures: list[str] = field(default_factory=list)
     elapsed_s: float = 0.0
 

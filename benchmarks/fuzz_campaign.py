@@ -3,9 +3,14 @@ and CLI arguments, each run with a time budget; prints the inputs tried per cate
 tracebacks and hangs found (both must be 0). Then the surfaces of issue 19 (``_fuzz_surfaces.py``):
 damaged run-database records through runs/report/export/calibrate --resume, SIGTERM (once or
 twice) at seeded random moments of a simulated calibration, and closed or early-closed stdout and
-stderr; each prints the inputs tried, the exit codes, the internal errors and the hangs.
+stderr; each prints the inputs tried, the exit codes, the internal errors and the hangs. Then the
+families of issue 33 (``_fuzz_issue33.py``): record-level damage of every measured field, robot-file
+typos, URDF structure, float limits, overflowing integers and a full disk; these count silent
+acceptances too (exit 0 for an input that must be refused).
 
-    .venv/bin/python benchmarks/fuzz_campaign.py [--scale N] [--only inputs|records|signals|pipes]
+    .venv/bin/python benchmarks/fuzz_campaign.py [--scale N] [--only FAMILY[,FAMILY…]]
+
+FAMILY: inputs, records, signals, pipes, fields, typos, urdf, floats, ints, disk (default: all).
 
 The targets and their input generators are the ones of ``tests/test_fuzz_inputs.py`` (the test
 runs them with fewer examples); ``--scale`` multiplies the test's example counts (default 3).
@@ -27,6 +32,9 @@ from pathlib import Path
 from hypothesis import given, settings
 
 ROOT = Path(__file__).resolve().parents[1]
+#: the families of issue 33 (``_fuzz_issue33.py``): they count silent acceptances too
+ISSUE33_FAMILIES = ("fields", "typos", "urdf", "floats", "ints", "disk")
+ALL_FAMILIES = ("inputs", "records", "signals", "pipes", *ISSUE33_FAMILIES)
 
 
 def _load_targets():
@@ -41,39 +49,53 @@ def _load_targets():
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--scale", type=int, default=3, help="examples per target = the test's × SCALE")
-    ap.add_argument("--only", choices=["inputs", "records", "signals", "pipes"], help="one family")
+    ap.add_argument("--only", type=_families, help="these families, comma-separated: "
+                    + ",".join(ALL_FAMILIES))
     args = ap.parse_args(argv)
+    only = args.only or ALL_FAMILIES
     failures: list[str] = []
     n_tb = n_hang = n_tried = 0
-    if args.only in (None, "inputs"):
+    if "inputs" in only:
         n_tried, n_tb, n_hang = _inputs(args.scale, failures)
-    if args.only != "inputs":
-        n_tb_new, n_hang_new, n_tried_new = _new_surfaces(args.scale, args.only, failures)
+    if set(only) - {"inputs"}:
+        n_tb_new, n_hang_new, n_tried_new = _new_surfaces(args.scale, only, failures)
         n_tb, n_hang, n_tried = n_tb + n_tb_new, n_hang + n_hang_new, n_tried + n_tried_new
     for f in failures:  # one line each, then the first few in full
         print(" ", f.splitlines()[0][:300])
     for f in failures[:3]:
         print("\n", f)
-    print(f"all families: {n_tried} tried, internal errors (tracebacks): {n_tb}, hangs: {n_hang}")
+    n_silent = sum(f.startswith("silent acceptance") for f in failures)
+    print(f"all families: {n_tried} tried, internal errors (tracebacks): {n_tb}, hangs: {n_hang}, "
+          f"silent acceptances: {n_silent}")
     return 1 if failures else 0
 
 
-def _new_surfaces(scale: int, only: str | None, failures: list[str]) -> tuple[int, int, int]:
+def _families(text: str) -> tuple[str, ...]:
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    unknown = [n for n in names if n not in ALL_FAMILIES]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(f"{text!r}: families are {', '.join(ALL_FAMILIES)}")
+    return names
+
+
+def _new_surfaces(scale: int, only: tuple[str, ...], failures: list[str]) -> tuple[int, int, int]:
     sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import _fuzz_issue33 as f33
     import _fuzz_surfaces as fs
 
-    fams = [run(scale) for name, run in fs.FAMILIES.items() if only in (None, name)]
+    families = {**fs.FAMILIES, **f33.FAMILIES}
+    fams = [run(scale) for name, run in families.items() if name in only]
     codes = sorted({c for fam in fams for c in fam.by_exit})
     print()
-    print(f"{'surface':<16} {'tried':>7} " + " ".join(f"{'exit ' + str(c):>8}" for c in codes)
-          + f" {'internal':>9} {'hangs':>6} {'seconds':>8}")
+    print(f"{'surface':<20} {'tried':>7} " + " ".join(f"{'exit ' + str(c):>8}" for c in codes)
+          + f" {'internal':>9} {'hangs':>6} {'silent':>7} {'seconds':>8}")
     for fam in fams:
-        print(f"{fam.name:<16} {fam.tried:>7} " + " ".join(f"{fam.by_exit[c]:>8}" for c in codes)
-              + f" {fam.internal:>9} {fam.hangs:>6} {fam.elapsed_s:>8.1f}")
+        print(f"{fam.name:<20} {fam.tried:>7} " + " ".join(f"{fam.by_exit[c]:>8}" for c in codes)
+              + f" {fam.internal:>9} {fam.hangs:>6} {fam.silent:>7} {fam.elapsed_s:>8.1f}")
         failures.extend(fam.failures)
     n_int, n_hang = sum(f.internal for f in fams), sum(f.hangs for f in fams)
-    n_tried = sum(f.tried for f in fams)
-    print(f"surfaces tried: {n_tried}, internal errors: {n_int}, hangs: {n_hang} "
+    n_tried, n_silent = sum(f.tried for f in fams), sum(f.silent for f in fams)
+    print(f"surfaces tried: {n_tried}, internal errors: {n_int}, hangs: {n_hang}, silent acceptances: {n_silent} "
           f"({sum(f.elapsed_s for f in fams):.1f} s, budget {fs.BUDGET_S:.0f} s per command)")
     return n_int, n_hang, n_tried
 

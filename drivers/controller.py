@@ -173,7 +173,7 @@ class ModbusController(TablePager):
             except ConnectionException as exc:
                 raise ControllerConnectionError(
                     f"no connection to the controller at {self.host}:{self.port} ({exc}): check the "
-                    f"network and that the robot program runs; the next call reconnects") from exc
+                    f"network and that the robot program runs; the station reconnects on its next request") from exc
             except ModbusIOException as exc:
                 raise ControllerConnectionError(
                     f"no valid response from {self.host}:{self.port} within {self.timeout} s for function "
@@ -349,7 +349,7 @@ class ModbusController(TablePager):
                 self._link_lost = (
                     f"controller heartbeat did not advance for {silent:.2f} s (limit "
                     f"{self.link_timeout:.2f} s){cause}: the robot program or the link is down; check "
-                    f"the robot, then call connect() again")
+                    f"the robot program and the link, then start the run again")
                 log.error(self._link_lost)
                 return
 
@@ -429,7 +429,7 @@ class ModbusController(TablePager):
                 raise ControllerConnectionError(
                     f"{code.name} seq {seq}: the write of the command got no valid response ({exc}); the "
                     f"command was NOT re-sent and may or may not have reached the controller: read "
-                    f"status() and check the robot before commanding again") from exc
+                    f"the robot's state and check the robot before commanding again") from exc
             deadline = time.monotonic() + self.ack_timeout
             while True:
                 st = self.status()

@@ -233,7 +233,7 @@ def error_for(st: ReportedError, seq: int, command: Command, target: Any,
     if ec is ErrorCode.MOTION_ABORTED:
         return MotionAborted(msg, code, seq)
     if ec is ErrorCode.SEQUENCE_ERROR:
-        return SequenceError(msg + "; reconnect (connect()) to resynchronise", code, seq)
+        return SequenceError(msg + "; reconnect to resynchronise (start the run again)", code, seq)
     if ec is ErrorCode.WATCHDOG_TIMEOUT:
         return ControllerLinkLost(msg)
     if ec in (ErrorCode.TABLE_CRC_MISMATCH, ErrorCode.TABLE_NOT_STAGED, ErrorCode.TABLE_SHAPE_INVALID,

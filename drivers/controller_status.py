@@ -149,7 +149,7 @@ class CommandStatus:
             if time.monotonic() >= deadline:
                 raise MotionTimeout(
                     f"{self.command.name} seq {self.seq} not finished within {timeout:.3g} s; the robot "
-                    f"may still be moving: wait again, or call stop() and check the robot")
+                    f"may still be moving: wait, or stop it and check the robot")
             time.sleep(self.controller.poll_interval)
 
     def __repr__(self) -> str:

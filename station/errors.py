@@ -48,7 +48,7 @@ _DESCRIPTIONS = {
     Outcome.SAFETY_STOP: "safety stop (emergency stop, drive fault)",
     Outcome.UPLOAD_FAILED: "correction table upload failed verification — it was not activated",
     Outcome.TARGET_MISSED: "verification showed less than the required gain, or a pose beyond [verification] max_ap_um / max_rp_um",
-    Outcome.NOT_UPLOADED: "identified and verified before correction, but no correction is active (--no-upload, or the operator declined or rolled it back)",
+    Outcome.NOT_UPLOADED: "identified, but no correction is active: --no-upload, the operator declined or rolled it back, or no table within the controller's capacity meets correction.max_interpolation_um (JSON not_uploaded_reason correction_bound; the measurements are kept: resume with a looser bound or a smaller region)",
     Outcome.DRIFTED: "recheck: the robot drifted beyond the tolerance since its baseline calibration — recalibrate",
     Outcome.RECHECK_UNTRUSTED: "recheck: the measurement is not trustworthy (invalid readings, or the repeated pose moved) — no verdict",
 }

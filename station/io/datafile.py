@@ -48,6 +48,21 @@ _KNOWN = {"x", "y", "z", "roll", "pitch", "yaw", *NEST_COLUMNS}
 NEST_TOLERANCE_MM = 1.0
 
 
+#: the largest joint length (100 m) and angle (2π·10 rad) a data file may hold: beyond them a value is a
+#: typo or garbage, never a measurement (issue 33). Measured positions get a looser bound (1000 km), so
+#: that a file in the wrong length unit reaches the check that names the unit it looks like.
+LENGTH_BOUND_MM = 100_000.0
+POSITION_BOUND_MM = 1e9
+ANGLE_BOUND_RAD = 20 * math.pi
+
+
+def _bound_text(unit: str, bound: float) -> str:
+    if unit in _ANGLE_UNITS:
+        return f"±{ANGLE_BOUND_RAD / _SCALE[unit]:.6g} {unit} = 2π·10 rad"
+    return f"±{bound / _SCALE[unit]:.6g} {unit} = {bound / 1e6:g} km" if bound > 1e6 else \
+        f"±{bound / _SCALE[unit]:.6g} {unit} = {bound / 1000:g} m"
+
+
 @dataclass(frozen=True)
 class Table:
     """Parsed columns in internal units (mm, rad); ``columns`` maps name -> (n,) array.
@@ -160,6 +175,11 @@ def read_table(path: str | Path) -> Table:
             if not math.isfinite(x):
                 raise ConfigError(f"{p}, line {lineno}: {name} is {v}; remove or repair this row")
             data[r_i, c] = x * _SCALE[unit]
+            bound = ANGLE_BOUND_RAD if unit in _ANGLE_UNITS else (
+                LENGTH_BOUND_MM if name.startswith("q") else POSITION_BOUND_MM)
+            if not abs(data[r_i, c]) <= bound:  # also 1e308 m, which overflows to inf in mm
+                raise ConfigError(f"{p}, line {lineno}: {name} = {v} {unit} is beyond physical plausibility (at most "
+                                  f"{_bound_text(unit, bound)}); repair this row or its unit")
     cols = {n: data[:, k] for k, n in enumerate(names)}
     for _, n, unit in used:
         kind = "angle" if unit in _ANGLE_UNITS else "length"
@@ -181,6 +201,8 @@ def joints_from_table(table: Table, model: RobotModel) -> np.ndarray:
             f"{table.path}: robot {model.name!r} has {g} joints; expected columns "
             f"{', '.join(expected)} with units, found {', '.join(present) or 'none'}"
         )
+    if table.n_rows == 0:
+        raise ConfigError(f"{table.path}: a header but no rows; add one row of joint values per pose")
     units = table.units
     for name, kind in zip(expected, model.joint_types):
         u = units[name]

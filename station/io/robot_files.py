@@ -31,6 +31,7 @@ import numpy as np
 from station.core.joint_map import JointMap, joint_map_from_file_units
 from station.core.model import RobotModel, robot_from_dict
 from station.errors import ConfigError
+from station.io.robot_bounds import check_map_plausible, check_plausible
 
 #: a robot file larger than this is refused before it is read (a URDF with inline meshes is
 #: rarely above a few MB; the DH and TOML files are a few kB)
@@ -95,6 +96,7 @@ def check_model(model: RobotModel, source: str) -> RobotModel:
             raise ConfigError(f"{source}: joint {j + 1} has limits [{lo}, {hi}]; give finite limits")
         if not lo < hi:
             raise ConfigError(f"{source}: joint {j + 1} has limits [{lo}, {hi}]; lower must be < upper")
+    check_plausible(model, source)
     return model
 
 
@@ -142,11 +144,19 @@ def load_mapped_robot(name_or_path: str | Path, base: str | None = None,
                 model, jmap = read_dh_file(path)
         except (UnicodeDecodeError, OSError) as exc:
             raise ConfigError(f"{path}: cannot read the robot file ({exc})") from None
-        return check_model(model, str(path)), jmap
+        return check_model(model, str(path)), _plausible_map(jmap, model, str(path))
     data = _read_toml(path)
+    from station.io.robot_schema import validate_robot_toml  # pydantic: only for a TOML file
+
+    validate_robot_toml(data, str(path))  # unknown tables and keys: the nearest known name
     model = check_model(robot_from_dict(data, source=str(path)), str(path))
     _toml_tool_unknown(data, str(path))  # a typo in [tool] is refused by every command, not only identify
-    return model, _toml_joint_map(data, model, str(path))
+    return model, _plausible_map(_toml_joint_map(data, model, str(path)), model, str(path))
+
+
+def _plausible_map(jmap: JointMap, model: RobotModel, source: str) -> JointMap:
+    check_map_plausible(jmap.offset, jmap.k, jmap.names, model.joint_types, source)
+    return jmap
 
 
 def tool_marked_unknown(name_or_path: str | Path) -> bool:

@@ -35,6 +35,7 @@ from station.core.joint_map import JointMap, joint_map_from_file_units
 from station.core.model import RobotModel, TransformSpec
 from station.core.transforms import invert, matrix_to_pose, pose_to_matrix, rot_x, rot_z, rotation_exp
 from station.errors import ConfigError
+from station.io.robot_bounds import nearest
 
 
 def _T(R: np.ndarray | None = None, t: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
@@ -126,6 +127,13 @@ def read_dh_file(path: Path) -> tuple[RobotModel, JointMap]:
     missing = [n for n in need if n not in names]
     if missing:
         raise ConfigError(f"{path}: missing columns {missing}; expected {need} with units")
+    for n in names:  # an unknown column (a typo of 'offset') would otherwise be ignored
+        if n not in need and n not in MAP_COLUMNS:
+            raise ConfigError(f"{path}: unknown column {n!r}{nearest(n, (*need, *MAP_COLUMNS))}; the columns are "
+                              f"{', '.join(need)} and optionally {', '.join(MAP_COLUMNS)}")
+    if len(set(names)) != len(names):
+        raise ConfigError(f"{path}: a column appears twice ({', '.join(sorted({n for n in names if names.count(n) > 1}))}); "
+                          f"keep one")
     units = {n: (_unit(h) if n not in _UNITLESS else "") for n, h in zip(names, head)}
     scale = {"deg": math.pi / 180, "rad": 1.0, "mm": 1.0, "m": 1000.0}
     out = []
@@ -317,6 +325,29 @@ def _leaves(link: str, out: dict[str, list[ET.Element]], child_of: dict[int, str
     return leaves
 
 
+def _urdf_names(path: Path, root: ET.Element, edges: list[tuple[ET.Element, str, str]]) -> None:
+    """Every link and joint named once, and every joint's parent and child a declared link: a
+    duplicate or a link that is not there would silently pick one chain out of several."""
+    links: set[str] = set()
+    for kind, elements in (("link", root.findall("link")), ("joint", root.findall("joint"))):
+        seen: set[str] = set()
+        for el in elements:
+            name = el.get("name")
+            if not name:
+                raise ConfigError(f"{path}: a <{kind}> without a name; give every {kind} a unique name")
+            if name in seen:
+                raise ConfigError(f"{path}: two <{kind}> elements are named {name!r}; {kind} names must be unique "
+                                  f"(rename or delete one)")
+            seen.add(name)
+        if kind == "link":
+            links = seen
+    for j, parent, child in edges:
+        for tag, link in (("parent", parent), ("child", child)):
+            if link not in links:
+                raise ConfigError(f"{path}: joint {_joint_name(j)!r}: its {tag} link {link!r} is not declared; add "
+                                  f"<link name=\"{link}\"/> or correct the name")
+
+
 def _urdf_chain(path: Path, root: ET.Element, base: str | None = None,
                 tip: str | None = None) -> tuple[str, dict[str, ET.Element]]:
     """The chain's first link and each of its links' joint towards the tip; refuses a loop,
@@ -324,6 +355,7 @@ def _urdf_chain(path: Path, root: ET.Element, base: str | None = None,
     a dropped branch would drop its joints)."""
     elements = root.findall("joint")
     edges = [(j, _urdf_link(path, j, "parent"), _urdf_link(path, j, "child")) for j in elements]
+    _urdf_names(path, root, edges)
     _urdf_loop(path, edges)
     children = {c for _, _, c in edges}
     link_names = [str(link.get("name")) for link in root.findall("link")]

@@ -31,7 +31,7 @@ __all__ = ["BUILTIN_ROBOT_CELLS", "load_cell"]
 
 #: the tables of a ``--simulated`` CONFIG without [robot] and [body] that the built-in simulated
 #: cell's configuration takes over (besides its [simulation], which the simulators take)
-_TAKEN = ("recheck", "warmup")
+_TAKEN = ("recheck", "warmup", "fleet")  # [fleet]: a rehearsal publishes where the plant's runs go
 
 #: the built-in simulated cells besides the SCARA's: robot name -> (start servers, config text)
 BUILTIN_ROBOT_CELLS = ("irb2600",)

@@ -25,9 +25,15 @@ DH_ROWS = ["revolute,0,0,445,0,-130,130", "revolute,0,0,355,0,-140,140",
            "prismatic,0,0,0,180,-195,-5", "revolute,0,0,0,0,-355,355"]
 
 
-def bad(old: str, new: str) -> str:
-    assert old in TEMPLATE, old
-    return TEMPLATE.replace(old, new, 1)
+def bad(old: str, new: str, template: str = TEMPLATE) -> str:
+    assert old in template, old
+    return template.replace(old, new, 1)
+
+
+#: the template with its commented grid keys given: an explicit grid instead of the station's design
+EXPLICIT = TEMPLATE
+for _k in ("x_mm", "y_mm", "z_mm", "yaw_step_deg"):
+    EXPLICIT = EXPLICIT.replace(f"# {_k} = ", f"{_k} = ", 1)
 
 
 def refused(text: str, *patterns: str) -> str:
@@ -70,7 +76,7 @@ def test_every_number_has_bounds():
                          ids=[f"{s}.{k}" for s, k, _ in NUMERIC if s != "simulation"])
 def test_template_states_the_bounds(section, key, info):
     """The template's comment on each number states the schema's bounds (one source)."""
-    line = next(ln for ln in TEMPLATE.splitlines() if ln.startswith(f"{key} ="))
+    line = next(ln for ln in TEMPLATE.splitlines() if ln.startswith((f"{key} =", f"# {key} =")))
     assert cfgmod.bounds_text(info) in line, (line, cfgmod.bounds_text(info))
 
 
@@ -155,11 +161,19 @@ def test_nan_limits_never_reach_the_soft_limits():
     ("elbows = [1, -1]", "elbows = [2]", r"plan\.elbows\[0\]"),
 ])
 def test_grid_and_sigma_refused_when_the_file_is_read(old, new, pattern):
-    refused(bad(old, new), pattern)
+    refused(bad(old, new, EXPLICIT), pattern)
+
+
+def test_a_grid_is_given_whole_or_designed():
+    assert not parse_text(TEMPLATE).correction.explicit  # the template: the station designs the grid
+    refused(bad("z_mm = [250.0, 450.0, 200.0]\n", "", EXPLICIT), r"correction: the grid is given by x_mm, y_mm and "
+            r"z_mm together: add z_mm")
+    refused(bad("# region = {", "region = {", EXPLICIT), r"either region .* or x_mm, y_mm, z_mm")
+    refused(bad("# region = { x_mm = [300.0, 650.0]", "region = { x_mm = [650.0, 300.0]"), r"low < high")
 
 
 def test_the_grid_checked_is_the_grid_the_pipeline_builds():
-    cfg = parse_text(TEMPLATE)
+    cfg = parse_text(EXPLICIT)
     grid = correction_grid(cfg.correction, cfg.plan.elbows)
     grid.check_capacity(cfg.model.n_joints, MAX_TABLE_VALUES)
     assert grid.shape == (11, 15, 2, 12)

@@ -1,11 +1,11 @@
 """Plans that survive a real body (issue 18 §2): a point out of reach, or whose approach leaves the
 soft limits, is left out with its reason and the plan goes on; only too few poses for the
-identifiable set is an error; a grid too coarse for the expected correction is refused before the
-first motion; ``[simulation]`` sets offsets, tilts and backlash per joint."""
+identifiable set is an error; a grid too coarse for the expected correction, a verification target
+outside the table or no table within the capacity is refused before the first motion, by ``station
+plan`` and ``station calibrate`` alike; ``[simulation]`` sets offsets, tilts and backlash per joint."""
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import re
 import shutil
@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from station.cell.config.cell_config import load_config
-from station.cell.correction.grid_precheck import GridTooCoarse, check_grid
+from station.cell.correction.design import CorrectionRefused, check_correction
 from station.cell.plan.measurement_plan import build_plan
 from station.cell.records.rundb import RunDB
 from station.errors import ConfigError, Outcome
@@ -74,6 +74,13 @@ def test_too_few_poses_for_the_identifiable_set_is_an_error_saying_how_many(tmp_
     with pytest.raises(ConfigError, match=r"only \d+ identification targets can be measured; the 20 parameters "
                                           r"of the minimal model need at least 7"):
         build_plan(load_config(path))
+    assert main(["plan", str(path)]) == int(Outcome.CONFIG_ERROR)  # 'station plan' refuses it, as calibrate does
+
+
+def test_a_tool_calibrate_would_refuse_is_refused_by_plan_too(tmp_path, capsys):
+    path = _cell(tmp_path, (), lambda t: t + '\n[[tool]]\nname = "angled"\ntcp = [0.0, 0.0, -150.0, 30.0, 0.0, 0.0]\n')
+    assert main(["plan", str(path)]) == int(Outcome.CONFIG_ERROR)
+    assert "tool 'angled': its TCP frame's z axis is tilted 30.0 deg" in capsys.readouterr().err
 
 
 def test_with_every_point_out_of_reach_the_message_names_points_joints_and_amounts(tmp_path):
@@ -85,34 +92,54 @@ def test_with_every_point_out_of_reach_the_message_names_points_joints_and_amoun
     msg = str(exc.value)
     assert all(f"F{i} elbow +1: out of the arm's reach by" in msg for i in range(3))
     assert len(re.findall(r"reach by [0-9.]+ mm", msg)) == 6
+    assert main(["plan", str(path)]) == int(Outcome.CONFIG_ERROR)  # 'station plan' refuses it, as calibrate does
 
 
-def test_a_grid_too_coarse_is_refused_before_anything_moves(tmp_path, capsys):
-    path = _cell(tmp_path, (), lambda t: t.replace("x_mm = [180.0, 480.0, 30.0]", "x_mm = [180.0, 480.0, 100.0]")
-                 .replace("y_mm = [-270.0, 270.0, 30.0]", "y_mm = [-270.0, 270.0, 90.0]"))
-    with pytest.raises(GridTooCoarse) as exc:
-        check_grid(load_config(path))
-    msg = str(exc.value)
-    assert "before the first motion" in msg and "above correction.max_interpolation_um = 15" in msg
-    assert re.search(r"in the cell x [0-9.]+…[0-9.]+ mm, y -?[0-9.]+…-?[0-9.]+ mm", msg)  # where it is reached
-    assert "narrow the grid's ranges" in msg or "correction.x_mm = [" in msg  # which step would meet it
-    db = tmp_path / "runs.sqlite"
+def _refused_alike(path: Path, capsys, db: Path) -> str:
+    """``station plan`` and ``station calibrate`` refuse the cell before any motion, exit 2, with
+    the same message; nothing is measured. Returns the message."""
+    assert main(["plan", str(path)]) == int(Outcome.CONFIG_ERROR)
+    said = capsys.readouterr().err.removeprefix("station: error: ").strip()
     code = main(["calibrate", "--simulated", str(path), "--db", str(db), "--json"])
     out = json.loads(capsys.readouterr().out)
-    assert code == int(Outcome.CONFIG_ERROR) == out["exit_code"] and "before the first motion" in out["failure"]["message"]
-    with RunDB(str(db)) as rdb:  # nothing was measured: no run was even created
-        assert rdb.measurements(1) == [] if rdb.runs() else True
+    assert code == int(Outcome.CONFIG_ERROR) == out["exit_code"] and out["failure"]["message"] == said
+    assert out["run_id"] is None  # nothing was measured: no run was even created
+    return said
 
 
-def test_the_grid_check_names_a_finer_grid_that_meets_the_bound(tmp_path):
-    cfg = load_config(_cell(tmp_path, ()))
-    coarse = dataclasses.replace(cfg, correction=dataclasses.replace(cfg.correction, x_mm=(180.0, 480.0, 50.0),
-                                                                     y_mm=(-270.0, 270.0, 54.0)))
-    with pytest.raises(GridTooCoarse, match=r"correction\.x_mm = \[180, 480, [0-9.]+\]") as exc:
-        check_grid(coarse)
-    assert re.search(r"give ([0-9.]+) µm", str(exc.value))
-    assert float(re.search(r"give ([0-9.]+) µm", str(exc.value)).group(1)) <= 15.0
-    assert check_grid(cfg) is not None  # the example's own grid passes
+def test_a_grid_too_coarse_is_refused_before_anything_moves_with_what_to_change(tmp_path, capsys):
+    path = _cell(tmp_path, (), lambda t: t.replace("x_mm = [180.0, 480.0, 30.0]", "x_mm = [180.0, 480.0, 100.0]")
+                 .replace("y_mm = [-270.0, 270.0, 30.0]", "y_mm = [-270.0, 270.0, 90.0]"))
+    with pytest.raises(CorrectionRefused) as exc:
+        check_correction(load_config(path))
+    msg = str(exc.value)
+    assert main(["plan", str(path)]) == int(Outcome.CONFIG_ERROR) and msg in capsys.readouterr().err
+    assert "before the first motion" in msg and "above correction.max_interpolation_um = 15" in msg
+    assert re.search(r"correction\.max_interpolation_um = \d+", msg)  # a looser bound, in numbers
+    assert "remove correction.x_mm, y_mm, z_mm and yaw_step_deg" in msg  # or the station's own design
+    assert check_correction(load_config(_cell(tmp_path, ()))) is not None  # the example's own grid passes
+
+
+def test_a_verification_target_outside_the_table_is_named_by_target_axis_and_key(tmp_path, capsys):
+    path = _cell(tmp_path, (), lambda t: t.replace("z_mm = [180.0, 280.0, 100.0]", "z_mm = [190.0, 290.0, 100.0]"))
+    msg = _refused_alike(path, capsys, tmp_path / "runs.sqlite")
+    m = re.search(r"verification target (P\w+ elbow [+-]): z = ([0-9.]+) mm, with its ([0-9.]+) mm margin "
+                  r"([0-9.]+) mm, lies ([0-9.]+) mm below the table's z range \[190, 290\] mm \(correction\.z_mm: "
+                  r"widen it to (\d+) mm\)", msg)
+    assert m, msg
+    z, margin, need, by = (float(m.group(k)) for k in (2, 3, 4, 5))
+    assert need == pytest.approx(z - margin) and by == pytest.approx(190.0 - need, abs=0.06)
+    assert "head frame's origin" in msg  # which point the grid describes
+
+
+def test_no_table_within_the_capacity_is_refused_with_numbers(tmp_path, capsys):
+    path = _cell(tmp_path, (), lambda t: re.sub(r"x_mm = .*\ny_mm = .*\nz_mm = .*\nyaw_step_deg = .*\n", "", t)
+                 .replace("max_interpolation_um = 15.0", "max_interpolation_um = 2.0"))
+    assert main(["plan", str(path)]) == int(Outcome.CONFIG_ERROR)
+    msg = capsys.readouterr().err
+    assert "no correction grid within the controller's 32000 values meets it" in msg
+    assert re.search(r"a looser bound, correction\.max_interpolation_um = \d+", msg)
+    assert re.search(r"a smaller region, x and y extent × 0\.\d+: correction\.region = \{ x_mm = \[", msg)
 
 
 def test_a_cell_with_points_out_of_reach_calibrates(tmp_path, capsys):

@@ -83,7 +83,12 @@ def _sim_cfg(seed, extra=""):
 
 def test_no_change_is_within_tolerance_in_95_percent_of_40_seeds():
     """Baseline identified from the identification poses of the simulated cell's plan (in-process,
-    the runner's procedure on the cell's physics), then a recheck of the unchanged robot."""
+    the runner's procedure on the cell's physics), then a recheck of the unchanged robot.
+
+    The tolerances are 95 % bounds, so of 40 unchanged robots the number flagged is binomial
+    (40, 0.05): 2 on average, and more than 5 with a probability of 1.4 %. Up to 5 are accepted;
+    6 or more say the tolerances are too tight. (Asking for at most 2 would fail a correct 95 %
+    bound one time in three, on whichever seeds the floating-point kernel makes marginal.)"""
     ok = 0
     outcomes = []
     for seed in range(40):
@@ -98,7 +103,7 @@ def test_no_change_is_within_tolerance_in_95_percent_of_40_seeds():
         result = analyse_recheck(cfg, steps, io.measure(steps), base, Tolerances.for_(cfg, base))
         outcomes.append((seed, result.outcome.name, round(result.rms_um or -1, 1), result.moved))
         ok += result.outcome is Outcome.SUCCESS
-    assert ok >= 38, outcomes
+    assert 40 - ok <= 5, outcomes
 
 
 def test_recheck_plan_is_short_spread_and_repeats_its_first_pose():

@@ -72,7 +72,7 @@ def fields(i):
     return dict(kind="identification", point_id=f"P{i % 5}", label=f"step {i}",
                 joints_commanded=q, joints_read=[v + 1e-9 for v in q],
                 raw_frames=(f"M0,+{i:08.4f}".encode() + b"\r\n\x00\xff") * (1 + i % 4),
-                readings_mm=readings, channel_status=["ok"] * 5 + ["over" if i % 7 == 0 else "ok"],
+                readings_mm=readings, channel_status=["ok"] * 5 + ["over_range" if i % 7 == 0 else "ok"],
                 pose=pose, pose_residual_um=0.5 + i, ok=i % 7 != 0, message="" if i % 7 else "out of range")
 '''
 _ns: dict = {}
@@ -387,20 +387,23 @@ def test_export_csv_parses_back(db, tmp_path):
         rows = list(csv.reader(f))
     header = rows[0]
     assert header == (["step", "kind", "point_id", "label", "t_utc",
-                       "q1 [rad]", "q2 [rad]", "q3 [mm]", "q4 [rad]",
-                       "q1_cmd [rad]", "q2_cmd [rad]", "q3_cmd [mm]", "q4_cmd [rad]",
-                       "x [mm]", "y [mm]", "z [mm]", "roll [rad]", "pitch [rad]", "yaw [rad]",
+                       "q1 [deg]", "q2 [deg]", "q3 [mm]", "q4 [deg]",
+                       "q1_cmd [deg]", "q2_cmd [deg]", "q3_cmd [mm]", "q4_cmd [deg]",
+                       "x [mm]", "y [mm]", "z [mm]", "roll [deg]", "pitch [deg]", "yaw [deg]",
                        "residual [um]"]
                       + [f"p{i} [mm]" for i in range(1, 7)] + ["status", "ok", "message"])
     recs = [dict(zip(header, r)) for r in rows[1:]]
     assert [r["step"] for r in recs] == ["0", "1", "2", "3"]
     for i in (0, 1, 2):
         r, f = recs[i], fields(i)
-        units = ["rad", "rad", "mm", "rad"]
-        assert [float(r[f"q{j + 1} [{u}]"]) for j, u in enumerate(units)] == f["joints_read"]
-        assert [float(r[f"q{j + 1}_cmd [{u}]"]) for j, u in enumerate(units)] == f["joints_commanded"]
-        pose = [float(r[h]) for h in header[13:19]]
-        assert pose == matrix_to_pose(f["pose"]).tolist()  # repr precision: exact
+        units = ["deg", "deg", "mm", "deg"]  # joints and orientations in degrees, as everywhere (issue 29)
+        deg = np.array([True, True, False, True])
+        for col, key in (("", "joints_read"), ("_cmd", "joints_commanded")):
+            got = np.array([float(r[f"q{j + 1}{col} [{u}]"]) for j, u in enumerate(units)])
+            np.testing.assert_allclose(got, np.where(deg, np.degrees(f[key]), f[key]), rtol=1e-15)
+        pose = np.array([float(r[h]) for h in header[13:19]])
+        want = matrix_to_pose(f["pose"])
+        np.testing.assert_allclose(pose, np.r_[want[:3], np.degrees(want[3:])], rtol=1e-15)
         np.testing.assert_array_equal([float(r[f"p{j} [mm]"]) for j in range(1, 7)], f["readings_mm"])
         assert r["status"] == ";".join(f["channel_status"]) and r["ok"] == str(int(f["ok"]))
         assert float(r["residual [um]"]) == f["pose_residual_um"]
@@ -417,8 +420,8 @@ def test_export_joint_units_given_or_unknown(db, tmp_path):
         assert next(csv.reader(f))[5:7] == ["q1 [rad|mm]", "q2 [rad|mm]"]
     with open(export_csv(db, rid, tmp_path / "b.csv", joint_units=["rad", "mm"]), newline="") as f:
         rows = list(csv.reader(f))
-    assert rows[0][5:7] == ["q1 [rad]", "q2 [mm]"]
-    np.testing.assert_allclose([float(v) for v in rows[1][9:15]], [1, 2, 3, 0.1, -0.2, 0.3], atol=1e-12)
+    assert rows[0][5:7] == ["q1 [deg]", "q2 [mm]"]
+    np.testing.assert_allclose([float(v) for v in rows[1][9:15]], [1, 2, 3, *np.degrees([0.1, -0.2, 0.3])], atol=1e-12)
 
 
 # -------------------------------------------------------------------------------- bad files

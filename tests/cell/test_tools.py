@@ -51,6 +51,12 @@ def _with_tools(text: str, tools: str) -> str:
     return text + "\n" + tools
 
 
+#: the template with its grid keys given (the old fixed grid x 250 … 650, y ±350, z 250 … 450 mm)
+EXPLICIT = TEMPLATE
+for _key in ("x_mm", "y_mm", "z_mm", "yaw_step_deg"):
+    EXPLICIT = EXPLICIT.replace(f"# {_key} = ", f"{_key} = ", 1)
+
+
 # ------------------------------------------------------------------------------ the schema
 
 def test_tools_are_parsed_in_mm_and_rad():
@@ -66,7 +72,8 @@ def test_tools_are_parsed_in_mm_and_rad():
 
 
 def test_the_templates_example_parses():
-    example = [ln for ln in TEMPLATE.splitlines() if ln.startswith(("# [[tool]]", "# name =", "# tcp =", "# z_mm ="))]
+    tools = TEMPLATE[TEMPLATE.index("# [[tool]]"):]  # the [[tool]] example (the grid's commented keys come before)
+    example = [ln for ln in tools.splitlines() if ln.startswith(("# [[tool]]", "# name =", "# tcp =", "# z_mm ="))]
     assert len(example) == 4
     cfg = parse_text(TEMPLATE + "\n" + "\n".join(ln[2:] for ln in example) + "\n")
     assert cfg.tools[0].name == "gripper" and cfg.tools[0].tcp[2] == -200.0
@@ -84,8 +91,8 @@ def test_the_templates_example_parses():
     ('[[tool]]\nname = "g"\ntcp = [0, 0, 0, 0, 0, 0]\nz_mm = [150.0, 450.0, 70.0]\n', r"tool 'g'.*correction\.z_mm"),
 ])
 def test_bad_tools_are_refused_naming_the_key(tools, pattern):
-    with pytest.raises(ConfigError, match=pattern):
-        parse_text(_with_tools(TEMPLATE, tools))
+    with pytest.raises(ConfigError, match=pattern):  # an explicit grid: the tool's capacity is known when read
+        parse_text(_with_tools(EXPLICIT, tools))
 
 
 def test_a_scara_tool_must_run_along_the_last_axis():
@@ -120,7 +127,7 @@ def _resplit_last(model, p, dz, dyaw):
 def test_a_truth_that_splits_a4_and_k_otherwise_needs_no_other_correction():
     """The identification's K absorbs A4's unidentifiable parts; a true robot that splits them
     otherwise is the same robot, and the tool's correction is the oracle's to the bit of float32."""
-    cfg = parse_text(_with_tools(TEMPLATE, GRIPPER))
+    cfg = parse_text(_with_tools(EXPLICIT, GRIPPER))  # a grid over these joints, not one designed for the plan
     rng = np.random.default_rng(4)
     p_id = np.array(cfg.model.nominal)
     p_id[6:] += rng.normal(0.0, 1.0, cfg.model.n_params - 6) * np.tile([0.04, 0.04, 0.04, 7e-4, 7e-4, 7e-4], 5)

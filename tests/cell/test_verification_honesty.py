@@ -134,7 +134,7 @@ def test_summary_says_how_many_readings_were_re_centred_and_explains_rp():
     assert "before 120 of 120 (up to 1640 µm)" in text and "after 0 of 120" in text
     assert "identification 30 of 216" in text and "counted in the error" in text
     assert RunSummary.from_json(json.loads(json.dumps(s.to_json()))) == s
-    assert "by chance" in s.rp_text() and "5 cycles at each of 24 poses" in s.rp_text()
+    assert "cannot be told from the scatter" in s.rp_text() and "5 cycles at each of 24 poses" in s.rp_text()
     # a robot that really repeats worse after the correction is not explained away
     worse = ErrorStats.from_errors({(f"P{i}", 1): rng.normal(0, 0.02, (5, 3)) for i in range(24)})
     assert "repeated worse" in s.replace(after=worse).rp_text()

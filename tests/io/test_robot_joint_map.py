@@ -126,7 +126,7 @@ def test_a_cell_configuration_with_a_mapped_robot_exits_2_at_config_check(capsys
 @pytest.mark.parametrize("extra, pattern", [
     ("[joint_map.A9]\nsign = -1\n", r"\[joint_map.A9\]: no joint transform 'A9'; the joints are A1, A2, A3, A4"),
     ("[joint_map.A2]\nsign = 2\n", r"\[joint_map.A2\].sign must be 1 or -1"),
-    ("[joint_map.A2]\nsing = -1\n", r"unknown keys \['sing'\]; allowed: sign, offset, coupled_to, k"),
+    ("[joint_map.A2]\nsing = -1\n", r"\[joint_map.A2\]: unknown key 'sing' \(did you mean 'sign'\?\); allowed: sign, offset, coupled_to, k"),
     ("[joint_map.A2]\ncoupled_to = \"A2\"\nk = 1\n", r"coupled_to = 'A2': give another joint transform"),
     ("[joint_map.A2]\nk = 1\n", r"A2: k is given without the joint it couples to"),
     ("[joint_map.A3]\ncoupled_to = \"A2\"\n", r"A3: coupled to A2, but no factor k"),

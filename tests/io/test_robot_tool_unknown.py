@@ -97,7 +97,7 @@ def test_tool_file_on_the_command_line_holds_a_tool_the_file_marks_unknown(capsy
 
 @pytest.mark.parametrize("head, tail, pattern", [
     ("", "\n[tool]\nunknown = \"yes\"\n", "[tool].unknown must be true or false, got 'yes'"),
-    ("", "\n[tool]\nunknown = true\noffset = [62, -40, 75]\n", "[tool] has unknown keys ['offset']; allowed: unknown"),
+    ("", "\n[tool]\nunknown = true\noffset = [62, -40, 75]\n", "[tool]: unknown key 'offset'; allowed: unknown (the tool itself is the last [[transform]])"),
     ("tool = 1\n", "", "tool must be a table, e.g. [tool] with unknown = true"),  # a top-level key: before [robot]
 ])
 def test_a_malformed_tool_table_is_refused_by_every_command(capsys, tmp_path, head, tail, pattern):

@@ -144,14 +144,16 @@ def test_station_check_exits_7_when_a_wired_probe_reads_invalid(tmp_path, capsys
         cfg.write_text(cell_config_text(srv, 2))
         # parked in the air, the plungers rest at their stops: over range, no fault
         assert main(["check", str(cfg)]) == 0
-        assert "ProbeChannelsInvalid" not in capsys.readouterr().out
+        assert "read invalid" not in capsys.readouterr().out
         srv.probe_server.faults.force_status(1, ChannelStatus.INVALID)  # a wired channel's sensor fails
         code = main(["check", str(cfg)])
     finally:
         srv.stop()
     out = capsys.readouterr().out
     assert code == 7
-    assert "ProbeChannelsInvalid" in out and "DeviceInfo(" not in out and "ControllerStatus(" not in out
+    assert "FAILED: 1 of the head's" in out and "wired probes read invalid: " in out
+    # words for people: no Python type name, no repr (issue 33)
+    assert "ProbeChannelsInvalid" not in out and "DeviceInfo(" not in out and "ControllerStatus(" not in out
     assert re.search(r"joints: -?\d+\.\d\d°", out)
 
 

@@ -245,7 +245,7 @@ def test_sigterm_at_spread_moments_always_gives_one_outcome(tmp_path):
 
 @pytest.mark.parametrize("args,says", [
     (["calibrate", "--simulated", "--bogus", "--json"], "unrecognized arguments: --bogus"),
-    (["calibrate", "--simulated", "--seed", "abc", "--json"], "invalid int value: 'abc'"),
+    (["calibrate", "--simulated", "--seed", "abc", "--json"], "'abc': give a seed as a whole number (0 … 4294967295)"),
     (["recheck", "--simulated", "--poses", "x", "--json"], "--poses"),
     (["--json"], "required"),
 ])

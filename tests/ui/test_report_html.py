@@ -14,7 +14,6 @@ from test_report import make_data
 
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import ReversalSummary
-from station.errors import IdentificationError
 from station.ui.cli.main import main
 from station.ui.report.run import report_data_for_run, report_for_run
 from station.ui.report.writer import write_report
@@ -218,7 +217,9 @@ def test_rebuilt_report_returns_the_html(simulated_run, tmp_path):
     assert path == tmp_path / "again" / "report.html" and (tmp_path / "again" / "report.md").is_file()
 
 
-def test_a_run_without_identification_gives_a_clear_error(simulated_run, tmp_path, capsys):
+def test_a_run_without_identification_gets_a_report_saying_how_far_it_got(simulated_run, tmp_path, capsys):
+    """Every run that ends gets a report (issue 29): one stopped before any measurement says so,
+    and how to finish it, instead of exiting without one."""
     db, _ = simulated_run
     copy = tmp_path / "copy.sqlite"
     with sqlite3.connect(db) as src, sqlite3.connect(copy) as dst:
@@ -227,12 +228,14 @@ def test_a_run_without_identification_gives_a_clear_error(simulated_run, tmp_pat
         run = d.run(1)
         rid = d.create_run(run.config_toml, list(run.plan), seed=1)
         d.set_status(rid, "aborted")
-    with pytest.raises(IdentificationError, match=rf"no report for run {rid}: it stopped before the identification"):
-        report_for_run(copy, rid, tmp_path / "r")
-    assert main(["report", str(rid), "--db", str(copy), "-o", str(tmp_path / "r2")]) == 3
-    err = capsys.readouterr().err
-    assert f"--resume {rid}" in err and "Traceback" not in err
-    assert not (tmp_path / "r2" / "report.html").exists()
+    assert main(["report", str(rid), "--db", str(copy), "-o", str(tmp_path / "r2")]) == 0
+    assert "Traceback" not in capsys.readouterr().err
+    page = Page((tmp_path / "r2" / "report.html").read_text(encoding="utf-8"))
+    assert page.texts["progress"].startswith("How far the run got: The run has no stored outcome (database status "
+                                             "'aborted'")
+    assert f"Steps measured: 0 of {len(run.plan)}" in page.texts["progress"]
+    text = (tmp_path / "r2" / "report.md").read_text(encoding="utf-8")
+    assert f"--resume {rid}" in text and "No parameters: nothing identified." in text
 
 
 def test_simulated_run_signoff(simulated_run, tmp_path):

@@ -62,7 +62,8 @@ def test_acceptance_judges_ap_and_rp_per_pose_beside_the_gain(tmp_path):
     assert ap[0] == "≤ 10 µm" and ap[1].startswith("largest 12.5 µm at C1.d elbow +1; 2 of 3") and ap[2] == "FAIL"
     rp = acc["RP after correction, every pose (ISO 9283)"]
     assert rp[1].startswith("largest 41.0 µm at C2.b elbow -1; 2 of 3") and rp[2] == "FAIL"
-    assert page.texts["verdict"] == "FAIL" and "### Acceptance: FAIL" in md
+    # the verdict says what was judged (issue 29)
+    assert page.texts["verdict"] == "FAIL (AP, RP); passed: gain" and "### Acceptance: FAIL (AP, RP); passed: gain" in md
     # per pose: the figures, and which limit a pose fails
     iso = page.tables["iso-table"]
     assert iso[0] == list(so.ISO_HEAD)
@@ -77,7 +78,7 @@ def test_without_a_specification_only_the_gain_is_judged(tmp_path):
     acc = page.tables["acceptance-table"][1:]
     assert [r[3] for r in acc] == ["PASS", "not judged", "not judged"]
     assert "not specified ([verification] max_ap_um)" in acc[1][1]
-    assert page.texts["verdict"] == "PASS"
+    assert page.texts["verdict"] == "PASS (gain); AP, RP not judged: no limit set"
     assert all(r[-1] in ("—", "") for r in page.tables["iso-table"][1:])
 
 
@@ -88,6 +89,7 @@ def test_without_after_measurements_the_limits_are_not_judged(tmp_path):
     acc = page.tables["acceptance-table"][1:]
     assert [r[3] for r in acc] == ["not judged"] * 3
     assert acc[1][2] == "no measurements after correction"
+    assert page.texts["verdict"].startswith("not judged: gain, AP, RP: ")
 
 
 def test_conditions_poses_and_traceability(tmp_path):
@@ -112,6 +114,7 @@ def test_conditions_poses_and_traceability(tmp_path):
     sig = page.tables["signature-table"]
     assert [r[0] for r in sig[1:]] == list(so.SIGNATURE_ROLES) and all(c == "" for r in sig[1:] for c in r[1:])
     assert page.sections[-1] == "signoff" and "## Sign-off" in md
+    assert page.texts["signature-attests"] == so.SIGNATURE_ATTESTS and "rehearsal" not in page.texts
 
 
 def test_not_recorded_items_say_where_to_give_them(tmp_path):
@@ -130,11 +133,15 @@ def test_not_recorded_items_say_where_to_give_them(tmp_path):
 def test_a_simulated_run_is_marked_on_every_page(tmp_path):
     page, html, md = render(tmp_path, signoff_data(simulated=True))
     assert page.texts["simulated-banner"] == so.SIMULATED_BANNER
-    assert "@top-center" in html and 'class="watermark"' in html  # every printed page: margin box, fixed mark
+    # every printed page: the mark in the running header (a page-margin box) and a fixed watermark
+    assert '@top-right { content: "SIMULATED: rehearsal: not for sign-off"' in html and 'class="watermark"' in html
     assert "<title>SIMULATED — " in html
     assert md.startswith("# SIMULATED — ") and so.SIMULATED_BANNER in md
+    # no signature block on a rehearsal: it is replaced, not qualified
+    assert "signature-table" not in page.tables and page.texts["rehearsal"].startswith("Rehearsal: not for sign-off.")
+    assert "Rehearsal: not for sign-off." in md and "| role |" not in md
     page, html, md = render(tmp_path / "real", signoff_data())
-    assert "simulated-banner" not in page.texts and "@top-center" not in html and "SIMULATED" not in md
+    assert "simulated-banner" not in page.texts and "SIMULATED" not in html and "SIMULATED" not in md
 
 
 def test_numbers_and_timestamps_are_rounded(tmp_path):

@@ -43,7 +43,7 @@ def _wait_for_steps(proc: subprocess.Popen, n: int, timeout: float = 120.0) -> l
 def test_sigterm_stops_at_a_safe_point_and_resume_gives_the_uninterrupted_result(tmp_path):
     db = tmp_path / "runs.sqlite"
     proc = _calibrate(db)
-    _wait_for_steps(proc, 30)
+    seen = _wait_for_steps(proc, 30)
     proc.send_signal(signal.SIGTERM)
     out, err = proc.communicate(timeout=120)
     assert proc.returncode == 6, err[-2000:]
@@ -52,6 +52,16 @@ def test_sigterm_stops_at_a_safe_point_and_resume_gives_the_uninterrupted_result
     stopped = objects[0]
     assert stopped["outcome"] == "ABORTED" and stopped["run_id"] == 1
     assert "--resume 1" in stopped["failure"]["hint"] and "Traceback" not in err
+    # a signal is reported as a signal, with the command that continues this very run (issue 29)
+    assert stopped["failure"]["message"].startswith("stopped by SIGTERM at a safe point")
+    assert f"station calibrate --simulated --seed 1 --db {db} --resume 1" in stopped["failure"]["hint"]
+    assert "CONFIG" not in stopped["failure"]["hint"]
+    progress = [ln for ln in seen if ln.strip().startswith("30/")]
+    assert progress and " elapsed" in progress[0] and " left (" in progress[0]  # time on every progress line
+    from station.cell.records.rundb import RunDB
+
+    with RunDB(db) as d:  # the stored summary (the report's, 'runs'') says the same
+        assert d.load_result(1, "summary")["failure"]["message"] == stopped["failure"]["message"]
 
     resumed = subprocess.run([sys.executable, "-m", "station.ui.cli.main", "calibrate", "--simulated", "--seed", "1",
                               "--db", str(db), "--json", "--resume", "1"], cwd=ROOT, env=ENV, text=True,
@@ -84,8 +94,11 @@ def test_runs_lists_outcomes_and_what_can_be_resumed(tmp_path, capsys):
     assert main(["runs", "--db", str(db)]) == 0
     table = capsys.readouterr().out
     assert "NOT_UPLOADED" in table and "sr800" in table
-    assert main(["runs", "--db", str(cfg)]) == 2  # no database there: a clear error
-    assert "no run database" in capsys.readouterr().err
+    assert main(["runs", "--db", str(cfg)]) == 5  # no database there: a database error naming the path (issue 29)
+    assert f"no run database at {cfg}" in capsys.readouterr().err
+    assert main(["runs", "--db", str(cfg), "--json"]) == 5
+    failed = json.loads(capsys.readouterr().out)
+    assert failed["outcome"] == "DATABASE_ERROR" and failed["db"] == str(cfg) and failed["failure"]["hint"]
 
 
 def test_report_rebuilds_a_runs_report(tmp_path, capsys):

@@ -94,7 +94,9 @@ def test_calibrate_json_summary_export_and_reversal(sim, tmp_path, capsys):
     with RunDB(db) as d:
         n = len(d.measurements(summary["run_id"]))
     assert len(rows) - 1 == n  # one row per stored measurement
-    assert any("[mm]" in h for h in rows[0]) and any("[rad]" in h for h in rows[0])  # units in the header
+    # units in the header; joints and orientations in degrees, as everywhere else (issue 29)
+    assert any("[mm]" in h for h in rows[0]) and any("[deg]" in h for h in rows[0])
+    assert not any("rad" in h for h in rows[0])
 
 
 def test_calibrate_without_config_is_a_usage_error(capsys):

@@ -301,7 +301,8 @@ async def test_run_failed_shows_message_and_hint():
         await pilot.press("s")
         await wait_until(pilot, lambda: app.state == "failed", "failed")
         text = panel(app)
-        assert "IdentificationError" in text
+        # the panel names the outcome, never the Python type (issue 33: messages for people)
+        assert "IDENTIFICATION_FAILED" in text and "IdentificationError" not in text
         assert failure.message in text and failure.hint in text
         assert row(text, "outcome").startswith("IDENTIFICATION_FAILED")
         assert app.exit_code == 3 and app.failure == failure
@@ -331,7 +332,7 @@ async def test_station_error_escaping_start_run_is_classified_by_type(tmp_path):
         await pilot.press("s")
         await wait_until(pilot, lambda: app.state == "failed", "failed")
         text = panel(app)
-        assert "ConfigError" in text and "probe 7 has no direction" in text
+        assert "CONFIG_ERROR" in text and "probe 7 has no direction" in text and "ConfigError" not in text
         assert app.exit_code == Outcome.CONFIG_ERROR == 2
     assert not list(tmp_path.iterdir())  # not a bug: no traceback file
 

@@ -263,7 +263,7 @@ async def test_rehearsal_of_the_example_cell_through_the_ui(tmp_path):
 
 # -- advice for the device kind ---------------------------------------------------------------
 LINK_LOST = ("controller heartbeat did not advance for 3.10 s (limit 3.00 s): the robot program or the link is "
-             "down; check the robot, then call connect() again")
+             "down; check the robot program and the link, then start the run again")
 
 
 def failure_of(exc: BaseException, run_id: int | None = 7) -> Failure:

@@ -154,11 +154,17 @@ class IdentificationConfig:
 
 @dataclass(frozen=True)
 class CorrectionConfig:
-    x_mm: tuple[float, float, float]
-    y_mm: tuple[float, float, float]
-    z_mm: tuple[float, float, float]
-    yaw_step_deg: float
+    """[correction]: x/y/z_mm (start, stop, step) [mm], all or none (designed); region (lo, hi) per axis or None."""
+    x_mm: tuple[float, float, float] | None
+    y_mm: tuple[float, float, float] | None
+    z_mm: tuple[float, float, float] | None
+    yaw_step_deg: float | None
     max_interpolation_um: float
+    region: tuple[tuple[float, float], tuple[float, float], tuple[float, float]] | None = None
+
+    @property
+    def explicit(self) -> bool:  # the grid is given (x_mm, y_mm, z_mm), not designed
+        return self.x_mm is not None and self.y_mm is not None and self.z_mm is not None
 
 
 @dataclass(frozen=True)
@@ -170,6 +176,16 @@ class RecheckConfig:
     offset_tolerance_arcsec: float = 0.0  # 0: tolerance_um over a 500 mm lever
     length_tolerance_um: float = 0.0  # 0: tolerance_um
     repeat_tolerance_um: float = 0.0  # first pose vs its repeat at the end; 0: tolerance_um
+
+
+@dataclass(frozen=True)
+class FleetConfig:
+    """``[fleet]``: where finished runs are published (None: nowhere, unless STATION_FLEET_URL),
+    this station's name there, and the days between rechecks the fleet's due dates use."""
+
+    url: str | None = None
+    station: str | None = None
+    recheck_interval_days: int = 30
 
 
 @dataclass(frozen=True)
@@ -273,6 +289,7 @@ class CellConfig:
     identity: CellIdentity = CellIdentity()  # [cell] robot_serial, controller, operator (the report's)
     head_certificate: Certificate = Certificate()  # the [head] file's CMM certificate (empty: none given)
     body_certificate: Certificate = Certificate()  # the [body] file's CMM certificate (empty: none given)
+    fleet: FleetConfig = FleetConfig()  # [fleet]: the plant's fleet store (issue 31)
 
 
 # --------------------------------------------------------------------------------------------
@@ -368,12 +385,15 @@ def _soft_limits(raw: list | None, model: RobotModel, source: str) -> np.ndarray
 
 
 def correction_grid(correction: CorrectionConfig, elbows: tuple[int, ...]) -> GridSpec:
-    """The configured correction grid (robot base frame) for the given plan elbows."""
+    """The configured (explicit) correction grid (robot base frame) for the given plan elbows."""
     c = correction
+    if c.x_mm is None or c.y_mm is None or c.z_mm is None:
+        raise ConfigError("correction: the grid is designed by the station (no x_mm, y_mm, z_mm given)")
     return GridSpec(x_range=(c.x_mm[0], c.x_mm[1]), x_step=c.x_mm[2], y_range=(c.y_mm[0], c.y_mm[1]),
                     y_step=c.y_mm[2], z_range=(c.z_mm[0], c.z_mm[1]), z_step=c.z_mm[2],
-                    yaw_step=float(np.deg2rad(c.yaw_step_deg)), elbows=tuple(elbows))
+                    yaw_step=float(np.deg2rad(c.yaw_step_deg or DEFAULT_YAW_STEP_DEG)), elbows=tuple(elbows))
 
+DEFAULT_YAW_STEP_DEG = 30.0  # the yaw step of an explicit grid that gives none [deg]
 
 _GRID_KEY = {"x": "correction.x_mm", "y": "correction.y_mm", "z": "correction.z_mm", "yaw": "correction.yaw_step_deg"}
 
@@ -381,19 +401,19 @@ _GRID_KEY = {"x": "correction.x_mm", "y": "correction.y_mm", "z": "correction.z_
 def _check_grid(corr: CorrectionConfig, elbows: tuple[int, ...], n_joints: int, source: str) -> None:
     """The grid's ranges and steps and the controller's capacity, before anything moves (the
     same :class:`GridSpec` the pipeline builds the table on)."""
+    yaw, n = corr.yaw_step_deg, 360.0 / (corr.yaw_step_deg or 30.0)
+    if yaw is not None and abs(n - round(n)) > 1e-9 * n:
+        steps = [360.0 / k for k in range(2, 361) if (3600 % k) == 0]  # divisors to 0.1 deg
+        lower, upper = max((v for v in steps if v < yaw), default=1.0), min((v for v in steps if v > yaw), default=180.0)
+        raise ConfigError(f"{source}: correction.yaw_step_deg = {yaw:g}: must divide 360 deg ({n:.4g} steps); "
+                          f"use e.g. {lower:g} or {upper:g}")
+    if not corr.explicit:  # designed: checked with the plan, before the first motion (design.py)
+        return
     for key in ("x_mm", "y_mm", "z_mm"):
         lo, hi, step = getattr(corr, key)
         if not hi > lo:
             raise ConfigError(f"{source}: correction.{key} = [{lo:g}, {hi:g}, {step:g}]: [start, stop, step] needs "
                               f"stop > start")
-    n = 360.0 / corr.yaw_step_deg
-    if abs(n - round(n)) > 1e-9 * n:
-        steps = [360.0 / k for k in range(2, 361) if (3600 % k) == 0]  # divisors to 0.1 deg
-        lower = max((v for v in steps if v < corr.yaw_step_deg), default=1.0)
-        upper = min((v for v in steps if v > corr.yaw_step_deg), default=180.0)
-        hint = f"{lower:g} or {upper:g}"
-        raise ConfigError(f"{source}: correction.yaw_step_deg = {corr.yaw_step_deg:g}: must divide 360 deg "
-                          f"({n:.4g} steps); use e.g. {hint}")
     try:
         correction_grid(corr, elbows).check_capacity(n_joints, MAX_TABLE_VALUES)
     except ConfigError as exc:
@@ -431,8 +451,9 @@ def _tools(tools: list[_Tool], corr: CorrectionConfig, elbows: tuple[int, ...], 
     out = []
     for t in tools:
         c = CorrectionConfig(x_mm=t.x_mm or corr.x_mm, y_mm=t.y_mm or corr.y_mm, z_mm=t.z_mm or corr.z_mm,
-                             yaw_step_deg=corr.yaw_step_deg, max_interpolation_um=corr.max_interpolation_um)
-        if c != corr:
+                             yaw_step_deg=corr.yaw_step_deg, max_interpolation_um=corr.max_interpolation_um,
+                             region=corr.region)
+        if c != corr and c.explicit:  # else its missing axes come from the head's designed grid (tools.py)
             _check_grid(c, elbows, n_joints, f"{source}: tool {t.name!r} (its x_mm, y_mm, z_mm replace [correction]'s)")
         out.append(ToolConfig(t.name, _pose_deg(t.tcp), c))
     return tuple(out)
@@ -494,8 +515,10 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
                 raise ConfigError(f"{source}: identification.{key}: {exc}") from None
 
     c = f.correction
-    corr = CorrectionConfig(x_mm=c.x_mm, y_mm=c.y_mm, z_mm=c.z_mm, yaw_step_deg=c.yaw_step_deg,
-                            max_interpolation_um=c.max_interpolation_um)
+    corr = CorrectionConfig(x_mm=c.x_mm, y_mm=c.y_mm, z_mm=c.z_mm, yaw_step_deg=DEFAULT_YAW_STEP_DEG
+                            if c.x_mm is not None and c.yaw_step_deg is None else c.yaw_step_deg,
+                            max_interpolation_um=c.max_interpolation_um,
+                            region=None if c.region is None else (c.region.x_mm, c.region.y_mm, c.region.z_mm))
     if model.is_scara:  # an articulated arm gets compensated targets, not a table (issue 9)
         _check_grid(corr, plan.elbows, model.n_joints, source)
 
@@ -524,6 +547,7 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
         verification=VerificationConfig(**f.verification.model_dump()),  # [verification] (the report's)
         identity=CellIdentity(f.cell.robot_serial or "", f.cell.controller or "", f.cell.operator or ""),
         head_certificate=head_cert, body_certificate=body_cert,  # the CMM certificates, for the report
+        fleet=FleetConfig(f.fleet.url, f.fleet.station, r.interval_days or f.fleet.recheck_interval_days),
     )
 
 

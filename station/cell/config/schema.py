@@ -33,6 +33,7 @@ Deg = Annotated[float, Field(ge=-360.0, le=360.0)]
 Pose = Annotated[tuple[Mm, Mm, Mm, Deg, Deg, Deg], Field(strict=False)]
 GridStep = Annotated[float, Field(ge=1.0, le=MAX_MM)]
 GridAxis = Annotated[tuple[Mm, Mm, GridStep], Field(strict=False)]
+RegionAxis = Annotated[tuple[Mm, Mm], Field(strict=False)]
 
 _POSE_WHAT = "x, y, z [mm] within ±10000, roll, pitch, yaw [deg] within ±360"
 
@@ -196,12 +197,45 @@ class _Identification(_Section):
     exclude: list[ParamName] = Field([], max_length=500, description='parameter names such as "K.x"')
 
 
+class _Region(_Section):
+    """``[correction] region``: the TCP's working box in the robot base frame (the head frame's origin)."""
+
+    x_mm: RegionAxis = Field(description="[low, high] in mm")
+    y_mm: RegionAxis = Field(description="[low, high] in mm")
+    z_mm: RegionAxis = Field(description="[low, high] in mm")
+
+    @model_validator(mode="after")
+    def _ordered(self) -> "_Region":
+        for key in ("x_mm", "y_mm", "z_mm"):
+            lo, hi = getattr(self, key)
+            if not lo < hi:
+                raise ValueError(f"region {key} = [{lo:g}, {hi:g}]: write [low, high] with low < high")
+        return self
+
+
 class _Correction(_Section):
-    x_mm: GridAxis = Field((250.0, 650.0, 40.0), description="[start, stop, step] in mm, step 1 … 10000")
-    y_mm: GridAxis = Field((-350.0, 350.0, 50.0), description="[start, stop, step] in mm, step 1 … 10000")
-    z_mm: GridAxis = Field((250.0, 450.0, 200.0), description="[start, stop, step] in mm, step 1 … 10000")
-    yaw_step_deg: float = _num(30.0, ge=1.0, le=180.0, what="yaw step of the table [deg], a divisor of 360")
+    # Without x_mm, y_mm and z_mm the station designs the grid (station/cell/correction/design.py);
+    # given, all three together, they are the grid.
+    x_mm: GridAxis | None = _absent(description="[start, stop, step] in mm, step 1 … 10000 (absent: designed)")
+    y_mm: GridAxis | None = _absent(description="[start, stop, step] in mm, step 1 … 10000 (absent: designed)")
+    z_mm: GridAxis | None = _absent(description="[start, stop, step] in mm, step 1 … 10000 (absent: designed)")
+    yaw_step_deg: float = _num(None, ge=1.0, le=180.0, what="yaw step of the table [deg], a divisor of 360 "
+                               "(absent: designed; 30 with x_mm, y_mm, z_mm)")
     max_interpolation_um: float = _num(15.0, gt=0.0, le=1000.0, what="largest interpolation bound accepted [µm]")
+    region: _Region | None = _absent(description="the TCP's working box in the robot base frame: "
+                                     "{ x_mm = [low, high], y_mm = [low, high], z_mm = [low, high] }")
+
+    @model_validator(mode="after")
+    def _whole_grid(self) -> "_Correction":
+        given = [k for k in ("x_mm", "y_mm", "z_mm") if getattr(self, k) is not None]
+        if given and len(given) < 3:
+            missing = ", ".join(k for k in ("x_mm", "y_mm", "z_mm") if k not in given)
+            raise ValueError(f"the grid is given by x_mm, y_mm and z_mm together: add {missing}, or remove "
+                             f"{', '.join(given)} to let the station design the grid")
+        if given and self.region is not None:
+            raise ValueError("give either region (the station designs the grid over it) or x_mm, y_mm, z_mm "
+                             "(the grid itself), not both")
+        return self
 
 
 class _Simulation(_Section):
@@ -288,6 +322,27 @@ class _Recheck(_Section):
     length_tolerance_um: float = _num(0.0, ge=0.0, le=10000.0, what="arm length change accepted [µm]; 0: tolerance_um")
     repeat_tolerance_um: float = _num(0.0, ge=0.0, le=10000.0,
                                       what="first pose against its repeat at the end [µm]; 0: tolerance_um")
+    interval_days: int = _num(0, ge=0, le=3650, what="days between rechecks (the fleet's due date); 0: [fleet] "
+                              "recheck_interval_days")
+
+
+class _Fleet(_Section):
+    """[fleet]: the plant's central fleet store (issue 31). No credentials here: the libpq service
+    file, ~/.pgpass or PG* environment variables supply them."""
+
+    url: Text | None = _absent(description="the fleet store: postgresql://host/dbname or service=NAME (no "
+                                           "password; STATION_FLEET_URL overrides)")
+    station: Text | None = _absent(description="this station's name in the fleet (default: the host name)")
+    recheck_interval_days: int = _num(30, ge=1, le=3650, what="days between rechecks where [recheck] "
+                                                              "interval_days is 0")
+
+    @field_validator("url")
+    @classmethod
+    def _no_password(cls, url: str | None) -> str | None:
+        if url is not None and re.search(r"(?i)(password\s*=|^[a-z]+://[^/@]*:[^/@]*@)", url):
+            raise ValueError("holds a password: put credentials in ~/.pgpass, the libpq service file or "
+                             "PGPASSWORD, never in the cell file")
+        return url
 
 
 class _Warmup(_Section):
@@ -328,6 +383,20 @@ class _Tool(_Section):
     y_mm: GridAxis | None = _absent(description="the tool's own grid y [start, stop, step] in mm (default: [correction])")
     z_mm: GridAxis | None = _absent(description="the tool's own grid z [start, stop, step] in mm (default: [correction])")
 
+    @model_validator(mode="after")
+    def _whole_steps(self) -> "_Tool":
+        """Its own axes, whole steps from start to stop (with a designed [correction] its capacity
+        is checked with the design, before the first motion)."""
+        for key in ("x_mm", "y_mm", "z_mm"):
+            v = getattr(self, key)
+            if v is None:
+                continue
+            n = (v[1] - v[0]) / v[2]
+            if not v[1] > v[0] or abs(n - round(n)) > 1e-9 * max(1.0, n):
+                raise ValueError(f"tool {self.name!r}: correction.{key} = [{v[0]:g}, {v[1]:g}, {v[2]:g}]: stop > start "
+                                 f"and a whole number of steps from start to stop, e.g. step {(v[1] - v[0]) / max(1, round(n)):.6g}")
+        return self
+
     @field_validator("name")
     @classmethod
     def _name_chars(cls, v: str) -> str:
@@ -356,6 +425,7 @@ class _CellFile(_Section):
                                         description="a table [verification]")
     recheck: _Recheck = Field(default_factory=lambda: _Recheck.model_validate({}), description="a table [recheck]")
     warmup: _Warmup = Field(default_factory=lambda: _Warmup.model_validate({}), description="a table [warmup]")
+    fleet: _Fleet = Field(default_factory=lambda: _Fleet.model_validate({}), description="a table [fleet]")
     conformance: _Conformance = Field(default_factory=lambda: _Conformance.model_validate({}), description="a table [conformance]")
     head: _Head = Field(default_factory=lambda: _Head.model_validate({}), description="a table [head] with file = \"head.toml\"")
     tool: list[_Tool] = Field([], max_length=MAX_TOOLS, description=f"[[tool]] tables, at most {MAX_TOOLS}, "

@@ -165,7 +165,8 @@ verification_cycles = 3          # ISO 9283 repetitions per verification pose, 1
 select = 0                       # > 0: keep only this many most informative steps (D-optimal), 0 … 5000
 repeats = 2                      # visits per identification pose (robot repeatability averages out), 1 … 20
 recenter_attempts = 2            # re-centre when a probe is near the end of its stroke, 0 … 10
-recenter_margin_mm = 1.5         # 0 … 4 (the probes' stroke is ±5 mm)
+recenter_margin_mm = 1.5         # 0 … 4, less than half the probes' stroke (the built-in head's: ±5 mm;
+#                                # a [head] file states its own)
 max_residual_um = 10.0           # plane residual above which a reading is not valid, > 0 … 1000
 remeasure_attempts = 1           # re-touches when a redundant head's probes disagree, 0 … 5
 
@@ -182,14 +183,22 @@ sigma_angle_arcsec = 20.0        # 0.01 … 3600
 # exclude = []
 
 [correction]
-# Grid of the correction table in the robot base frame: [start, stop, step], stop > start, the
-# range a whole number of steps, step 1 … 10000 mm; with the yaw step (a divisor of 360) it must fit
-# the controller's 32 000 values (nodes × elbows × joints): checked when the file is read.
-x_mm = [250.0, 650.0, 40.0]
-y_mm = [-350.0, 350.0, 50.0]
-z_mm = [250.0, 450.0, 200.0]
-yaw_step_deg = 30.0              # 1 … 180
+# The correction table's grid describes the head frame's origin (MKKS, the point the head's CMM
+# report names; the built-in head's is about 60 mm above the corner it touches) in the robot base
+# frame, and its yaw. The station designs it: the region around every verification target (with
+# a margin for the set-up guess and a re-centred touch) and one step per axis, so that robots
+# with errors of the size the simulation table's *_sigma_* keys state meet the bound within the
+# controller's 32 000 values. 'station plan' shows the design, its value count and its predicted bound
+# (docs/correction.md, "The table's design").
 max_interpolation_um = 15.0      # refuse a table whose interpolation bound exceeds this, > 0 … 1000
+# region = { x_mm = [300.0, 650.0], y_mm = [-350.0, 350.0], z_mm = [250.0, 400.0] }
+#                                # the TCP's working box instead of the derived one [low, high] mm
+# Or the grid itself, all three: [start, stop, step] mm, stop > start, a whole number of steps,
+# step 1 … 10000; checked the same way before any motion:
+# x_mm = [250.0, 650.0, 40.0]
+# y_mm = [-350.0, 350.0, 50.0]
+# z_mm = [250.0, 450.0, 200.0]
+# yaw_step_deg = 30.0            # 1 … 180, a divisor of 360 (designed when absent)
 
 [verification]
 # The accuracy specification the report judges the held-out poses against after correction (ISO
@@ -208,6 +217,15 @@ tolerance_um = 0.0               # RMS position drift accepted [µm]; 0: 3× the
 offset_tolerance_arcsec = 0.0    # joint offset change accepted [″]; 0: tolerance_um over 500 mm, 0 … 36000
 length_tolerance_um = 0.0        # arm length change accepted [µm]; 0: tolerance_um, 0 … 10000
 repeat_tolerance_um = 0.0        # first pose vs its repeat [µm], else untrusted; 0: tolerance_um, 0 … 10000
+# interval_days = 0              # days between rechecks (the fleet's due dates); 0: [fleet]'s, 0 … 3650
+
+[fleet]
+# The plant's fleet store (docs/fleet.md): each finished run is published there, or queued in the
+# run database and sent later by 'station sync'. No credentials here: ~/.pgpass, the libpq
+# service file or PG* variables hold them. STATION_FLEET_URL overrides url.
+# url = "postgresql://fleet.plant.example/fleet"  # or "service=plant"
+# station = "cart-1"             # this station's name in the fleet (default: the host name)
+recheck_interval_days = 30       # days between rechecks where [recheck] has none, 1 … 3650
 
 [warmup]
 # Before 'calibrate' and 'recheck': cycles of a motion program over the workspace, each ended by

@@ -1,4 +1,5 @@
-"""The correction: the pre-motion grid check, the upload and the operator's table, tools.
+"""The correction: its design and pre-motion check (design.py), the upload and the operator's
+table, tools.
 
 May import run, records, plan, config and station.core; never results or sessions.
 """

@@ -39,7 +39,8 @@ from typing import Any
 import numpy as np
 
 from drivers.controller_map import MAX_TABLE_VALUES
-from station.cell.config.cell_config import CellConfig, ToolConfig, correction_grid
+from station.cell.config.cell_config import CellConfig, ToolConfig
+from station.cell.correction.design import head_in_flange, tool_grid_for
 from station.cell.plan.steps import PlannedStep
 from station.cell.records.rundb import RunDB
 from station.cell.records.stored_config import stored_config
@@ -54,7 +55,6 @@ from station.core.table_grid import GridSpec, interpolate_table
 from station.core.tool_frame import (
     ToolKinematics,
     derive_tool,
-    nominal_head_in_flange,
     tool_params,
     tool_transform,
 )
@@ -88,15 +88,6 @@ def result_key(name: str) -> str:
     return f"tool:{name}"
 
 
-def head_in_flange(cfg: CellConfig) -> np.ndarray:
-    """``H`` ``(4, 4)``: MKKS in the flange frame from the head's CMM report
-    (``cfg.head_in_flange``); without one, the robot model's nominal K (the nominal flange is then
-    the last joint frame, and the tools' TCPs are given in it)."""
-    if cfg.head_in_flange is None:
-        return nominal_head_in_flange(cfg.model)
-    return np.asarray(cfg.head_in_flange, dtype=float)
-
-
 def find_tool(cfg: CellConfig, name: str) -> ToolConfig:
     """The configured tool called ``name``; :class:`ConfigError` naming the configured ones."""
     for t in cfg.tools:
@@ -108,8 +99,10 @@ def find_tool(cfg: CellConfig, name: str) -> ToolConfig:
 
 
 def tool_grid(cfg: CellConfig, tool: ToolConfig) -> GridSpec:
-    """The grid of the tool's table: ``[correction]`` with the tool's own x_mm / y_mm / z_mm."""
-    return correction_grid(tool.correction, tuple(cfg.plan.elbows))
+    """The grid of the tool's table: ``[correction]``'s grid (configured or designed) with the
+    tool's own x_mm / y_mm / z_mm."""
+
+    return tool_grid_for(cfg, tool)
 
 
 def check_tools(cfg: CellConfig) -> None:

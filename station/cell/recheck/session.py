@@ -12,6 +12,7 @@ from collections.abc import Callable
 from contextlib import ExitStack
 from pathlib import Path
 
+from station.cell.config.cell_config import CellConfig
 from station.cell.recheck.measure import RecheckOptions, RecheckSummary, run_recheck
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import RunSummary
@@ -26,6 +27,7 @@ from station.cell.session.calibrate import (
     describe_devices,
     load_cell,
     open_cell,
+    publish_finished,
     store_failure,
 )
 
@@ -40,6 +42,7 @@ def run_recheck_session(request: CellRequest, emit: Callable[[Event], None], con
     ``on_cell``: called with the loaded cell (a test reaches the simulator's state through it)."""
     tracker = RunTracker(emit)
     cell_name = robot = ""
+    cfg: CellConfig | None = None  # known once loaded: a failed recheck is published with it
 
     try:
         with ExitStack() as stack:
@@ -58,7 +61,8 @@ def run_recheck_session(request: CellRequest, emit: Callable[[Event], None], con
                                   resume_run=request.resume,
                                   seed=loaded.endpoints.get("seed", request.seed) if request.simulated else None,
                                   devices_info=describe_devices(devices))
-            return summary.replace(db=request.db)
+        publish_finished(request.db, summary.run_id, cfg, emit)  # devices closed: the fleet store, or its queue
+        return summary.replace(db=request.db)
     except Exception as exc:  # every failure becomes an outcome; nothing escapes as a traceback
         failed = failure_summary(exc, run_id=tracker.run_id, log_dir=Path(request.db).resolve().parent,
                                  cell=cell_name, robot=robot, db=request.db)
@@ -68,5 +72,7 @@ def run_recheck_session(request: CellRequest, emit: Callable[[Event], None], con
                 failed.failure.hint.replace("station calibrate", "station recheck"), failed.failure.log_file))
         if tracker.run_id is not None:
             store_failure(request.db, tracker.run_id, {**failed.to_json(), "kind": "recheck"})
+            if cfg is not None:
+                publish_finished(request.db, tracker.run_id, cfg, emit)
         emit(RunFailed(failed))
         return failed

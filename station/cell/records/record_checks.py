@@ -47,6 +47,14 @@ def damaged(run_id: int | None, record: str, why: str) -> DamagedRecordError:
     return DamagedRecordError(f"{where}the stored {record} is damaged ({why}); {_ADVICE}")
 
 
+def damaged_field(run_id: int | None, table: str, row: str, field: str, why: str,
+                  advice: str = _ADVICE) -> DamagedRecordError:
+    """A damaged field: the message names the run, the table, the row and the field."""
+    where = f"run {run_id}: " if run_id is not None else ""
+    return DamagedRecordError(f"{where}the stored record is damaged: table {table}, row {row}, field {field}: "
+                              f"{why}; {advice}")
+
+
 def check_columns(path: object, table: str, have: Sequence[str]) -> None:
     """Refuse a table that lacks a column the station reads."""
     missing = [c for c in TABLE_COLUMNS[table] if c not in have]
@@ -139,6 +147,10 @@ def run_record(row: tuple) -> RunRecord:
     """A row of ``runs`` (its columns in :data:`TABLE_COLUMNS` order), checked."""
     rid, created, version, status, config, plan_json, seed, note = row
     plan = check_plan(parse_json(plan_json, rid, "plan"), rid)
+    if seed is not None and not (isinstance(seed, (str, int)) and str(seed).isascii() and str(seed).isdigit()
+                                 and len(str(seed)) <= 100):
+        raise damaged_field(rid, "runs", f"run {rid}", "seed", f"{str(seed)[:40]!r} is not a seed (a whole number "
+                                                              f"≥ 0 of at most 100 digits)")
     return checked(rid, "run record", lambda: RunRecord(
         id=rid, created_utc=str(created), station_version=str(version), status=str(status),
         config_toml=str(config), plan=plan, seed=None if seed is None else int(seed), note=str(note)))
@@ -148,6 +160,9 @@ def measurement_record(r: tuple) -> MeasurementRecord:
     """A row of ``measurements`` (its columns in :data:`TABLE_COLUMNS` order), checked."""
     (run_id, step, kind, point_id, label, jc, jr, raw, rd, cs, pose, res, ok, msg, t) = r
     what = f"measurement of step {step}"
+    if not isinstance(raw, (bytes, bytearray, memoryview)):  # bytes(5) would be five zero bytes
+        raise damaged_field(run_id, "measurements", f"step {step}", "raw_frames",
+                            f"a {type(raw).__name__} where the probe's frames (bytes) belong")
     status = None if cs is None else parse_json(cs, run_id, f"{what} (channel status)")
     if status is not None and not isinstance(status, list):
         raise damaged(run_id, f"{what} (channel status)", "not a list")

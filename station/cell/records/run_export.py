@@ -34,28 +34,35 @@ def export_csv(db: RunDB, run_id: int, path: str | Path,
                joint_units: Sequence[str] | None = None) -> Path:
     """Write one CSV row per measurement (docs/run-database.md, "Export").
 
-    ``joint_units`` ('rad' or 'mm' per joint) labels the joint columns; by default it is
-    taken from the joint types in the run's configuration snapshot (``joint = "revolute" |
-    "prismatic"`` entries), and joints of unknown type are labelled ``rad|mm``.
+    Joints and orientations in degrees, as everywhere else the station shows them (issue 29):
+    ``q1 [deg]`` for a revolute joint, ``[mm]`` for a prismatic one, ``roll [deg]`` … ``yaw [deg]``.
+    ``joint_units`` ('rad' or 'deg' for a revolute joint, 'mm' for a prismatic one) says which
+    is which; by default the run's robot says (its stored configuration, else the joint types
+    in the snapshot: ``joint = "revolute" | "prismatic"`` entries); joints of unknown type are
+    written as stored, labelled ``rad|mm``.
     """
     run = db.run(run_id)
     ms = db.measurements(run_id)
     n_q = max((len(m.joints_commanded) for m in ms), default=0)
     n_q = max([n_q] + [len(m.joints_read) for m in ms if m.joints_read is not None])
     n_p = max((len(m.readings_mm) for m in ms if m.readings_mm is not None), default=0)
-    units = list(joint_units) if joint_units is not None else _joint_units(run.config_toml)
-    units = (units + ["rad|mm"] * n_q)[:n_q]
+    given = list(joint_units) if joint_units is not None else _run_joint_units(db, run_id, run.config_toml)
+    units = [("deg" if u in ("rad", "deg") else u) for u in (given + ["rad|mm"] * n_q)[:n_q]]
     header = (["step", "kind", "point_id", "label", "t_utc"]
               + [f"q{i + 1} [{u}]" for i, u in enumerate(units)]
               + [f"q{i + 1}_cmd [{u}]" for i, u in enumerate(units)]
-              + ["x [mm]", "y [mm]", "z [mm]", "roll [rad]", "pitch [rad]", "yaw [rad]",
+              + ["x [mm]", "y [mm]", "z [mm]", "roll [deg]", "pitch [deg]", "yaw [deg]",
                  "residual [um]"]
               + [f"p{i + 1} [mm]" for i in range(n_p)]
               + ["status", "ok", "message"])
 
-    def cells(a: np.ndarray | None, n: int) -> list[str]:
-        vals = [] if a is None else [_num(v) for v in a]
+    def cells(a: np.ndarray | None, n: int, deg: Sequence[bool] = ()) -> list[str]:
+        vals = [] if a is None else [_num(float(np.degrees(v)) if i < len(deg) and deg[i] else v)
+                                     for i, v in enumerate(a)]
         return (vals + [""] * n)[:n]
+
+    q_deg = [u == "deg" for u in units]
+    pose_deg = [False, False, False, True, True, True]
 
     out = Path(path)
     try:
@@ -68,14 +75,25 @@ def export_csv(db: RunDB, run_id: int, path: str | Path,
                     str(s) for s in m.channel_status)
                 w.writerow([m.step_index, csv_text(m.kind), csv_text(m.point_id), csv_text(m.label),
                             csv_text(m.t_utc)]
-                           + cells(m.joints_read, n_q) + cells(m.joints_commanded, n_q)
-                           + cells(pose, 6) + [_num(m.pose_residual_um)]
+                           + cells(m.joints_read, n_q, q_deg) + cells(m.joints_commanded, n_q, q_deg)
+                           + cells(pose, 6, pose_deg) + [_num(m.pose_residual_um)]
                            + cells(m.readings_mm, n_p)
                            + [csv_text(status), int(m.ok), csv_text(m.message)])
     except OSError as e:
-        raise RunDatabaseError(f"{out}: cannot write the CSV export ({e}); check the folder "
-                               f"and its permissions") from e
+        raise RunDatabaseError(f"{out}: cannot write the CSV export ({e.strerror or e}); free space on its disk, "
+                               f"check the folder and its permissions, or choose another path") from e
     return out
+
+
+def _run_joint_units(db: RunDB, run_id: int, config_toml: str) -> list[str]:
+    """'rad'/'mm' per joint of the run's robot: its stored configuration's, else the snapshot's
+    inline joint types (:func:`_joint_units`); [] when neither says."""
+    try:
+        from station.cell.records.stored_config import stored_config
+
+        return ["rad" if k == "revolute" else "mm" for k in stored_config(db, run_id).model.joint_types]
+    except Exception:  # noqa: BLE001 - a snapshot this version cannot load: the inline types, else unknown
+        return _joint_units(config_toml)
 
 
 def _joint_units(config_toml: str) -> list[str]:
@@ -139,8 +157,8 @@ def export_pose_file(db: RunDB, run_id: int, path: str | Path) -> tuple[Path, in
             w.writerow(header)
             w.writerows(rows)
     except OSError as e:
-        raise RunDatabaseError(f"{out}: cannot write the pose file ({e}); check the folder and its "
-                               f"permissions") from e
+        raise RunDatabaseError(f"{out}: cannot write the pose file ({e.strerror or e}); free space on its disk, "
+                               f"check the folder and its permissions, or choose another path") from e
     return out, len(rows), _robot_argument(cfg)
 
 

@@ -17,6 +17,8 @@ import sqlite3
 import uuid
 from dataclasses import dataclass
 
+from station.cell.records.record_checks import DamagedRecordError
+from station.cell.records.record_fields import check_lock_row
 from station.cell.records.run_records import RunDatabaseError, utc_now
 
 LOCK_TABLE = """CREATE TABLE IF NOT EXISTS run_locks (
@@ -90,13 +92,21 @@ def is_stale(holder: LockHolder) -> bool:
     return bool(holder.pid_start and now_start and now_start != holder.pid_start)
 
 
-def read_holder(conn: sqlite3.Connection, run_id: int) -> LockHolder | None:
+def read_holder(conn: sqlite3.Connection, run_id: int, strict: bool = True) -> LockHolder | None:
+    """The holder of the run's lock, its row checked (a damaged row: :class:`DamagedRecordError`
+    naming the field; ``strict=False``: what of it reads, for clearing it)."""
     if not _has_table(conn):
         return None
     row = conn.execute("SELECT run_id, host, pid, pid_start, since_utc, token FROM run_locks WHERE run_id = ?",
                        (int(run_id),)).fetchone()
-    return None if row is None else LockHolder(int(row[0]), str(row[1]), int(row[2]), str(row[3]), str(row[4]),
-                                               str(row[5]))
+    if row is None:
+        return None
+    try:
+        return LockHolder(*check_lock_row(row))
+    except DamagedRecordError:
+        if strict:
+            raise
+        return LockHolder(int(run_id), str(row[1])[:80], 0, "", str(row[4])[:40], str(row[5]))
 
 
 def _has_table(conn: sqlite3.Connection) -> bool:

@@ -1,4 +1,4 @@
-"""What the run database stores, as Python values: its records, its errors, and the JSON
+"""What the run database stores: its SQL schema and, as Python values, its records, its errors, and the JSON
 conversions of arrays and results (NaN and infinities kept). :mod:`station.cell.records.rundb` is the
 database itself; this module does no I/O.
 """
@@ -15,6 +15,66 @@ from typing import Any
 import numpy as np
 
 from station.errors import Outcome, StationError
+
+# --------------------------------------------------------------------------------------- schema
+
+SCHEMA_VERSION = 1
+
+RUN_STATUSES = ("created", "measuring", "measured", "identified", "uploaded", "verified",
+                "failed", "aborted")
+EVENT_LEVELS = ("debug", "info", "warning", "error")
+
+_SCHEMA = """
+CREATE TABLE schema_version (
+    version     INTEGER NOT NULL
+);
+CREATE TABLE runs (
+    id              INTEGER PRIMARY KEY AUTOINCREMENT,
+    created_utc     TEXT NOT NULL,
+    station_version TEXT NOT NULL,
+    status          TEXT NOT NULL CHECK (status IN ({statuses})),
+    config_toml     TEXT NOT NULL,
+    plan_json       TEXT NOT NULL,
+    seed            TEXT,               -- decimal integer as TEXT: seeds may exceed 64 bit
+    note            TEXT NOT NULL DEFAULT ''
+);
+CREATE TABLE measurements (
+    run_id           INTEGER NOT NULL REFERENCES runs(id) ON DELETE CASCADE,
+    step_index       INTEGER NOT NULL CHECK (step_index >= 0),
+    kind             TEXT NOT NULL,
+    point_id         TEXT NOT NULL DEFAULT '',
+    label            TEXT NOT NULL DEFAULT '',
+    joints_commanded TEXT NOT NULL,     -- JSON list, rad | mm
+    joints_read      TEXT,              -- JSON list or NULL, rad | mm
+    raw_frames       BLOB NOT NULL,
+    readings_mm      TEXT,              -- JSON list, NaN as null
+    channel_status   TEXT,              -- JSON list
+    pose             TEXT,              -- JSON 4x4 nested list or NULL
+    pose_residual_um REAL,
+    ok               INTEGER NOT NULL CHECK (ok IN (0, 1)),
+    message          TEXT NOT NULL DEFAULT '',
+    t_utc            TEXT NOT NULL,
+    UNIQUE (run_id, step_index)
+);
+CREATE TABLE results (
+    run_id  INTEGER NOT NULL REFERENCES runs(id) ON DELETE CASCADE,
+    key     TEXT NOT NULL,
+    json    TEXT NOT NULL,
+    t_utc   TEXT NOT NULL,
+    UNIQUE (run_id, key)
+);
+CREATE TABLE events (
+    id      INTEGER PRIMARY KEY AUTOINCREMENT,
+    run_id  INTEGER REFERENCES runs(id) ON DELETE CASCADE,
+    t_utc   TEXT NOT NULL,
+    level   TEXT NOT NULL,
+    message TEXT NOT NULL
+);
+CREATE INDEX events_run ON events(run_id, id);
+""".format(statuses=", ".join(f"'{s}'" for s in RUN_STATUSES))
+
+_TABLES = {"schema_version", "runs", "measurements", "results", "events"}
+
 
 # --------------------------------------------------------------------------------------- errors
 

@@ -37,10 +37,16 @@ import numpy as np
 
 from station.cell.plan.steps import MEASUREMENT_KINDS
 from station.cell.records import record_checks as rc
+from station.cell.records import record_fields as rf
 from station.cell.records import run_lock
 from station.cell.records.record_checks import DamagedRecordError, check_against_plan
 from station.cell.records.run_lock import LockHolder, RunLockedError
 from station.cell.records.run_records import (  # re-exported: the database's records and errors
+    _SCHEMA,
+    _TABLES,
+    EVENT_LEVELS,
+    RUN_STATUSES,
+    SCHEMA_VERSION,
     DuplicateMeasurementError,
     EventRecord,
     MeasurementRecord,
@@ -58,67 +64,7 @@ __all__ = ["RunDB", "RunRecord", "MeasurementRecord", "EventRecord", "RunDatabas
            "RunNotFoundError", "DuplicateMeasurementError", "DamagedRecordError", "RunLockedError", "RUN_STATUSES", "EVENT_LEVELS", "SCHEMA_VERSION",
            "utc_now"]
 
-SCHEMA_VERSION = 1
-
-RUN_STATUSES = ("created", "measuring", "measured", "identified", "uploaded", "verified",
-                "failed", "aborted")
-EVENT_LEVELS = ("debug", "info", "warning", "error")
-
 _MISSING = object()
-
-
-# --------------------------------------------------------------------------------------- schema
-
-_SCHEMA = """
-CREATE TABLE schema_version (
-    version     INTEGER NOT NULL
-);
-CREATE TABLE runs (
-    id              INTEGER PRIMARY KEY AUTOINCREMENT,
-    created_utc     TEXT NOT NULL,
-    station_version TEXT NOT NULL,
-    status          TEXT NOT NULL CHECK (status IN ({statuses})),
-    config_toml     TEXT NOT NULL,
-    plan_json       TEXT NOT NULL,
-    seed            TEXT,               -- decimal integer as TEXT: seeds may exceed 64 bit
-    note            TEXT NOT NULL DEFAULT ''
-);
-CREATE TABLE measurements (
-    run_id           INTEGER NOT NULL REFERENCES runs(id) ON DELETE CASCADE,
-    step_index       INTEGER NOT NULL CHECK (step_index >= 0),
-    kind             TEXT NOT NULL,
-    point_id         TEXT NOT NULL DEFAULT '',
-    label            TEXT NOT NULL DEFAULT '',
-    joints_commanded TEXT NOT NULL,     -- JSON list, rad | mm
-    joints_read      TEXT,              -- JSON list or NULL, rad | mm
-    raw_frames       BLOB NOT NULL,
-    readings_mm      TEXT,              -- JSON list, NaN as null
-    channel_status   TEXT,              -- JSON list
-    pose             TEXT,              -- JSON 4x4 nested list or NULL
-    pose_residual_um REAL,
-    ok               INTEGER NOT NULL CHECK (ok IN (0, 1)),
-    message          TEXT NOT NULL DEFAULT '',
-    t_utc            TEXT NOT NULL,
-    UNIQUE (run_id, step_index)
-);
-CREATE TABLE results (
-    run_id  INTEGER NOT NULL REFERENCES runs(id) ON DELETE CASCADE,
-    key     TEXT NOT NULL,
-    json    TEXT NOT NULL,
-    t_utc   TEXT NOT NULL,
-    UNIQUE (run_id, key)
-);
-CREATE TABLE events (
-    id      INTEGER PRIMARY KEY AUTOINCREMENT,
-    run_id  INTEGER REFERENCES runs(id) ON DELETE CASCADE,
-    t_utc   TEXT NOT NULL,
-    level   TEXT NOT NULL,
-    message TEXT NOT NULL
-);
-CREATE INDEX events_run ON events(run_id, id);
-""".format(statuses=", ".join(f"'{s}'" for s in RUN_STATUSES))
-
-_TABLES = {"schema_version", "runs", "measurements", "results", "events"}
 
 
 # --------------------------------------------------------------------------------------- the DB
@@ -134,6 +80,8 @@ class RunDB:
         self._lock_new_runs = lock_new_runs
         self._run_locks: dict[int, str] = {}  # run id -> token of the run lock this RunDB holds
         self._conn: sqlite3.Connection | None = None
+        self._contexts: dict[int, rf.RunContext | None] = {}  # per run: what the checks of its records know
+        self._checked: set[str] = set()  # the whole-file checks done once
         if self.path.is_dir():
             raise RunDatabaseError(f"{self.path}: is a directory; give the path of a run database "
                                    f"file (it is created if it does not exist)")
@@ -152,6 +100,9 @@ class RunDB:
         except sqlite3.DatabaseError as e:
             conn.close()
             self._conn = None
+            if isinstance(e, sqlite3.OperationalError) and ("disk" in str(e) or "full" in str(e)):
+                raise RunDatabaseError(f"{self.path}: cannot open the run database ({e}); check free disk space "
+                                       f"and that its folder is writable") from e
             raise RunDatabaseError(
                 f"{self.path}: not a usable run database ({e}). If it is a damaged run database, "
                 f"keep it for inspection and restore the last backup; otherwise move it away or "
@@ -288,7 +239,7 @@ class RunDB:
     def _require_run(self, run_id: int) -> tuple[Any, ...]:
         row = self._c().execute(
             "SELECT id, created_utc, station_version, status, config_toml, plan_json, seed, note "
-            "FROM runs WHERE id = ?", (int(run_id),)).fetchone()
+            "FROM runs WHERE id = ?", (rf.run_id_param(run_id),)).fetchone()
         if row is None:
             latest = self._c().execute("SELECT MAX(id) FROM runs").fetchone()[0]
             have = f"its runs are 1..{latest}" if latest else "it holds no runs yet"
@@ -296,9 +247,7 @@ class RunDB:
                                    f"and the --db file")
         return tuple(row)
 
-    @staticmethod
-    def _run_from_row(row: tuple) -> RunRecord:
-        return rc.run_record(row)
+    _run_from_row = staticmethod(rc.run_record)
 
     # -- run locks (station.cell.records.run_lock) ---------------------------------------------------
 
@@ -332,17 +281,17 @@ class RunDB:
         except sqlite3.Error:  # a lock left behind is taken over as stale: this process ends
             pass
 
-    def run_lock(self, run_id: int) -> LockHolder | None:
-        """Who holds the run's lock, or None."""
+    def run_lock(self, run_id: int, strict: bool = True) -> LockHolder | None:
+        """Who holds the run's lock, or None (``strict=False``: a damaged lock row as far as it reads)."""
         with self._lock:
             self._require_run(run_id)
-            return run_lock.read_holder(self._c(), run_id)
+            return run_lock.read_holder(self._c(), run_id, strict)
 
     def unlock_run(self, run_id: int) -> LockHolder | None:
         """Clear the run's lock whoever holds it (``station runs --unlock``); returns the holder it
         removed, or None if the run was not locked."""
         with self._lock:
-            holder = self.run_lock(run_id)
+            holder = self.run_lock(run_id, strict=False)  # a damaged lock row is cleared too
             if holder is not None:
                 self._write([("DELETE FROM run_locks WHERE run_id = ?", (int(run_id),)),
                              ("INSERT INTO events(run_id, t_utc, level, message) VALUES (?, ?, 'warning', ?)",
@@ -505,25 +454,46 @@ class RunDB:
                                        f"database ({e})") from e
         return self._measurement_from_row(row)
 
-    @staticmethod
-    def _measurement_from_row(r: tuple) -> MeasurementRecord:
-        return rc.measurement_record(r)
+    _measurement_from_row = staticmethod(rc.measurement_record)
 
     def measurements(self, run_id: int, kind: str | None = None) -> list[MeasurementRecord]:
-        """The run's measurements ordered by step index, optionally only those of one kind."""
+        """The run's measurements ordered by step index, optionally only those of one kind. Every
+        row of the run is checked, also when only one kind is asked for: a row whose kind was
+        damaged must not drop out of the selection unnoticed."""
         sql = ("SELECT run_id, step_index, kind, point_id, label, joints_commanded, joints_read, "
                "raw_frames, readings_mm, channel_status, pose, pose_residual_um, ok, message, "
-               "t_utc FROM measurements WHERE run_id = ?")
-        params: tuple = (int(run_id),)
-        if kind is not None:
-            sql += " AND kind = ?"
-            params += (kind,)
+               "t_utc FROM measurements WHERE run_id = ? ORDER BY step_index")
         with self._lock:
             self._require_run(run_id)
-            rows = self._c().execute(sql + " ORDER BY step_index", params).fetchall()
+            rows = self._c().execute(sql, (int(run_id),)).fetchall()
+            self._check_orphans()
         records = [self._measurement_from_row(r) for r in rows]
-        check_against_plan(records, self.run(run_id).plan, run_id)
+        plan = self.run(run_id).plan
+        check_against_plan(records, plan, run_id)
+        rf.check_measurements(records, plan, self._context(int(run_id)))  # every field (record_fields.py)
+        if kind is not None:
+            records = [r for r in records if r.kind == kind]
         return records
+
+    def _check_orphans(self) -> None:
+        """A measurement of no run (written with the foreign keys off) is damage, named (once per RunDB)."""
+        if "orphans" in self._checked:
+            return
+        bad = self._c().execute("PRAGMA foreign_key_check(measurements)").fetchall()
+        if bad:
+            row = self._c().execute("SELECT run_id, step_index FROM measurements WHERE rowid = ?",
+                                    (bad[0][1],)).fetchone()
+            raise rc.damaged_field(None, "measurements", f"rowid {bad[0][1]} (step {row[1]})", "run_id",
+                                   f"run {row[0]} does not exist ({len(bad)} rows of no run); it belonged to another "
+                                   f"run or was edited")
+        self._checked.add("orphans")
+
+    def _context(self, run_id: int) -> rf.RunContext | None:
+        """The run's robot, body and head as its stored configuration says (read once per RunDB)."""
+        if run_id not in self._contexts:
+            from station.cell.records.stored_config import run_context  # it reads the database: imported here
+            self._contexts[run_id] = run_context(self, run_id)
+        return self._contexts[run_id]
 
     def completed_steps(self, run_id: int, ok_only: bool = False) -> set[int]:
         """Step indices that have a stored measurement (also failed ones unless ``ok_only``)."""
@@ -573,7 +543,9 @@ class RunDB:
                 raise RunDatabaseError(f"run {run_id}: no result {key!r}; run the step that "
                                        f"produces it first, or pass default=")
             return default
-        return rc.check_result(rc.parse_json(row[0], int(run_id), f"result {key!r}"), int(run_id), key)
+        value = rc.check_result(rc.parse_json(row[0], int(run_id), f"result {key!r}"), int(run_id), key)
+        rf.check_result_fields(value, int(run_id), key, self.run(run_id).n_steps if key == "recentring" else 0)
+        return value
 
     def result_keys(self, run_id: int) -> list[str]:
         with self._lock:

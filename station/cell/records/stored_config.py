@@ -7,17 +7,33 @@ this module sits below all of them, so none imports another to get at a stored r
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
 
 from station.cell.config.cell_config import CellConfig, parse_text
 from station.cell.plan.steps import PlannedStep
 from station.cell.records.record_checks import check_step_joints, checked
-from station.cell.records.rundb import RunDB
+from station.cell.records.record_fields import RunContext, check_plan_against
+from station.cell.records.run_records import RunRecord
 from station.errors import StationError
 
-__all__ = ["POSTPROCESSED_CONFIG", "config_source", "stored_config", "stored_plan"]
+__all__ = ["POSTPROCESSED_CONFIG", "config_source", "run_context", "stored_config", "stored_plan"]
+
+#: how far beyond the robot's joint limits a stored joint may lie (read-back, wrapping): a fraction of the range
+JOINT_MARGIN = 0.1
 
 #: result key of the configuration text a resume with changed post-processing finished the run with
 POSTPROCESSED_CONFIG = "config_toml_resumed"
+
+
+class RunDB(Protocol):
+    """What these readers need of the run database (:class:`station.cell.records.rundb.RunDB`
+    satisfies it; the database itself calls :func:`run_context`, so importing it here would be a
+    circle)."""
+
+    def run(self, run_id: int) -> RunRecord: ...
+    def load_result(self, run_id: int, key: str, default: Any = ...) -> Any: ...
 
 
 def config_source(cfg: CellConfig) -> str:
@@ -59,3 +75,23 @@ def _stored_joint_count(db: RunDB, run_id: int) -> int | None:
         return int(stored_config(db, run_id).model.n_joints)
     except StationError:
         return None
+
+
+def run_context(db: RunDB, run_id: int) -> RunContext | None:
+    """What the run's stored configuration says its records hold: the robot's joints and their
+    range (its limits widened by :data:`JOINT_MARGIN`), the body's points, the head's probes.
+    None where the configuration does not read (its robot file moved): the records are then checked
+    without it, and the configuration's reader reports its own error where it is needed."""
+    try:
+        cfg = stored_config(db, run_id)
+    except StationError:
+        return None
+    limits = np.asarray(cfg.model.joint_limits, dtype=float)
+    margin = JOINT_MARGIN * (limits[:, 1] - limits[:, 0])
+    lo, hi = tuple((limits[:, 0] - margin).tolist()), tuple((limits[:, 1] + margin).tolist())
+    head = cfg.head
+    ctx = RunContext(n_joints=int(cfg.model.n_joints), joint_lo=lo, joint_hi=hi,
+                     point_ids=tuple(str(p) for p in cfg.point_ids),
+                     n_probes=None if head is None else len(head.probe_channels))
+    check_plan_against(db.run(run_id).plan, run_id, ctx)
+    return ctx

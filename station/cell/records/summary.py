@@ -84,9 +84,18 @@ class IdentificationSummary:
 
 @dataclass(frozen=True)
 class CorrectionSummary:
+    """The run's correction table: its values, CRC-32 and interpolation bound [µm] (over the cells
+    the verification targets use, for a designed grid); the bound predicted before motion (the
+    median of the sampled robots' tables on the designed grid), the grid's node counts (x, y, z,
+    yaw), whether the grid was refined for the identified robot, and the limit it was judged by."""
+
     n_values: int
     interpolation_bound_um: float
     crc32: str
+    predicted_bound_um: float | None = None
+    grid_shape: tuple[int, ...] = ()
+    refined: bool = False
+    limit_um: float | None = None
 
 
 @dataclass(frozen=True)
@@ -237,6 +246,9 @@ class RunSummary:
     compensation: CompensationSummary | None = None  # an articulated arm's compensated targets
     tables: TableSummary | None = None  # the controller's active table at the run's start and end
     recentring: tuple[RecentringStats, ...] = field(default=())  # re-centred readings per kind
+    #: why a run that identified ends NOT_UPLOADED by itself: "correction_bound" (no table within the
+    #: controller's capacity meets correction.max_interpolation_um for the identified robot); None otherwise
+    not_uploaded_reason: str | None = None
 
     @property
     def exit_code(self) -> int:
@@ -284,16 +296,20 @@ class RunSummary:
                 f"pose {a.rp_max_um:.1f}")
         if b.rp_sd_um is None or a.rp_sd_um is None:
             return text
-        # the standard error of each mean over the poses; 3 of them apart is a real change
+        # the standard error of each mean over the poses; 3 of them apart is a real change. The
+        # statement is computed from the figures it stands beside (issue 29: "the means agree"
+        # was said of 13.4 and 26.4 µm): it gives the difference and the threshold, never a claim
         se = float(np.hypot(b.rp_sd_um / np.sqrt(b.n_poses), a.rp_sd_um / np.sqrt(a.n_poses)))
-        if abs(a.rp_mean_um - b.rp_mean_um) <= 3.0 * se:
-            return (f"{text}. A correction changes where the robot goes, not how well it repeats: the means agree "
-                    f"within their spread (±{se:.1f} µm), and one pose's RP from {a.cycles} cycles scatters by "
-                    f"{max(a.rp_sd_um, b.rp_sd_um):.1f} µm from pose to pose, so the worst of {a.n_poses} poses "
-                    f"differs between before and after by chance")
-        return (f"{text}. The means differ by more than 3× their spread (±{se:.1f} µm): the robot repeated "
-                f"{'worse' if a.rp_mean_um > b.rp_mean_um else 'better'} after the correction; check what changed "
-                f"between the two (warm-up, backlash, the approach)")
+        diff = a.rp_mean_um - b.rp_mean_um
+        if abs(diff) <= 3.0 * se:
+            return (f"{text}. The means differ by {diff:+.1f} µm, less than 3× their standard error "
+                    f"(3 × {se:.2f} = {3.0 * se:.1f} µm over {a.n_poses} poses of {a.cycles} cycles): a change this "
+                    f"size cannot be told from the scatter of RP from pose to pose ({max(a.rp_sd_um, b.rp_sd_um):.1f} "
+                    f"µm); a correction changes where the robot goes, not how well it repeats. RP against a limit is "
+                    f"judged per pose ([verification] max_rp_um)")
+        return (f"{text}. The means differ by {diff:+.1f} µm, more than 3× their standard error (3 × {se:.2f} = "
+                f"{3.0 * se:.1f} µm): the robot repeated {'worse' if diff > 0 else 'better'} after the correction; "
+                f"check what changed between the two (warm-up, backlash, the approach)")
 
     def figures(self) -> list[tuple[str, float, str, int]]:
         """(label, value, unit, digits) of the headline figures, in display order; the UI and
@@ -329,6 +345,8 @@ class RunSummary:
                 out[key] = _plain(dataclasses.asdict(value))
         if self.upload_skipped:
             out["upload_skipped"] = True
+        if self.not_uploaded_reason is not None:
+            out["not_uploaded_reason"] = self.not_uploaded_reason
         if self.gain is not None:
             out["gain"] = self.gain
         if self.after_vs_oracle is not None:
@@ -364,7 +382,8 @@ class RunSummary:
             report=d.get("report"), notes=tuple(d.get("notes", ())),
             tools=tuple(_build(ToolSummary, t) for t in d.get("tools", ())),
             compensation=sub("compensation", CompensationSummary), tables=sub("tables", TableSummary),
-            recentring=tuple(_build(RecentringStats, r) for r in d.get("recentring", ())))
+            recentring=tuple(_build(RecentringStats, r) for r in d.get("recentring", ())),
+            not_uploaded_reason=d.get("not_uploaded_reason"))
 
 
 _KIND_WORDS = {"identification": "identification", "reversal": "reversal", "verification_before": "before",

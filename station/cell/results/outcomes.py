@@ -32,6 +32,7 @@ from drivers.probe_protocol import (
     ProbeOutOfRange,
     ProbeTimeout,
 )
+from station.cell.correction.design import CorrectionRefused
 from station.cell.records.summary import Failure, RunSummary
 from station.core.table_data import TableError as TableDataError
 from station.errors import Outcome, RunAborted, StationError
@@ -52,6 +53,9 @@ class _Row:
 
 
 _TABLE: tuple[_Row, ...] = (
+    _Row((CorrectionRefused,), Outcome.CONFIG_ERROR,
+         "nothing was measured: change [correction] (or the key the message names) as it says, then check with "
+         "'station plan CONFIG' before starting again"),
     _Row((RunAborted,), Outcome.ABORTED, f"the robot stopped at a safe point; {RESUME}"),
     _Row((EmergencyStop,), Outcome.SAFETY_STOP, f"release the e-stop, check the cell, reset the controller, {RESUME}", device="controller"),
     _Row((DriveFault,), Outcome.SAFETY_STOP, f"clear the drive fault at the controller, {RESUME}", device="controller"),
@@ -85,6 +89,28 @@ _TABLE: tuple[_Row, ...] = (
 )
 
 
+#: what to do about an outcome whose error has no row above (a station error's own message names the
+#: key, file or value): never an empty hint, so that a script can always show one (issue 29)
+_OUTCOME_HINTS: dict[Outcome, str] = {
+    Outcome.INTERNAL_ERROR: "a bug in the station: report it with the log file the message names",
+    Outcome.CONFIG_ERROR: "fix what the message names (the key, file or argument), then run the command again",
+    Outcome.IDENTIFICATION_FAILED: "no correction was made; fix what the message names (measurements, robot file, "
+                                   "[identification] or [correction]), then resume or run again",
+    Outcome.UNREACHABLE: "nothing was moved; change what the message names (limits, body pose, set-up), then run again",
+    Outcome.DATABASE_ERROR: "check the run database the message names (--db): the path, that it is a station run "
+                            "database, and that its disk is writable; then run the command again",
+    Outcome.ABORTED: f"the robot stopped at a safe point; {RESUME}",
+    Outcome.DEVICE_FAULT: f"check the device the message names, its cable and its settings in [devices], {RESUME}",
+    Outcome.SAFETY_STOP: f"make the cell safe, reset the controller ('station reset CONFIG'), {RESUME}",
+    Outcome.UPLOAD_FAILED: "the table was NOT activated; check the controller and its link, then resume to upload again",
+    Outcome.TARGET_MISSED: "read the report's acceptance table: check the robot, the set-up and [verification], then "
+                           "calibrate again",
+    Outcome.NOT_UPLOADED: "no correction is active: upload one with a run that is allowed to (no --no-upload)",
+    Outcome.DRIFTED: "recalibrate the robot ('station calibrate CONFIG')",
+    Outcome.RECHECK_UNTRUSTED: "check the probe head and the body, then run the recheck again",
+}
+
+
 def classify(exc: BaseException) -> Outcome:
     """The outcome a run that raised ``exc`` ends with; INTERNAL_ERROR for anything unknown."""
     for row in _TABLE:
@@ -102,7 +128,8 @@ def hint_for(exc: BaseException, run_id: int | None = None) -> str:
         if isinstance(exc, row.types):
             text = row.hint
             break
-    # A station error's own message already says what to do: no second hint.
+    else:  # a station error's message says what to do; the hint says it in one line, never empty
+        text = _OUTCOME_HINTS.get(classify(exc), _OUTCOME_HINTS[Outcome.INTERNAL_ERROR])
     if run_id is not None:
         return text.replace("RUN", str(run_id))
     # nothing was measured yet: there is no run to resume

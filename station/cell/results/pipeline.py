@@ -22,11 +22,11 @@ from typing import Any
 import numpy as np
 
 from station.cell.config.cell_config import CellConfig
-from station.cell.correction.grid_precheck import check_grid
+from station.cell.correction.design import grid_to_json, identified_table, worst_cell
 from station.cell.correction.table_keeping import finish_tables, restore_after_failure, table_at_start
-from station.cell.correction.tools import check_tools, run_tools
+from station.cell.correction.tools import run_tools
 from station.cell.correction.upload import verified_upload
-from station.cell.plan.measurement_plan import build_plan, head_targets_world, joints_for
+from station.cell.plan.measurement_plan import head_targets_world, joints_for
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.fingerprint import check_same_cell, fingerprint, resume_note
 from station.cell.records.rundb import RunDB
@@ -49,6 +49,7 @@ from station.cell.results.pipeline_results import (
     verification_errors,
     verified_outcome,
 )
+from station.cell.results.premotion import Premotion, premotion_check
 from station.cell.run.devices import CellController, ProbeHead
 from station.cell.run.events import Event, Notice, PhaseChanged, RunFinished, RunStarted
 from station.cell.run.questions import Confirm, KeepCorrection, UploadProposal
@@ -127,14 +128,13 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
     """Measure → identify → correct → upload → verify. Returns the run's summary; raises the
     typed error of whatever stopped it (everything measured so far is on disk)."""
     control = control or RunControl()
-    check_tools(cfg)  # every [[tool]] can be corrected on this robot, before anything moves
-    grid = check_grid(cfg)  # the grid's bound for the expected error size, before anything moves
+    pre = premotion_check(cfg)  # tools, plan, correction: what 'station plan' checks, before anything moves
     runner = Runner(cfg, probe, controller, emit, control)
     with_oracle = options.oracle_truth is not None and options.upload
     reused: tuple[str, ...] = ()  # a resume: the post-processing sections changed since
     if resume_run is None:
         emit(PhaseChanged("plan"))
-        steps = build_plan(cfg).run_steps(cfg.plan.verification_cycles, with_oracle, options.upload)
+        steps = pre.plan.run_steps(cfg.plan.verification_cycles, with_oracle, options.upload)
         run_id = db.create_run(cfg.source_text, [st.to_record() for st in steps], seed=seed)
         db.save_result(run_id, "config_source", config_source(cfg))
         db.save_result(run_id, "fingerprint", fingerprint(cfg))
@@ -159,14 +159,15 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
     if devices_info:  # the devices of the latest attempt, for the report
         db.save_result(run_id, "devices", devices_info)
     emit(RunStarted(run_id, len(steps), resumed))
-    for note in (resume_note(reused), grid.note() if grid else None):
+    design = None if pre.design is None else f"correction table designed: {pre.design.describe()}"
+    for note in (resume_note(reused), design):
         if note:
             emit(Notice("info", note))
     db.log(run_id, "info", f"run {'resumed' if resume_run else 'started'}: {len(steps)} steps, {resumed} on disk")
     summary = RunSummary(outcome=Outcome.SUCCESS, run_id=run_id, cell=cfg.name, robot=cfg.model.name)
     start = table_at_start(controller, db, run_id, emit)  # before anything changes the controller's tables
     try:
-        summary = _pipeline(cfg, runner, db, run_id, steps, emit, options, with_oracle, summary)
+        summary = _pipeline(cfg, runner, db, run_id, steps, emit, options, with_oracle, summary, pre)
         summary = summary.replace(recentring=recentring_stats(
             steps, {k: db.measurements(run_id, kind=k.value) for k in StepKind if k is not StepKind.RECHECK},
             stored_recentring(db, run_id)))
@@ -187,6 +188,25 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
     return summary
 
 
+def _not_uploaded(cfg: CellConfig, summary: RunSummary, run_id: int, table: Any, used: Any, bound: float,
+                  emit: Callable[[Event], None]) -> RunSummary:
+    """No table within the capacity meets the bound for the identified robot: nothing is uploaded
+    (NOT_UPLOADED, reason ``correction_bound``); the measurements and the identification stay."""
+    limit = float(cfg.correction.max_interpolation_um)
+    note = (f"no correction table within the controller's {used.capacity} values meets correction.max_interpolation_um "
+            f"= {limit:g} for the identified robot: on the grid {'×'.join(map(str, used.counts))} (the design, refined for "
+            f"this robot as far as the capacity allows) "
+            f"its table interpolates with up to {bound:.1f} µm {worst_cell(table, used.region)}, where "
+            f"{used.predicted_bound_um:.1f} µm was predicted before motion. Nothing was uploaded. Every measurement "
+            f"and the identified parameters of run {run_id} are stored: set correction.max_interpolation_um = "
+            f"{math.ceil(bound * 1.05)} or a smaller correction.region, then 'station calibrate CONFIG --resume "
+            f"{run_id}' builds the table again without measuring ('station export --run {run_id} --format identify' "
+            f"and 'station identify' give the identified model for compensated targets)")
+    emit(Notice("warning", note))
+    return summary.replace(outcome=Outcome.NOT_UPLOADED, upload_skipped=True, not_uploaded_reason="correction_bound",
+                           notes=(*summary.notes, note))
+
+
 def _identification_summary(res: IdentificationResult) -> IdentificationSummary:
     return IdentificationSummary(
         objective=res.kind, n_measurements=int(res.residuals.shape[0]), n_parameters=len(res.chosen),
@@ -198,7 +218,7 @@ def _identification_summary(res: IdentificationResult) -> IdentificationSummary:
 
 def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tuple[PlannedStep, ...],
               emit: Callable[[Event], None], options: Options, with_oracle: bool,
-              summary: RunSummary) -> RunSummary:
+              summary: RunSummary, pre: Premotion) -> RunSummary:
     total = len(steps)
 
     def measure(kinds: set[StepKind], R: np.ndarray | None) -> None:
@@ -243,6 +263,7 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
     check_identification(res)
     db.save_result(run_id, "identification", {
         "params": res.params, "chosen": list(res.chosen), "sigma": res.uncertainty.sigma,
+        "covariance": res.uncertainty.covariance,  # of the chosen parameters, [mm, rad]² (the fleet store's)
         "rms_normalized": res.rms_normalized, "outliers": list(res.outliers),
         "residuals": res.residuals})
     db.set_status(run_id, "identified")
@@ -259,15 +280,20 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
                                       oracle_truth=options.oracle_truth)
 
     emit(PhaseChanged("correct"))
-    table = build_table_for(cfg, res.params)
+    assert pre.design is not None  # a SCARA's pre-motion check designs its table
+    table, used, bound = identified_table(cfg, res.params, pre.design)
+    limit = float(cfg.correction.max_interpolation_um)
     summary = summary.replace(correction=CorrectionSummary(
-        n_values=int(table.data.n_values), interpolation_bound_um=float(table.interpolation_bound_um),
-        crc32=f"{table.data.crc32():08x}"))
-    if table.interpolation_bound_um > cfg.correction.max_interpolation_um:
-        raise IdentificationError(
-            f"the correction grid interpolates with up to {table.interpolation_bound_um:.1f} µm, "
-            f"above correction.max_interpolation_um = {cfg.correction.max_interpolation_um}; "
-            f"use a finer grid (smaller steps)")
+        n_values=int(table.data.n_values), interpolation_bound_um=bound, crc32=f"{table.data.crc32():08x}",
+        predicted_bound_um=pre.design.predicted_bound_um, grid_shape=tuple(int(n) for n in used.counts),
+        refined=used.counts != pre.design.counts, limit_um=limit))
+    db.save_result(run_id, "correction_grid", {**grid_to_json(used.grid), "bound_um": bound,
+                                               "predicted_bound_um": pre.design.predicted_bound_um,
+                                               "sampled_bounds_um": list(pre.design.bounds_um)})
+    if used.counts != pre.design.counts:
+        emit(Notice("info", f"the correction grid was refined for the identified robot: {used.describe()}"))
+    if not bound <= limit:
+        return _not_uploaded(cfg, summary, run_id, table, used, bound, emit)
     if cfg.tools:  # [[tool]]: each tool's own correction, stored as tool:<name>; the head's table is uploaded
         truth = options.oracle_truth
         summary = summary.replace(tools=run_tools(cfg, db, run_id, steps, res.params, table,
@@ -302,7 +328,7 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
     if with_oracle:
         emit(PhaseChanged("verify", "oracle (true parameters)"))
         p_true = oracle_params(cfg, options.oracle_truth)
-        oracle_table = build_table_for(cfg, p_true).data
+        oracle_table = build_table_for(cfg, p_true, used.grid).data
         verified_upload(controller, oracle_table, emit)
         runner.guard.table = oracle_table
         emit(PhaseChanged("verify", "oracle (true parameters)"))  # back from the upload's phase

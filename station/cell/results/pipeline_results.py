@@ -15,6 +15,7 @@ import numpy as np
 
 from drivers.controller_map import MAX_TABLE_VALUES
 from station.cell.config.cell_config import CellConfig, correction_grid
+from station.cell.correction.design import design_for
 from station.cell.plan.measurement_plan import head_targets_world
 from station.cell.plan.steps import PlannedStep
 from station.cell.records.run_records import MeasurementRecord
@@ -130,13 +131,19 @@ def oracle_params(cfg: CellConfig, truth: Any) -> np.ndarray:
 
 
 def grid_for(cfg: CellConfig) -> GridSpec:
-    """The configured correction grid: the one the configuration was checked against."""
-    return correction_grid(cfg.correction, tuple(cfg.plan.elbows))
+    """The correction grid before identification: the configured one, or the station's design
+    (:func:`station.cell.correction.design.design_for`). A run stores the grid its table was
+    built on (``correction_grid``, refined for the identified robot where it needed it)."""
+    if cfg.correction.explicit:
+        return correction_grid(cfg.correction, tuple(cfg.plan.elbows))
+    return design_for(cfg).grid
 
 
-def build_table_for(cfg: CellConfig, params: np.ndarray) -> CorrectionTable:
-    """The correction table of ``params`` on the configured grid (the controller's nominal model)."""
-    return build_correction_table(cfg.model, params, grid_for(cfg), capacity=MAX_TABLE_VALUES)
+def build_table_for(cfg: CellConfig, params: np.ndarray, grid: GridSpec | None = None) -> CorrectionTable:
+    """The correction table of ``params`` on ``grid`` (default :func:`grid_for`; the controller's
+    nominal model)."""
+    return build_correction_table(cfg.model, params, grid_for(cfg) if grid is None else grid,
+                                  capacity=MAX_TABLE_VALUES)
 
 
 def verification_orientation_errors(cfg: CellConfig, steps: Sequence[PlannedStep], records: Sequence[MeasurementRecord],

@@ -39,7 +39,7 @@ from station.errors import ConfigError, Outcome, RunAborted
 log = logging.getLogger(__name__)
 
 __all__ = ["CellRequest", "CellLoader", "Devices", "LoadedCell", "open_cell", "open_probe", "open_controller", "load_cell", "check_cell", "CheckReport",
-           "run_calibration_session", "reset_controller", "RunTracker", "store_failure"]
+           "run_calibration_session", "reset_controller", "RunTracker", "store_failure", "publish_finished"]
 
 
 @dataclass(frozen=True)
@@ -71,9 +71,33 @@ class LoadedCell:
     endpoints: dict[str, Any] = field(default_factory=dict)
 
 
+def check_probe_url(url: str) -> None:
+    """A URL pyserial cannot use (``socket://`` without host and port, an unknown protocol) is a
+    :class:`ConfigError` naming ``[devices] probe_head``, before anything is opened: pyserial's
+    own failure names no key and may read like a Python error. A device path is left to opening."""
+    if "://" not in url:
+        return
+    import serial
+
+    why = ""
+    try:
+        port = serial.serial_for_url(url, do_not_open=True)
+        from_url = getattr(port, "from_url", None)
+        if callable(from_url):
+            from_url(url)  # socket://, rfc2217://, loop://: their host, port and options
+        return
+    except (ValueError, serial.SerialException) as exc:
+        why = f" ({str(exc).splitlines()[0][:160]})" if str(exc) else ""
+    except Exception:  # noqa: BLE001 - pyserial's own slip (a TypeError for 'socket://'): not shown
+        pass
+    raise ConfigError(f"[devices] probe_head = {url!r}: not a serial port pyserial can open{why}; write a device "
+                      f"such as /dev/ttyUSB0 or COM3, or a URL socket://HOST:PORT or rfc2217://HOST:PORT")
+
+
 def open_probe(cfg: CellConfig, stack: ExitStack) -> ProbeHead:
     """The probe head interface named in ``cfg`` (closed when ``stack`` closes)."""
     d = cfg.devices
+    check_probe_url(d.probe_head)
     probe: ProbeHead = stack.enter_context(SerialProbeHead(
         d.probe_head, baudrate=d.baudrate, timeout=d.probe_timeout_s, dialect=d.probe_protocol,
         bytesize=d.probe_bytesize, parity=d.probe_parity, refresh_s=d.probe_refresh_s))
@@ -185,6 +209,7 @@ def run_calibration_session(request: CellRequest, emit: Callable[[Event], None],
     """
     tracker = RunTracker(emit)
     cell_name = robot = ""
+    cfg: CellConfig | None = None  # known once loaded: a failed run is published with it
 
     try:
         with ExitStack() as stack:
@@ -208,14 +233,30 @@ def run_calibration_session(request: CellRequest, emit: Callable[[Event], None],
                                       Options(upload=request.upload, oracle_truth=loaded.truth, confirm=confirm),
                                       resume_run=request.resume, seed=seed,
                                       devices_info=describe_devices(devices))
-            return summary.replace(db=request.db)
+        publish_finished(request.db, summary.run_id, cfg, emit)  # devices closed: the fleet store, or its queue
+        return summary.replace(db=request.db)
     except Exception as exc:  # every failure becomes an outcome; nothing escapes as a traceback
         summary = failure_summary(exc, run_id=tracker.run_id, log_dir=Path(request.db).resolve().parent,
                                   cell=cell_name, robot=robot, db=request.db)
         if tracker.run_id is not None:  # 'station runs' shows why it stopped
             store_failure(request.db, tracker.run_id, summary.to_json())
+            if cfg is not None:
+                publish_finished(request.db, tracker.run_id, cfg, emit)
         emit(RunFailed(summary))
         return summary
+
+
+def publish_finished(db_path: str, run_id: int | None, cfg: CellConfig, emit: Callable[[Event], None]) -> None:
+    """Queue a finished run for the fleet store and try to send it ([fleet] url or
+    STATION_FLEET_URL; nothing when neither is set). Never raises: a run never depends on the network."""
+    try:
+        from station.fleet.outbox import publish_or_queue  # the fleet's code only where a run ends
+
+        line = publish_or_queue(db_path, run_id, cfg)
+        if line is not None:
+            emit(Notice("info" if "published" in line else "warning", line))
+    except Exception as exc:  # noqa: BLE001 - the run's outcome stands whatever publishing does
+        log.warning("run %s: not published to the fleet store: %s", run_id, exc)
 
 
 def store_failure(db_path: str, run_id: int, record: dict[str, Any]) -> None:
@@ -321,7 +362,7 @@ def check_cell(cfg: CellConfig) -> CheckReport:
                 raise invalid
         except Exception as exc:  # report every device, then fail
             outcome = classify(exc) if outcome is Outcome.SUCCESS else outcome
-            lines.append(f"probe head {d.probe_head}: FAILED: {type(exc).__name__}: {exc}")
+            lines.append(f"probe head {d.probe_head}: FAILED: {exc}")
             if hint := hint_for(exc):
                 lines.append(f"  what to do: {hint}")
     with ExitStack() as stack:
@@ -344,7 +385,7 @@ def check_cell(cfg: CellConfig) -> CheckReport:
                              f"{[int(j) for j in np.nonzero(wide)[0] + 1]}")
         except Exception as exc:
             outcome = classify(exc) if outcome is Outcome.SUCCESS else outcome
-            lines.append(f"controller {where}: FAILED: {type(exc).__name__}: {exc}")
+            lines.append(f"controller {where}: FAILED: {exc}")
             if hint := hint_for(exc):
                 lines.append(f"  what to do: {hint}")
     return CheckReport(tuple(lines), outcome)

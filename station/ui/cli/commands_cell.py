@@ -11,8 +11,10 @@ JSON summary and the readable one goes to stderr. Its exit code is the run's
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
+import shlex
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -28,6 +30,8 @@ from station.cell.run.runcontrol import RunControl
 from station.cell.session.calibrate import CellRequest, check_cell, reset_controller, run_calibration_session
 from station.core.probe_check import check_head
 from station.errors import ConfigError, Outcome, RunAborted, StationError
+from station.ui.cli.output import DISK_ERRNOS
+from station.ui.cli.progress_clock import ProgressClock, plan_seconds
 from station.ui.cli.stop_signals import current as current_stop_signals
 from station.ui.cli.stop_signals import safe_stop_on_signals
 from station.ui.report.paths import report_dir
@@ -59,11 +63,13 @@ def result_stream(args: argparse.Namespace) -> TextIO:
     return sys.stderr if getattr(args, "json", False) else sys.stdout
 
 
-def progress_printer(stream: TextIO) -> Callable[[ev.Event], None]:
+def progress_printer(stream: TextIO, clock: ProgressClock | None = None) -> Callable[[ev.Event], None]:
     """Progress on ``stream``: a progress bar that redraws one line at a terminal, plain lines
-    otherwise (a log file, a scheduler's journal)."""
+    otherwise (a log file, a scheduler's journal); each measurement's line carries the elapsed
+    time and the time left (``clock``)."""
     tty = stream.isatty()
     bar_shown = False
+    clock = clock or ProgressClock()
 
     def line(text: str) -> None:
         nonlocal bar_shown
@@ -77,18 +83,20 @@ def progress_printer(stream: TextIO) -> Callable[[ev.Event], None]:
         if isinstance(e, ev.PhaseChanged):
             line(f"[{e.phase}] {e.detail or PHASE_DETAIL.get(e.phase, e.phase)}")
         elif isinstance(e, ev.RunStarted):
+            clock.started(e)
             line(f"run {e.run_id}: {e.n_steps} steps ({e.resumed_from} already on disk)")
         elif isinstance(e, ev.MeasurementRecorded):
             res = "" if math.isnan(e.residual_um) else f" residual {e.residual_um:.2f} µm"
             state = "ok" if e.ok else "NOT OK " + e.message
+            when = clock.text(e.index + 1, e.total)
             if tty and e.ok:
                 done = (e.index + 1) / max(e.total, 1)
                 filled = int(round(30 * done))
-                print(f"\r  [{'#' * filled}{'.' * (30 - filled)}] {e.index + 1:4d}/{e.total} {e.label[:32]:32s}",
+                print(f"\r  [{'#' * filled}{'.' * (30 - filled)}] {e.index + 1:4d}/{e.total} {e.label[:24]:24s} {when:44s}",
                       end="", file=stream, flush=True)
                 bar_shown = True
             else:
-                line(f"  {e.index + 1:4d}/{e.total} {e.label}: {state}{res}")
+                line(f"  {e.index + 1:4d}/{e.total} {e.label}: {state}{res} [{when}]")
         elif isinstance(e, ev.Notice):
             line(f"  {e.level}: {e.message}")
         elif isinstance(e, (ev.RunFinished, ev.RunFailed)) and bar_shown:
@@ -105,11 +113,15 @@ def print_summary(s: RunSummary, stream: TextIO) -> None:
     if s.failure is not None and stream is not sys.stderr:
         print(f"station: error: {s.failure.message}", file=sys.stderr)
     if s.failure is not None:
-        print(f"  {s.failure.error_type}: {s.failure.message}", file=stream)
+        print(f"  {s.failure.message}", file=stream)  # words for people, no Python type name (issue 33)
         if s.run_id is not None:
             print(f"  everything measured so far is in {s.db} (run {s.run_id})", file=stream)
         if s.failure.hint:
             print(f"  what to do: {s.failure.hint}", file=stream)
+        if s.report:  # a failed run's report says how far it got
+            print(f"  report: {s.report}", file=stream)
+        for note in s.notes:  # among them why a report is missing
+            print(f"  note: {note}", file=stream)
         return
     idn = s.identification
     if idn is not None:
@@ -151,8 +163,18 @@ def cmd_init(args: argparse.Namespace) -> int:
     p = Path(args.path)
     if p.exists() and not args.force:
         raise ConfigError(f"{p} exists; pass --force to overwrite it")
-    p.write_text(TEMPLATE, encoding="utf-8")
-    print(f"wrote a commented template to {p}; edit [body], [devices] and [robot].setup")
+    robot, head, body = getattr(args, "robot", None), getattr(args, "head", None), getattr(args, "body", None)
+    if robot is None and head is None and body is None:
+        p.write_text(TEMPLATE, encoding="utf-8")
+        print(f"wrote a commented template to {p}; edit [body], [devices] and [robot].setup")
+        return 0
+    from station.cell.results.new_cell import new_cell_text
+
+    cell = new_cell_text(p, robot, head, body)
+    p.write_text(cell.text, encoding="utf-8")
+    print(f"wrote {p}, derived from the cell's files; edit [devices], check [robot].setup, then 'station plan {p}'")
+    for note in cell.notes:
+        print(f"  {note}")
     return 0
 
 
@@ -179,24 +201,78 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     control = RunControl()
     summary = stopped_before_start(request)
     if summary is None:
+        clock = ProgressClock(lambda run: plan_seconds(args.db, run, args.time_scale if args.simulated else None))
         with safe_stop_on_signals(control):
-            summary = run_calibration_session(request, progress_printer(sys.stderr), control, load=load_cell)
-    if args.report and summary.run_id is not None and summary.outcome is not Outcome.ABORTED:
-        from station.ui.report.run import report_for_run
+            summary = run_calibration_session(request, progress_printer(sys.stderr, clock), control, load=load_cell)
+        summary = as_stopped(summary, args)
+    if args.report and summary.run_id is not None:  # every run that ends: its report says how far it got
+        summary = _with_report(summary, args)
+        from station.ui.cli.commands_fleet import with_fleet_report  # issue 31: the report joins its run
 
-        try:
-            path = report_for_run(args.db, summary.run_id, Path(args.report), operator=args.operator)
-            summary = summary.replace(report=str(path))
-        except StationError as exc:  # e.g. the run stopped before there was anything to report
-            summary = summary.replace(notes=(*summary.notes, f"no report: {exc}"))
-        except Exception as exc:  # noqa: BLE001 - the run's result stands; say why the report is missing
-            log = write_traceback(exc, Path(args.report))
-            summary = summary.replace(notes=(*summary.notes, f"the report could not be written ({exc}); "
-                                                              f"traceback in {log}; rebuild it with 'station report'"))
+        summary = with_fleet_report(summary, args.db)
     print_summary(summary, result_stream(args))
     if args.json:
         print(json.dumps(summary.to_json()), flush=True)
     return summary.exit_code
+
+
+def resume_command(args: argparse.Namespace, run_id: int, verb: str = "calibrate") -> str:
+    """The command line that continues run ``run_id`` of this ``calibrate`` (or ``recheck``): its
+    configuration, simulated cell, seed, robot and database as given, and ``--resume``."""
+    words = ["station", verb]
+    if args.config:
+        words.append(args.config)
+    if args.simulated:
+        words.append("--simulated")
+        if args.seed is not None:
+            words += ["--seed", str(args.seed)]
+        if getattr(args, "robot", None):
+            words += ["--robot", args.robot]
+        if getattr(args, "time_scale", 0.0):
+            words += ["--time-scale", f"{args.time_scale:g}"]
+    words += ["--db", str(args.db), "--resume", str(run_id)]
+    return " ".join(shlex.quote(w) for w in words)
+
+
+def as_stopped(summary: RunSummary, args: argparse.Namespace, verb: str = "calibrate") -> RunSummary:
+    """A run a signal stopped says so ("stopped by SIGTERM", not "aborted by the operator"), and a
+    failure's hint names the real resume command instead of 'CONFIG --resume RUN'; the stored
+    summary is updated alike, so that 'station runs' and the report say the same."""
+    failure, run_id = summary.failure, summary.run_id
+    if failure is None or run_id is None:
+        return summary
+    stops = current_stop_signals()
+    message = failure.message
+    if summary.outcome is Outcome.ABORTED and stops is not None and stops.requested and "operator" in message:
+        message = (f"stopped by {stops.name} at a safe point (not by the operator at the station); every "
+                   f"measurement taken is stored")
+    placeholder = f"station calibrate CONFIG --resume {run_id}"
+    hint = failure.hint.replace(placeholder, resume_command(args, run_id, verb))
+    if (message, hint) == (failure.message, failure.hint):
+        return summary
+    summary = summary.replace(failure=dataclasses.replace(failure, message=message, hint=hint))
+    from station.cell.session.calibrate import store_failure
+
+    store_failure(args.db, run_id, {**summary.to_json(), **({"kind": "recheck"} if verb == "recheck" else {})})
+    return summary
+
+
+def _with_report(summary: RunSummary, args: argparse.Namespace) -> RunSummary:
+    """``summary`` with its report written (``report``), or a note saying why there is none; a
+    report's traceback goes beside the run database, never into the report folder."""
+    from station.ui.report.run import report_for_run
+
+    assert summary.run_id is not None
+    try:
+        path = report_for_run(args.db, summary.run_id, Path(args.report), operator=args.operator)
+        return summary.replace(report=str(path))
+    except StationError as exc:  # e.g. a stored configuration this version cannot read
+        return summary.replace(notes=(*summary.notes, f"no report: {exc}"))
+    except Exception as exc:  # noqa: BLE001 - the run's result stands; say why the report is missing
+        log = write_traceback(exc, Path(args.db).resolve().parent)
+        return summary.replace(notes=(*summary.notes, f"no report: it could not be written ({type(exc).__name__}: "
+                                                      f"{exc}); traceback in {log}; rebuild it with 'station report "
+                                                      f"{summary.run_id} --db {args.db}'"))
 
 
 def stopped_before_start(request: CellRequest) -> RunSummary | None:
@@ -241,18 +317,30 @@ def _check_report_dir(path: Path) -> None:
 
 def cmd_plan(args: argparse.Namespace) -> int:
     """The plan preview: nothing moves."""
+    from station.cell.correction.design import GRID_POINT
+    from station.cell.results.premotion import premotion_check
     from station.cell.results.preview import describe, preview
 
     cfg = load_config(args.config)
+    design = premotion_check(cfg).design  # what 'calibrate' refuses before moving, refused here the same way (exit 2)
     p = preview(cfg, with_upload=not args.no_upload)
     head = check_head(cfg.head)  # the probe head's arrangement and sensitivity (docs/probe-head.md)
     warnings = plan_warnings(p, cfg)
     if args.json:
-        print(json.dumps({**p.to_json(), "head": head.to_json(), "warnings": warnings}))
+        correction = None if design is None else {
+            "grid_shape": list(design.counts), "n_values": design.n_values, "capacity": design.capacity,
+            "region_mm": {"x": list(design.region.x_mm), "y": list(design.region.y_mm), "z": list(design.region.z_mm)},
+            "steps": dict(zip(("x_mm", "y_mm", "z_mm", "yaw_deg"), design.steps)),
+            "predicted_bound_um": design.predicted_bound_um, "sampled_bounds_um": list(design.bounds_um),
+            "max_interpolation_um": design.limit_um, "designed": not cfg.correction.explicit, "grid_point": GRID_POINT}
+        print(json.dumps({**p.to_json(), "head": head.to_json(), "warnings": warnings, "correction": correction}))
     else:
         lines = describe(p)
         at = next((i + 1 for i, ln in enumerate(lines) if ln.lstrip().startswith("predicted accuracy")), len(lines))
-        print("\n".join([*lines[:at], *(f"  warning: {w}" for w in warnings), *lines[at:], *head.lines()]))
+        table = [] if design is None else [
+            f"  correction table ({'configured' if cfg.correction.explicit else 'designed by the station'}): "
+            f"{design.describe()}", f"  the grid's x, y, z and yaw are {GRID_POINT}"]
+        print("\n".join([*lines[:at], *table, *(f"  warning: {w}" for w in warnings), *lines[at:], *head.lines()]))
     return 0
 
 
@@ -276,10 +364,21 @@ def plan_warnings(p, cfg) -> list[str]:
     return []
 
 
+def existing_db(path: str) -> str:
+    """``path`` when the run database is there; a database error (exit 5) naming it when not
+    (opening it would create an empty one)."""
+    if not Path(path).is_file():
+        from station.cell.records.run_records import RunDatabaseError
+
+        where = Path(path).resolve()
+        raise RunDatabaseError(f"no run database at {where}" + (" (that is a folder)" if where.is_dir() else "")
+                               + "; give the path of an existing one with --db (a calibration creates it)")
+    return path
+
+
 def cmd_runs(args: argparse.Namespace) -> int:
     """The runs of a run database: a table for people, one JSON object for scripts."""
-    if not Path(args.db).exists():
-        raise ConfigError(f"{args.db}: no run database here; give it with --db")
+    existing_db(args.db)
     if getattr(args, "unlock", None) is not None:
         with RunDB(args.db) as db:
             holder = db.unlock_run(args.unlock)
@@ -288,14 +387,18 @@ def cmd_runs(args: argparse.Namespace) -> int:
     with RunDB(args.db) as db:
         runs = list_runs(db)
     if args.json:
-        print(json.dumps({"db": str(args.db), "runs": [r.to_json() for r in runs]}))
+        print(json.dumps({"outcome": Outcome.SUCCESS.name, "exit_code": int(Outcome.SUCCESS), "db": str(args.db),
+                          "runs": [r.to_json() for r in runs]}))
         return 0
-    print(f"{'run':>4}  {'created (UTC)':20}  {'cell':24}  {'robot':8}  {'status':10}  {'steps':>9}  "
+    # names in full: each column as wide as its longest entry (issue 29: "myscara6" for "myscara650")
+    w_cell = max([4, *(len(r.cell) for r in runs)])
+    w_robot = max([5, *(len(r.robot) for r in runs)])
+    print(f"{'run':>4}  {'created (UTC)':20}  {'cell':{w_cell}}  {'robot':{w_robot}}  {'status':10}  {'steps':>9}  "
           f"{'outcome':22}  {'before':>8}  {'after':>8}  resume?")
     for r in runs:
         def um(v: float | None) -> str:
             return "—" if v is None else f"{v:.1f}"
-        print(f"{r.id:>4}  {r.created_utc[:19]:20}  {r.cell[:24]:24}  {r.robot[:8]:8}  {r.status:10}  "
+        print(f"{r.id:>4}  {r.created_utc[:19]:20}  {r.cell:{w_cell}}  {r.robot:{w_robot}}  {r.status:10}  "
               f"{r.steps_done:>4}/{r.steps_total:<4}  {(r.outcome or 'unfinished'):22}  {um(r.rms_before_um):>8}  "
               f"{um(r.rms_after_um):>8}  {'--resume ' + str(r.id) if r.resumable else ''}")
         if r.kind == "recheck":  # the trend: a recheck's drift beside the calibrations
@@ -312,16 +415,32 @@ def cmd_report(args: argparse.Namespace) -> int:
     """Rebuild a run's report from the run database."""
     from station.ui.report.run import report_for_run
 
+    existing_db(args.db)
     out = Path(args.output) if args.output else report_dir(args.db, args.run)
     _check_report_dir(out)
     with RunDB(args.db) as db:
         db.run(args.run)  # a clear error for a run that is not there
-    path = report_for_run(args.db, args.run, out, operator=args.operator)
+    try:
+        path = report_for_run(args.db, args.run, out, operator=args.operator)
+    except StationError:
+        raise  # the stored run cannot be read as a run (its outcome's exit code, never 1)
+    except Exception as exc:  # noqa: BLE001 - a stored run always gets a report: the bare one, and why
+        if isinstance(exc, OSError) and exc.errno in DISK_ERRNOS:  # a full disk is the operator's (issue 33)
+            raise ConfigError(f"{out}: cannot write the report ({exc.strerror or exc}); free space on its disk or "
+                              f"give another folder with -o") from None
+        from station.ui.report.progress import bare_report_for_run
+
+        log = write_traceback(exc, Path(args.db).resolve().parent)
+        why = f"{type(exc).__name__}: {exc} (traceback in {log}; please report it with that file)"
+        path = bare_report_for_run(args.db, args.run, out, why)
+        print(f"station: warning: the full report of run {args.run} could not be built ({why}); the report "
+              f"written holds the run's record and outcome only", file=sys.stderr)
     print(f"report of run {args.run}: {path}")
     return 0
 
 
 def cmd_export(args: argparse.Namespace) -> int:
+    existing_db(args.db)
     with RunDB(args.db) as db:
         run = db.run(args.run) if args.run else db.latest_run()
         if run is None:
@@ -370,5 +489,5 @@ def cmd_tui(args: argparse.Namespace) -> int:
     return launch(request_from(args), recheck=RecheckOptions(baseline=baseline, poses=poses) if recheck else None)
 
 
-__all__ = ["cmd_calibrate", "print_summary", "progress_printer", "request_from", "safe_stop_on_signals",
+__all__ = ["as_stopped", "cmd_calibrate", "print_summary", "progress_printer", "request_from", "safe_stop_on_signals",
            "stopped_before_start"]

@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from station.errors import ConfigError, Outcome
+from station.ui.cli.output import write_file
 
 POSE_COLUMNS = ("x_mm", "y_mm", "z_mm", "roll_deg", "pitch_deg", "yaw_deg")
 CONFIG_COLUMNS = ("shoulder", "elbow", "wrist")
@@ -175,7 +176,7 @@ def cmd_compensate(args) -> int:
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(_out_header(nominal))
     w.writerows(_out_rows(nominal, res, n, jmap))
-    Path(args.output).write_text(buf.getvalue(), encoding="utf-8")
+    write_file(args.output, buf.getvalue())
     failures = [{"row": i + 1, "line": line_of[i], "status": s.value, "reason": r} for i, s, r in res.failures()]
     ok = res.ok
     summary: dict = {

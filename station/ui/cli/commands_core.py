@@ -6,12 +6,12 @@ They work on robot and data files only (no cell); the parser is in :mod:`station
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 
 from station.core.units import ARCSEC
 from station.errors import ConfigError
+from station.ui.cli.output import write_file
 
 
 def _names(s: str) -> tuple[str, ...]:
@@ -40,6 +40,8 @@ def _robot(args, name):
 
 
 def _print_json(obj) -> None:
+    if isinstance(obj, dict) and "outcome" not in obj:  # a command that printed its object succeeded
+        obj = _succeeded(obj)
     print(json.dumps(obj, indent=2, default=lambda o: o.tolist() if isinstance(o, np.ndarray) else str(o)))
 
 
@@ -48,6 +50,8 @@ def _print_json(obj) -> None:
 #: random poses ``station analyze`` draws: a plan measures tens to hundreds, and beyond this
 #: the rank and condition no longer change
 MAX_ANALYZE_POSES = 10_000
+#: the distances (pairs) an analysis forms at most: a range check before numpy sees the count
+MAX_ANALYZE_DISTANCES = 10_000_000
 
 
 def _check_analyze_args(args) -> None:
@@ -56,9 +60,9 @@ def _check_analyze_args(args) -> None:
     if not low <= args.poses <= MAX_ANALYZE_POSES:
         raise ConfigError(f"--poses {args.poses}: the number of poses must be {low} … {MAX_ANALYZE_POSES} "
                           f"for --objective {args.objective} (e.g. --poses 30, the default)")
-    if args.objective == "distance" and args.distances < 1:
-        raise ConfigError(f"--distances {args.distances}: the number of distances must be at least 1 "
-                          "(e.g. --distances 200, the default)")
+    if args.objective == "distance" and not 1 <= args.distances <= MAX_ANALYZE_DISTANCES:
+        raise ConfigError(f"--distances {args.distances}: the number of distances must be at least 1 and at most "
+                          f"{MAX_ANALYZE_DISTANCES} (e.g. --distances 200, the default)")
 
 
 def cmd_analyze(args) -> int:
@@ -224,8 +228,8 @@ def cmd_identify(args) -> int:
                    loss=getattr(args, "loss", "linear"))
     file_notes = [f"{args.data}: {n}" for n in mf.notes] + tool_note
     if args.output:
-        Path(args.output).write_text(robot_to_toml(model, res.params, angle_unit="rad")
-                                     + joint_map_toml(jmap, model, angle_unit="rad"))
+        write_file(args.output, robot_to_toml(model, res.params, angle_unit="rad")
+                   + joint_map_toml(jmap, model, angle_unit="rad"))
     if args.json:
         rep = identify_report(model, res, data, objective, args.pairs if objective == "distance" else None)
         rep["output"] = args.output
@@ -444,7 +448,7 @@ def cmd_export_model(args) -> int:
     elif not jmap.is_identity:
         notes.append(f"the joint map ({'; '.join(jmap.describe())}) is not written in {args.format.upper()}: the "
                      f"file's joints are the model's; export --format toml to keep it")
-    Path(args.output).write_text(text)
+    write_file(args.output, text)
     if args.json:
         _print_json({"model": model.name, "format": args.format, "output": args.output,
                      "frame": "base" if args.base else "measurement", "exact": res.exact,

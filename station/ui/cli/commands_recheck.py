@@ -19,6 +19,7 @@ from station.cell.run.runcontrol import RunControl
 from station.cell.session.calibrate import CellRequest
 from station.errors import ConfigError
 from station.ui.cli.commands_cell import (
+    as_stopped,
     print_summary,
     progress_printer,
     result_stream,
@@ -79,6 +80,7 @@ def cmd_recheck(args: argparse.Namespace) -> int:
             summary = run_recheck_session(request, progress_printer(sys.stderr), control,
                                           RecheckOptions(baseline=args.baseline, poses=args.poses), load=load_cell)
     if isinstance(summary, RunSummary):
+        summary = as_stopped(summary, args, verb="recheck")  # a signal as a signal, the real resume command
         print_summary(summary, result_stream(args))
         out = summary.to_json()
         if summary.failure is not None and summary.run_id is not None:

@@ -20,7 +20,8 @@ from collections.abc import Callable, Sequence
 from typing import NoReturn
 
 from station.errors import ConfigError, Outcome, StationError
-from station.ui.cli.output import guarded_streams
+from station.ui.cli.library_log import route_library_logs
+from station.ui.cli.output import DISK_ERRNOS, guarded_streams
 from station.ui.cli.stop_signals import catch_stop_signals
 from station.ui.cli.warning_policy import station_warnings
 
@@ -53,6 +54,42 @@ def time_scale(text: str) -> float:
     return value
 
 
+def _integer(text: str, what: str, lo: int, hi: int) -> int:
+    """An integer argument in ``lo … hi``: a run number, seed or count is range-checked before it
+    reaches SQLite (64-bit integers) or numpy."""
+    try:
+        value = int(text.strip().replace("_", ""), 10)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: give {what} as a whole number ({lo} … {hi})") from None
+    if not lo <= value <= hi:
+        raise argparse.ArgumentTypeError(f"{text}: {what} must lie in {lo} … {hi}")
+    return value
+
+
+#: run ids are SQLite's 64-bit row ids
+MAX_RUN = 2**63 - 1
+#: the simulated cell's seed range ([simulation] seed)
+MAX_SEED = 2**32 - 1
+
+
+def run_number(text: str) -> int:
+    """A run number (``report RUN``, ``--run``, ``--resume``, ``--unlock``, ``--baseline``)."""
+    return _integer(text, "a run number", 1, MAX_RUN)
+
+
+def seed(text: str) -> int:
+    """``--seed``: the simulated cell's and the studies' random seed."""
+    return _integer(text, "a seed", 0, MAX_SEED)
+
+
+def count(hi: int) -> Callable[[str], int]:
+    """A positive count (poses, sets, pairs) up to ``hi``."""
+    def parse(text: str) -> int:
+        return _integer(text, "a count", 1, hi)
+    parse.__name__ = "count"
+    return parse
+
+
 def _command(spec: str) -> Callable[[argparse.Namespace], int | None]:
     """The function a ``"module:function"`` spec names, its module imported now."""
     module, _, name = spec.partition(":")
@@ -63,10 +100,10 @@ def _command(spec: str) -> Callable[[argparse.Namespace], int | None]:
 def _add_cell(p):
     """The cell a session runs on: a configuration, or a simulated cell (CONFIG's or the built-in)."""
     p.add_argument("config", nargs="?", help="cell configuration; with --simulated: the cell to rehearse "
-                   "(a file with only [simulation], [recheck], [warmup]: the built-in cell with those)")
+                   "(a file with only [simulation], [recheck], [warmup], [fleet]: the built-in cell with those)")
     p.add_argument("--simulated", action="store_true", help="run against a simulated cell: CONFIG's (rehearse "
                    "your cell), or the built-in one")
-    p.add_argument("--seed", type=int, default=None, help="simulated cell seed (default [simulation].seed, else 1)")
+    p.add_argument("--seed", type=seed, default=None, help="simulated cell seed (default [simulation].seed, else 1)")
     p.add_argument("--time-scale", type=time_scale, default=0.0, help="simulated motion time scale (0 = instant)")
 
 
@@ -102,7 +139,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--distances", "--max-pairs", dest="distances", type=int, default=200,
                    help="distances (pairs) formed from the poses (default 200)")
     p.add_argument("--joints", help="joint file (CSV with units) instead of random poses")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed, default=0)
     _add_prefs(p)
     p.add_argument("--json", action="store_true")
     p.set_defaults(func="station.ui.cli.commands_core:cmd_analyze")
@@ -115,7 +152,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sigma-angle", type=float, default=20.0, help="arc seconds (default 20)")
     p.add_argument("--pairs", choices=["cap", "all", "independent"], default="cap",
                    help="distance objective: which pairs of points (default cap)")
-    p.add_argument("--max-pairs", type=int, default=20_000, help="distance objective: the cap (default 20000)")
+    p.add_argument("--max-pairs", type=count(10_000_000), default=20_000, help="distance objective: the cap (default 20000)")
     p.add_argument("--output", "-o", help="write the identified robot file here")
     p.add_argument("--tool", choices=["file", "unknown"], default=None,
                    help="unknown: fit the tool/marker point too (a reflector or marker offset); file: hold the robot "
@@ -170,16 +207,20 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("study", help="re-run the chapter's simulation studies (§7.5)")
     _add_robot(p)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--sets", type=int, default=1000, help="Monte Carlo data sets for pose studies")
+    p.add_argument("--seed", type=seed, default=0)
+    p.add_argument("--sets", type=count(10_000_000), default=1000, help="Monte Carlo data sets for pose studies")
     p.add_argument("--quick", action="store_true", help="fewer Monte Carlo sets and seeds (a smoke run)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func="station.ui.cli.commands_core:cmd_study")
 
 
-    p = sub.add_parser("init", help="write a commented cell configuration template")
+    p = sub.add_parser("init", help="write a commented cell configuration: the template, or one derived from the "
+                       "cell's robot, head and body files")
     p.add_argument("path")
     p.add_argument("--force", action="store_true")
+    p.add_argument("--robot", help="the robot file (or a built-in name): limits, a set-up guess, repeats and cycles")
+    p.add_argument("--head", help="the probe-head file (docs/probe-head.md)")
+    p.add_argument("--body", help="the body's CMM report (CSV, docs/data-files.md)")
     p.set_defaults(func="station.ui.cli.commands_cell:cmd_init")
 
     p = sub.add_parser("check", help="validate a configuration and connect to every device")
@@ -197,7 +238,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--robot", metavar="NAME", help="with --simulated: the built-in simulated cell of this robot "
                    "(sr800, the default; irb2600: a six-axis arm)")
     p.add_argument("--db", default="runs.sqlite", help="run database (default runs.sqlite)")
-    p.add_argument("--resume", type=int, metavar="RUN", help="continue an interrupted run")
+    p.add_argument("--resume", type=run_number, metavar="RUN", help="continue an interrupted run")
     p.add_argument("--no-upload", action="store_true", help="identify and verify 'before' only")
     p.add_argument("--report", metavar="DIR", help="write the run's report here: one self-contained report.html (printable), report.md beside it")
     p.add_argument("--operator", metavar="NAME", help="the operator the report names (default [cell] operator)")
@@ -207,10 +248,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("recheck", help="a short accuracy check against the last calibration (drift)")
     _add_cell(p)
     p.add_argument("--db", default="runs.sqlite", help="run database (default runs.sqlite)")
-    p.add_argument("--baseline", type=int, metavar="RUN", help="calibration to compare with (default: the latest "
+    p.add_argument("--baseline", type=run_number, metavar="RUN", help="calibration to compare with (default: the latest "
                    "successful calibration of this cell)")
     p.add_argument("--poses", type=int, metavar="N", help="poses to measure (default [recheck].poses, 10)")
-    p.add_argument("--resume", type=int, metavar="RUN", help="continue an interrupted recheck")
+    p.add_argument("--resume", type=run_number, metavar="RUN", help="continue an interrupted recheck")
     p.add_argument("--json", action="store_true", help="JSON summary on stdout")
     p.set_defaults(func="station.ui.cli.commands_recheck:cmd_recheck")
 
@@ -227,13 +268,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("runs", help="list the runs of a run database (status, outcome, figures, resumable)")
     p.add_argument("--db", default="runs.sqlite")
-    p.add_argument("--unlock", type=int, metavar="RUN",
+    p.add_argument("--unlock", type=run_number, metavar="RUN",
                    help="clear RUN's run lock (its process is gone, e.g. on another PC)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func="station.ui.cli.commands_cell:cmd_runs")
 
     p = sub.add_parser("report", help="rebuild a run's report from the run database")
-    p.add_argument("run", type=int)
+    p.add_argument("run", type=run_number)
     p.add_argument("--db", default="runs.sqlite")
     p.add_argument("--output", "-o", metavar="DIR", help="report folder (default report-DB-run-RUN beside the "
                    "database, DB its file name without .sqlite)")
@@ -243,7 +284,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("export", help="export a run's measurements to CSV")
     p.add_argument("--db", default="runs.sqlite")
-    p.add_argument("--run", type=int)
+    p.add_argument("--run", type=run_number)
     p.add_argument("--tool", metavar="NAME", help="instead: the correction of the [[tool]] NAME (JSON, for its controller)")
     p.add_argument("--force", action="store_true", help="with --tool: write a table beyond its max_interpolation_um "
                    "(the warning is written into the file)")
@@ -256,19 +297,59 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("tui", help="terminal UI for the operator")
     p.add_argument("config", nargs="?")
     p.add_argument("--simulated", action="store_true", help="a simulated cell: CONFIG's, or the built-in one")
-    p.add_argument("--seed", type=int, default=None, help="simulated cell seed (default [simulation].seed, else 1)")
+    p.add_argument("--seed", type=seed, default=None, help="simulated cell seed (default [simulation].seed, else 1)")
     p.add_argument("--db", default="runs.sqlite")
     p.add_argument("--recheck", action="store_true", help="run a recheck against the last calibration (drift)")
-    p.add_argument("--baseline", type=int, metavar="RUN", help="with --recheck: the calibration run to compare with")
+    p.add_argument("--baseline", type=run_number, metavar="RUN", help="with --recheck: the calibration run to compare with")
     p.add_argument("--poses", type=int, metavar="N", help="with --recheck: poses to measure (default [recheck].poses)")
     p.set_defaults(func="station.ui.cli.commands_cell:cmd_tui")
+    _add_fleet(sub)
     return ap
+
+
+def _add_fleet(sub) -> None:
+    """``sync``, ``fleet``, ``serve``: the plant's fleet store (issue 31; station/ui/cli/commands_fleet.py)."""
+    url_help = "the fleet store (postgresql://host/db or service=NAME; default STATION_FLEET_URL, else CONFIG's [fleet] url)"
+    p = sub.add_parser("sync", help="send the runs queued for the fleet store (store and forward)")
+    p.add_argument("config", nargs="?", help="cell configuration whose [fleet] url names the store")
+    p.add_argument("--db", default="runs.sqlite", help="run database (default runs.sqlite)")
+    p.add_argument("--url", help=url_help)
+    p.add_argument("--all", action="store_true", help="first queue every finished run of the database not yet "
+                   "queued (a station joining the fleet with its history)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func="station.ui.cli.commands_fleet:cmd_sync")
+
+    p = sub.add_parser("fleet", help="every robot of the fleet store: last calibration, recheck, drift, due date")
+    p.add_argument("config", nargs="?", help="cell configuration whose [fleet] url names the store")
+    p.add_argument("--url", help=url_help)
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--overdue", action="store_true", help="exit 12 when a robot is overdue, drifted or uncalibrated")
+    p.add_argument("--interval-days", type=count(3650), default=30,
+                   help="days between rechecks for runs that name none (default 30)")
+    p.add_argument("--migrate", action="store_true", help="the store's administrator: create or update its schema")
+    p.set_defaults(func="station.ui.cli.commands_fleet:cmd_fleet")
+
+    p = sub.add_parser("serve", help="the read-only QA dashboard over the fleet store (localhost by default)")
+    p.add_argument("--fleet", dest="url", metavar="URL", help=url_help)
+    p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1; another needs auth)")
+    p.add_argument("--port", type=count(65535), default=8031, help="port (default 8031)")
+    p.add_argument("--token-file", metavar="FILE", help="a file holding the bearer token remote readers send")
+    p.add_argument("--basic-auth-file", metavar="FILE", help="a file holding USER:PASSWORD (HTTP basic auth)")
+    p.add_argument("--tls-cert", metavar="PEM", help="serve HTTPS with this certificate")
+    p.add_argument("--tls-key", metavar="PEM", help="and this key")
+    p.add_argument("--behind-proxy", action="store_true", help="a reverse proxy on this host terminates TLS")
+    p.add_argument("--interval-days", type=count(3650), default=30,
+                   help="days between rechecks for runs that name none (default 30)")
+    p.set_defaults(func="station.ui.cli.commands_fleet:cmd_serve")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     words = list(sys.argv[1:] if argv is None else argv)
-    # the handlers first: a SIGTERM while the modules load is an ABORTED run, not a death by signal
-    with catch_stop_signals(enabled=words[:1] != [] and words[0] in SESSION_COMMANDS):
+    # the handlers first: a SIGTERM while the modules load is an ABORTED run, not a death by signal;
+    # the process itself (argv None: the station script) keeps them ignored after the outcome is
+    # decided, until it has exited, so that its exit code is the outcome's (README, "Signals")
+    session = words[:1] != [] and words[0] in SESSION_COMMANDS
+    with catch_stop_signals(enabled=session, hold=session and argv is None):
         if words[:1] == ["tui"]:  # the full-screen UI owns the terminal: its streams stay as they are
             return _main(words)
         with guarded_streams():  # a closed stdout or stderr (| head) never stops or fails a command
@@ -281,8 +362,9 @@ def _main(words: list[str]) -> int:
     except UsageError as exc:
         print(exc, file=sys.stderr)
         if "--json" in words:
-            print(json.dumps(_usage_json(str(exc))), flush=True)
+            print(json.dumps(_usage_json(str(exc), words)), flush=True)
         return int(Outcome.CONFIG_ERROR)
+    route_library_logs()  # pymodbus' own log lines: the station's log, not the terminal
     try:
         with station_warnings():  # numpy's and scipy's warnings: the station's policy, not their two lines
             return int(_command(args.func)(args) or 0)
@@ -292,13 +374,19 @@ def _main(words: list[str]) -> int:
             # the mapping knows the drivers' errors: imported only when there is an error to map
             from station.cell.results.outcomes import failure_summary
 
-            print(json.dumps(failure_summary(exc, run_id=None, log_dir=".").to_json()))
+            print(json.dumps(failure_summary(exc, run_id=None, log_dir=".", db=getattr(args, "db", None)).to_json()))
         return exc.exit_code
     except OSError as exc:
+        if exc.errno in DISK_ERRNOS:  # a full disk (also one of a report's files): not a bug
+            text = (f"{exc.strerror or exc}{f': {exc.filename}' if exc.filename else ''}; free space "
+                    f"on the disk (or make it writable) and repeat the command")
+            print(f"station: error: {text}", file=sys.stderr)
+            return _config_error_json(text, args)
         if exc.filename is not None:
             # A file the user named cannot be read or written: a usage error, not a bug.
-            print(f"station: error: {exc.strerror or exc}: {exc.filename}; check the path", file=sys.stderr)
-            return int(Outcome.CONFIG_ERROR)
+            text = f"{exc.strerror or exc}: {exc.filename}; check the path"
+            print(f"station: error: {text}", file=sys.stderr)
+            return _config_error_json(text, args)
         return _internal_error(exc, args)
     except KeyboardInterrupt:
         print("station: interrupted", file=sys.stderr)
@@ -307,10 +395,26 @@ def _main(words: list[str]) -> int:
         return _internal_error(exc, args)
 
 
-def _usage_json(message: str) -> dict:
+def _config_error_json(message: str, args: argparse.Namespace) -> int:
+    """CONFIG_ERROR's exit code, and with ``--json`` its one JSON object (a file the user named)."""
+    if getattr(args, "json", False):
+        from station.cell.results.outcomes import failure_summary
+
+        print(json.dumps(failure_summary(ConfigError(message), run_id=None, log_dir=".",
+                                         db=getattr(args, "db", None)).to_json()))
+    return int(Outcome.CONFIG_ERROR)
+
+
+def _usage_json(message: str, words: Sequence[str] = ()) -> dict:
+    """The one JSON object of a command line argparse refused; ``db``: the ``--db`` given, as in
+    every other object (None when none was)."""
     from station.cell.results.outcomes import failure_summary
 
-    out: dict = failure_summary(ConfigError(message), run_id=None, log_dir=".").to_json()
+    db = next((w.split("=", 1)[1] for w in words if w.startswith("--db=")), None)
+    if db is None and "--db" in words[:-1]:
+        db = words[list(words).index("--db") + 1]
+    out: dict = failure_summary(ConfigError(message), run_id=None, log_dir=".", db=db).to_json()
+    out.setdefault("db", db)
     return out
 
 

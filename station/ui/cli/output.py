@@ -11,12 +11,29 @@ to go and prints no "Exception ignored … BrokenPipeError".
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import sys
 from collections.abc import Iterable, Iterator
 from typing import Any, TextIO
 
-__all__ = ["SafeStream", "guarded_streams"]
+from station.errors import ConfigError
+
+__all__ = ["DISK_ERRNOS", "SafeStream", "guarded_streams", "write_file"]
+
+#: a disk that is full, over quota, at a file-size limit or read-only: the operator's to fix, not a bug
+DISK_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS})
+
+
+def write_file(path: str | os.PathLike[str], text: str) -> None:
+    """Write a file the user named (``-o``): a full disk (ENOSPC, also ``/dev/full``), a read-only
+    folder or a missing one is a :class:`ConfigError` that names the file, never an internal error."""
+    try:
+        with open(path, "w", encoding="utf-8") as f:
+            f.write(text)
+    except OSError as exc:
+        raise ConfigError(f"{os.fspath(path)}: cannot write it ({exc.strerror or exc}); free space on its disk "
+                          f"or choose another path") from None
 
 
 class SafeStream:

@@ -9,7 +9,10 @@ moment the station runs is an outcome (ABORTED, exit 6), never the default death
 - during the session (:func:`safe_stop_on_signals`), the first signal asks the run to stop at the
   next safe point; a second one raises :class:`~station.errors.RunAborted` where the program is,
   which the runner turns into an aborted, resumable run (every measurement is already committed);
-- after the session, the run's own outcome stands: a signal then is only noted.
+- after the session, the run's own outcome stands: a signal then is only noted, and so until the
+  process has exited: ``main()`` of the process itself (the ``station`` script) leaves SIGTERM and
+  SIGINT ignored when it returns (``hold``), so a signal that lands after the JSON is written, while
+  the interpreter shuts down, changes nothing: the exit code is the outcome's (issue 33).
 """
 
 from __future__ import annotations
@@ -48,6 +51,7 @@ class StopSignals:
     def __init__(self) -> None:
         self.received: list[int] = []
         self.control: _Abortable | None = None  # set while a session runs
+        self.decided: bool | str = False  # the session has ended: its outcome stands, whatever comes now
         self._lock = threading.Lock()
 
     @property
@@ -62,6 +66,11 @@ class StopSignals:
         self.received.append(signum)
         name = signal.Signals(signum).name
         control = self.control
+        if self.decided:
+            if self.decided is True:  # said once
+                _say(f"\nstation: {name}: the run has already ended; its outcome stands\n")
+                self.decided = "said"
+            return
         if control is None:
             if len(self.received) == 1:
                 _say(f"\nstation: {name}: stopping\n")
@@ -86,9 +95,10 @@ def current() -> StopSignals | None:
 
 
 @contextlib.contextmanager
-def catch_stop_signals(enabled: bool = True) -> Iterator[StopSignals | None]:
+def catch_stop_signals(enabled: bool = True, hold: bool = False) -> Iterator[StopSignals | None]:
     """Catch SIGTERM and SIGINT for the duration (main thread only: tests call ``main()`` from
-    workers too); the previous handlers are back afterwards."""
+    workers too); the previous handlers are back afterwards, or (``hold``: the process ends now,
+    with the command's exit code) both signals are ignored until it has exited."""
     global _current
     if not enabled or threading.current_thread() is not threading.main_thread():
         yield None
@@ -101,6 +111,9 @@ def catch_stop_signals(enabled: bool = True) -> Iterator[StopSignals | None]:
     finally:
         _current = outer
         for sig, old in previous.items():
+            if hold:  # the outcome is decided: nothing may turn it into a death by signal now
+                signal.signal(sig, signal.SIG_IGN)
+                continue
             # After a stop the command is ending with exit 6: a late repeat of the signal (the
             # operator pressing twice) must not kill the process by the default action before
             # its JSON and exit code are out, so it is ignored from here instead.
@@ -122,3 +135,4 @@ def safe_stop_on_signals(control: _Abortable) -> Iterator[StopSignals | None]:
             yield stops
         finally:
             stops.control = None
+            stops.decided = True

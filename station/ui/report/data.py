@@ -189,7 +189,7 @@ class ReportData:
     * ``param_names`` (p,), ``param_nominal`` / ``param_identified`` / ``param_sigma`` (p,),
       ``param_is_angle`` (p,) bool: angle parameters are rad, the others mm.  ``param_sigma``
       may hold NaN for parameters that were held (not identified). Names ``R.*`` are the set-up
-      (the calibration body in the robot base frame), ``K.*`` the head / tool, the others the
+      (the robot base's pose in the calibration body's frame), ``K.*`` the head / tool, the others the
       robot's own geometry; the report shows the three apart.
     * ``param_correlation`` (p, p) or None: correlation coefficients of the estimates (from the
       identification's covariance); |r| > 0.9 is marked.
@@ -212,6 +212,8 @@ class ReportData:
       ``max_correction``, ``crc32``, ...), ``notes`` (what the report builder wants said).
     * ``trend``: the robot's history, :class:`TrendRun` per run of the same cell and robot up to
       and including this one (kept in run order); the report shows it from two runs on.
+    * ``document_id`` (on every printed page) and ``progress`` (how far an unfinished run got;
+      a run stopped before the identification has no parameters: empty arrays).
     * The sign-off: ``simulated`` (a banner on every page), ``conditions``
       (:class:`TestConditions`), ``iso_poses`` (:class:`IsoPose` per held-out pose),
       ``acceptance`` (:class:`Acceptance`) and ``traceability`` (:class:`Traceability`); None or
@@ -251,6 +253,12 @@ class ReportData:
     iso_poses: Sequence[IsoPose] = ()
     acceptance: Acceptance | None = None
     traceability: Traceability | None = None
+    #: the document ID every printed page carries (cell, robot serial or name, run, a digest of the
+    #: run's creation time and configuration: a rebuilt report keeps it); "" : "run N"
+    document_id: str = ""
+    #: how far the run got, for a run that did not finish ("" : it finished): the report says it
+    #: first, and the sections the run did not reach say so instead of their tables
+    progress: str = ""
 
     def __post_init__(self) -> None:
         names = tuple(str(n) for n in self.param_names)
@@ -311,6 +319,7 @@ class ReportData:
         object.__setattr__(self, "trend", tuple(sorted(self.trend, key=lambda r: r.run_id)))
         object.__setattr__(self, "simulated", bool(self.simulated))
         object.__setattr__(self, "iso_poses", tuple(self.iso_poses))
+        object.__setattr__(self, "document_id", str(self.document_id) or f"run {self.run_id}")
 
     # --- derived figures, in people units --------------------------------------------------
     @property

@@ -6,8 +6,10 @@ from __future__ import annotations
 
 import base64
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from html import escape
+
+import numpy as np
 
 from station.ui.report import plots
 from station.ui.report import signoff as so
@@ -63,8 +65,11 @@ section#signoff { break-inside: avoid; page-break-inside: avoid; }
   body { max-width: none; padding: 0; font-size: 10pt; }
   table { font-size: 8.5pt; } table.corr { font-size: 6.5pt; } pre.config { font-size: 7.5pt; }
   nav.toc { display: none; }
-  h2 { break-after: avoid; page-break-after: avoid; }
-  h3 { break-after: avoid; }
+  /* a heading stays with what it heads: its note and its table's first rows (issue 29) */
+  h2, h3, h2 + p.note, h3 + p.note, h2 + p, h3 + p { break-after: avoid; page-break-after: avoid; }
+  table + p.note, .scope + p.note { break-before: avoid; page-break-before: avoid; }
+  thead { display: table-header-group; } /* a table's header repeats on every page it spans */
+  pre.config { background: none; }
   section { break-inside: auto; }
   tr, figure, .scope { break-inside: avoid; page-break-inside: avoid; }
   pre.config { max-height: none; overflow: visible; }
@@ -74,18 +79,42 @@ section#signoff { break-inside: avoid; page-break-inside: avoid; }
 }
 """
 
-#: a simulated run's marks on every printed page: a page-margin line (browsers with CSS page
-#: margin boxes) and a fixed watermark (repeated on every page by every browser's print)
+#: a simulated run's watermark on every printed page (a fixed element repeats on each), drawn over
+#: the content, faint, so that no block with a background hides it
 _SIM_CSS = """
 @media print {
-  @page { margin-top: 16mm;
-          @top-center { content: "SIMULATED RUN: not a calibration of a real robot"; color: #b3261e;
-                        font: 700 10pt system-ui, "DejaVu Sans", sans-serif; } }
   .watermark { display: block; position: fixed; top: 40%; left: -20%; right: -20%; text-align: center;
-               font: 700 64pt system-ui, "DejaVu Sans", sans-serif; color: rgba(179, 38, 30, 0.12);
-               transform: rotate(-30deg); z-index: -1; pointer-events: none; }
+               font: 700 64pt system-ui, "DejaVu Sans", sans-serif; color: rgba(179, 38, 30, 0.10);
+               transform: rotate(-30deg); z-index: 1000; pointer-events: none; }
 }
 """
+
+
+def _css_text(text: str) -> str:
+    """``text`` as a CSS string literal."""
+    return '"' + "".join(c if c.isprintable() and c not in '"\\<>' else f"\\{ord(c):x} " for c in text) + '"'
+
+
+def page_css(d: ReportData) -> str:
+    """The running header and footer of every printed page, as CSS page-margin boxes (Chromium
+    131 and later, Chrome and Edge among them, print them; docs/report.md says how to print):
+    the document ID and the run at the top, the SIMULATED mark where it applies, "page X of Y"
+    at the foot."""
+    font = 'font: 8pt system-ui, "DejaVu Sans", sans-serif; color: #333;'
+    top_right = (f'@top-right {{ content: {_css_text("SIMULATED: " + so.REHEARSAL)}; {font} color: #b3261e; '
+                 f'font-weight: 700; }}') if d.simulated else ""
+    created = f", {t.timestamp_text(d.created)}" if d.created else ""
+    return f"""
+@media print {{
+  @page {{ size: A4; margin: 16mm 12mm 14mm;
+    @top-left {{ content: {_css_text("Calibration report " + d.document_id)}; {font} }}
+    {top_right}
+    @bottom-left {{ content: {_css_text(f"{d.robot_name}, run {d.run_id}{created}")}; {font} }}
+    @bottom-right {{ content: "page " counter(page) " of " counter(pages); {font} }}
+  }}
+}}
+"""
+
 
 SECTIONS = (
     ("summary", "Summary"),
@@ -156,10 +185,11 @@ def _summary(d: ReportData) -> str:
     else:
         cls = "ok" if s.ok else ("warn" if s.outcome.name == "NOT_UPLOADED" else "bad")
         banner = f'<div class="outcome {cls}" id="outcome">{_e(s.outcome.name)} — exit code {s.exit_code}</div>'
-    notes = list(s.notes) if s is not None else []
-    notes += list(d.notes)
+    notes = t.summary_notes(d)
     note_html = "".join(f"<li>{_e(n)}</li>" for n in notes)
-    return (banner + _kv(t.summary_rows(d, outcome=s is None), table_id="summary-table")
+    progress = (f'<div class="scope" id="progress"><b>How far the run got:</b> {_e(d.progress)}</div>'
+                if d.progress else "")
+    return (banner + progress + _kv(t.summary_rows(d, outcome=s is None), table_id="summary-table")
             + _acceptance(d)
             + (f"<h3>Notes</h3><ul>{note_html}</ul>" if note_html else ""))
 
@@ -170,15 +200,20 @@ def _acceptance(d: ReportData) -> str:
         return ""
     v = so.verdict(d)
     cls = {so.PASS: "pass", so.FAIL: "fail"}.get(v, "none")
-    return (f'<h3>Acceptance<span class="verdict {cls}" id="verdict">{_e(v)}</span></h3>'
+    return (f'<h3>Acceptance<span class="verdict {cls}" id="verdict">{_e(so.verdict_text(d))}</span></h3>'
             '<p class="note">The run succeeds only when every criterion passes: the improvement ratio, and the '
             'ISO 9283 limits that [verification] gives, per held-out pose after correction (a miss: '
             'TARGET_MISSED, exit code 10).</p>'
             + _table(so.ACCEPTANCE_HEAD, rows, table_id="acceptance-table", num_from=9))
 
 
+def _departures(d: ReportData, ident: str) -> str:
+    items = "".join(f"<li>{_e(x)}</li>" for x in so.iso_departures(d))
+    return f'<p class="note">{_e(so.ISO_DEPARTURE_NOTE)}</p><ul class="note" id="{ident}">{items}</ul>' if items else ""
+
+
 def _conditions(d: ReportData) -> str:
-    out = _kv(so.conditions_rows(d), table_id="conditions-table")
+    out = _kv(so.conditions_rows(d), table_id="conditions-table") + _departures(d, "iso-departures")
     if d.iso_poses:
         out += (f'<h3>Held-out poses</h3><p class="note">{_e(so.POSES_NOTE)}</p>'
                 + _table(so.POSES_HEAD, so.pose_rows(d), table_id="poses-table", num_from=2))
@@ -192,9 +227,11 @@ def _traceability(d: ReportData) -> str:
 
 
 def _signoff(d: ReportData) -> str:
-    what = ("a simulated run: for rehearsal only, not for sign-off" if d.simulated else
-            f"run {d.run_id} of {d.robot_name}")
-    return (f'<p class="note">Signed for {_e(what)}. Verdict: {_e(so.verdict(d))}.</p>'
+    verdict = f'<p id="signoff-verdict">Document {_e(d.document_id)}. Verdict: {_e(so.verdict_text(d))}.</p>'
+    if d.simulated:  # nothing to sign: the block is replaced, not qualified
+        return (verdict + f'<div class="scope" id="rehearsal"><b>{_e(so.REHEARSAL[0].upper() + so.REHEARSAL[1:])}.'
+                          f'</b> {_e(so.REHEARSAL_TEXT)}</div>')
+    return (verdict + f'<p class="note" id="signature-attests">{_e(so.SIGNATURE_ATTESTS)}</p>'
             + _table(so.SIGNATURE_HEAD, so.signature_rows(), table_id="signature-table", num_from=9)
             .replace("<table", '<table class="signature"', 1))
 
@@ -208,7 +245,14 @@ def _record(d: ReportData) -> str:
     return _kv(t.record_rows(d), table_id="record-table") + cfg
 
 
+def _not_reached(d: ReportData, what: str) -> str:
+    why = next((n for n in d.notes if n.startswith("nothing identified")), "nothing identified")
+    return f'<p class="note not-reached">{_e(what)}: {_e(why)}.</p>'
+
+
 def _parameters(d: ReportData) -> str:
+    if not d.param_names:
+        return _not_reached(d, "No parameters")
     out = [f'<p class="note">{_e(t.parameter_line(d))} Nominal and identified values in mm and degrees; '
            f'Δ and σ in µm and arc seconds (″).</p>']
     for key, title, what in t.groups_present(d):
@@ -268,6 +312,8 @@ def _correlations(d: ReportData) -> str:
 
 
 def _residuals(d: ReportData) -> str:
+    if not d.residuals.shape[0]:
+        return _not_reached(d, "No residuals")
     groups = t.residual_groups(d)
     ori = any(g.rms_ori_arcsec is not None for g in groups)
     head = ["pose (point, elbow)", "measurements", "RMS |position| µm", "max |position| µm"]
@@ -288,6 +334,9 @@ def _residuals(d: ReportData) -> str:
 
 
 def _verification(d: ReportData) -> str:
+    if not np.isfinite(d.errors_before_um).any():
+        return ('<p class="note" id="verification-none">No verification measurements: the run ended before it '
+                'measured the held-out poses.</p>')
     after = bool(d.errors_after_um.size)
     oracle = d.oracle_after_um is not None and bool(d.oracle_after_um.size)
     head = ["point", "elbow", "cycles", "before RMS µm"] + (["after RMS µm", "after max µm"] if after else [])
@@ -315,12 +364,14 @@ def _verification(d: ReportData) -> str:
     iso = (f'<h3>ISO 9283 pose accuracy AP and repeatability RP per pose</h3><p class="note">{_e(so.ISO_NOTE)}</p>'
            + _table(so.ISO_HEAD, so.iso_rows(d), table_id="iso-table", num_from=2,
                     row_classes=["total" if r[0] == "largest" else "" for r in so.iso_rows(d)])
-           if d.iso_poses else "")
+           + ('<p class="note">How this test departs from ISO 9283\'s (cycles, poses, load, speed): see '
+              '<a href="#conditions">Test conditions</a>.</p>') if d.iso_poses else "")
     return (f'<p class="note">{_e(note)}</p>' + "<h3>Per elbow</h3>"
             + _table(elbow_head, t.per_elbow_rows(d), table_id="verification-elbows")
             + "<h3>Per pose</h3>" + table + iso
             + _img(plots.plot_verification(d), "verification errors per pose",
-                   "Bars: RMS over each pose's cycles (log scale); dashed: RMS over all."))
+                   "Bars: RMS over each pose's cycles (a log scale where they span more than 20×); dashed: "
+                   "RMS over all."))
 
 
 def _accuracy(d: ReportData) -> str:
@@ -375,19 +426,28 @@ def _trend(d: ReportData) -> str:
                    "One column per run, oldest first; a recheck's red dash is its tolerance."))
 
 
+def _guarded(key: str, build: Callable[[ReportData], str], d: ReportData) -> str:
+    """A section's HTML; a section that cannot be drawn from what the run stored says so and why
+    instead of failing the whole report (every run that ends gets one)."""
+    try:
+        return build(d)
+    except Exception as exc:  # noqa: BLE001 - the rest of the report stands; the gap is stated in its place
+        return (f'<p class="note section-failed">This section could not be drawn from what the run stored '
+                f'({_e(type(exc).__name__)}: {_e(exc)}).</p>')
+
+
 def render_html(d: ReportData) -> str:
     title = f"Calibration report — {d.robot_name}, run {d.run_id}"
-    parts = [
-        ("summary", _summary(d)), ("conditions", _conditions(d)), ("traceability", _traceability(d)),
-        ("record", _record(d)), ("parameters", _parameters(d)),
-        ("residuals", _residuals(d)), ("verification", _verification(d)), ("accuracy", _accuracy(d)),
-        ("table", _table_section(d)), ("reversal", _reversal(d)),
-    ]
+    builders = [("summary", _summary), ("conditions", _conditions), ("traceability", _traceability),
+                ("record", _record), ("parameters", _parameters), ("residuals", _residuals),
+                ("verification", _verification), ("accuracy", _accuracy), ("table", _table_section),
+                ("reversal", _reversal)]
     if t.has_tools(d):  # [[tool]]: each tool's own correction
-        parts.append(("tools", _tools(d)))
+        builders.append(("tools", _tools))
     if t.has_trend(d):  # one run has no history: no section
-        parts.append(("trend", _trend(d)))
-    parts.append(("signoff", _signoff(d)))
+        builders.append(("trend", _trend))
+    builders.append(("signoff", _signoff))
+    parts = [(key, _guarded(key, build, d)) for key, build in builders]
     shown = {k for k, _ in parts}
     toc = "".join(f'<a href="#{k}">{_e(v)}</a>' for k, v in SECTIONS if k in shown)
     created = f"created {_e(t.timestamp_text(d.created))} · " if d.created else ""
@@ -398,7 +458,7 @@ def render_html(d: ReportData) -> str:
         title = f"SIMULATED — {title}"
     sim = (f'<div class="sim-banner" id="simulated-banner">{_e(so.SIMULATED_BANNER)}</div>'
            f'<div class="watermark" aria-hidden="true">SIMULATED</div>' if d.simulated else "")
-    css = _CSS + (_SIM_CSS if d.simulated else "")
+    css = _CSS + page_css(d) + (_SIM_CSS if d.simulated else "")
     return ("<!DOCTYPE html>\n"
             f'<html lang="en"><head><meta charset="utf-8"><meta name="viewport" content="width=device-width">'
             f"<title>{_e(title)}</title><style>{css}</style></head>\n"

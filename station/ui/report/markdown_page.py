@@ -30,18 +30,23 @@ def render_markdown(d: ReportData) -> str:
     L += [f"The QA record with plots is `{HTML_NAME}` beside this file. Units: lengths in µm (nominal and "
           "identified values in mm), angles in arc seconds ″ (nominal and identified values in degrees).", ""]
 
+    L += [f"Document {d.document_id}.", ""]
     L += ["## Summary", ""]
+    if d.progress:
+        L += [f"**How far the run got:** {d.progress}", ""]
     L += _table(("quantity", "value"), t.summary_rows(d), num_from=9)
-    notes = [*(d.summary.notes if d.summary else ()), *d.notes]
+    notes = t.summary_notes(d)
     if notes:
         L += [f"- {n}" for n in notes] + [""]
     acceptance = so.acceptance_rows(d)
     if acceptance:
-        L += [f"### Acceptance: {so.verdict(d)}", ""]
+        L += [f"### Acceptance: {so.verdict_text(d)}", ""]
         L += _table(so.ACCEPTANCE_HEAD, acceptance, num_from=9)
 
     L += ["## Test conditions", ""]
     L += _table(("item", "value"), so.conditions_rows(d), num_from=9)
+    if so.iso_departures(d):
+        L += [so.ISO_DEPARTURE_NOTE, ""] + [f"- {x}" for x in so.iso_departures(d)] + [""]
     if d.iso_poses:
         L += [so.POSES_NOTE, ""]
         L += _table(so.POSES_HEAD, so.pose_rows(d), num_from=2)
@@ -56,7 +61,7 @@ def render_markdown(d: ReportData) -> str:
                    if so.snapshot_changed(d.config_toml) else "")
         L += [f"Configuration snapshot{rounded}:", "", "```toml", so.tidy_config(d.config_toml).rstrip("\n"), "```", ""]
 
-    L += ["## Identified parameters", "", t.parameter_line(d), ""]
+    L += ["## Identified parameters", "", t.parameter_line(d) if d.param_names else "No parameters: nothing identified.", ""]
     for key, title, what in t.groups_present(d):
         L += [f"### {title}", "", f"{what}.", ""]
         for kind, kind_head in t.PARAM_KINDS:
@@ -71,8 +76,8 @@ def render_markdown(d: ReportData) -> str:
         else:
             L += [f"No pair with |r| > {t.STRONG_CORRELATION}.", ""]
 
-    L += ["## Residuals of the identification", "", t.residual_line(d), ""]
-    groups = t.residual_groups(d)
+    L += ["## Residuals of the identification", "", t.residual_line(d) if d.residuals.shape[0] else "None.", ""]
+    groups = t.residual_groups(d) if d.residuals.shape[0] else []
     ori = any(g.rms_ori_arcsec is not None for g in groups)
     head = ["pose", "n", "RMS µm", "max µm"] + (["RMS ″"] if ori else []) + ["outliers"]
     L += _table(head, [[g.label, g.n, t.fmt(g.rms_pos_um), t.fmt(g.max_pos_um)]
@@ -130,7 +135,10 @@ def render_markdown(d: ReportData) -> str:
         L += _table(t.TREND_HEAD, [(f"**{r[0]}**" if r[0] == this else r[0], *r[1:]) for r in t.trend_rows(d)],
                     num_from=4)
 
-    L += ["## Sign-off", "", f"Verdict: {so.verdict(d)}." + (" A simulated run: for rehearsal only, not for sign-off."
-                                                             if d.simulated else ""), ""]
-    L += _table(so.SIGNATURE_HEAD, so.signature_rows(), num_from=9)
+    L += ["## Sign-off", "", f"Document {d.document_id}. Verdict: {so.verdict_text(d)}.", ""]
+    if d.simulated:  # nothing to sign: the block is replaced
+        L += [f"**{so.REHEARSAL[0].upper()}{so.REHEARSAL[1:]}.** {so.REHEARSAL_TEXT}", ""]
+    else:
+        L += [so.SIGNATURE_ATTESTS, ""]
+        L += _table(so.SIGNATURE_HEAD, so.signature_rows(), num_from=9)
     return "\n".join(L)

@@ -22,7 +22,11 @@ from station.ui.report.tables import (
     xy_positions,
 )
 
-DPI = 120
+DPI = 150
+#: every figure is drawn at the printed width (A4 less the page margins), so that a font size here
+#: is the size on paper: no text under MIN_FONT points (issue 29: legends were 5 pt in print)
+PRINT_WIDTH_IN = 7.0
+MIN_FONT = 8
 _ELBOW_COLOURS = {1: "tab:blue", -1: "tab:red"}
 
 
@@ -30,7 +34,8 @@ def _new_figure(w: float, h: float) -> Any:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(w, h), dpi=DPI, layout="constrained")
+    scale = PRINT_WIDTH_IN / w  # the callers' proportions, at the printed width
+    fig = Figure(figsize=(PRINT_WIDTH_IN, h * scale * 1.25), dpi=DPI, layout="constrained")
     FigureCanvasAgg(fig)
     return fig
 
@@ -66,14 +71,14 @@ def plot_residuals(d: ReportData) -> bytes:
         ax.axhline(level, color="tab:red", ls="--", lw=1, label=f"RMS |{what}| = {level:.1f} {unit}")
         ax.set_ylabel(f"{what} residual [{unit}]")
         ax.grid(True, alpha=0.3)
-        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=MIN_FONT)
 
     draw(axes[0], pos, "µm", "position", ("x", "y", "z"))
     if ori is not None:
         draw(axes[1], ori, "″", "orientation", ("about x", "about y", "about z"))
     axes[-1].set_xlabel("identification pose (in the order measured)")
     if d.pose_labels is not None and n <= 40:
-        axes[-1].set_xticks(x, d.pose_labels, rotation=60, ha="right", fontsize=7)
+        axes[-1].set_xticks(x, d.pose_labels, rotation=60, ha="right", fontsize=MIN_FONT)
     fig.suptitle(f"{d.robot_name}, run {d.run_id}: residuals after identification (model − measured)", fontsize=10)
     return _png(fig)
 
@@ -104,14 +109,14 @@ def plot_parameters(d: ReportData, groups: tuple[str, ...], title: str) -> bytes
         if ok.any():
             ax_d.errorbar(idx[ok], delta[ok], yerr=sigma[ok], fmt="none", ecolor="black", capsize=3)
         ax_d.axhline(0.0, color="black", lw=0.6)
-        ax_d.set_xticks(idx, names[mask], rotation=60, ha="right", fontsize=7)
+        ax_d.set_xticks(idx, names[mask], rotation=60, ha="right", fontsize=MIN_FONT)
         ax_d.set_ylabel(f"Δ [{unit}]")
         ax_d.set_title(f"{what}: identified − nominal (±1σ)", fontsize=9)
         ax_d.grid(True, axis="y", alpha=0.3)
         ax_s.bar(idx[ok], sigma[ok], color=[c for c, k in zip(colours, ok) if k])
         for i in np.flatnonzero(held):
-            ax_s.text(i, 0.0, "held", ha="center", va="bottom", fontsize=7, color="gray", rotation=90)
-        ax_s.set_xticks(idx, names[mask], rotation=60, ha="right", fontsize=7)
+            ax_s.text(i, 0.0, "held", ha="center", va="bottom", fontsize=MIN_FONT, color="gray", rotation=90)
+        ax_s.set_xticks(idx, names[mask], rotation=60, ha="right", fontsize=MIN_FONT)
         ax_s.set_ylabel(f"σ [{unit}]")
         ax_s.set_title(f"{what}: standard uncertainty σ", fontsize=9)
         ax_s.grid(True, axis="y", alpha=0.3)
@@ -155,10 +160,11 @@ def plot_accuracy(d: ReportData) -> bytes:
         ax.set_xlabel("x [mm] (robot base frame)")
         ax.set_ylabel("y [mm]")
         ax.grid(True, alpha=0.3)
-        ax.legend(loc="lower left", fontsize=7)
-        per = f"; up to {count.max()} points per position (largest σ shown)" if n_pos and count.max() > 1 else ""
+        ax.legend(loc="lower left", fontsize=MIN_FONT)
+        # one line each: at the printed width two panels' titles side by side would overlap
+        per = f"\nup to {count.max()} per position (largest σ shown)" if n_pos and count.max() > 1 else ""
         head = f"elbow {elbow_text(int(elbow))}: " if d.accuracy_elbows is not None else ""
-        ax.set_title(f"{head}{int(m.sum())} points at {n_pos} x-y positions{per}", fontsize=8)
+        ax.set_title(f"{head}{int(m.sum())} points at\n{n_pos} x-y positions{per}", fontsize=MIN_FONT)
     if sc is not None:
         cb = fig.colorbar(sc, ax=list(axes))
         cb.set_label("predicted position σ [µm]")
@@ -167,8 +173,32 @@ def plot_accuracy(d: ReportData) -> bytes:
     return _png(fig)
 
 
-def plot_verification(d: ReportData) -> bytes:
-    """Per held-out pose (point, elbow): RMS over its cycles before / after / oracle, log scale."""
+def _value_axis(ax: Any, values: np.ndarray, what: str) -> None:
+    """A linear axis from 0 where the values span less than :data:`LOG_RATIO`, else a log axis
+    with minor ticks labelled at 2 and 5 of each decade, so that a value can be read off."""
+    v = values[np.isfinite(values) & (values > 0)]
+    if v.size and float(v.max()) / float(v.min()) < LOG_RATIO:
+        ax.set_ylim(bottom=0.0)
+        ax.set_ylabel(f"{what} [µm]")
+        return
+    from matplotlib.ticker import FuncFormatter, LogLocator
+
+    ax.set_yscale("log")
+    ax.yaxis.set_minor_locator(LogLocator(base=10.0, subs=(2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0)))
+    ax.yaxis.set_minor_formatter(FuncFormatter(lambda y, _: f"{y:g}" if f"{y:.0e}"[0] in "25" else ""))
+    ax.tick_params(axis="y", which="minor", labelsize=MIN_FONT)
+    ax.set_ylabel(f"{what} [µm] (log)")
+
+
+#: values spanning less than this factor get a linear axis
+LOG_RATIO = 20.0
+
+
+def plot_verification(d: ReportData) -> bytes | None:
+    """Per held-out pose (point, elbow): RMS over its cycles before / after / oracle; a log axis
+    where they span more than :data:`LOG_RATIO`. None without a verification measurement."""
+    if not np.isfinite(d.errors_before_um).any():
+        return None
     rows = verification_rows(d)
     k = len(rows)
     x = np.arange(k)
@@ -187,14 +217,14 @@ def plot_verification(d: ReportData) -> bytes:
         ax.bar(x - 0.4 + w * (s + 0.5), np.maximum(v, floor), w, color=colour, label=label)
         level = rms(every)
         ax.axhline(max(level, floor), color=colour, ls="--", lw=1.0, label=f"RMS {label.split(' (')[0]} = {level:.1f} µm")
-    ax.set_yscale("log")
-    ax.set_ylabel("position error [µm], RMS over cycles (log)")
-    ax.set_xticks(x, [f"{r.point}\nelbow {elbow_text(r.elbow)}" for r in rows], fontsize=7,
+    drawn = np.array([v for _, _, values, _ in series for v in values if v is not None], dtype=float)
+    _value_axis(ax, drawn, "position error, RMS over cycles")
+    ax.set_xticks(x, [f"{r.point}\nelbow {elbow_text(r.elbow)}" for r in rows], fontsize=MIN_FONT,
                   rotation=0 if k <= 14 else 60)
     for tick, r in zip(ax.get_xticklabels(), rows):
         tick.set_color(_ELBOW_COLOURS.get(r.elbow or 0, "black"))
     ax.grid(True, which="both", axis="y", alpha=0.3)
-    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    ax.legend(fontsize=MIN_FONT, loc="upper center", bbox_to_anchor=(0.5, -0.22), ncol=2)
     worst = f" (max after correction: {nanmax(d.errors_after_um):.1f} µm)" if d.errors_after_um.size else " (nothing uploaded)"
     ax.set_title(f"{d.robot_name}, run {d.run_id}: verification per held-out pose{worst}", fontsize=10)
     return _png(fig)
@@ -235,17 +265,17 @@ def plot_trend(d: ReportData) -> bytes | None:
     for i, r in enumerate(runs):
         if not r.is_recheck and r.rms_after_um is None:
             ax.annotate("no upload" if r.outcome == "NOT_UPLOADED" else "no figure", (i, 0.0),
-                        xytext=(0, 4), textcoords="offset points", ha="center", fontsize=7, color="gray")
+                        xytext=(0, 4), textcoords="offset points", ha="center", fontsize=MIN_FONT, color="gray")
     ax.set_xlim(-0.5, len(runs) - 0.5)
     ax.set_ylim(bottom=0.0)
-    ax.set_xticks(x, [f"run {r.run_id}\n{r.created[:10]}" for r in runs], fontsize=7,
+    ax.set_xticks(x, [f"run {r.run_id}\n{r.created[:10]}" for r in runs], fontsize=MIN_FONT,
                   rotation=0 if len(runs) <= 12 else 60)
     for tick, r in zip(ax.get_xticklabels(), runs):
         if r.run_id == _int_or_none(d.run_id):
             tick.set_fontweight("bold")
     ax.set_ylabel("position error [µm]")
     ax.grid(True, axis="y", alpha=0.3)
-    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    ax.legend(fontsize=MIN_FONT, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     ax.set_title(f"{d.robot_name}: accuracy per run, oldest first (this report: run {d.run_id})", fontsize=10)
     return _png(fig)
 

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from station.cell.config.cell_config import CellConfig
+from station.cell.correction.design import grid_from_json
 from station.cell.plan.common import head_targets_world
 from station.cell.plan.measurement_plan import build_plan
 from station.cell.plan.steps import PlannedStep, StepKind
@@ -36,6 +37,7 @@ from station.core.uncertainty import pose_accuracy
 from station.core.units import ARCSEC, UM
 from station.errors import ConfigError, IdentificationError, StationError
 from station.ui.report.data import Acceptance, IsoPose, ReportData, TestConditions, Traceability, TrendRun
+from station.ui.report.progress import document_id, partial_report_data, run_progress
 from station.ui.report.provenance import software_rows
 from station.ui.report.writer import write_report
 
@@ -187,11 +189,11 @@ def _identify(cfg: CellConfig, db: RunDB, run_id: int, status: str, summary: Run
             ended += f": {summary.failure.message}"
         if n_valid < 5:  # identify_run's own minimum
             raise IdentificationError(
-                f"no report for run {run_id}: it stopped before the identification ({ended}) with {n_valid} "
-                f"valid identification measurements on disk, so there is nothing to identify from. Finish it with "
-                f"'station calibrate CONFIG --resume {run_id}', then 'station report {run_id}'") from None
-        raise IdentificationError(f"no report for run {run_id} ({ended}): the identification from its stored "
-                                  f"measurements fails: {exc}") from None
+                f"run {run_id} stopped before the identification ({ended}) with {n_valid} valid identification "
+                f"measurements on disk, too few to identify from; finish it with 'station calibrate CONFIG "
+                f"--resume {run_id}', then 'station report {run_id}'") from None
+        raise IdentificationError(f"run {run_id} ({ended}): the identification from its stored measurements "
+                                  f"fails: {exc}") from None
 
 
 def _trend_run(r: RunInfo) -> TrendRun:
@@ -332,12 +334,16 @@ def report_data_for_run(db: RunDB, run_id: int, *, operator: str | None = None) 
         raise ConfigError(f"no report for run {run_id}: its stored configuration does not read with this "
                           f"station version ({exc})") from None
     steps = stored_plan(db, run_id)
-    res = _identify(cfg, db, run_id, run.status, summary)
+    try:
+        res = _identify(cfg, db, run_id, run.status, summary)
+    except IdentificationError as exc:  # a report all the same: how far the run got (issue 29)
+        return _partial_report(db, run_id, cfg, steps, summary, str(exc), operator)
     notes: list[str] = []
     table = None
     if cfg.model.is_scara:  # an articulated arm gets compensated targets, no table
         try:
-            table = build_table_for(cfg, res.params)
+            stored = db.load_result(run_id, "correction_grid", default=None)  # the grid the run's table was built on
+            table = build_table_for(cfg, res.params, None if stored is None else grid_from_json(stored))
         except StationError as exc:
             notes.append(f"the correction table could not be rebuilt for the report ({exc})")
     try:
@@ -372,7 +378,37 @@ def report_data_for_run(db: RunDB, run_id: int, *, operator: str | None = None) 
         simulated=run.seed is not None or bool(oracle[0].size),  # a simulated run stores its seed
         conditions=_conditions(cfg, steps, db, run_id), iso_poses=_iso_poses(cfg, steps, db, run_id),
         acceptance=Acceptance(Options().min_gain, cfg.verification.max_ap_um, cfg.verification.max_rp_um),
-        traceability=_traceability(cfg, db, run_id, run.station_version, run.config_toml, operator))
+        traceability=_traceability(cfg, db, run_id, run.station_version, run.config_toml, operator),
+        document_id=_document_id(cfg, run), progress=run_progress(db, run_id, steps, summary, run.status))
+
+
+def _document_id(cfg: CellConfig, run: Any) -> str:
+    return document_id(cell=cfg.name, serial=cfg.identity.robot_serial,
+                       robot=cfg.model.name, run_id=run.id, created=run.created_utc, config_toml=run.config_toml)
+
+
+def _partial_report(db: RunDB, run_id: int, cfg: CellConfig, steps: Sequence[PlannedStep], summary: RunSummary | None,
+                    reason: str, operator: str | None) -> ReportData:
+    """The report of a run with nothing identified: its record, conditions, the measurements it
+    took and how far it got (:mod:`~station.ui.report.progress`)."""
+    run = db.run(run_id)
+    before = _errors_um(cfg, steps, db, run_id, StepKind.VERIFY_BEFORE)
+    after = _errors_um(cfg, steps, db, run_id, StepKind.VERIFY_AFTER)
+    labels, (b, a) = _aligned(before, after)
+    notes: list[str] = []
+    devices = db.load_result(run_id, "devices", default=None)
+    fields = partial_report_data(
+        robot_name=cfg.model.name, run_id=run_id, reason=reason, errors_before_um=b,
+        errors_after_um=a if after[0].size else np.zeros(0), verify_labels=labels, summary=summary,
+        created=run.created_utc, config_toml=run.config_toml, station_version=run.station_version,
+        devices=devices if isinstance(devices, Mapping) else None, run_status=run.status,
+        trend=_trend(db, run_id, notes), notes=notes, simulated=run.seed is not None,
+        conditions=_conditions(cfg, steps, db, run_id), iso_poses=_iso_poses(cfg, steps, db, run_id),
+        acceptance=Acceptance(Options().min_gain, cfg.verification.max_ap_um, cfg.verification.max_rp_um),
+        traceability=_traceability(cfg, db, run_id, run.station_version, run.config_toml, operator),
+        document_id=_document_id(cfg, run),
+        progress=run_progress(db, run_id, steps, summary, run.status) or f"Nothing was identified: {reason}")
+    return ReportData(**fields)
 
 
 def report_for_run(db_path: str | Path, run_id: int, out_dir: Path, *, operator: str | None = None) -> Path:

@@ -183,6 +183,80 @@ def verdict(d: ReportData) -> str:
     return PASS if PASS in results else NOT_JUDGED
 
 
+#: the criteria's short names in the verdict, in acceptance_rows' order
+_CRITERIA = ("gain", "AP", "RP")
+
+
+def _why_not_judged(required: str, measured: str) -> str:
+    if required.startswith("not specified"):
+        return "no limit set"
+    if measured in ("—", "no measurements after correction"):
+        return "no measurements after correction"
+    return measured
+
+
+def verdict_text(d: ReportData) -> str:
+    """The verdict and exactly what was judged: ``"PASS (gain); AP, RP not judged: no limit set"``,
+    ``"FAIL (AP); passed: gain, RP"``; "not judged: …" when nothing was."""
+    rows = acceptance_rows(d)
+    if not rows:
+        return f"{NOT_JUDGED}: no acceptance criteria (the run's configuration could not be read)"
+    failed = [n for n, r in zip(_CRITERIA, rows) if r[3] == FAIL]
+    passed = [n for n, r in zip(_CRITERIA, rows) if r[3] == PASS]
+    why: dict[str, list[str]] = {}
+    for n, r in zip(_CRITERIA, rows):
+        if r[3] == NOT_JUDGED:
+            why.setdefault(_why_not_judged(r[1], r[2]), []).append(n)
+    parts = []
+    if failed:
+        parts.append(f"{FAIL} ({', '.join(failed)})" + (f"; passed: {', '.join(passed)}" if passed else ""))
+    elif passed:
+        parts.append(f"{PASS} ({', '.join(passed)})")
+    parts += [f"{', '.join(names)} {NOT_JUDGED}: {reason}" for reason, names in why.items()]
+    return "; ".join(parts) if (failed or passed) else f"{NOT_JUDGED}: " + "; ".join(
+        f"{', '.join(names)}: {reason}" for reason, names in why.items())
+
+
+# ----------------------------------------------------------------------------- ISO 9283's own test
+#: what ISO 9283 (1998, §§ 6.3, 6.6, 6.8, 7.2) prescribes for the pose accuracy and repeatability test
+ISO_CYCLES, ISO_POSES = 30, 5
+
+
+def iso_departures(d: ReportData) -> list[str]:
+    """How this run's AP/RP test departs from ISO 9283's (cycles, poses, load, speed), one
+    sentence each; empty without test conditions."""
+    c = d.conditions
+    if c is None:
+        return []
+    out = []
+    if c.verification_cycles != ISO_CYCLES:
+        out.append(f"cycles: {c.verification_cycles} per pose, where ISO 9283 measures {ISO_CYCLES}; RP from "
+                   f"{c.verification_cycles} cycles scatters more from pose to pose than the standard's figure")
+    out.append(f"poses: {c.verification_poses} held-out poses at the calibration body's measuring points, not the "
+               f"standard's {ISO_POSES} poses P1 … P5 on a diagonal plane of the test cube")
+    load = f"{c.load_kg:g} kg" if c.load_kg is not None else "a mass not recorded ([verification] load_kg)"
+    out.append(f"load: the probe head on the flange ({load}), not the robot's rated load that ISO 9283 tests at")
+    if c.speed < 1.0:
+        out.append(f"speed: {c.speed * 100:.0f} % of the robot's maximum, where ISO 9283 tests at the rated speed "
+                   f"(100 %; 50 % and 10 % as options)")
+    return out
+
+
+ISO_DEPARTURE_NOTE = ("AP and RP are computed as ISO 9283 defines them, but the test is the calibration's own, "
+                      "not the standard's pose test; it departs from it in:")
+
+#: what a signature on a real run's report attests
+SIGNATURE_ATTESTS = ("A signature attests that the signer has read this report; that the run was made as the test "
+                     "conditions state, on the robot, probe head and body that the traceability block names; and "
+                     "that the verdict was judged against the limits stated under Acceptance. It does not attest "
+                     "what the report marks not judged or not recorded.")
+#: a simulated run's sign-off, in place of the signature block
+REHEARSAL = "rehearsal: not for sign-off"
+REHEARSAL_TEXT = ("A simulated run: simulators stood in for the robot, the probe head and the body, so there is "
+                  "nothing to sign. Use it to rehearse the procedure and to read the report; sign the report of "
+                  "a run on the real cell.")
+
+
 # ----------------------------------------------------------------------------- traceability
 def _cert(cid: str, date: str) -> str:
     if not cid and not date:

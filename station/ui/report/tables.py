@@ -26,7 +26,7 @@ _LABEL = re.compile(r"^(?P<point>.+?) elbow (?P<elbow>[+-]?\d+)(?: cycle (?P<pas
 
 PARAM_GROUPS = (
     ("robot", "Robot's own parameters", "the arm's geometry: what the correction table corrects"),
-    ("setup", "Set-up R.*", "the calibration body's pose in the robot base frame: this cell's "
+    ("setup", "Set-up R.*", "the robot base's pose in the calibration body's frame: this cell's "
                             "mounting, not the robot"),
     ("head", "Head / tool K.*", "the probe head on the flange: replaced by the user's tool later"),
 )
@@ -114,6 +114,20 @@ def summary_rows(d: ReportData, *, outcome: bool = True) -> list[tuple[str, str]
     if s is not None and (recentred := s.recentring_text()) is not None:
         rows.append(("re-centred readings", recentred))
     return rows
+
+
+#: how the stored RP note begins (RunSummary.rp_text): the report words it afresh from the figures
+_RP_NOTE = "RP (ISO 9283 repeatability"
+
+
+def summary_notes(d: ReportData) -> list[str]:
+    """The run's notes, then the report's own. The RP note is computed again from the summary's
+    figures (RunSummary.rp_text), so that a run stored with an older wording never shows a
+    statement its numbers contradict."""
+    s = d.summary
+    rp = s.rp_text() if s is not None else None
+    notes = [rp if rp is not None and n.startswith(_RP_NOTE) else n for n in (s.notes if s is not None else ())]
+    return notes + list(d.notes)
 
 
 def record_rows(d: ReportData) -> list[tuple[str, str]]:

@@ -2,8 +2,8 @@
 
 What to do is fitted to the cell the UI runs on (:class:`CellContext`): advice written for a
 network or a cable is not shown for a simulator, and a serial probe interface is not a TCP one.
-The drivers' messages state what happened; some also carry advice for a program that calls them
-("call connect() again"), which the panel leaves out — the hint says what the operator does.
+The drivers' messages state what happened; some also carry general advice ("start the run
+again"), which the panel leaves out — the hint says what the operator does, with the resume key.
 The resume the hint asks for is one key (``c``); where a command line is shown it is the exact
 one, with ``--simulated``, ``--db`` and the configuration as this UI was started with.
 
@@ -88,8 +88,9 @@ class CellContext:
 # --------------------------------------------------------------------- advice by device kind
 #: advice inside a driver's message that is for a program calling it, or for a network
 _MESSAGE_ADVICE: tuple[tuple[str, dict[str, str]], ...] = (
-    (r"; check the robot, then call connect\(\) again", {"simulator": "", "tcp": ""}),
-    (r": check the network and that the robot program runs; the next call reconnects", {"simulator": "", "tcp": ""}),
+    (r"; check the robot program and the link, then start the run again", {"simulator": "", "tcp": ""}),
+    (r": check the network and that the robot program runs; the station reconnects on its next request",
+     {"simulator": "", "tcp": ""}),
     (r"; check the network\b", {"simulator": ""}),
     (r"the robot program or the link is down", {"simulator": "the simulated controller did not keep up"}),
 )
@@ -192,13 +193,22 @@ def summary_markup(summary: RunSummary, step_index: int | None = None, ctx: Cell
         message, hint = advice(failure, ctx, summary.run_id)
         where = f" at step {step_index + 1}" if step_index is not None else ""
         head = ("ABORTED by the operator" if summary.outcome is Outcome.ABORTED
-                else f"FAILED — {failure.error_type}")
+                else f"FAILED — {summary.outcome.name}")
         lines.append(f"[b $error]{esc(head)}[/]{where}")
         lines.append(esc(message))
         if hint:
             lines.append(f"[b]What to do:[/] {esc(hint)}")
         if failure.log_file and failure.log_file not in message:
             lines.append(f"traceback in {esc(failure.log_file)}")
+        lines.append("")
+    elif summary.not_uploaded_reason == "correction_bound":  # not a failure to resume: the same table again
+        lines.append("[b $warning]NOT UPLOADED — no correction table meets the bound[/]")
+        lines.append("[b]What to do:[/] the measurements and the identification are kept: set a looser "
+                     "correction.max_interpolation_um or a smaller correction.region (the note below gives the "
+                     "numbers), then resume the run" + ("" if summary.run_id is None else f" #{summary.run_id}")
+                     + "; it builds the table again without measuring")
+        if ctx is not None and summary.run_id is not None:
+            lines.append(esc(ctx.command(resume=summary.run_id)))
         lines.append("")
     # two blocks, each aligned on its own labels: the first one's short labels leave its values room
     rows: list[tuple[str, str]] = [

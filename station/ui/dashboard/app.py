@@ -1,0 +1,224 @@
+"""The QA dashboard (``station serve``): a read-only Starlette app over the fleet store.
+
+Pages: the fleet table (sortable and filterable by cell and state, on the server: it works
+without script), a robot's history with its SVG plots, a run's figures, and each run's report as
+the station wrote it. Assets are the package's own (``static/``); nothing is fetched from the
+internet. Every connection is read-only (use the ``fleet_dashboard`` role as well); with a token
+or basic auth configured, every request must carry it.
+"""
+
+from __future__ import annotations
+
+import base64
+import hmac
+import queue
+import threading
+import time
+from collections.abc import AsyncIterator, Iterator
+from contextlib import asynccontextmanager, contextmanager
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import psycopg
+from jinja2 import Environment, FileSystemLoader, select_autoescape
+from starlette.applications import Starlette
+from starlette.middleware import Middleware
+from starlette.middleware.base import BaseHTTPMiddleware, RequestResponseEndpoint
+from starlette.requests import Request
+from starlette.responses import HTMLResponse, Response
+from starlette.routing import Mount, Route
+from starlette.staticfiles import StaticFiles
+
+from station.fleet import store
+from station.fleet.overview import STATES, fleet_status
+from station.ui.dashboard.plots import history_svg
+
+__all__ = ["DashboardAuth", "create_app", "SORT_KEYS"]
+
+_HERE = Path(__file__).parent
+
+#: the fleet table's sortable columns: query value -> attribute of RobotStatus
+SORT_KEYS = {"robot": "robot_key", "cell": "cell", "station": "station", "calibrated": "last_calibration_utc",
+             "gain": "gain", "rms": "rms_after_um", "ap": "ap_max_um", "recheck": "last_recheck_utc",
+             "drift": "drift_rms_um", "trend": "drift_trend_um_per_30d", "due": "next_recheck_due_utc",
+             "state": "state"}
+
+_PAGE_CSP = "default-src 'self'; img-src 'self' data:; style-src 'self'; script-src 'none'; frame-ancestors 'none'"
+#: the station's report is self-contained HTML (inline styles, data: images): sandboxed, nothing fetched
+_REPORT_CSP = "sandbox; default-src 'none'; img-src data:; style-src 'unsafe-inline'; font-src data:"
+
+
+@dataclass(frozen=True)
+class DashboardAuth:
+    token: str | None = None  # Authorization: Bearer TOKEN
+    basic: tuple[str, str] | None = None  # Authorization: Basic user:password
+
+    @property
+    def enabled(self) -> bool:
+        return self.token is not None or self.basic is not None
+
+    def allows(self, header: str) -> bool:
+        scheme, _, value = header.partition(" ")
+        if self.token is not None and scheme.lower() == "bearer":
+            return hmac.compare_digest(value.strip().encode(), self.token.encode())
+        if self.basic is not None and scheme.lower() == "basic":
+            try:
+                user, _, password = base64.b64decode(value.strip(), validate=True).decode().partition(":")
+            except (ValueError, UnicodeDecodeError):
+                return False
+            ok_user = hmac.compare_digest(user.encode(), self.basic[0].encode())
+            return hmac.compare_digest(password.encode(), self.basic[1].encode()) and ok_user
+        return False
+
+
+class _AuthMiddleware(BaseHTTPMiddleware):
+    def __init__(self, app: Any, auth: DashboardAuth) -> None:
+        super().__init__(app)
+        self.auth = auth
+
+    async def dispatch(self, request: Request, call_next: RequestResponseEndpoint) -> Response:
+        if self.auth.enabled and not self.auth.allows(request.headers.get("authorization", "")):
+            challenge = 'Basic realm="station QA dashboard"' if self.auth.basic else 'Bearer realm="station"'
+            return Response("authentication required\n", status_code=401, headers={"WWW-Authenticate": challenge})
+        response = await call_next(request)
+        response.headers.setdefault("Content-Security-Policy", _PAGE_CSP)
+        response.headers["X-Content-Type-Options"] = "nosniff"
+        response.headers["Referrer-Policy"] = "no-referrer"
+        response.headers.setdefault("Cache-Control", "no-store")
+        return response
+
+
+class _Pool:
+    """A few read-only connections, reused; a broken one is dropped and replaced."""
+
+    def __init__(self, url: str, size: int = 4) -> None:
+        self.url, self._free = url, queue.LifoQueue[psycopg.Connection](maxsize=size)
+        self._lock = threading.Lock()
+
+    @contextmanager
+    def connection(self) -> Iterator[psycopg.Connection]:
+        try:
+            conn = self._free.get_nowait()
+        except queue.Empty:
+            conn = store.connect(self.url, read_only=True, autocommit=True)
+        try:
+            yield conn
+        except BaseException:
+            conn.close()
+            raise
+        if conn.broken or conn.closed:
+            return
+        try:
+            self._free.put_nowait(conn)
+        except queue.Full:
+            conn.close()
+
+    def close(self) -> None:
+        while True:
+            try:
+                self._free.get_nowait().close()
+            except queue.Empty:
+                return
+
+
+def _fmt(v: Any, digits: int = 1) -> str:
+    if v is None:
+        return "—"
+    if isinstance(v, (int, float)) and not isinstance(v, bool):  # jsonb gives 11.0 back as 11
+        return f"{v:.{digits}f}"
+    return str(v)
+
+
+def _date(v: Any) -> str:
+    if v is None:
+        return "—"
+    if isinstance(v, datetime):
+        return v.astimezone(timezone.utc).strftime("%Y-%m-%d %H:%M")
+    return str(v)[:16].replace("T", " ")
+
+
+def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: int = 30) -> Starlette:
+    env = Environment(loader=FileSystemLoader(str(_HERE / "templates")), autoescape=select_autoescape(["html"]))
+    env.filters["fmt"] = _fmt
+    env.filters["date"] = _date
+    pool = _Pool(url)
+
+    def render(name: str, status: int = 200, **ctx: Any) -> HTMLResponse:
+        started = ctx.pop("_started", None)
+        html = env.get_template(name).render(**ctx)
+        headers = {} if started is None else {"Server-Timing": f"app;dur={(time.perf_counter() - started) * 1e3:.1f}"}
+        return HTMLResponse(html, status_code=status, headers=headers)
+
+    def fleet_page(request: Request) -> Response:
+        started = time.perf_counter()
+        q = request.query_params
+        with pool.connection() as conn:
+            robots = fleet_status(conn, default_interval_days=interval_days)
+        cells = sorted({r.cell for r in robots})
+        cell, state = q.get("cell", ""), q.get("state", "")
+        shown = [r for r in robots if (not cell or r.cell == cell) and (not state or r.state == state)]
+        sort = q.get("sort", "robot") if q.get("sort", "robot") in SORT_KEYS else "robot"
+        desc = q.get("order") == "desc"
+        attr = SORT_KEYS[sort]
+        present = [r for r in shown if getattr(r, attr) is not None]
+        missing = [r for r in shown if getattr(r, attr) is None]
+        present.sort(key=lambda r: getattr(r, attr), reverse=desc)
+        counts = {s: sum(1 for r in robots if r.state == s) for s in STATES}
+        return render("fleet.html", robots=present + missing, cells=cells, states=STATES, cell=cell, state=state,
+                      sort=sort, desc=desc, counts=counts, total=len(robots), _started=started)
+
+    def robot_page(request: Request) -> Response:
+        started = time.perf_counter()
+        key = request.path_params["key"]
+        with pool.connection() as conn:
+            runs = store.robot_history(conn, key)
+        if not runs:
+            return render("missing.html", 404, what=f"robot {key}")
+        accuracy, drift = history_svg(runs)
+        return render("robot.html", key=key, runs=list(reversed(runs)), latest=runs[-1], accuracy_svg=accuracy,
+                      drift_svg=drift, n_cal=sum(r["kind"] == "calibration" for r in runs),
+                      n_rec=sum(r["kind"] == "recheck" for r in runs), _started=started)
+
+    def run_page(request: Request) -> Response:
+        uid = request.path_params["uuid"]
+        with pool.connection() as conn:
+            run = store.run_detail(conn, str(uid))
+            has_report = run is not None and store.report_html(conn, str(uid)) is not None
+        if run is None:
+            return render("missing.html", 404, what=f"run {uid}")
+        ident = (run.get("detail") or {}).get("identification") or {}
+        params = list(zip(ident.get("names") or [], ident.get("params") or [], ident.get("sigma") or []))
+        return render("run.html", run=run, params=params, has_report=has_report,
+                      has_covariance=bool(ident.get("covariance")))
+
+    def report_page(request: Request) -> Response:
+        uid = request.path_params["uuid"]
+        with pool.connection() as conn:
+            html = store.report_html(conn, str(uid))
+        if html is None:
+            return render("missing.html", 404, what=f"a report of run {uid}")
+        return HTMLResponse(html, headers={"Content-Security-Policy": _REPORT_CSP})
+
+    routes = [
+        Route("/", fleet_page),
+        Route("/robots/{key:path}", robot_page),
+        Route("/runs/{uuid:uuid}", run_page),
+        Route("/runs/{uuid:uuid}/report", report_page),
+        Mount("/static", app=StaticFiles(directory=str(_HERE / "static")), name="static"),
+    ]
+    middleware = [Middleware(_AuthMiddleware, auth=auth or DashboardAuth())]
+    @asynccontextmanager
+    async def lifespan(app: Starlette) -> AsyncIterator[None]:
+        yield
+        pool.close()
+
+    async def unavailable(request: Request, exc: Exception) -> Response:
+        """The store is down or refused: a page that says so (503), never a traceback."""
+        what = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        html = env.get_template("missing.html").render(what=f"answer now: the fleet store is unavailable ({what})")
+        return HTMLResponse(html, status_code=503)
+
+    handlers: dict[Any, Any] = {psycopg.Error: unavailable, store.FleetStoreError: unavailable}
+    return Starlette(routes=routes, middleware=middleware, lifespan=lifespan, exception_handlers=handlers)
