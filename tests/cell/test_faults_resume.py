@@ -71,8 +71,10 @@ def test_fault_exit_code_then_resume_to_completion(tmp_path, kind, outcome):
 
             old_port = sim.probe_server.port
             sim.probe_server.stop()
+            # the same unit as before, at the same pacing (start_simulated_cell's: not paced at time
+            # scale 0); a paced replacement spent 45 s of wall time on the wire for nothing
             sim.probe_server = ProbeHeadServer(snapshot_source=sim.cell.probe_values, protocol="keyence-dl-rs1a",
-                                               refresh_s=0.0).start()
+                                               refresh_s=0.0, pace=sim.probe_server.pace).start()
             cfg.write_text(cfg.read_text().replace(old_port, sim.probe_server.port))
         _repair(sim, kind)
         resumed = run_calibration_session(CellRequest(config=str(cfg), db=str(db), resume=first.run_id),
