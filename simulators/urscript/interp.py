@@ -288,7 +288,7 @@ class Program:
                 except _Break:
                     return
                 except _Continue:
-                    pass
+                    pass  # `continue` ends this pass of the body: the condition is evaluated again
                 self._budget -= 1  # the condition is evaluated again: one statement
                 if self._budget < 0:
                     yield ("budget",)

@@ -88,8 +88,8 @@ def check_probe_url(url: str) -> None:
         return
     except (ValueError, serial.SerialException) as exc:
         why = f" ({str(exc).splitlines()[0][:160]})" if str(exc) else ""
-    except Exception:  # noqa: BLE001 - pyserial's own slip (a TypeError for 'socket://'): not shown
-        pass
+    except Exception:  # noqa: BLE001 - pyserial's own slips (TypeError for 'socket://', KeyError for a bad port): not shown
+        why = ""  # the ConfigError below names the key and the forms that work
     raise ConfigError(f"[devices] probe_head = {url!r}: not a serial port pyserial can open{why}; write a device "
                       f"such as /dev/ttyUSB0 or COM3, or a URL socket://HOST:PORT or rfc2217://HOST:PORT")
 
