@@ -36,6 +36,7 @@ def test_the_example_cell_shares_nothing_with_the_built_in_one():
 def test_plan_of_the_example_cell(capsys):
     assert main(["plan", str(CELL), "--json"]) == 0
     p = json.loads(capsys.readouterr().out)
+    assert p["outcome"] == "SUCCESS" and p["exit_code"] == 0  # every --json object routes (issue 29)
     assert p["robot"] == "scara600" and not p["rejected"]
     assert p["n_identification"] >= 100 and p["motion_s_estimate"] > 0
 

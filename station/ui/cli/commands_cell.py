@@ -333,7 +333,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
             "steps": dict(zip(("x_mm", "y_mm", "z_mm", "yaw_deg"), design.steps)),
             "predicted_bound_um": design.predicted_bound_um, "sampled_bounds_um": list(design.bounds_um),
             "max_interpolation_um": design.limit_um, "designed": not cfg.correction.explicit, "grid_point": GRID_POINT}
-        print(json.dumps({**p.to_json(), "head": head.to_json(), "warnings": warnings, "correction": correction}))
+        print(json.dumps({"outcome": "SUCCESS", "exit_code": 0, **p.to_json(), "head": head.to_json(),
+                          "warnings": warnings, "correction": correction}))
     else:
         lines = describe(p)
         at = next((i + 1 for i, ln in enumerate(lines) if ln.lstrip().startswith("predicted accuracy")), len(lines))
