@@ -5,39 +5,11 @@ internal errors of the reliability campaign are each a typed error now."""
 
 from __future__ import annotations
 
-import shutil
-import sqlite3
-from pathlib import Path
-
 import pytest
 
 from station.cell.records.record_checks import DamagedRecordError
 from station.cell.records.rundb import RunDB, RunNotFoundError
-from station.ui.cli.main import main
-
-
-@pytest.fixture(scope="module")
-def good_db(tmp_path_factory) -> Path:
-    """One finished simulated calibration (sr800: 4 joints, a head of 6 probes)."""
-    db = tmp_path_factory.mktemp("good") / "runs.sqlite"
-    assert main(["calibrate", "--simulated", "--seed", "1", "--db", str(db)]) == 0
-    return db
-
-
-def _damaged(good_db: Path, tmp_path: Path, sql: str) -> Path:
-    db = tmp_path / "runs.sqlite"
-    shutil.copy(good_db, db)
-    conn = sqlite3.connect(db)
-    conn.executescript(sql)
-    conn.close()
-    return db
-
-
-def _run(capsys, *argv: object) -> tuple[int, str]:
-    capsys.readouterr()
-    rc = main([str(a) for a in argv])
-    out = capsys.readouterr()
-    return rc, out.out + out.err
+from tests.cell.damaged_runs import damaged, run_cli
 
 
 def _no_internal(text: str) -> None:
@@ -74,23 +46,23 @@ FIELD_DAMAGES = [
 
 @pytest.mark.parametrize("sql, field", FIELD_DAMAGES, ids=[f[1][:40] for f in FIELD_DAMAGES])
 def test_a_damaged_measurement_field_is_exit_5_naming_table_row_and_field(good_db, tmp_path, capsys, sql, field):
-    db = _damaged(good_db, tmp_path, sql)
-    rc, text = _run(capsys, "export", "--db", db, "--run", "1", tmp_path / "m.csv")
+    db = damaged(good_db, tmp_path, sql)
+    rc, text = run_cli(capsys, "export", "--db", db, "--run", "1", tmp_path / "m.csv")
     assert rc == 5 and field in text and "the stored record is damaged" in text, text
     assert "keep the database file" in text
     _no_internal(text)
 
 
 def test_a_row_of_a_damaged_kind_does_not_drop_out_of_a_selection_by_kind(good_db, tmp_path):
-    db = _damaged(good_db, tmp_path, _M.format("kind = 'bogus'"))
+    db = damaged(good_db, tmp_path, _M.format("kind = 'bogus'"))
     with RunDB(db) as rdb, pytest.raises(DamagedRecordError, match="row step 3, field kind"):
         rdb.measurements(1, kind="identification")
 
 
 def test_an_unknown_point_id_is_exit_5_in_the_report(good_db, tmp_path, capsys):
     """Was ``KeyError`` (internal error) in ``report``."""
-    db = _damaged(good_db, tmp_path, _M.format("point_id = 'ZZ'"))
-    rc, text = _run(capsys, "report", "1", "--db", db, "-o", tmp_path / "rep")
+    db = damaged(good_db, tmp_path, _M.format("point_id = 'ZZ'"))
+    rc, text = run_cli(capsys, "report", "1", "--db", db, "-o", tmp_path / "rep")
     assert rc == 5 and "field point_id" in text, text
     _no_internal(text)
 
@@ -102,8 +74,8 @@ def test_an_unknown_point_id_is_exit_5_in_the_report(good_db, tmp_path, capsys):
 ])
 def test_a_malformed_recentring_result_is_exit_5_in_the_report(good_db, tmp_path, capsys, value, field):
     """Was ``AttributeError`` (internal error) in ``report``."""
-    db = _damaged(good_db, tmp_path, f"UPDATE results SET json = '{value}' WHERE key = 'recentring';")
-    rc, text = _run(capsys, "report", "1", "--db", db, "-o", tmp_path / "rep")
+    db = damaged(good_db, tmp_path, f"UPDATE results SET json = '{value}' WHERE key = 'recentring';")
+    rc, text = run_cli(capsys, "report", "1", "--db", db, "-o", tmp_path / "rep")
     assert rc == 5 and "table results, row key 'recentring', " + field in text, text
     _no_internal(text)
 
@@ -116,24 +88,24 @@ def test_a_malformed_recentring_result_is_exit_5_in_the_report(good_db, tmp_path
 ])
 def test_a_malformed_tool_result_is_exit_5_in_export(good_db, tmp_path, capsys, value, field):
     """Was ``AttributeError`` (internal error) in ``export --tool``."""
-    db = _damaged(good_db, tmp_path, "INSERT INTO results(run_id, key, json, t_utc) VALUES "
+    db = damaged(good_db, tmp_path, "INSERT INTO results(run_id, key, json, t_utc) VALUES "
                                      f"(1, 'tool:t1', '{value}', '2026-01-01T00:00:00Z');")
-    rc, text = _run(capsys, "export", "--db", db, "--run", "1", "--tool", "t1", tmp_path / "t.json")
+    rc, text = run_cli(capsys, "export", "--db", db, "--run", "1", "--tool", "t1", tmp_path / "t.json")
     assert rc == 5 and "table results, row key 'tool:t1', " + field in text, text
     _no_internal(text)
 
 
 def test_a_lock_row_with_a_non_numeric_pid_is_exit_5_and_can_be_cleared(good_db, tmp_path, capsys):
     """Was ``ValueError`` (internal error) in ``calibrate --resume``."""
-    db = _damaged(good_db, tmp_path, "CREATE TABLE IF NOT EXISTS run_locks (run_id INTEGER PRIMARY KEY, host TEXT "
+    db = damaged(good_db, tmp_path, "CREATE TABLE IF NOT EXISTS run_locks (run_id INTEGER PRIMARY KEY, host TEXT "
                                      "NOT NULL, pid INTEGER NOT NULL, pid_start TEXT NOT NULL DEFAULT '', since_utc "
                                      "TEXT NOT NULL, token TEXT NOT NULL); INSERT INTO run_locks VALUES "
                                      "(1, 'pc', 'abc', '', '2026-01-01T00:00:00Z', 't');")
-    rc, text = _run(capsys, "calibrate", "--simulated", "--seed", "1", "--resume", "1", "--db", db)
+    rc, text = run_cli(capsys, "calibrate", "--simulated", "--seed", "1", "--resume", "1", "--db", db)
     assert rc == 5 and "table run_locks, row run 1, field pid: 'abc' is not a process id" in text, text
     assert "station runs --unlock 1" in text
     _no_internal(text)
-    rc, text = _run(capsys, "runs", "--db", db, "--unlock", "1")
+    rc, text = run_cli(capsys, "runs", "--db", db, "--unlock", "1")
     assert rc == 0 and "cleared" in text, text
     with RunDB(db) as rdb:
         assert rdb.run_lock(1) is None
@@ -149,7 +121,7 @@ BIG = "99999999999999999999"  # above 2^63
 ], ids=lambda a: " ".join(a)[:40])
 def test_a_run_number_out_of_range_is_a_usage_error(tmp_path, capsys, argv):
     """Was ``OverflowError`` (internal error) in all five commands."""
-    rc, text = _run(capsys, *argv, "--db", tmp_path / "runs.sqlite")
+    rc, text = run_cli(capsys, *argv, "--db", tmp_path / "runs.sqlite")
     assert rc == 2 and "a run number" in text and "9223372036854775807" in text, text
     _no_internal(text)
 
@@ -157,7 +129,7 @@ def test_a_run_number_out_of_range_is_a_usage_error(tmp_path, capsys, argv):
 @pytest.mark.parametrize("seed", ["-1", "4294967296", BIG, "x"])
 def test_a_seed_out_of_range_is_a_usage_error(tmp_path, capsys, seed):
     """``--seed -1`` was ``ValueError`` (internal error)."""
-    rc, text = _run(capsys, "calibrate", "--simulated", "--seed", seed, "--db", tmp_path / "r.sqlite")
+    rc, text = run_cli(capsys, "calibrate", "--simulated", "--seed", seed, "--db", tmp_path / "r.sqlite")
     assert rc == 2 and "seed" in text and "0 … 4294967295" in text, text
     _no_internal(text)
 
