@@ -1,6 +1,6 @@
 """Driver for the robot controller over Modbus TCP (pymodbus synchronous client).
 
-The wire protocol is register map 2, defined in :mod:`drivers.controller_map` and documented in
+The wire protocol is register map 3, defined in :mod:`drivers.controller_map` and documented in
 ``docs/protocols.md``: one window of 128 holding registers from ``register_base`` (every address
 here is an offset into it), function codes 3 and 16 (the simulator also serves 4 and 6).
 Summary of the handshake: the PC writes the whole command block (target, command code, sequence
@@ -13,6 +13,9 @@ Safety rules implemented here:
 * A command is never re-sent automatically: the pymodbus client runs with ``retries=0`` and a
   missing acknowledgement raises :class:`HandshakeTimeout` instead of retrying.
 * Slow actions return a :class:`MotionStatus`; waiting needs an explicit timeout.
+* One station per controller: connect() claims the controller (:mod:`drivers.controller_session`)
+  and refuses one that another station holds (:class:`ControllerClaimed`, naming the holder)
+  before it writes anything; close() gives it back.
 * A heartbeat thread writes ``hb_pc`` and checks that ``hb_robot`` advances; when it stops for
   longer than ``link_timeout`` the link is declared lost and every later call (and every pending
   motion) raises :class:`ControllerLinkLost` until :meth:`ModbusController.connect` is called
@@ -38,7 +41,10 @@ from pymodbus.client import ModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
 
 from .controller_errors import (
+    ClaimIdentity,
+    ClaimNotGranted,
     CommandRejected,
+    ControllerClaimed,
     ControllerConnectionError,
     ControllerLinkLost,
     DriveFault,
@@ -71,6 +77,7 @@ from .controller_map import (
     encode,
     register_span,
 )
+from .controller_session import SessionKeeper, new_token
 from .controller_status import CommandStatus, ControllerStatus, MotionStatus
 from .controller_transfer import TablePager
 from .correction_table import (
@@ -95,7 +102,7 @@ __all__ = [
     "ControllerConnectionError", "ControllerLinkLost", "CommandRejected", "MotionRejected",
     "MotionAborted", "EmergencyStop", "DriveFault", "SequenceError", "HandshakeTimeout",
     "MotionTimeout", "TableError", "TableVerifyError", "TablePageError",
-    "CorrectionState", "WordOrder",
+    "CorrectionState", "WordOrder", "ControllerClaimed", "ClaimIdentity", "ClaimNotGranted",
 ]
 
 log = logging.getLogger(__name__)
@@ -111,13 +118,15 @@ _HALF = WINDOW_SIZE // 2
 # --------------------------------------------------------------------------------------------
 
 
-class ModbusController(TablePager):
+class ModbusController(SessionKeeper, TablePager):
     """Robot controller on Modbus TCP.
 
     ``register_base``: the wire address of the map's first register (``[devices]
     controller_register_base``; 128 on a Universal Robots controller). ``client`` may inject a
     pymodbus-compatible client (tests); otherwise a
-    ``ModbusTcpClient(host, port=port, timeout=timeout, retries=0)`` is created.
+    ``ModbusTcpClient(host, port=port, timeout=timeout, retries=0)`` is created. ``claim_token``
+    and ``claim_identity`` fix the session token and the holder's identity (tests); by default a
+    random token, and the socket's IPv4 address, this process's PID and the time of the grant.
     """
 
     poll_interval = 0.002
@@ -125,7 +134,8 @@ class ModbusController(TablePager):
     def __init__(self, host: str, port: int, device_id: int = 1,
                  word_order: WordOrder = WordOrder.BIG, timeout: float = 1.0, register_base: int = 0,
                  heartbeat_period: float | None = 0.2, link_timeout: float | None = None,
-                 ack_timeout: float = 1.0, command_timeout: float = 5.0, client: Any = None):
+                 ack_timeout: float = 1.0, command_timeout: float = 5.0, client: Any = None,
+                 claim_token: int | None = None, claim_identity: ClaimIdentity | None = None):
         if not isinstance(word_order, WordOrder):
             raise ValueError(f"word_order must be WordOrder.BIG or WordOrder.LITTLE, got {word_order!r}")
         if not 0 <= int(register_base) <= 65536 - WINDOW_SIZE:
@@ -164,6 +174,10 @@ class ModbusController(TablePager):
         self._readback_ok = False
         self._readback_problem = "the uploaded table was not read back yet: call read_table()"
         self._connected = False
+        self.claim_token = new_token() if claim_token is None else int(claim_token)
+        self._claim_identity = claim_identity
+        self._claimed = False
+        self._watchdog_ms = 0
 
     # -- low level I/O ---------------------------------------------------------------------
     def _call(self, fn: Callable, fc: int, address: int, n_regs: int, **kw) -> Any:
@@ -267,6 +281,8 @@ class ModbusController(TablePager):
         state = int(field("correction_state"))
         self.correction_state = (CorrectionState(state) if state in CorrectionState._value2member_map_
                                  else CorrectionState.UNKNOWN)
+        self._watchdog_ms = int(field("watchdog_ms"))
+        self.claim(int(field("claim_owner")))  # before any transfer request: the holder's run goes on undisturbed
         self._xfer_seq = int(self._read_entry("xfer_ack"))  # the program answers the next number
         self._soft_limits = self._checked_soft_limits(g)
         self._seq = int(self._read_entry("cmd_seq"))
@@ -298,7 +314,11 @@ class ModbusController(TablePager):
         return self.correction_state
 
     def close(self) -> None:
-        """Stop the heartbeat and close the socket (pending motions are not stopped)."""
+        """Give the controller back, stop the heartbeat and close the socket (pending motions are
+        not stopped)."""
+        if self._link_lost is None and self._connected:
+            self.release()
+        self._claimed = False
         self._stop_heartbeat()
         with self._io_lock:
             self._client.close()
@@ -313,66 +333,6 @@ class ModbusController(TablePager):
     @property
     def n_joints(self) -> int:
         return self._n_joints
-
-    # -- heartbeat -------------------------------------------------------------------------
-    def _start_heartbeat(self) -> None:
-        self._hb_stop.clear()
-        self._hb_thread = threading.Thread(target=self._heartbeat_loop, name="controller-heartbeat",
-                                           daemon=True)
-        self._hb_thread.start()
-
-    def _stop_heartbeat(self) -> None:
-        self._hb_stop.set()
-        t = self._hb_thread
-        if t is not None and t is not threading.current_thread():
-            t.join(timeout=max(2.0, 2 * self.timeout))
-        self._hb_thread = None
-
-    def _heartbeat_loop(self) -> None:
-        last_robot: int | None = None
-        last_change = time.monotonic()
-        period = float(self.heartbeat_period or 0.2)
-        while not self._hb_stop.wait(period):
-            try:
-                hb = self._heartbeat_once()
-                if hb != last_robot:
-                    last_robot = hb
-                    last_change = time.monotonic()
-                    self._hb_robot_seen = last_change
-            except ControllerError as exc:
-                # Recorded, reported as the cause if the link is declared lost.
-                self._hb_last_error = exc
-                log.warning("heartbeat exchange failed: %s", exc)
-            silent = time.monotonic() - last_change
-            if silent > self.link_timeout:
-                cause = f" (last error: {self._hb_last_error})" if self._hb_last_error else ""
-                self._link_lost = (
-                    f"controller heartbeat did not advance for {silent:.2f} s (limit "
-                    f"{self.link_timeout:.2f} s){cause}: the robot program or the link is down; check "
-                    f"the robot program and the link, then start the run again")
-                log.error(self._link_lost)
-                return
-
-    @property
-    def heartbeat_age_s(self) -> float | None:
-        """Seconds since the robot's heartbeat last advanced (None before the first one)."""
-        seen = self._hb_robot_seen
-        return None if seen is None else time.monotonic() - seen
-
-    def _heartbeat_once(self) -> int:
-        """Advance and write the PC heartbeat; return the robot heartbeat."""
-        self._hb_counter = (self._hb_counter + 1) & 0xFFFF
-        self._write(REG["hb_pc"].address, [self._hb_counter])
-        return int(self._read(REG["hb_robot"].address, 1)[0])
-
-    @property
-    def link_lost(self) -> str | None:
-        """Reason the link was declared lost, or None."""
-        return self._link_lost
-
-    def _check_link(self) -> None:
-        if self._link_lost is not None:
-            raise ControllerLinkLost(self._link_lost)
 
     # -- reading ---------------------------------------------------------------------------
     def status(self) -> ControllerStatus:
@@ -415,13 +375,18 @@ class ModbusController(TablePager):
             regs += encode("cmd_seq", seq, o)
             regs += encode("cmd_elbow", elbow, o)
             regs += encode("cmd_speed", speed, o)
-            jj = np.zeros(MAX_JOINTS)
+            tt = np.zeros(MAX_JOINTS)  # one target block: the joints or the pose
             if joints is not None:
-                jj[:len(joints)] = joints
-            pp = np.zeros(6) if pose is None else np.asarray(pose, dtype=float)
-            regs += encode("cmd_joints", jj, o)
-            regs += encode("cmd_pose", pp, o)
+                tt[:len(joints)] = joints
+            elif pose is not None:
+                tt[:6] = np.asarray(pose, dtype=float)
+            regs += encode("cmd_target", tt, o)
+            regs += encode("cmd_token", self.claim_token, o)
             first = REG["cmd_code"].address
+            if not self.heartbeat_period:  # no heartbeat thread: the command beats
+                self._heartbeat_once()
+            if code is not Command.STOP:  # a STOP goes out whoever holds the controller (it obeys anyone's)
+                self.claim()  # still ours; lapsed (no heartbeat for watchdog_ms): asked for again; another's: refused
             self._seq = seq  # consumed even if the write fails: never reuse a number
             try:
                 self._write(first, regs)

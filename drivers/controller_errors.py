@@ -9,6 +9,8 @@ depends on the map and the table data only, never on the driver or its status ob
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from datetime import datetime, timezone
 from typing import Any, Protocol
 
 import numpy as np
@@ -57,6 +59,9 @@ __all__ = [
     "SequenceError",
     "HandshakeTimeout",
     "MotionTimeout",
+    "ClaimIdentity",
+    "ControllerClaimed",
+    "ClaimNotGranted",
     "error_message",
     "error_for",
     "word_order_problem",
@@ -187,6 +192,49 @@ class HandshakeTimeout(ControllerError):
 
 class MotionTimeout(ControllerError):
     """A motion did not complete within the caller's timeout (it may still be running)."""
+
+
+@dataclass(frozen=True)
+class ClaimIdentity:
+    """Who holds the controller, as the holder wrote it into the claim block (map 3)."""
+
+    host: str  # IPv4 address of the holder's socket to the controller ("0.0.0.0": not known)
+    pid: int
+    since: float  # UTC seconds since 1970 (0: not written yet)
+
+    def describe(self) -> str:
+        if not self.since:
+            return "a station that has not named itself yet (host, PID and since still 0)"
+        when = datetime.fromtimestamp(self.since, timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
+        host = self.host if self.host != "0.0.0.0" else "unknown (its link is not IPv4)"
+        return f"host {host}, PID {self.pid}, since {when}"
+
+
+class ControllerClaimed(ControllerError):
+    """Another station holds the controller (map 3's claim): this one sent no command."""
+
+    def __init__(self, holder: ClaimIdentity, owner_token: int, watchdog_ms: int = 0):
+        self.holder = holder
+        self.owner_token = int(owner_token)
+        self.watchdog_ms = int(watchdog_ms)
+        wd = f" ({self.watchdog_ms} ms without its heartbeat)" if self.watchdog_ms else ""
+        super().__init__(
+            f"the controller is held by another station: {holder.describe()}; nothing was commanded. One station "
+            f"per controller: wait until that station's run ends, or stop it there; a station that died frees the "
+            f"controller by the robot program's watchdog{wd}, nothing to clear by hand")
+
+
+class ClaimNotGranted(ControllerError):
+    """The program made another token the owner right after this station asked, and nobody named
+    itself: the program takes ``claim_request`` wrongly (signed words, word order)."""
+
+    def __init__(self, owner: int, token: int, waited: float):
+        self.owner, self.token = int(owner), int(token)
+        super().__init__(
+            f"the robot program made {self.owner:#010x} the owner of the controller right after this station asked "
+            f"with {self.token:#010x}, and no station named itself within {waited:.3g} s: the program does not take "
+            f"claim_request as the map's u32 in the link's word order (signed 16-bit words, docs/robot-program.md); "
+            f"nothing was commanded")
 
 
 def error_message(code: int) -> str:

@@ -1,4 +1,4 @@
-"""Register map 2 of the robot-controller link (Modbus TCP, holding registers only).
+"""Register map 3 of the robot-controller link (Modbus TCP, holding registers only).
 
 This module is the single source of truth for the wire protocol between the station PC and the
 robot-controller program. The driver (:mod:`drivers.controller`), the simulated controller
@@ -23,6 +23,10 @@ Conventions
   with Modbus exception 2 (illegal data address).
 * What does not fit the window travels through the transfer block (offsets 63..127): the
   correction table in pages (:data:`XferOp`), and the info pages (soft limits, actual pose).
+* One station per controller (map 3): the claim block (offsets 24..35; ``docs/protocols.md``).
+  The program grants ``claim_request`` only while ``claim_owner`` is 0 and ``hb_pc`` is live,
+  refuses every command but STOP whose ``cmd_token`` is not the owner's (``NOT_CLAIMED``), and
+  frees the claim on :func:`release_code` or when ``hb_pc`` is silent for ``watchdog_ms``.
 
 Nothing in here knows about the station; it must not import ``station``.
 """
@@ -37,8 +41,11 @@ from typing import Sequence
 
 import numpy as np
 
+from .controller_plausibility import implausible_limits
+
 __all__ = [
     "MAP_VERSION",
+    "release_code",
     "SUPPORTED_MAP_VERSIONS",
     "WINDOW_SIZE",
     "ORDER_CHECK_VALUE",
@@ -86,9 +93,9 @@ __all__ = [
 ]
 
 #: Version of this register map, readable at ``map_version``.
-MAP_VERSION = 2
+MAP_VERSION = 3
 #: Map versions the driver can talk to (it refuses a controller that reports another).
-SUPPORTED_MAP_VERSIONS: tuple[int, ...] = (2,)
+SUPPORTED_MAP_VERSIONS: tuple[int, ...] = (3,)
 #: Registers of the window the map occupies (offsets 0 .. WINDOW_SIZE-1 from the base).
 WINDOW_SIZE = 128
 #: What ``order_check`` holds: 1 read in the right word order, 65536 in the wrong one.
@@ -195,7 +202,7 @@ REGISTERS: tuple[Register, ...] = (
        meaning="PC heartbeat counter; the PC increments it every heartbeat period (wraps 65535->0)"),
     _r("hb_robot", 1, "u16",
        meaning="controller heartbeat counter; the robot program increments it every period"),
-    _r("map_version", 2, "u16", meaning="version of this register map (2)"),
+    _r("map_version", 2, "u16", meaning="version of this register map (3)"),
     _r("n_joints", 3, "u16", meaning="number of joints g of the robot (<= 6)"),
     _r("watchdog_ms", 4, "u16", unit="ms",
        meaning="controller watchdog: a move is stopped if hb_pc does not change for this long"),
@@ -212,10 +219,22 @@ REGISTERS: tuple[Register, ...] = (
        meaning="configuration flag for Cartesian moves: +1 elbow with phi2>0, -1 phi2<0"),
     _r("cmd_speed", 11, "u16", scale=0.001, access="rw",
        meaning="speed as a fraction of the maximum joint speeds, raw 1..1000"),
-    _r("cmd_joints", 12, "i32", count=MAX_JOINTS, scale=_S, unit="rad or mm", access="rw",
-       meaning="target joints for MOVE_JOINTS (first g used)"),
-    _r("cmd_pose", 24, "i32", count=6, scale=_S, unit="mm,rad", access="rw",
-       meaning="target tool pose x,y,z,roll,pitch,yaw in the robot base frame for MOVE_CARTESIAN"),
+    _r("cmd_target", 12, "i32", count=MAX_JOINTS, scale=_S, unit="rad or mm; mm,rad", access="rw", meaning="the "
+       "target: MOVE_JOINTS joints (first g used); MOVE_CARTESIAN the tool pose x,y,z,roll,pitch,yaw in the robot "
+       "base frame (map 2 had two blocks; a command uses one)"),
+    _r("cmd_token", 24, "u32", access="rw", meaning="the session token of the station that holds the controller "
+       "(claim_owner); every command but STOP whose token is not the owner's is refused with NOT_CLAIMED"),
+    # --- claim block: one station per controller ----------------------------------------------
+    _r("claim_request", 26, "u32", access="rw",
+       meaning="a station writes its token to ask for the controller, release_code(token) to give it back"),
+    _r("claim_owner", 28, "u32",
+       meaning="token of the station that holds the controller, 0 if free; the program grants a request only "
+               "while it is 0 and hb_pc is live, and clears it when hb_pc has not changed for watchdog_ms"),
+    _r("claim_host", 30, "u32", access="rw",
+       meaning="IPv4 address of the holder (as its socket to the controller has it), written once granted"),
+    _r("claim_pid", 32, "u32", access="rw", meaning="process id of the holder, written once granted"),
+    _r("claim_since", 34, "u32", unit="s", access="rw",
+       meaning="when the holder was granted the controller, UTC seconds since 1970, written once granted"),
     # --- response block (robot -> PC) --------------------------------------------------------
     _r("ack_seq", 36, "u16", meaning="sequence number of the last command acknowledged"),
     _r("done_seq", 37, "u16", meaning="sequence number of the last command completed successfully"),
@@ -298,6 +317,12 @@ def _check_map() -> None:
 _check_map()
 
 
+def release_code(token: int) -> int:
+    """What the holder of ``token`` writes to ``claim_request`` to give the controller back: its
+    complement ``0xFFFFFFFF - token``, which a robot program without bitwise operators computes too."""
+    return 0xFFFFFFFF - int(token)
+
+
 def register_span(first: str, last: str) -> tuple[int, int]:
     """``(offset, count)`` of the contiguous block from entry ``first`` to entry ``last``."""
     a = REG[first].address
@@ -374,6 +399,7 @@ class ErrorCode(enum.IntEnum):
     NO_PREVIOUS_TABLE = 14
     PAGE_CRC_MISMATCH = 15
     PAGE_INVALID = 16
+    NOT_CLAIMED = 17
 
 
 ERROR_MESSAGES: dict[ErrorCode, str] = {
@@ -396,6 +422,8 @@ ERROR_MESSAGES: dict[ErrorCode, str] = {
     ErrorCode.NO_PREVIOUS_TABLE: "roll back requested but no previous table is kept",
     ErrorCode.PAGE_CRC_MISMATCH: "a table page arrived with data that do not match its page CRC: re-upload",
     ErrorCode.PAGE_INVALID: "a transfer request with an unknown operation, page number or length",
+    ErrorCode.NOT_CLAIMED: "the command's cmd_token is not the token of the station that holds the controller "
+                           "(claim_owner): no claim, another station holds it, or the claim expired by the watchdog",
 }
 
 
@@ -569,27 +597,3 @@ def raw_crc32(raw: np.ndarray) -> int:
 def registers_crc32(regs: Sequence[int]) -> int:
     """CRC-32 (zlib, ISO-HDLC) over registers, each high byte first: the page CRC."""
     return zlib.crc32(_words(regs, "page").astype(">u2").tobytes()) & 0xFFFFFFFF
-
-
-#: Largest magnitude a plausible soft limit has (mm or rad); the smallest non-zero one.
-PLAUSIBLE_LIMIT_MAX = 1e5
-PLAUSIBLE_LIMIT_MIN = 1e-6
-
-
-def implausible_limits(soft_limits: Sequence[float] | np.ndarray, n_joints: int) -> str | None:
-    """Why the decoded ``soft_limits`` (lower_1, upper_1, ...) cannot be a robot's soft limits,
-    or None if they can: every value finite, zero or of magnitude within
-    [1e-6, 1e5] (mm or rad), and lower < upper for each of the ``n_joints`` joints."""
-    v = np.asarray(soft_limits, dtype=float)[:2 * n_joints]
-    if v.size != 2 * n_joints:
-        return f"expected {2 * n_joints} values, got {v.size}"
-    for i, x in enumerate(v):
-        name = f"{'lower' if i % 2 == 0 else 'upper'}_{i // 2 + 1}"
-        if not np.isfinite(x):
-            return f"{name} = {x}"
-        if x != 0.0 and not PLAUSIBLE_LIMIT_MIN <= abs(x) <= PLAUSIBLE_LIMIT_MAX:
-            return f"{name} = {x:.6g}"
-    for j in range(n_joints):
-        if not v[2 * j] < v[2 * j + 1]:
-            return f"joint {j + 1}: lower {v[2 * j]:.6g} is not below upper {v[2 * j + 1]:.6g}"
-    return None

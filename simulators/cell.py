@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from station.core.kinematics import forward
+from simulators.truth_kinematics import true_forward
 from station.core.model import RobotModel
 from station.core.transforms import invert, matrix_to_pose, pose_to_matrix, rotation_log
 from station.core.units import ARCMIN, ARCSEC
@@ -137,7 +137,8 @@ class CellTruth:
         (n_params,) added to the true parameters (the thermal state)."""
         q = np.atleast_2d(np.asarray(joints_physical, dtype=float))
         p = self.params if delta is None else self.params + delta
-        return forward(self.model, q, params=p, setup=True)
+        # the truth's own kinematics, not the station's: a fault in station.core cannot hide
+        return true_forward([t.joint for t in self.model.transforms], p, q, setup=True)
 
     def with_change(self, delta: np.ndarray) -> "CellTruth":
         """The same robot after a step change ``delta`` (n_params,) of its parameters."""
@@ -244,7 +245,8 @@ class SimulatedCell:
     def __init__(self, truth: CellTruth | None = None, body: CalibrationBody | None = None,
                  probe=None, seed: int = 0, capture_mm: float = 8.0,
                  capture_angle_rad: float = np.deg2rad(10.0), probe_noise_mm: float = 0.0005,
-                 initial_joints: np.ndarray | None = None, thermal=None, step: np.ndarray | None = None):
+                 initial_joints: np.ndarray | None = None, thermal=None, step: np.ndarray | None = None,
+                 joint_errors=None):
         """``thermal``: a :class:`simulators.thermal.ThermalModel` (None: no drift with
         warm-up); ``step``: a step change (n_params,) of the true parameters (a re-mastered axis,
         a bumped tool) applied before the first move."""
@@ -254,6 +256,8 @@ class SimulatedCell:
         if step is not None and np.any(np.asarray(step) != 0):
             self.truth = self.truth.with_change(step)
         self.thermal = thermal if thermal is not None and thermal.active else None
+        # joints that bend under gravity and err once per turn (simulators/joint_errors.py; issue 30)
+        self.joint_errors = joint_errors if joint_errors is not None and joint_errors.active else None
         self._motion_time_s = 0.0
         self.body = body if body is not None else CalibrationBody.generate(seed=seed)
         self.probe = probe if probe is not None else ProbeHeadPhysics(noise_mm=probe_noise_mm, seed=seed + 1)
@@ -287,6 +291,8 @@ class SimulatedCell:
     def _physical(self, cmd: np.ndarray, noise: bool = True) -> np.ndarray:
         t = self.truth
         q = cmd - 0.5 * t.backlash * self._direction
+        if self.joint_errors is not None:
+            q = q + self.joint_errors.delta(t.model, t.params, cmd)[0]
         if noise:
             q = q + self._keyed_rng(0).normal(0.0, 1.0, q.shape) * t.repeatability
         return q

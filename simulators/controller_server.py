@@ -1,6 +1,6 @@
 """Simulated robot controller: pymodbus async TCP server + robot program, in a background thread.
 
-The register map (map 2) and the handshake are those of :mod:`drivers.controller_map` /
+The register map (map 3) and the handshake are those of :mod:`drivers.controller_map` /
 ``docs/protocols.md``. The controller hosts the map's window at ``register_base`` and refuses
 every address outside ``[register_base, register_base + register_count)`` with Modbus exception
 2, and every function code but 3, 4, 6 and 16 with exception 1; ``requests_log`` records every
@@ -13,7 +13,11 @@ same sequence number. Cartesian moves use the controller's NOMINAL kinematics in
 frame (``station.core.kinematics.scara_ik``; for an articulated arm general inverse kinematics
 from the joints the robot stands at, which keeps its configuration) plus the multilinear table correction
 (:meth:`station.core.table_data.CorrectionTableData.interpolate`) when a table is active; the
-table area itself is :class:`simulators.controller_tables.TableSlots`.
+table area itself is :class:`simulators.controller_tables.TableSlots`. One station per controller:
+the claim block follows :class:`simulators.controller_claim.ClaimRules` - a request is served at
+once, the watchdog (``hb_pc`` silent for ``watchdog``) frees a claim on the program tick, and every
+command but STOP whose ``cmd_token`` is not the owner's is refused with NOT_CLAIMED;
+``command_log`` records (code, seq, token) of every command block written.
 
 Faults are injected at run time through methods of :class:`SimulatedController` (thread-safe).
 A robot program that implements the protocol *wrongly* is played with ``quirks`` (see
@@ -54,7 +58,8 @@ from drivers.controller_map import (
     encode,
     register_span,
 )
-from simulators.controller_faults import QUIRKS, ModbusFault
+from simulators.controller_claim import ClaimRules
+from simulators.controller_faults import QUIRKS, FaultInjection, ModbusFault
 from simulators.controller_tables import TableSlots, serve_transfer
 from station.core.kinematics import forward, inverse_kinematics, scara_ik
 from station.core.model import RobotModel
@@ -70,7 +75,7 @@ __all__ = ["SimulatedController", "ModbusFault", "QUIRKS"]
 
 log = logging.getLogger(__name__)
 
-_CMD_FIRST, _CMD_COUNT = register_span("cmd_code", "cmd_pose")
+_CMD_FIRST, _CMD_COUNT = register_span("cmd_code", "cmd_token")
 _LATCHING = (ErrorCode.ESTOP, ErrorCode.DRIVE_FAULT, ErrorCode.WATCHDOG_TIMEOUT)
 
 class _Abort(Exception):
@@ -80,7 +85,7 @@ class _Abort(Exception):
         self.joint = joint
 
 
-class SimulatedController:
+class SimulatedController(FaultInjection):
     """The simulated controller. ``start()`` returns once the port accepts connections.
 
     ``quirks``: names from :data:`QUIRKS`, each a deliberate deviation from the protocol that
@@ -145,6 +150,7 @@ class SimulatedController:
         self._last_seq = 0
         self._latched: ErrorCode | None = None
         self._tables = TableSlots(crc_little_endian="crc_mismatch" in self.quirks, quirks=self.quirks)
+        self._claim = ClaimRules(self.word_order, self.quirks)
         self._move_task: asyncio.Task | None = None
         self._stop_request = False
         self._hb_robot = 0
@@ -159,9 +165,12 @@ class SimulatedController:
         self._hb_frozen = "no_heartbeat" in self.quirks
         # introspection
         self.command_writes: list[tuple[int, int]] = []  # (code, seq) per write of the command block
+        #: (code, seq, cmd_token) per write of the command block: whose command it was
+        self.command_log: list[tuple[int, int, int]] = []
         #: (function code, wire address, count) of every request that reached the program
         self.requests_log: list[tuple[int, int, int]] = []
         self._corrupt_next_page = False
+        self._switch_faults: dict[str, tuple[int, bool]] = {}  # TABLE_ACTIVATE/ROLLBACK to fail next
         self._xfer_last = 0
         self.requests = 0
         self.motion_failures = 0  # motions that ended in an internal error (reported DRIVE_FAULT)
@@ -263,9 +272,14 @@ class SimulatedController:
                 xs = REG["xfer_seq"].address
                 if first <= xs < first + len(vals) and vals[xs - first] != self._xfer_last:
                     self._transfer()
+                cr = REG["claim_request"].address
+                if first <= cr < first + len(vals):  # carried out at once, as a transfer request
+                    self._claim.serve(self._regs, not self._watchdog_expired())
                 seq_addr = REG["cmd_seq"].address
                 if first <= seq_addr < first + len(vals):
-                    self.command_writes.append((int(self._get("cmd_code")), int(self._get("cmd_seq"))))
+                    code_seq = (int(self._get("cmd_code")), int(self._get("cmd_seq")))
+                    self.command_writes.append(code_seq)
+                    self.command_log.append((*code_seq, self._claim.u32(self._regs, "cmd_token")))
                     if self._cmd_event is not None:
                         self._cmd_event.set()
             else:
@@ -339,54 +353,6 @@ class SimulatedController:
     def address(self) -> str:
         return f"{self.host}:{self.port}"
 
-    # ------------------------------------------------------------------ fault injection (thread-safe)
-    def inject_modbus_exception(self, address: int, function_code: int | None = None, code: int = 2,
-                                times: int = 1) -> None:
-        with self._lock:
-            self._faults.append(ModbusFault(int(address), function_code, int(code), int(times)))
-
-    def set_latency(self, seconds: float) -> None:
-        self._latency = float(seconds)
-
-    def lose_next_ack(self) -> None:
-        self._lose_ack = True
-
-    def estop_during_next_move(self) -> None:
-        self._estop_next = True
-
-    def drive_fault_during_next_move(self, axis: int = 1) -> None:
-        self._drive_fault_next = int(axis)
-
-    def freeze_heartbeat(self, frozen: bool = True) -> None:
-        self._hb_frozen = bool(frozen)
-
-    def drop_connections(self, timeout: float = 5.0) -> None:
-        """Close every client connection (the listener stays open)."""
-        done = threading.Event()
-
-        def _drop() -> None:
-            assert self._server is not None
-            for conn in list(self._server.active_connections.values()):
-                conn.close()
-            done.set()
-
-        assert self._loop is not None
-        self._loop.call_soon_threadsafe(_drop)
-        if not done.wait(timeout):
-            raise RuntimeError("could not drop connections")
-
-    def corrupt_staging_value(self, index: int, delta: float = 1e-3) -> None:
-        """Change value ``index`` of the stored table pages (as a flaky store would): the page
-        keeps its old CRC, so its read-back fails."""
-        with self._lock:
-            self._tables.corrupt_value(int(index), delta, self.word_order)
-
-    def corrupt_next_page(self) -> None:
-        """The next page written through the transfer block arrives with one bit flipped (its
-        page CRC no longer matches): the program refuses it with PAGE_CRC_MISMATCH."""
-        with self._lock:
-            self._corrupt_next_page = True
-
     # ------------------------------------------------------------------ introspection
     @property
     def joints(self) -> np.ndarray:
@@ -412,14 +378,23 @@ class SimulatedController:
             self._cmd_event.clear()
             if time.monotonic() >= next_tick:
                 next_tick = time.monotonic() + self.heartbeat_period
-                if not self._hb_frozen:
-                    with self._lock:
+                with self._lock:
+                    if not self._hb_frozen:
                         self._hb_robot = (self._hb_robot + 1) & 0xFFFF
                         self._set("hb_robot", self._hb_robot)
+                    self._serve_claim()
             await self._poll_command()
 
     def _watchdog_expired(self) -> bool:
         return time.monotonic() - self._hb_pc_changed > self.watchdog
+
+    def _serve_claim(self) -> None:
+        """The claim block on a program pass (caller holds the lock): the watchdog frees a claim
+        whose holder stopped its heartbeat, then a pending request is granted if it may be."""
+        live = not self._watchdog_expired()
+        if not live:
+            self._claim.expire(self._regs)
+        self._claim.serve(self._regs, live)
 
     async def _poll_command(self) -> None:
         with self._lock:
@@ -431,8 +406,10 @@ class SimulatedController:
             code = int(self._get("cmd_code"))
             elbow = int(self._get("cmd_elbow"))
             speed = float(self._get("cmd_speed"))
-            joints = np.asarray(self._get("cmd_joints"))[:self.g]
-            pose = np.asarray(self._get("cmd_pose"))
+            pose = np.asarray(self._get("cmd_target"))
+            joints = pose[:self.g]
+            self._serve_claim()  # a holder silent for the watchdog period commands nothing more
+            claimed = self._claim.allows(self._regs, int(self._get("cmd_token")))
             if self._lose_ack:
                 self._lose_ack = False
                 log.info("fault: command seq %d lost (not acknowledged)", seq)
@@ -450,6 +427,8 @@ class SimulatedController:
                 self._stop_request = True
                 await asyncio.gather(self._move_task, return_exceptions=True)  # type: ignore[arg-type]
             return self._done(seq)
+        if not claimed:  # STOP is obeyed from anyone; everything else only from the holder
+            return self._error(seq, ErrorCode.NOT_CLAIMED)
         if cmd is Command.RESET:
             if busy:
                 return self._error(seq, ErrorCode.BAD_COMMAND)
@@ -589,10 +568,15 @@ class SimulatedController:
 
     def _table_command(self, seq: int, cmd: Command) -> None:
         with self._lock:
+            fault = self._switch_faults.pop(cmd.name, None)
             if cmd is Command.TABLE_STAGE:
                 code = self._tables.stage(self.word_order, self.g)
+            elif fault is not None and not fault[1]:
+                code = ErrorCode(fault[0])  # refused: the slots stay as they were
             else:
                 code = self._tables.switch(cmd)
+                if fault is not None:  # switched, then failed before its acknowledgement
+                    code = ErrorCode(fault[0])
             self._publish_state()
         if code is not ErrorCode.NONE:
             return self._error(seq, code)

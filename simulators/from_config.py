@@ -181,7 +181,22 @@ def simulated_cell_for(cfg: Any, seed: int) -> SimulatedCell:
     conformance = getattr(cfg, "conformance", None)
     park = None if conformance is None else np.asarray(conformance.park_joints, dtype=float)
     return SimulatedCell(truth=truth, body=body, probe=probe, seed=seed, thermal=thermal, step=step,
-                         initial_joints=park, **cell_kw)
+                         initial_joints=park, joint_errors=_joint_errors(settings, truth.model, seed), **cell_kw)
+
+
+def _joint_errors(settings: Mapping[str, Any], model: Any, seed: int):
+    """``[simulation] joint_errors``: None, or the six-axis arm's (simulators/joint_errors.py)."""
+    kind = settings.get("joint_errors") or "none"
+    if kind == "none":
+        return None
+    from simulators.joint_errors import six_axis_joint_errors
+    from station.errors import ConfigError
+
+    if model.n_joints != 6 or any(t != "revolute" for t in model.joint_types):
+        raise ConfigError(f"[simulation] joint_errors = {kind!r} is for a six-axis arm of revolute joints; "
+                          f"robot {model.name!r} has the joints {', '.join(model.joint_types)}")
+    scale = settings.get("joint_errors_scale")
+    return six_axis_joint_errors(seed, 1.0 if scale is None else float(scale))
 
 
 def _absolute_paths(value: Any, base: Path) -> Any:
@@ -278,7 +293,9 @@ def simulate_config(cfg: Any, seed: int | None = None, source: str | Path | None
                                    correction_state=int(settings.get("controller_correction_state") or 0),
                                    port=port, word_order=WordOrder(d.word_order), cell=cell,
                                    ready_timeout=ready_timeout, soft_limits=np.asarray(cfg.soft_limits, dtype=float),
-                                   **drift)
+                                   # the program's watchdog allows what the station's heartbeat check
+                                   # allows here: a loaded machine stalls both sides of one process
+                                   watchdog=SIMULATOR_CONTROLLER_DEADLINE_S, **drift)
     try:
         instant = time_scale == 0.0
         text = station_config_text(cfg, servers, seed, source, instant=instant)

@@ -103,8 +103,8 @@ def test_a_changed_map_is_caught() -> None:
     added = (*cm.REGISTERS, cm.Register("new_reg", 127, cm.RegType.U16, 1, 1.0, "", "r", ""))
     assert mismatches(constants(UR), expected_constants(added, with_header=False)) == \
         ["R_NEW_REG: program None, map 127"]
-    assert "MAP_VERSION: program 2, map 3" in mismatches(
-        constants(UR), {**expected_constants(with_header=False), "MAP_VERSION": 3})
+    assert "MAP_VERSION: program 3, map 4" in mismatches(
+        constants(UR), {**expected_constants(with_header=False), "MAP_VERSION": 4})
 
 
 def test_ur_program_hosts_the_map_at_the_general_purpose_registers() -> None:
@@ -156,6 +156,6 @@ def test_crc_constants_are_the_zlib_polynomial() -> None:
 @pytest.mark.parametrize("path", [UR, EPSON], ids=["ur", "epson"])
 def test_program_header_states_what_was_and_was_not_checked(path: Path) -> None:
     head = path.read_text()[:8000]
-    for phrase in ("map version 2", "WHAT WAS CHECKED", "WHAT WAS NOT DONE", "NOT run on a real controller",
+    for phrase in ("map version 3", "WHAT WAS CHECKED", "WHAT WAS NOT DONE", "NOT run on a real controller",
                    "station conformance"):
         assert phrase in head, f"{path.name}: header lacks {phrase!r}"

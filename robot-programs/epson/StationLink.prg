@@ -1,6 +1,6 @@
 ' =============================================================================================
 ' StationLink.prg - the calibration station's robot program for an Epson SCARA (RC700 / RC90 /
-' RC800 family, Epson RC+ 7 / 8, SPEL+), register map version 2 (drivers/controller_map.py,
+' RC800 family, Epson RC+ 7 / 8, SPEL+), register map version 3 (drivers/controller_map.py,
 ' docs/protocols.md, docs/robot-program.md).
 '
 ' HOW THE PROGRAM SERVES THE STATION
@@ -28,6 +28,14 @@
 '     inverse kinematics plus the active correction table by the interpolation rule of
 '     docs/protocols.md), STOP, RESET, soft limits checked on what WILL be commanded, e-stop /
 '     drive fault / watchdog latching until RESET.
+'   * One station per controller (map 3's claim block), served by the heartbeat task (the only
+'     writer of the owner): a token in claim_request becomes claim_owner only while claim_owner
+'     is 0 and hb_pc is live; the owner's release code (0xFFFFFFFF - token) frees it, and so does
+'     hb_pc silent for WATCHDOG_MS; freeing clears the request and the holder's host, PID and
+'     since. Every command but STOP whose cmd_token is not claim_owner is refused with
+'     NOT_CLAIMED. A token is kept as its two 16-bit words (a Long cannot hold an unsigned 32-bit
+'     value), so the release code is 65535 - high word, 65535 - low word: no new built-in.
+'     claim_owner is the program's: a PC write to it is refused with exception 2.
 '   * The transfer block (served inside the Modbus request that starts it): WRITE_HEADER /
 '     WRITE_PAGE with the page CRC-32 checked, READ_HEADER / READ_PAGE, READ_INFO (soft limits,
 '     actual pose), READ_{STAGED,ACTIVE,PREVIOUS}_{HEADER,PAGE}. Page CRC-32 = zlib CRC-32
@@ -86,8 +94,8 @@
 '   * Speed and Accel are whole percents 1..100: the station's cmd_speed (1..1000, 0.1 %) is
 '     rounded and clamped to 1..100 before use; [RCREF80] Command 1 gives PTP acceleration as a
 '     whole percent >= 1 (the Accel statement's own page was not found).
-'   * The logic was traced against simulators/controller_server.py, controller_tables.py and
-'     drivers/correction_table.py; tests/test_robot_programs.py checks every map constant and
+'   * The logic was traced against simulators/controller_server.py, controller_tables.py,
+'     controller_claim.py (the claim rules) and drivers/correction_table.py; tests/test_robot_programs.py checks every map constant and
 '     the CRC polynomial halves against drivers/controller_map.py and zlib.
 '
 ' REPLACED (the constructs issue 28 doubted)
@@ -169,8 +177,8 @@
 ' the task number of main (the motion side), for TaskInfo [REF-TASKINFO]
 #define MAIN_TASK 1
 
-' ---------------- register map 2 (tests/test_robot_programs.py keeps these true) -------------
-#define MAP_VERSION 2
+' ---------------- register map 3 (tests/test_robot_programs.py keeps these true) -------------
+#define MAP_VERSION 3
 #define WINDOW_SIZE 128
 #define PAGE_DATA_REGISTERS 58
 #define PAGE_VALUES 29
@@ -190,8 +198,13 @@
 #define R_CMD_SEQ 9
 #define R_CMD_ELBOW 10
 #define R_CMD_SPEED 11
-#define R_CMD_JOINTS 12
-#define R_CMD_POSE 24
+#define R_CMD_TARGET 12
+#define R_CMD_TOKEN 24
+#define R_CLAIM_REQUEST 26
+#define R_CLAIM_OWNER 28
+#define R_CLAIM_HOST 30
+#define R_CLAIM_PID 32
+#define R_CLAIM_SINCE 34
 #define R_ACK_SEQ 36
 #define R_DONE_SEQ 37
 #define R_ERROR_SEQ 38
@@ -266,6 +279,7 @@
 #define E_NO_PREVIOUS_TABLE 14
 #define E_PAGE_CRC_MISMATCH 15
 #define E_PAGE_INVALID 16
+#define E_NOT_CLAIMED 17
 #define S_READY 1
 #define S_MOVING 2
 #define S_IN_POSITION 4
@@ -284,8 +298,8 @@
 ' valid state for all of them (no table, no latch, CRC table rebuilt by the heartbeat).
 ' the window image (offsets 0..127)
 Global Long Regs(127)
-' the command block as it arrived (offsets 8..35), and that a write covered cmd_seq
-Global Long CmdSnap(27)
+' the command block as it arrived (offsets 8..25), and that a write covered cmd_seq
+Global Long CmdSnap(17)
 Global Boolean CmdWritten
 ' the transfer store: header page and value pages as the PC wrote them (0 = no such page)
 Global Long StoreHdr(29)
@@ -305,6 +319,8 @@ Global Double SoftLo(3), SoftHi(3)
 Global Long Status
 Global Boolean Latched, Moving, InPosition, WdFired, MainUp
 Global Long LastSeq, MotionSeq, HbRobot, LastXfer, HbIdle
+' the token of the station that holds the controller, as its high and low word (0, 0: free)
+Global Long OwnHi, OwnLo
 Global Double Tq(3), Dq(3)
 ' the controller's pose of the tool (x, y, z mm, u deg), kept by main for READ_INFO
 Global Double ActPose(3)
@@ -354,6 +370,7 @@ Function Heartbeat
             HbIdle = HbIdle + 1
         EndIf
         If Moving And HbIdle * 100 > WATCHDOG_MS Then WdFired = True
+        ServeClaim
         If TaskInfo(MAIN_TASK, 3) = -1 Then
             MainUp = False
         Else
@@ -366,6 +383,55 @@ Function Heartbeat
         EndIf
         Wait 0.1
     Loop
+Fend
+
+' ---------------- the claim block: one station per controller ---------------------------
+' once per heartbeat (the only writer of OwnHi / OwnLo): the watchdog, a release, a grant;
+' claim_owner is published last, so that a station that reads it 0 finds the rest cleared
+Function ServeClaim
+    Long rqHi, rqLo
+    Boolean held
+    rqHi = U32Hi(R_CLAIM_REQUEST)
+    rqLo = U32Lo(R_CLAIM_REQUEST)
+    held = False
+    If OwnHi <> 0 Or OwnLo <> 0 Then held = True
+    If held And HbIdle * 100 > WATCHDOG_MS Then
+        FreeClaim
+    ElseIf held And rqHi = 65535 - OwnHi And rqLo = 65535 - OwnLo Then
+        FreeClaim
+    ElseIf Not held And HbIdle * 100 <= WATCHDOG_MS Then
+        If rqHi <> 0 Or rqLo <> 0 Then
+            OwnHi = rqHi
+            OwnLo = rqLo
+        EndIf
+    EndIf
+    PutWords R_CLAIM_OWNER, OwnHi, OwnLo
+Fend
+
+' freeing clears the request and the holder's host, PID and since: no stale request is granted
+' later, no stale holder named
+Function FreeClaim
+    OwnHi = 0
+    OwnLo = 0
+    PutWords R_CLAIM_REQUEST, 0, 0
+    PutWords R_CLAIM_HOST, 0, 0
+    PutWords R_CLAIM_PID, 0, 0
+    PutWords R_CLAIM_SINCE, 0, 0
+Fend
+
+' whether the command block's cmd_token (at snapshot offset a) is the holder's token
+Function TokenIsOwner(a As Integer) As Boolean
+    Long tHi, tLo
+    TokenIsOwner = False
+    If OwnHi = 0 And OwnLo = 0 Then Exit Function
+    If WORD_ORDER_BIG = 1 Then
+        tHi = CmdSnap(a)
+        tLo = CmdSnap(a + 1)
+    Else
+        tHi = CmdSnap(a + 1)
+        tLo = CmdSnap(a)
+    EndIf
+    If tHi = OwnHi And tLo = OwnLo Then TokenIsOwner = True
 Fend
 
 ' ---------------- words and scaled integers --------------------------------------------
@@ -688,6 +754,11 @@ Function Dispatch(seq As Long, code As Long)
         ReportDone seq
         Exit Function
     EndIf
+    ' STOP is obeyed from anyone; every other command only from the holder of the controller
+    If Not TokenIsOwner(R_CMD_TOKEN - R_CMD_CODE) Then
+        Refuse seq, E_NOT_CLAIMED, 0, 0
+        Exit Function
+    EndIf
     ' only STOP while a motion runs
     If Moving Then
         Refuse seq, E_BAD_COMMAND, 0, 0
@@ -715,7 +786,7 @@ Function Dispatch(seq As Long, code As Long)
         EndIf
         If code = C_MOVE_JOINTS Then
             For j = 0 To N_JOINTS - 1
-                Tq(j) = SnapI32(R_CMD_JOINTS + 2 * j) * 0.000001
+                Tq(j) = SnapI32(R_CMD_TARGET + 2 * j) * 0.000001
             Next
         Else
             If elbow <> 1 And elbow <> -1 Then
@@ -723,7 +794,7 @@ Function Dispatch(seq As Long, code As Long)
                 Exit Function
             EndIf
             For j = 0 To 5
-                pose(j) = SnapI32(R_CMD_POSE + 2 * j) * 0.000001
+                pose(j) = SnapI32(R_CMD_TARGET + 2 * j) * 0.000001
             Next
             If Not NominalIK(pose(0), pose(1), pose(2), pose(5), elbow) Then
                 Refuse seq, E_UNREACHABLE, 0, 0
@@ -1227,10 +1298,12 @@ Function MbException(tid As Long, unit As Long, fc As Long, code As Integer)
     Reply tid, unit, 2
 Fend
 
-' offsets the PC may write: all but hb_robot .. order_check and ack_seq .. table_previous_crc
+' offsets the PC may write: all but hb_robot .. order_check, claim_owner and ack_seq ..
+' table_previous_crc
 Function PcMayWrite(off As Integer) As Boolean
     PcMayWrite = True
     If off >= R_HB_ROBOT And off <= R_ORDER_CHECK + 1 Then PcMayWrite = False
+    If off >= R_CLAIM_OWNER And off <= R_CLAIM_OWNER + 1 Then PcMayWrite = False
     If off >= R_ACK_SEQ And off <= R_TABLE_PREVIOUS_CRC + 1 Then PcMayWrite = False
 Fend
 
@@ -1324,7 +1397,7 @@ Function AfterWrite(off As Integer, cnt As Integer)
         EndIf
     EndIf
     If off <= R_CMD_SEQ And R_CMD_SEQ < off + cnt Then
-        For i = 0 To 27
+        For i = 0 To R_CMD_TOKEN + 1 - R_CMD_CODE
             CmdSnap(i) = Regs(R_CMD_CODE + i)
         Next
         If MainUp Then

@@ -15,14 +15,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drivers.controller_map import REG, Command, decode, encode
+from drivers.controller_map import MAP_VERSION, REG, Command, decode, encode
 from simulators.urscript.controller import URController
 from simulators.urscript.interp import FRAME_S
 
 __all__ = ["Timing", "measure", "DEADLINES_S", "Bench"]
 
 #: the station's deadlines per step [s]
-DEADLINES_S = {"start": 10.0, "ack": 1.0, "refusal": 1.0, "done_after_arrival": 1.0, "info_page_0": 1.0,
+DEADLINES_S = {"start": 10.0, "claim": 1.0, "ack": 1.0, "refusal": 1.0, "done_after_arrival": 1.0, "info_page_0": 1.0,
                "info_page_1": 1.0, "heartbeat": 1.0}
 BASE = 128
 
@@ -37,6 +37,21 @@ class Bench:
         self.hb = 0
         #: the PC heartbeat: hb_pc changes every 0.1 s while True
         self.pc_heartbeat = True
+        #: the station's session token (cmd_token of every command; claim() asks for it)
+        self.token = 0x5EC0DE01
+
+    def claim(self, token: int | None = None, max_frames: int = 2000) -> int:
+        """Ask for the controller with ``token`` (default: the bench's) as the station does;
+        return claim_owner once the program has answered (the owner, or 0 if nothing changed)."""
+        token = self.token if token is None else token
+        owner0 = self.read("claim_owner")
+        self.write("claim_request", token)
+        try:
+            self.until(lambda: self.read("claim_owner") not in (0, owner0) or self.read("claim_owner") == token,
+                       max_frames)
+        except TimeoutError:
+            pass
+        return int(self.read("claim_owner"))
 
     def frames(self, n: int) -> None:
         for _ in range(n):
@@ -63,11 +78,12 @@ class Bench:
         return decode(r, self.c.ports.words(BASE + r.address, r.n_registers))
 
     def command(self, code: int, joints=None, speed: float = 0.5, seq: int | None = None, pose=None,
-                elbow: int = 0) -> int:
+                elbow: int = 0, token: int | None = None) -> int:
         self.seq = self.seq % 0xFFFF + 1 if seq is None else seq
+        target = joints if joints is not None else pose
         regs = (encode("cmd_code", int(code)) + encode("cmd_seq", self.seq) + encode("cmd_elbow", elbow)
-                + encode("cmd_speed", speed) + encode("cmd_joints", np.zeros(6) if joints is None else joints)
-                + encode("cmd_pose", np.zeros(6) if pose is None else pose))
+                + encode("cmd_speed", speed) + encode("cmd_target", np.zeros(6) if target is None else target)
+                + encode("cmd_token", self.token if token is None else token))
         self.c.ports.set_words(BASE + REG["cmd_code"].address, regs)
         return self.seq
 
@@ -93,7 +109,9 @@ def measure(budget: int) -> Timing:
     """Frames each step takes at ``budget`` statements per thread per frame."""
     b = Bench(budget)
     f: dict[str, int] = {}
-    f["start"] = b.until(lambda: b.read("map_version") == 2)
+    f["start"] = b.until(lambda: b.read("map_version") == MAP_VERSION)
+    b.write("claim_request", b.token)
+    f["claim"] = b.until(lambda: b.read("claim_owner") == b.token)
     hb0 = b.read("hb_robot")
     f["heartbeat"] = b.until(lambda: b.read("hb_robot") != hb0)
     hb1 = b.read("hb_robot")

@@ -20,8 +20,10 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
+from station.core.fit_kernel import DataEvaluator
 from station.core.measurements import MeasurementSet, residuals_and_jacobian
 from station.core.model import RobotModel
+from station.core.transforms import pose_to_matrix
 from station.errors import ConfigError
 
 # Relative size below which a singular value counts as zero. Structural dependencies give
@@ -60,6 +62,27 @@ class Identifiability:
     chosen_singular_values: np.ndarray
     chosen_condition: float
     dependencies: tuple[Dependency, ...]
+    #: transforms at pitch ±90°, the gimbal lock of roll-pitch-yaw (:func:`gimbal_locked`)
+    gimbal_locked: tuple[str, ...] = ()
+    #: where a transform is locked: the rank of the chain itself (:func:`chain_jacobian`), which
+    #: exceeds ``rank`` by the rotations the lock takes from this parametrisation; else None
+    chain_rank: int | None = None
+
+    @property
+    def lost_to_gimbal_lock(self) -> int:
+        """Parameters the chain determines that this parametrisation cannot (0 without a lock)."""
+        return 0 if self.chain_rank is None else max(self.chain_rank - self.rank, 0)
+
+    def gimbal_note(self) -> str | None:
+        """The line that says a gimbal lock costs rank, naming the transforms and the fix."""
+        if not self.lost_to_gimbal_lock:
+            return None
+        names = ", ".join(self.gimbal_locked)
+        return (f"the chain determines {self.chain_rank} parameters, this parametrisation {self.rank}: "
+                f"{names} {'sits' if len(self.gimbal_locked) == 1 else 'sit'} at pitch ±90°, where roll and yaw "
+                f"turn about one axis (the gimbal lock of roll-pitch-yaw), so {self.lost_to_gimbal_lock} "
+                f"rotation(s) cannot be identified. Turn the frame after a joint about its joint axis (imports do), "
+                f"or choose a tool frame whose x axis does not lie along the last joint axis (docs/robot-file.md)")
 
     def chosen_indices(self) -> np.ndarray:
         return np.array([self.param_names.index(n) for n in self.chosen], dtype=int)
@@ -75,6 +98,8 @@ class Identifiability:
             "zero_effect": list(self.zero_effect),
             "held": list(self.held),
             "dependencies": [d.describe() for d in self.dependencies],
+            "gimbal_locked": list(self.gimbal_locked),
+            "chain_rank": self.chain_rank,
         }
 
 
@@ -99,6 +124,49 @@ def weighted_jacobian(model: RobotModel, data: MeasurementSet, params=None) -> n
     p = model.nominal if params is None else params
     _, J = residuals_and_jacobian(model, data, p)
     return J / data.sigma[:, None]
+
+
+#: |cos pitch| below this is the gimbal lock (a structural ±90°, as an import or a snap gives it)
+GIMBAL_COS = 1e-6
+
+
+def gimbal_locked(model: RobotModel, params=None) -> tuple[str, ...]:
+    """Transforms whose pitch is ±90°: there ``Rz(yaw)·Ry(pitch)·Rx(roll)`` turns roll and yaw
+    about the same axis, and the rotation about the third axis has no parameter."""
+    p = np.asarray(model.nominal if params is None else params, dtype=float).reshape(-1, 6)
+    return tuple(model.transform_names[i] for i in np.nonzero(np.abs(np.cos(p[:, 4])) < GIMBAL_COS)[0])
+
+
+def chain_jacobian(model: RobotModel, data: MeasurementSet, params=None) -> np.ndarray:
+    """σ-normalised Jacobian ``(n_rows, n_params)`` of ``data`` by a small rigid motion of every
+    transform in its own frame (along and about the frame's three axes, at its origin) in place of
+    its x, y, z, roll, pitch, yaw. The same chain, no Euler angles: nothing locks, so its rank is
+    the number of parameters the chain and the measurements determine (4R + 2P + 6 from full poses
+    of a generic chain, 4R + 2P + 3 from positions of a point off the last axis; Everett,
+    Hollerbach), against which :func:`analyze`'s rank is checked where a transform is locked."""
+    p = np.asarray(model.nominal if params is None else params, dtype=float)
+    ev = DataEvaluator(model, data)
+    T, P = ev.chain.frames(p)
+    nt = len(model.transforms)
+    F = P[:, :, :3, :3] @ pose_to_matrix(p.reshape(nt, 6))[:, None, :3, :3]  # (nt, n, 3, 3) axes after each
+    origin = P[:, :, :3, 3] + np.einsum("tnij,tj->tni", P[:, :, :3, :3], p.reshape(nt, 6)[:, :3])
+    lever = T[None, :, :3, 3] - origin  # (nt, n, 3)
+    axes = np.swapaxes(F, -1, -2)  # (nt, n, 3 axes, 3 coordinates)
+    J = np.zeros((T.shape[0], 6, nt, 6))
+    J[:, :3, :, :3] = np.moveaxis(F, 0, 2)
+    J[:, :3, :, 3:] = np.moveaxis(np.cross(axes, lever[:, :, None, :]), (0, 3), (2, 1))
+    J[:, 3:, :, 3:] = np.moveaxis(F, 0, 2)
+    if not data.uses_setup:
+        J[:, :, 0] = 0.0
+    rows = ev._jacobian_rows(T, J.reshape(T.shape[0], 6, nt * 6))
+    return rows / data.sigma[:, None]
+
+
+def _scaled_rank(J: np.ndarray, held: set[str], names: tuple[str, ...]) -> int:
+    """:func:`analyze`'s rank of ``J``: zero columns out before scaling, the rest to unit norm."""
+    norms = np.linalg.norm(J, axis=0)
+    keep = [i for i in range(J.shape[1]) if norms[i] > ZERO_COLUMN_RTOL * norms.max() and names[i] not in held]
+    return _rank(J[:, keep] / norms[keep])[0]
 
 
 def _rank(Js: np.ndarray) -> tuple[int, np.ndarray]:
@@ -214,6 +282,10 @@ def analyze(model: RobotModel, data: MeasurementSet, params=None, prefer=(), fix
             continue  # held by the user but not a combination: identifiable, just not chosen
         deps.append(Dependency(names[i], tuple((n, c) for n, c, k in zip(chosen_names, coef_i, keep_i) if k)))
     cond = float(s[0] / s[rank - 1]) if rank else float("inf")
+    locked = gimbal_locked(model, params)
+    chain_rank = None
+    if locked:  # the count of the chain, to tell what the lock costs (only then: it is one more chain)
+        chain_rank = _scaled_rank(chain_jacobian(model, data, params), held, names)
     return Identifiability(
         param_names=names,
         candidates=tuple(names[i] for i in cand),
@@ -226,6 +298,8 @@ def analyze(model: RobotModel, data: MeasurementSet, params=None, prefer=(), fix
         chosen_singular_values=sc,
         chosen_condition=float(sc[0] / sc[-1]) if len(sc) else float("inf"),
         dependencies=tuple(deps),
+        gimbal_locked=locked,
+        chain_rank=chain_rank,
     )
 
 

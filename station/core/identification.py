@@ -28,7 +28,8 @@ of the measurements at one body point, which share its error
 
 Real data: distances between two rows with the same nominal point (q6 and q6 + 360°, a repeated
 pose) have no direction and are dropped with a note; ``loss="huber"`` fits robustly (rows beyond
-``HUBER_SCALE`` σ weigh less; the result lists them and its σ are the weighted fit's);
+``HUBER_SCALE`` σ weigh less; the result lists them and its σ are the weighted fit's), starting
+from the least-squares solution and so from the same set-up;
 ``tool_unknown`` registers an unknown tool or marker point and starts from it.
 """
 
@@ -41,7 +42,7 @@ from scipy.optimize import least_squares
 
 from station.core.blas_threads import single_blas_thread
 from station.core.distance_pairs import coincident_pairs, shares_points
-from station.core.fit_kernel import DataEvaluator, FitProblem, minpack_lm
+from station.core.fit_kernel import DataEvaluator, FitProblem, LMSolution, minpack_lm
 from station.core.identifiability import Identifiability, analyze, structural_params
 from station.core.kinematics import forward
 from station.core.measurements import MeasurementSet
@@ -66,6 +67,8 @@ LOSSES = ("linear", "huber")
 #: the robust loss's corner in σ: a row within 3 σ keeps its full weight (an ordinary row rarely
 #: leaves it), a row beyond it weighs c/|r| (its pull grows no further)
 HUBER_SCALE = 3.0
+#: the fit's evaluations at most, unless the caller says otherwise (``station identify --max-evaluations``)
+MAX_EVALUATIONS = 200
 
 
 @dataclass(frozen=True)
@@ -106,6 +109,8 @@ class IdentificationResult:
     downweighted: tuple[tuple[int, float], ...] = ()
     dropped_pairs: tuple[tuple[int, int], ...] = ()
     pairs: np.ndarray | None = None
+    #: the evaluations the fit was allowed (``identify``'s ``max_nfev``)
+    max_evaluations: int = 0
 
     def item_rows(self, item: int) -> tuple[int, ...]:
         """The 0-based joint rows of measurement ``item``: itself, or a distance's two rows."""
@@ -181,7 +186,7 @@ def _design_rank(model: RobotModel, kind: str, n_poses: int, seed: int) -> int:
 
 
 def identify(model: RobotModel, data: MeasurementSet, start=None, prefer=None, fix=(), exclude=(),
-             chosen=None, max_nfev: int = 200, max_rms_normalized: float = 1e3,
+             chosen=None, max_nfev: int = MAX_EVALUATIONS, max_rms_normalized: float = 1e3,
              register_frame: bool = True, tool_unknown: bool = False,
              loss: str = "linear") -> IdentificationResult:
     """Identify ``model``'s parameters from ``data``.
@@ -266,6 +271,9 @@ def _identify(model: RobotModel, data: MeasurementSet, start, prefer, fix, exclu
     if ident.rank < d_rank and not (fix or exclude or chosen is not None):
         notes.append(f"the data determine {ident.rank} of the {d_rank} parameters that a workspace-wide "
                      f"design determines (e.g. poses in one plane); the rest merge as listed")
+    gimbal = ident.gimbal_note()  # a transform at pitch ±90° that costs this parametrisation rank
+    if gimbal is not None:
+        notes.append(gimbal)
     if chosen is not None:
         idx = np.array(model.param_indices(chosen), dtype=int)
         J = evaluator.residuals_and_jacobian(p0)[1][:, idx] / data.sigma[:, None]
@@ -289,11 +297,9 @@ def _identify(model: RobotModel, data: MeasurementSet, start, prefer, fix, exclu
     w = 1.0 / data.fit_sigma(pair_units(model, data, p0) if data.has_body_sigma else None)
 
     prob = FitProblem(evaluator, p0, idx, w)
-    if loss == "huber":  # MINPACK's LM knows only plain least squares
-        sol = least_squares(prob.fun, p0[idx], jac=prob.jac, method="trf", x_scale="jac", max_nfev=max_nfev,
-                            loss="huber", f_scale=HUBER_SCALE, xtol=1e-15, ftol=1e-15, gtol=1e-15)
-    else:  # n_rows >= len(idx) here: Levenberg–Marquardt
-        sol = minpack_lm(prob, p0[idx], max_nfev)
+    sol = minpack_lm(prob, p0[idx], max_nfev)  # n_rows >= len(idx) here: Levenberg–Marquardt
+    if loss == "huber":
+        sol = _robust_from(prob, sol, max_nfev)
     p = prob.full(sol.x)
     r, J = evaluator.residuals_and_jacobian(p)  # at the result (MINPACK may not have evaluated last there)
     Jw = J[:, idx] * w[:, None]
@@ -329,11 +335,7 @@ def _identify(model: RobotModel, data: MeasurementSet, start, prefer, fix, exclu
     per_item = np.sqrt(np.mean(rn**2, axis=1))
     rms = float(np.sqrt(np.mean(rn**2)))
     if not np.all(np.isfinite(p)) or rms > max_rms_normalized:
-        raise IdentificationError(
-            f"identification diverged (normalised RMS residual {rms:.3g} after {sol.nfev} "
-            f"evaluations): the start model is too far from the robot or the data are wrong. "
-            f"Check units (mm, deg/rad in the file header), joint order and sign conventions"
-        )
+        raise IdentificationError(_diverged(rms, sol.nfev, reg, loss))
     if unc.rank < len(idx):
         raise IdentificationError(
             f"rank deficient at the solution ({unc.rank} of {len(idx)} parameters determined); "
@@ -352,8 +354,55 @@ def _identify(model: RobotModel, data: MeasurementSet, start, prefer, fix, exclu
         message=str(sol.message), identifiability=ident, uncertainty=unc,
         registration=reg, information=info, design_rank=d_rank, notes=tuple(notes),
         loss=loss, downweighted=downweighted, dropped_pairs=dropped,
-        pairs=data.distance_pairs() if data.kind == "distance" else None,
+        pairs=data.distance_pairs() if data.kind == "distance" else None, max_evaluations=max_nfev,
     )
+
+
+def require_converged(res: IdentificationResult) -> None:
+    """Refuse a fit that stopped before meeting its tolerance: no result, exit 3 with what to do
+    (``identify`` returns it, for callers that look at it; the CLI prints and writes nothing of it)."""
+    if res.converged:
+        return
+    what = (f"the fit did not converge ({res.message.rstrip('.')}; {res.iterations} evaluations, normalised RMS "
+            f"residual {res.rms_normalized:.3g}, RMS position residual {res.rms_position_mm() * 1e3:.4g} µm): its "
+            f"parameters are not used and nothing was written. ")
+    hold = ("hold the parameters these poses barely determine (--fix, --exclude; station analyze names them) or "
+            "measure poses spread over the workspace")
+    if res.max_evaluations and res.iterations >= res.max_evaluations:
+        raise IdentificationError(f"{what}It ran out of evaluations: allow more with --max-evaluations (now "
+                                  f"{res.max_evaluations}); if it still does not converge, {hold}")
+    raise IdentificationError(f"{what}{hold[0].upper()}{hold[1:]}")
+
+
+def _diverged(rms: float, nfev: int, reg: Registration | None, loss: str) -> str:
+    """What a diverged fit says: units and joint order only where nothing has checked them yet (a
+    registration that passed did; distances' scale check sees the length unit only)."""
+    head = f"identification diverged (normalised RMS residual {rms:.3g} after {nfev} evaluations)"
+    if reg is None:
+        return (f"{head}: the start model is too far from the robot or the data are wrong. Check units (mm, "
+                f"deg/rad in the file header), joint order and sign conventions")
+    return (f"{head}, although the registration placed the nominal model within {reg.rms_mm:.3g} mm RMS of "
+            f"the data, so units and joint order are consistent. The fit itself ran away: "
+            f"a few gross rows (try --loss {'linear' if loss != 'linear' else 'huber'}), parameters these poses "
+            f"barely determine (hold them with --fix or --exclude; station analyze names them), or a σ far "
+            f"below the instrument's noise (--sigma-position)")
+
+
+def _robust_from(prob: FitProblem, linear: LMSolution, max_nfev: int) -> LMSolution:
+    """The Huber fit started from the least-squares solution ``linear``.
+
+    Why not from the start itself: there the residuals of a set-up still metres off (a tracker
+    4 m away that the registration left to the fit, being turned less than
+    ``REGISTRATION_START_ANGLE``) are thousands of σ, every row sits far beyond the corner and
+    weighs c/|r|, and the robust loss crawls like an L1 fit: 200 evaluations left it 500 mm off.
+    Least squares takes the set-up in a few steps; from its solution only the outliers lie beyond
+    the corner. The evaluations of both count, and the robust fit's status is the result's."""
+    if not np.all(np.isfinite(prob.fun(linear.x))):
+        return linear  # diverged already: the caller refuses it
+    left = max(max_nfev - linear.nfev, 1)
+    sol = least_squares(prob.fun, linear.x, jac=prob.jac, method="trf", x_scale="jac", max_nfev=left,
+                        loss="huber", f_scale=HUBER_SCALE, xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    return LMSolution(np.asarray(sol.x, dtype=float), linear.nfev + int(sol.nfev), int(sol.status), str(sol.message))
 
 
 def _drop_coincident(model: RobotModel, data: MeasurementSet, p0: np.ndarray,

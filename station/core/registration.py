@@ -122,6 +122,21 @@ def rigid_residual_mm(model: RobotModel, joints: np.ndarray, measured_mm: np.nda
     return float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
 
 
+def rigid_setup(model: RobotModel, joints: np.ndarray, points_mm: np.ndarray, params=None) -> np.ndarray:
+    """The set-up pose ``(6,)`` [mm, rad] that places ``model`` (at ``params``, its own set-up
+    left out) best onto ``points_mm`` ``(n, 3)`` at ``joints`` ``(n, g)``: the rigid fit, without
+    any check. ``validate`` places the nominal robot onto an identified model's own points so,
+    wherever the identification put the set-up (split between R and parameters that merge with it)."""
+    b = forward(model, np.asarray(joints, dtype=float), params, setup=False)[:, :3, 3]
+    m = np.asarray(points_mm, dtype=float)
+    bc, mc = b.mean(0), m.mean(0)
+    rot, _ = Rotation.align_vectors(m - mc, b - bc)
+    T = np.eye(4)
+    T[:3, :3] = rot.as_matrix()
+    T[:3, 3] = mc - T[:3, :3] @ bc
+    return matrix_to_pose(T)
+
+
 def _limit_text(limit: float, sigma_mm: float, spread_b: float) -> str:
     """Where the residual limit comes from, naming σ and the option that sets it."""
     return (f"the limit {limit:.3g} mm is the larger of {RESIDUAL_NOISE_FACTOR:.0f} × σ "

@@ -11,6 +11,8 @@ Joint columns ``q1 … qg`` (deg | rad for revolute, mm | m for prismatic joints
 position ``x, y, z`` (mm | m), or the three reflectors of a nest ``x1, y1, z1 … x3, y3, z3``
 (one pose); orientation ``roll, pitch, yaw`` (deg | rad | arcsec) makes the file a pose file,
 without it a position file. A joints file (for ``station predict``) has only the joint columns.
+Optional ``time [s|min|h]``, ``approach1 … approachg [sign]`` (±1) and ``payload [kg]`` columns time
+the drift, give the backlash its sides and load the compliance term (``identify --model``, issue 30).
 
 As instruments export them: UTF-8 (with or without a byte-order mark), UTF-16 with its mark, or
 a single-byte code page (cp1252, else latin-1), each noted; names in any case (``X [mm]`` is
@@ -33,7 +35,10 @@ from station.core.transforms import pose_to_matrix
 from station.core.units import ARCSEC, DEG, UM
 from station.errors import ConfigError
 
-_SCALE = {"mm": 1.0, "m": 1000.0, "um": UM, "µm": UM, "deg": DEG, "rad": 1.0, "arcsec": ARCSEC}
+_SCALE = {"mm": 1.0, "m": 1000.0, "um": UM, "µm": UM, "deg": DEG, "rad": 1.0, "arcsec": ARCSEC,
+          "s": 1.0, "min": 60.0, "h": 3600.0, "sign": 1.0, "kg": 1.0}
+#: the time of a row (drift) and the side each joint arrived from (backlash): issue 30
+_TIME_UNITS = ("s", "min", "h")
 # spellings of instrument exports for the units above (after lower-casing)
 _UNIT_ALIASES = {"μm": "µm", "micron": "um", "°": "deg", "degree": "deg", "degrees": "deg",
                  "radian": "rad", "radians": "rad", '"': "arcsec", "″": "arcsec"}
@@ -78,7 +83,8 @@ class Table:
 
 
 def _is_known(name: str) -> bool:
-    return name in _KNOWN or (name.startswith("q") and name[1:].isdigit())
+    return (name in _KNOWN or (name.startswith("q") and name[1:].isdigit()) or name in ("time", "payload")
+            or (name.startswith("approach") and name[8:].isdigit()))
 
 
 def _decode(p: Path, raw: bytes) -> tuple[str, str | None]:
@@ -121,6 +127,10 @@ def _parse_header(p: Path, cells: list[str]) -> tuple[list[tuple[int, str, str]]
         name = (m.group("name") if m else h).strip().lower()
         if not _is_known(name):
             ignored.append(h or f"(column {k + 1}, no name)")
+            continue
+        if name == "time" and (m is None or _UNIT_ALIASES.get(m.group("unit").strip().lower(),
+                                                              m.group("unit").strip().lower()) not in _TIME_UNITS):
+            ignored.append(h)  # a time stamp (a date, hh:mm:ss) is not a time in s, min or h: as before, ignored
             continue
         if m is None:
             raise ConfigError(f"{p}: column {h!r} has no unit; write it like 'x [mm]' or 'q1 [deg]'")
@@ -182,7 +192,14 @@ def read_table(path: str | Path) -> Table:
                                   f"{_bound_text(unit, bound)}); repair this row or its unit")
     cols = {n: data[:, k] for k, n in enumerate(names)}
     for _, n, unit in used:
-        kind = "angle" if unit in _ANGLE_UNITS else "length"
+        kind = "angle" if unit in _ANGLE_UNITS else "length" if unit in _LENGTH_UNITS else unit
+        if n == "payload" and unit != "kg":
+            raise ConfigError(f"{p}: column 'payload' is the mass the robot carries: write it 'payload [kg]'")
+        if n.startswith("approach") and unit != "sign":
+            raise ConfigError(f"{p}: column {n!r} is the side the joint arrived from: write it '{n} [sign]', "
+                              f"+1 or -1")
+        if n.startswith("q") and kind not in ("angle", "length"):
+            raise ConfigError(f"{p}: column {n!r} is a joint and needs deg, rad, mm or m")
         if (n in ("x", "y", "z") or n in NEST_COLUMNS) and kind != "length":
             raise ConfigError(f"{p}: column {n!r} is a position and needs a length unit (mm or m)")
         if n in ("roll", "pitch", "yaw") and kind != "angle":
@@ -222,6 +239,12 @@ class MeasurementFile:
     joints: np.ndarray
     measured: np.ndarray
     notes: tuple[str, ...] = ()
+    #: ``(n,)`` [s] the time of every row (a ``time`` column), or None
+    time: np.ndarray | None = None
+    #: ``(n, g)`` ±1 the side every joint arrived from (``approach1 … approachg [sign]``), or None
+    approach: np.ndarray | None = None
+    #: ``(n,)`` [kg] the payload of every row (a ``payload [kg]`` column), or None
+    payload_kg: np.ndarray | None = None
 
 
 def nest_frames(points: np.ndarray, path: str = "", lines: tuple[int, ...] = ()) -> np.ndarray:
@@ -263,8 +286,32 @@ def nest_frames(points: np.ndarray, path: str = "", lines: tuple[int, ...] = ())
 
 
 def read_measurement_file(path, model: RobotModel) -> MeasurementFile:
-    """Read a pose or position file (see the module); nest columns give a pose per row."""
+    """Read a pose or position file (see the module); nest columns give a pose per row; ``time`` and
+    ``approach1 … approachg`` columns, where present, as the file's time and approach signs."""
+    import dataclasses
+
     t = read_table(path)
+    mf = _measurement_file(path, model, t)
+    time = t.columns.get("time")
+    app = [n for n in t.columns if n.startswith("approach")]
+    approach = None
+    if app:
+        expected = [f"approach{j}" for j in range(1, model.n_joints + 1)]
+        if sorted(app, key=lambda n: int(n[8:])) != expected:
+            raise ConfigError(f"{path}: the approach columns must be {', '.join(expected)} (one per joint), "
+                              f"found {', '.join(app)}")
+        approach = np.column_stack([t.columns[n] for n in expected])
+        if not np.all(np.isin(approach, (-1.0, 1.0))):
+            raise ConfigError(f"{path}: approach values must be +1 or -1 (the side the joint arrived from)")
+    payload = t.columns.get("payload")
+    if payload is not None and not np.all(payload >= 0):
+        raise ConfigError(f"{path}: payload values must be ≥ 0 kg")
+    if time is None and approach is None and payload is None:
+        return mf
+    return dataclasses.replace(mf, time=time, approach=approach, payload_kg=payload)
+
+
+def _measurement_file(path, model: RobotModel, t: Table) -> MeasurementFile:
     q = joints_from_table(t, model)
     nest = [c for c in NEST_COLUMNS if c in t.columns]
     ori = [c for c in ("roll", "pitch", "yaw") if c in t.columns]

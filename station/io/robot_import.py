@@ -37,6 +37,23 @@ from station.core.transforms import invert, matrix_to_pose, pose_to_matrix, rot_
 from station.errors import ConfigError
 from station.io.robot_bounds import nearest
 
+#: cos(pitch) below which a frame in front of a joint is turned off the gimbal lock: sin 5°, the
+#: reach of the structural snap (station.core.identifiability.structural_params), which would put
+#: a pitch within 5° of ±90° onto the lock for the rank analysis
+GIMBAL_COS = math.sin(math.radians(5.0))
+
+
+def _off_gimbal_lock(M: np.ndarray) -> np.ndarray:
+    """A quarter turn about z when the frame ``M`` ``(4, 4)`` in front of a joint sits at (or within
+    5° of) pitch ±90°, else the identity. There roll and yaw turn about one axis and the third
+    rotation has no parameter, which can cost the identification an axis tilt (station analyze,
+    rank one short). A turn about the joint's own axis commutes with its motion, so the caller
+    puts its inverse at the front of the next transform: the same kinematics, the same joints;
+    the turned frame's pitch is the old roll's share, |pitch| ≤ 5°, and the next pitch is unchanged."""
+    if math.hypot(M[0, 0], M[1, 0]) < GIMBAL_COS:
+        return _T(rot_z(math.pi / 2))
+    return np.eye(4)
+
 
 def _T(R: np.ndarray | None = None, t: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
     """Homogeneous ``(4, 4)`` transform from a rotation ``(3, 3)`` (default identity) and a
@@ -85,8 +102,9 @@ def robot_from_dh(rows, convention: str = "dh", name: str = "imported", tool=Non
         n_joint += 1
         specs.append(TransformSpec(f"A{n_joint}", kind))
         limits.append((lo, hi))
-        poses.append(matrix_to_pose(carry @ pre))
-        carry = post
+        turn = _off_gimbal_lock(carry @ pre)
+        poses.append(matrix_to_pose(carry @ pre @ turn))
+        carry = invert(turn) @ post
     if n_joint == 0:
         raise ConfigError("DH rows: no revolute or prismatic joint")
     specs.append(TransformSpec("K"))
@@ -450,6 +468,7 @@ def robot_from_urdf(path: Path, base: str | None = None, tip: str | None = None)
                 raise ConfigError(f"{path}: joint {_joint_name(j)!r}: <axis xyz=\"{axis_text}\"> has no direction; "
                                   f"give the joint axis as a non-zero vector")
             A = _T(_axis_to_z(axis))
+            A = A @ _off_gimbal_lock(T @ A)
             specs.append(TransformSpec(f"A{len(specs)}", "prismatic" if kind == "prismatic" else "revolute"))
             poses.append(matrix_to_pose(T @ A))
             lim = j.find("limit")

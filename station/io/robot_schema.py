@@ -60,15 +60,44 @@ class _Tool(_Section):
     unknown: bool = False
 
 
+class _ErrorTerms(_Section):
+    # the error terms beyond geometry an identification kept (issue 30; docs/error-terms.md)
+    families: list[Name] = Field(default_factory=list, max_length=256)
+    values: dict[str, Number] = Field(default_factory=dict)
+    sigma: dict[str, Number] = Field(default_factory=dict)
+    units: dict[str, str] = Field(default_factory=dict)
+    effect_on_fit_um: Number | None = None
+    geometric_params: list[Number] | None = Field(default=None, max_length=6 * 258)
+
+
+class _Gravity(_Section):
+    # what the compliance term's gravity torques come from (issue 30; docs/error-terms.md)
+    masses_kg: list[Number] | None = Field(default=None, max_length=64)
+    com_mm: list[Annotated[tuple[Number, Number, Number], Field(strict=False)]] | None = Field(default=None,
+                                                                                             max_length=64)
+    payload_kg: Number = 0.0
+    payload_com_mm: Annotated[tuple[Number, Number, Number], Field(strict=False)] = (0.0, 0.0, 0.0)
+    direction: Annotated[tuple[Number, Number, Number], Field(strict=False)] = (0.0, 0.0, -1.0)
+
+
+class _Gears(_Section):
+    # the gear ratio of every joint: the cyclic terms cycle with the motor angle (issue 30)
+    ratios: list[Number] = Field(default_factory=list, max_length=64)
+
+
 class _RobotFile(_Section):
     robot: _Robot
     transform: list[_Transform] = Field(min_length=3, max_length=256)
     joint_map: dict[str, _MapEntry] = Field(default_factory=dict)
     tool: _Tool = Field(default_factory=_Tool)
+    error_terms: _ErrorTerms = Field(default_factory=_ErrorTerms)
+    gravity: _Gravity = Field(default_factory=_Gravity)
+    gears: _Gears = Field(default_factory=_Gears)
 
 
 _NOTES = {"tool": "the tool itself is the last [[transform]]"}
-_TABLES = {"robot": "[robot]", "transform": "[[transform]]", "joint_map": "[joint_map]", "tool": "[tool]"}
+_TABLES = {"robot": "[robot]", "transform": "[[transform]]", "joint_map": "[joint_map]", "tool": "[tool]",
+           "error_terms": "[error_terms]", "gravity": "[gravity]", "gears": "[gears]"}
 
 
 def validate_robot_toml(data: dict, source: str) -> None:

@@ -63,6 +63,7 @@ def _read_toml(path: str) -> tuple[str, dict[str, Any]]:
 
 def _load_simulated(request: CellRequest, stack: ExitStack) -> LoadedCell:
     from simulators import start_simulated_cell
+    from simulators.from_config import SIMULATOR_CONTROLLER_DEADLINE_S
     from simulators.reference_cell import cell_config_text
 
     text, data = _read_toml(request.config) if request.config else ("", {})
@@ -79,10 +80,20 @@ def _load_simulated(request: CellRequest, stack: ExitStack) -> LoadedCell:
         return LoadedCell(rehearsal.cfg, rehearsal.servers.cell.truth, rehearsal.endpoints())
     sim = simulation_settings(text, str(request.config)) if request.config else {}
     given = sim.pop("seed", None)
+    # joint errors beyond geometry belong to a six-axis arm (issue 30); the built-in cell is a SCARA
+    kind = sim.pop("joint_errors", None) or "none"
+    sim.pop("joint_errors_scale", None)
+    if kind != "none":
+        raise ConfigError(f"{request.config}: [simulation] joint_errors = {kind!r} is for a six-axis arm; the "
+                          f"built-in simulated cell is a SCARA: remove the key, or rehearse a six-axis cell "
+                          f"(--robot irb2600, or a configuration with [robot] and [body])")
     seed = request.seed if request.seed is not None else (1 if given is None else int(given))
     window = {"register_count": sim.pop("controller_register_count", 128),
               "correction_state": sim.pop("controller_correction_state", 0)}
-    servers = start_simulated_cell(seed=seed, time_scale=request.time_scale, **window, **sim)
+    # the program's watchdog allows what the built-in cell's heartbeat check allows (5 s): a
+    # loaded machine stalls both sides of this one process
+    servers = start_simulated_cell(seed=seed, time_scale=request.time_scale, watchdog=SIMULATOR_CONTROLLER_DEADLINE_S,
+                                   **window, **sim)
     stack.callback(servers.stop)
     cell_text = cell_config_text(servers, seed)
     taken = {t: data[t] for t in _TAKEN if isinstance(data.get(t), dict)}

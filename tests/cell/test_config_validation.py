@@ -196,7 +196,7 @@ def test_the_grid_checked_is_the_grid_the_pipeline_builds():
     ('model = "sr800"', 'model = "/dev/zero"', r"/dev/zero: .*not a regular file"),
     ('model = "sr800"', 'model = "' + "x" * 300 + '"', r"cannot open the robot file"),
     ("[cell]", "[cell]\ncolour = 1", r"cell: unknown key 'colour'; allowed: name"),
-    ("[plan]", "[plan]\nsamles = 3", r"plan: unknown key 'samles'"),
+    ("[plan]", "[plan]\nsamles = 3", r"plan: unknown key 'samles'; did you mean 'samples'\? allowed: "),
     ("[simulation]", "[simulation]\nseed = -1", r"simulation\.seed") if "[simulation]" in TEMPLATE
     else ("[cell]", "[simulation]\nseed = -1\n[cell]", r"simulation\.seed"),
 ])

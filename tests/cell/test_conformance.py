@@ -1,4 +1,4 @@
-"""station conformance against the simulated controller (register map 2), and against deliberately
+"""station conformance against the simulated controller (register map 3), and against deliberately
 wrong variants of it (``SimulatedController(quirks=...)``): the simulator passes every requirement,
 at register base 0 and in a 128-register window at 128; each wrong variant fails exactly its
 requirement. Also: the kit moves only inside the park zone, leaves the controller's three table
@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drivers.controller import ModbusController
+from drivers.controller import ControllerClaimed, ModbusController
 from drivers.controller_map import REGISTERS, Command, ErrorCode, StatusBit, WordOrder
 from simulators.controller_server import QUIRKS, SimulatedController
 from station.cell.config.cell_config import parse_text
@@ -52,9 +52,9 @@ def sent_targets(monkeypatch):
     sent: list[tuple[int, int, np.ndarray | None]] = []
     original = cf._Link.send_block
 
-    def record(self, code, seq, joints=None, speed=0.0):
+    def record(self, code, seq, joints=None, speed=0.0, token=None):
         sent.append((int(code), int(seq), None if joints is None else np.array(joints, dtype=float)))
-        return original(self, code, seq, joints, speed)
+        return original(self, code, seq, joints, speed, token)
 
     monkeypatch.setattr(cf._Link, "send_block", record)
     return sent
@@ -92,6 +92,8 @@ def test_the_simulator_passes_every_requirement_inside_the_park_zone(order, base
     ("page_crc_ignored", "pages"),
     ("no_slot_reads", "slot_reads"),
     ("activate_drops_previous", "keep_previous"),
+    ("claim_always_granted", "claim"),
+    ("claim_never_expires", "claim"),
 ])
 def test_each_wrong_variant_fails_exactly_its_requirement(quirk, requirement):
     assert quirk in QUIRKS
@@ -307,7 +309,7 @@ def test_a_six_axis_cell_needs_no_table_on_its_controller():
         assert by_id[rid].status == cf.PASSED, rid
     # the only requirement left is the soft-limit refusal (no joint parked at a limit): not checked
     assert by_id["soft_limit"].status == cf.NOT_CHECKED and report.outcome.value == 7
-    assert "7 of 8 requirements passed (7 not applicable to this cell)" in "\n".join(report.describe())
+    assert "8 of 9 requirements passed (7 not applicable to this cell)" in "\n".join(report.describe())
 
 
 def test_the_kits_own_safety_refusal_is_a_failed_requirement_not_an_abort(monkeypatch):
@@ -329,3 +331,18 @@ def test_the_kits_own_safety_refusal_is_a_failed_requirement_not_an_abort(monkey
     assert any("park_joints" in f for f in done.fix)
     assert soft.status == cf.NOT_CHECKED and "no further motion" in " ".join(soft.detail)
     assert int(report.outcome) == 7
+
+
+def test_the_kit_stops_at_a_controller_another_station_holds():
+    """One station per controller: the kit is a station too. Against a controller another station
+    holds it stops before its first transfer request and its first command, naming the holder."""
+    with SimulatedController(time_scale=0.0) as sim:
+        holder = ModbusController("127.0.0.1", sim.port, heartbeat_period=0.05).connect()
+        try:
+            xfer = sim.register("xfer_ack")
+            with pytest.raises(ControllerClaimed, match=r"host 127\.0\.0\.1, PID \d+, since "):
+                cf.run_conformance(parse_text(config_text(sim.port)))
+            assert sim.register("xfer_ack") == xfer and sim.command_log == []  # nothing of the kit's went out
+            assert sim.register("claim_owner") == holder.claim_token  # the holder keeps the controller
+        finally:
+            holder.close()

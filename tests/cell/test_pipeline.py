@@ -57,7 +57,7 @@ def test_simulated_calibration_meets_the_targets(cell):
     assert summary.identification.n_parameters == 20
     # ≥ 20× smaller RMS error than before correction, within 1.2× of the oracle's
     assert summary.gain >= 20.0
-    assert summary.after_vs_oracle <= 1.2
+    assert 0.7 <= summary.after_vs_oracle <= 1.2, summary.after_vs_oracle
     assert summary.after.rms_um < 20.0 and summary.before.rms_um > 200.0
     # the verified upload took real time and told the operator each step
     assert summary.upload is not None and summary.upload.seconds > 0
@@ -109,6 +109,7 @@ def test_emergency_stop_ends_cleanly_and_the_run_resumes(cell, tmp_path, capsys)
 
     cfg_file = tmp_path / "cell.toml"
     cfg_file.write_text(cell.cfg.source_text)
+    cell.ctrl.close()  # the failed run's station ends and gives the controller back (one station per controller)
     assert main(["reset", str(cfg_file)]) == 2  # no terminal to confirm at, no --yes: nothing sent
     assert "confirmation" in capsys.readouterr().err
     assert cell.ctrl.status().error or cell.ctrl.status().estop
@@ -117,6 +118,7 @@ def test_emergency_stop_ends_cleanly_and_the_run_resumes(cell, tmp_path, capsys)
     assert not cell.ctrl.status().error
     assert main(["reset", str(cfg_file), "--yes"]) == 0  # nothing latched any more: nothing sent
     assert "nothing to reset" in capsys.readouterr().out
+    cell.ctrl.connect()  # the station of the resumed run
     summary = run_calibration(cell.cfg, cell.probe, cell.ctrl, cell.db, cell.events.append, resume_run=run.id)
     assert summary.outcome is Outcome.SUCCESS
     assert len(cell.db.measurements(run.id)) == run.n_steps

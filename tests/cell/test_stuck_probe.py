@@ -124,6 +124,7 @@ def test_after_over_oracle_with_a_stuck_probe_is_within_ten_percent_of_the_fault
     base, run = runs
     assert base.summary.after_vs_oracle is not None and run.summary.after_vs_oracle is not None
     assert run.summary.after_vs_oracle <= 1.10 * base.summary.after_vs_oracle
+    assert 0.7 <= base.summary.after_vs_oracle <= 1.2 and 0.7 <= run.summary.after_vs_oracle <= 1.3
     assert run.summary.gain is not None and run.summary.gain >= 20.0
 
 

@@ -212,7 +212,7 @@ def test_the_gripper_reaches_its_oracle_and_the_heads_correction_does_not(run):
     (g,) = s.tools
     assert g.name == "gripper" and g.kind == "table" and g.n_targets >= 8 and g.n_after == g.n_targets
     # its own correction: within 1.2× the oracle's (the correction built from the true robot and true tool)
-    assert g.after_vs_oracle is not None and g.after_vs_oracle <= 1.2
+    assert g.after_vs_oracle is not None and 0.7 <= g.after_vs_oracle <= 1.2, g.after_vs_oracle
     assert g.after_rms_um < 20.0
     # the head's correction used as it is leaves a clearly larger error for this tool
     assert g.head_rms_um > 5.0 * g.after_rms_um and g.n_head == g.n_targets

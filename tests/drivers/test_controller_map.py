@@ -33,7 +33,7 @@ def test_map_has_no_overlaps_and_fits_one_window():
     assert all(b[0] >= a[1] for a, b in zip(spans, spans[1:]))
     assert spans[0][0] == 0 and spans[-1][1] <= WINDOW_SIZE == 128
     # the command block and the transfer block each fit one FC 16 request
-    assert register_span("cmd_code", "cmd_pose")[1] <= 123
+    assert register_span("cmd_code", "cmd_token")[1] <= 123
     assert register_span("xfer_seq", "page_data")[1] <= 123
     assert TABLE_HEADER_REGISTERS <= REG["page_data"].count
 
@@ -42,9 +42,9 @@ def test_map_has_no_overlaps_and_fits_one_window():
                                             (WordOrder.LITTLE, [0x4240, 0x000F])])
 def test_scaled_i32_word_order(order, expected):
     # 1.0 rad = 1 000 000 counts of 1e-6 = 0x000F4240
-    assert encode("cmd_pose", [1.0], order) == expected
+    assert encode("cmd_target", [1.0], order) == expected
     assert decode_i32_array(expected, 1e-6, order)[0] == np.float32(1.0)
-    assert encode("cmd_joints", [-1e-6], order) == [0xFFFF, 0xFFFF]
+    assert encode("cmd_target", [-1e-6], order) == [0xFFFF, 0xFFFF]
 
 
 @pytest.mark.parametrize("order", list(WordOrder))
@@ -61,26 +61,26 @@ def test_u32_and_scaled_and_signed(order):
 @pytest.mark.parametrize("order", list(WordOrder))
 def test_roundtrip_arrays(order):
     v = np.array([1.5, -2.25, 1e-6, 800.0, -3.141593, 0.0])
-    assert np.allclose(decode("cmd_pose", encode("cmd_pose", v, order), order), v, rtol=0, atol=1e-12)
+    assert np.allclose(decode("cmd_target", encode("cmd_target", v, order), order), v, rtol=0, atol=1e-12)
     assert np.allclose(decode_i32_array(encode_i32_array(v, 1e-6, order), 1e-6, order), v, rtol=1e-7)
     # vectorised and scalar encoders agree
-    assert encode_i32_array(v, 1e-6, order) == encode("cmd_pose", v, order)
+    assert encode_i32_array(v, 1e-6, order) == encode("cmd_target", v, order)
 
 
 def test_encode_rejects_what_does_not_fit():
     with pytest.raises(ValueError, match="does not fit"):
         encode("cmd_seq", 70000)
     with pytest.raises(ValueError, match="non-finite"):
-        encode("cmd_pose", [np.nan])
+        encode("cmd_target", [np.nan])
     with pytest.raises(ValueError, match="at most"):
-        encode("cmd_pose", np.zeros(7))
+        encode("cmd_target", np.zeros(7))
     with pytest.raises(ValueError, match="does not fit"):
-        encode("cmd_joints", [2200.0])  # beyond +-2147.48 at 1e-6 a count
+        encode("cmd_target", [2200.0])  # beyond +-2147.48 at 1e-6 a count
 
 
 def test_decode_rejects_wrong_count_and_range():
     with pytest.raises(RegisterDecodeError, match="expected 12"):
-        decode("cmd_pose", [0] * 11)
+        decode("cmd_target", [0] * 11)
     with pytest.raises(RegisterDecodeError, match="outside"):
         decode("status", [70000])
     with pytest.raises(RegisterDecodeError, match="even"):

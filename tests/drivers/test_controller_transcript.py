@@ -1,13 +1,16 @@
-"""Exact register transactions of the driver (map 2) against a scripted fake pymodbus client.
+"""Exact register transactions of the driver (map 3) against a scripted fake pymodbus client.
 
 The fake hosts the 128-register window at a base (128 like a Universal Robots controller unless
-a test says otherwise) and answers transfer requests with the simulator's own robot-program
-logic (:func:`simulators.controller_tables.serve_transfer`)."""
+a test says otherwise) and answers transfer requests and claims with the simulator's own
+robot-program logic (:func:`simulators.controller_tables.serve_transfer`,
+:class:`simulators.controller_claim.ClaimRules`)."""
 
 import numpy as np
 import pytest
 
 from drivers.controller import (
+    ClaimIdentity,
+    ControllerClaimed,
     HandshakeTimeout,
     MapVersionError,
     ModbusController,
@@ -26,6 +29,7 @@ from drivers.controller_map import (
     encode,
     encode_i32_array,
     registers_crc32,
+    release_code,
 )
 from drivers.correction_table import (
     TableError,
@@ -34,11 +38,16 @@ from drivers.correction_table import (
     data_registers,
     header_registers,
 )
+from simulators.controller_claim import ClaimRules
 from simulators.controller_tables import TableSlots, serve_transfer
 from station.core.table_data import CorrectionTableData, TableAxis
 
 BASE = 128
 LIMITS = [-2, 2, -2.5, 2.5, -200, 0, -6, 6]
+TOKEN = 0x5EC0DE01  # the session token of the station under test
+ME = ClaimIdentity("10.0.0.7", 4711, 1796199978.0)
+#: what connect() writes once granted: host, PID, since (big word order)
+ME_WORDS = [0x0A00, 0x0007, 0, 4711, 0x6B0F, 0xD62A]
 
 
 class _Resp:
@@ -61,7 +70,8 @@ class FakeClient:
         self.on_request = None
         self.order = order
         self.tables = TableSlots()
-        self.put("map_version", 2)
+        self.claims = ClaimRules(order)
+        self.put("map_version", 3)
         self.put("n_joints", 4)
         self.put("order_check", 1)
         self.put("correction_state", 1)
@@ -105,6 +115,8 @@ class FakeClient:
         self.regs[off:off + len(values)] = list(values)
         if off == REG["xfer_seq"].address:
             serve_transfer(self.regs, self.tables, self.order, self.info)
+        if off == REG["claim_request"].address:
+            self.claims.serve(self.regs, heartbeat_live=True)
         if self.on_request:
             self.on_request(self, ("write", off, values))
         return _Resp()
@@ -112,6 +124,8 @@ class FakeClient:
 
 def _connect(fake, **kw):
     kw.setdefault("register_base", BASE)
+    kw.setdefault("claim_token", TOKEN)
+    kw.setdefault("claim_identity", ME)
     c = ModbusController("fake", 0, device_id=7, heartbeat_period=None, client=fake, **kw)
     c.connect()
     return c
@@ -125,11 +139,15 @@ def test_connect_transcript():
     fake = FakeClient()
     c = _connect(fake)
     assert fake.log == [("connect",), ("read", BASE, 64, 7), ("read", BASE + 64, 64, 7),
+                        ("write", BASE, [1], 7), ("read", BASE + 1, 1, 7),  # a heartbeat: hb_pc is live
+                        ("write", BASE + 26, [0x5EC0, 0xDE01], 7),  # claim_request: the session token
+                        ("read", BASE + 28, 2, 7),          # claim_owner: granted
+                        ("write", BASE + 30, ME_WORDS, 7),  # who holds it: host, PID, since
                         ("read", BASE + 43, 1, 7),          # xfer_ack: where the transfer numbers go on
                         _read_info_request(1, 0),           # soft limits: info page 0
                         ("read", BASE + 43, 84, 7),         # answer + page in one read
                         ("read", BASE + 9, 1, 7)]           # cmd_seq
-    assert c.n_joints == 4 and c.map_version == 2
+    assert c.n_joints == 4 and c.map_version == 3 and c.claimed
     assert c.correction_state is CorrectionState.VENDOR
     np.testing.assert_array_equal(c.soft_limits(), np.reshape(LIMITS, (4, 2)))
 
@@ -154,9 +172,10 @@ def test_move_handshake_transcript(order):
     q = [0.1, -0.2, -50.0, 1.0]
     st = c.move_joints(q, speed=0.25)
     st.wait(timeout=1.0)
-    expected_block = ([1, 42, 0, 250] + encode_i32_array(q + [0, 0], 1e-6, order)
-                      + encode_i32_array(np.zeros(6), 1e-6, order))
+    expected_block = [1, 42, 0, 250] + encode_i32_array(q + [0, 0], 1e-6, order) + encode("cmd_token", TOKEN, order)
     assert fake.log == [
+        ("write", BASE, [2], 7), ("read", BASE + 1, 1, 7),  # no heartbeat thread: the command beats,
+        ("read", BASE + 28, 2, 7),                # and checks that the claim did not lapse meanwhile
         ("write", BASE + 8, expected_block, 7),   # whole command block in ONE request, at 136
         ("read", BASE + 36, 7, 7),                # ack poll -> ack_seq == 42
         ("read", BASE + 36, 7, 7),                # done poll -> done_seq == 42
@@ -172,9 +191,11 @@ def test_missing_ack_is_not_resent():
     fake.log.clear()
     with pytest.raises(HandshakeTimeout, match="NOT re-sent"):
         c.move_cartesian([500, 0, 300, 0, 0, 0], elbow=-1)
-    writes = [e for e in fake.log if e[0] == "write"]
+    writes = [e for e in fake.log if e[0] == "write" and e[1] != BASE]  # not the heartbeat
     assert len(writes) == 1 and writes[0][2][:3] == [2, 1, 0xFFFF]
-    assert all(e == ("read", BASE + 36, 7, 7) for e in fake.log[1:])
+    assert writes[0][2][4:16] == encode_i32_array([500, 0, 300, 0, 0, 0], 1e-6, WordOrder.BIG)  # the pose
+    assert writes[0][2][16:] == [0x5EC0, 0xDE01]  # the token
+    assert all(e == ("read", BASE + 36, 7, 7) for e in fake.log[4:])
 
 
 def test_modbus_exception_carries_code():
@@ -197,9 +218,9 @@ def test_wrong_base_is_named_on_the_first_read():
 def test_wrong_map_version_names_expected_and_found():
     fake = FakeClient()
     fake.put("map_version", 1)
-    with pytest.raises(MapVersionError, match=r"version 1 \(register 130\).*expects version 2") as ei:
+    with pytest.raises(MapVersionError, match=r"version 1 \(register 130\).*expects version 3") as ei:
         _connect(fake)
-    assert (ei.value.found, ei.value.supported) == (1, (2,))
+    assert (ei.value.found, ei.value.supported) == (1, (3,))
     assert not [e for e in fake.log if e[0] == "write"]
 
 
@@ -281,3 +302,21 @@ def test_activation_refused_without_readback_or_with_difference():
         c.stage_table()
     with pytest.raises(TableVerifyError, match="read-back failed"):
         c.activate_table()
+
+
+def test_a_held_controller_is_refused_before_anything_is_written():
+    fake = FakeClient()
+    holder = _connect(fake)  # another station (same fake controller), granted and named
+    fake.log.clear()
+    with pytest.raises(ControllerClaimed, match=r"host 10\.0\.0\.7, PID 4711, since 2026-12-02 08:26:18 UTC") as ei:
+        _connect(fake, claim_token=0x12345678, claim_identity=ClaimIdentity("10.0.0.8", 99, 1.0))
+    assert ei.value.owner_token == TOKEN and ei.value.holder == ME
+    assert fake.log == [("connect",), ("read", BASE, 64, 7), ("read", BASE + 64, 64, 7),
+                        ("read", BASE + 30, 6, 7)]  # the holder's name; nothing written, not even a heartbeat
+    # the holder's orderly end gives the controller back: release code, then claim_owner read until 0
+    fake.log.clear()
+    holder.close()
+    assert fake.log == [("write", BASE + 26, encode("claim_request", release_code(TOKEN)), 7),
+                        ("read", BASE + 28, 2, 7), ("close",)]
+    assert [fake.regs[REG[n].address] for n in ("claim_owner", "claim_host", "claim_pid", "claim_since")] == [0] * 4
+    _connect(fake, claim_token=0x12345678)  # now the other station gets it

@@ -86,8 +86,8 @@ def test_only_function_codes_3_4_6_16_are_served(sim128):
     assert client.connect()
     try:
         assert not client.read_holding_registers(130, count=1, device_id=1).isError()
-        assert client.read_holding_registers(130, count=1, device_id=1).registers == [2]  # map_version
-        assert client.read_input_registers(130, count=1, device_id=1).registers == [2]
+        assert client.read_holding_registers(130, count=1, device_id=1).registers == [3]  # map_version
+        assert client.read_input_registers(130, count=1, device_id=1).registers == [3]
         assert not client.write_register(128, 7, device_id=1).isError()  # FC 6 on hb_pc
         rr = client.read_coils(128, count=1, device_id=1)
         assert rr.isError() and rr.exception_code == 1
@@ -101,10 +101,10 @@ def test_only_function_codes_3_4_6_16_are_served(sim128):
 
 
 def test_wrong_map_version_is_a_typed_error(sim128):
-    sim = SimulatedController(register_base=128, map_version=3).start()
+    sim = SimulatedController(register_base=128, map_version=2).start()
     try:
         c = ModbusController("127.0.0.1", sim.port, register_base=128, heartbeat_period=None)
-        with pytest.raises(MapVersionError, match=r"version 3 \(register 130\).*expects version 2"):
+        with pytest.raises(MapVersionError, match=r"version 2 \(register 130\).*expects version 3"):
             c.connect()
         c.close()
     finally:

@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 from pymodbus.client import ModbusTcpClient
 
 from drivers.controller import (
+    ClaimIdentity,
     MapVersionError,
     ModbusController,
     ModbusExceptionError,
@@ -39,6 +40,7 @@ from drivers.controller_map import (
     implausible_limits,
     register_span,
 )
+from simulators.controller_claim import ClaimRules
 from simulators.controller_server import SimulatedController
 from simulators.controller_tables import TableSlots, serve_transfer
 
@@ -59,7 +61,7 @@ class _Program:
 
     def __init__(self):
         self.regs = [0] * WINDOW_SIZE
-        for name, value in (("map_version", 2), ("n_joints", 4), ("order_check", 1)):
+        for name, value in (("map_version", 3), ("n_joints", 4), ("order_check", 1)):
             r = REG[name]
             self.regs[r.address:r.end] = encode(r, value)
         self.tables = TableSlots()
@@ -76,6 +78,8 @@ class _Program:
         self.regs[address:address + count] = values
         if address == REG["xfer_seq"].address:
             serve_transfer(self.regs, self.tables, WordOrder.BIG, self.info)
+        if address == REG["claim_request"].address:
+            ClaimRules(WordOrder.BIG).serve(self.regs, heartbeat_live=True)
         return pdu[:5]
 
 
@@ -119,11 +123,18 @@ class ScriptedServer:
 CONNECT_REQUESTS = [  # MBAP (tid, protocol 0, length, unit 1) + PDU
     bytes.fromhex("0001 0000 0006 01 03 0000 0040"),      # offsets 0..63: identification
     bytes.fromhex("0002 0000 0006 01 03 0040 0040"),      # 64..127: the whole window is there
-    bytes.fromhex("0003 0000 0006 01 03 002b 0001"),      # xfer_ack
-    bytes.fromhex("0004 0000 000d 01 10 003f 0003 06 0001 0005 0000"),  # READ_INFO page 0
-    bytes.fromhex("0005 0000 0006 01 03 002b 0054"),      # answer + soft limits in one read
-    bytes.fromhex("0006 0000 0006 01 03 0009 0001"),      # cmd_seq
+    bytes.fromhex("0003 0000 0009 01 10 0000 0001 02 0001"),  # hb_pc: the claim needs a live heartbeat
+    bytes.fromhex("0004 0000 0006 01 03 0001 0001"),      # hb_robot
+    bytes.fromhex("0005 0000 000b 01 10 001a 0002 04 5ec0 de01"),  # claim_request: the session token
+    bytes.fromhex("0006 0000 0006 01 03 001c 0002"),      # claim_owner: granted
+    bytes.fromhex("0007 0000 0013 01 10 001e 0006 0c 0a00 0007 0000 1267 6b0f d62a"),  # host, PID, since
+    bytes.fromhex("0008 0000 0006 01 03 002b 0001"),      # xfer_ack
+    bytes.fromhex("0009 0000 000d 01 10 003f 0003 06 0001 0005 0000"),  # READ_INFO page 0
+    bytes.fromhex("000a 0000 0006 01 03 002b 0054"),      # answer + soft limits in one read
+    bytes.fromhex("000b 0000 0006 01 03 0009 0001"),      # cmd_seq
 ]
+#: the session the scripted connects claim with (fixed: the bytes above carry it)
+SESSION = {"claim_token": 0x5EC0DE01, "claim_identity": ClaimIdentity("10.0.0.7", 4711, 1796199978.0)}
 
 
 def _connect_script():
@@ -139,7 +150,7 @@ def _connect_script():
 ])
 def test_a_reply_with_another_function_code_is_refused(reply, error, got):
     srv = ScriptedServer(_connect_script() + [lambda req: reply])
-    c = ModbusController("127.0.0.1", srv.port, heartbeat_period=None, timeout=2.0)
+    c = ModbusController("127.0.0.1", srv.port, heartbeat_period=None, timeout=2.0, **SESSION)
     try:
         c.connect()
         with pytest.raises(error) as info:
@@ -149,7 +160,7 @@ def test_a_reply_with_another_function_code_is_refused(reply, error, got):
         srv.close()
     status_first, status_count = register_span("ack_seq", "error_bound")
     assert srv.requests == CONNECT_REQUESTS + [
-        bytes.fromhex("0007 0000 0006 01 03") + struct.pack(">HH", status_first, status_count)]
+        bytes.fromhex("000c 0000 0006 01 03") + struct.pack(">HH", status_first, status_count)]
     if got is not None:
         assert (info.value.expected_fc, info.value.got_fc) == (3, got)
         assert "was not used" in str(info.value)
@@ -159,7 +170,7 @@ def test_a_reply_with_another_function_code_is_refused(reply, error, got):
 
 def test_a_write_answered_with_a_read_response_is_refused():
     srv = ScriptedServer(_connect_script() + [lambda req: _read_reply(b"\x00\x01")])
-    c = ModbusController("127.0.0.1", srv.port, heartbeat_period=None, timeout=2.0)
+    c = ModbusController("127.0.0.1", srv.port, heartbeat_period=None, timeout=2.0, **SESSION)
     try:
         c.connect()
         with pytest.raises(ModbusResponseError) as info:
@@ -167,7 +178,7 @@ def test_a_write_answered_with_a_read_response_is_refused():
     finally:
         c.close()
         srv.close()
-    assert srv.requests[-1] == bytes.fromhex("0007 0000 0009 01 10 0000 0001 02 0007")
+    assert srv.requests[-1] == bytes.fromhex("000c 0000 0009 01 10 0000 0001 02 0007")
     assert (info.value.expected_fc, info.value.got_fc) == (16, 3)
 
 
@@ -183,8 +194,8 @@ def test_unknown_map_version_is_refused_naming_both_versions():
             c.connect()
         c.close()
         assert sim.command_writes == []
-    assert (info.value.found, info.value.supported) == (1, (2,))
-    assert "version 1" in str(info.value) and "version 2" in str(info.value)
+    assert (info.value.found, info.value.supported) == (1, (3,))
+    assert "version 1" in str(info.value) and "version 3" in str(info.value)
 
 
 @pytest.mark.parametrize("sim_order, drv_order", [(WordOrder.LITTLE, WordOrder.BIG),
@@ -233,7 +244,7 @@ def test_limits_implausible_in_either_order_are_a_decode_error():
 # safety invariants in the simulated controller (any client) and in the driver
 # --------------------------------------------------------------------------------------------
 
-_CMD_FIRST, _ = register_span("cmd_code", "cmd_pose")
+_CMD_FIRST, _ = register_span("cmd_code", "cmd_token")
 _ST_FIRST, _ST_COUNT = register_span("ack_seq", "error_bound")
 
 
@@ -247,10 +258,16 @@ def _i32_words(values) -> list[int]:
 class RawClient:
     """A bare pymodbus client that writes command blocks the driver would never send."""
 
+    TOKEN = [0x1234, 0x5678]  # its session token, as two words
+
     def __init__(self, port: int):
         self.client = ModbusTcpClient("127.0.0.1", port=port, timeout=2.0, retries=0)
         assert self.client.connect()
         self.seq = self.read(REG["cmd_seq"].address, 1)[0]
+        # it holds the controller (map 3): a heartbeat, then its token in claim_request
+        assert not self.client.write_registers(REG["hb_pc"].address, [1], device_id=1).isError()
+        assert not self.client.write_registers(REG["claim_request"].address, self.TOKEN, device_id=1).isError()
+        assert self.read(REG["claim_owner"].address, 2) == self.TOKEN
 
     def read(self, address, count):
         rr = self.client.read_holding_registers(address, count=count, device_id=1)
@@ -260,8 +277,8 @@ class RawClient:
     def command(self, code: Command, joints=(0.0,) * 6, pose=(0.0,) * 6, elbow=1, speed=500):
         self.seq = self.seq % 0xFFFF + 1
         block = [int(code), self.seq, elbow & 0xFFFF, speed]
-        block += _i32_words(list(joints) + [0.0] * (6 - len(joints)))
-        block += _i32_words(pose)
+        target = pose if code == Command.MOVE_CARTESIAN else list(joints) + [0.0] * (6 - len(joints))
+        block += _i32_words(target) + self.TOKEN
         assert not self.client.write_registers(_CMD_FIRST, block, device_id=1).isError()
         deadline = time.monotonic() + 5.0
         while True:  # resolved: done_seq or error_seq is this command's number

@@ -23,7 +23,7 @@ def test_the_simulated_program_sees_signed_registers_and_decodes_every_target():
         try:
             ctl.move_joints(TARGET, speed=0.5).wait(10.0)
             np.testing.assert_allclose(sim.joints, TARGET, atol=1e-6)
-            low = REG["cmd_joints"].address + 1  # joint 1's low word (big word order)
+            low = REG["cmd_target"].address + 1  # joint 1's low word (big word order)
             assert sim._regs[low] == 0xF7F0  # read by the program as 0xF7F0 - 65536 = -2064
             # sequence numbers past 32767: the program reads them as negative values
             ctl._seq = sim._last_seq = 32766  # both sides at 32766, as after 32 766 commands

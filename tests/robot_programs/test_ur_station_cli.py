@@ -35,7 +35,7 @@ def cell(tmp_path: Path, source: str | None = None) -> Iterator[tuple[Path, URCo
         path = tmp_path / "ur_cell.toml"
         path.write_text(text, encoding="utf-8")
         deadline = time.monotonic() + 30
-        while ur.ports.read_signed(128 + 2) != 2:  # map_version: the program is serving
+        while ur.ports.read_signed(128 + 2) != 3:  # map_version: the program is serving
             assert time.monotonic() < deadline and ur.program.error is None, ur.program.error
             time.sleep(0.01)
         yield path, ur
@@ -54,7 +54,7 @@ def test_station_check_and_conformance_pass_against_the_shipped_program(tmp_path
         np.testing.assert_allclose(np.degrees(ur.arm.q), PARK_DEG, atol=1e-3)  # back where it was parked
         requests = list(ur.server.requests)
     assert check.returncode == 0, check.stdout + check.stderr
-    assert "register map 2 at base 128" in check.stdout
+    assert "register map 3 at base 128" in check.stdout
     assert conformance.returncode == 0, conformance.stdout + conformance.stderr
     assert all(128 <= a and a + n <= 256 for _fc, a, n in requests)
 

@@ -11,7 +11,17 @@ import zlib
 import numpy as np
 import pytest
 
-from drivers.controller_map import INFO_PAGES, Command, ErrorCode, StatusBit, WordOrder, decode, registers_crc32
+from drivers.controller_map import (
+    INFO_PAGES,
+    MAP_VERSION,
+    Command,
+    ErrorCode,
+    StatusBit,
+    WordOrder,
+    decode,
+    registers_crc32,
+    release_code,
+)
 from simulators.urscript import DEFAULT_BUDGET
 from simulators.urscript.controller import SHIPPED_SCRIPT
 from simulators.urscript.interp import FRAME_S
@@ -22,9 +32,11 @@ SOURCE = SHIPPED_SCRIPT.read_text(encoding="utf-8")
 HOME = [0.0, 0.0, 0.0, 0.0, 0.5, 0.0]
 
 
-def started(source: str | None = None, budget: int = DEFAULT_BUDGET) -> Bench:
+def started(source: str | None = None, budget: int = DEFAULT_BUDGET, claim: bool = True) -> Bench:
     b = Bench(budget, q0=HOME, source=source)
-    b.until(lambda: b.read("map_version") == 2)
+    b.until(lambda: b.read("map_version") == MAP_VERSION)
+    if claim:
+        assert b.claim() == b.token  # the station holds the controller before its first command
     return b
 
 
@@ -85,7 +97,10 @@ def test_a_calibration_step_sequence():
     assert answer(b, move) == "WATCHDOG_TIMEOUT"
     assert b.read("status") & StatusBit.ERROR and not b.read("status") & StatusBit.READY and b.c.arm.idle
     stopped_at = b.c.arm.q.copy()
+    assert b.read("claim_owner") == 0  # the same watchdog freed the silent station's claim
     b.pc_heartbeat = True
+    assert answer(b, b.command(Command.MOVE_JOINTS, HOME)) == "NOT_CLAIMED"
+    assert b.claim() == b.token
     assert answer(b, b.command(Command.MOVE_JOINTS, HOME)) == "NOT_READY"
     assert answer(b, b.command(Command.RESET)) == "done" and b.read("status") & StatusBit.READY
     assert b.read("error_code") == 0
@@ -151,7 +166,9 @@ def test_info_pages_carry_the_zlib_crc(order):
 
 
 def test_the_old_unsigned_reads_are_caught():
-    b = started(old_unsigned_reads(SOURCE))
+    b = started(old_unsigned_reads(SOURCE), claim=False)
+    # the token's low word 0xDE01 is read unsigned, the owner written back is another number
+    assert b.claim() not in (0, b.token)
     target = [0.0, 0.0, 1.5708, 0.0, 0.5, 0.0]
     assert answer(b, b.command(Command.MOVE_JOINTS, target)) == "done"
     # the issue's observation: joint 3 commanded to 1.5708 rad arrives 65 536 µrad short
@@ -233,3 +250,34 @@ def test_no_scratch_name_is_shared_between_functions_and_threads():
             else:
                 assert name in declared, f"{f.name} (line {s.line}): {name} assigned without local or global"
     assert not re.search(r"(?m)^[^#\n]*%", SOURCE)
+
+
+def test_one_station_per_controller_in_the_program():
+    """The claim block in controller time: a second claim is refused, a command with another token
+    is refused without moving, the holder's release frees the controller (and names nobody), and a
+    holder that stops its heartbeat loses it by the program's watchdog, not by hand."""
+    b = started()
+    other = 0x80000001  # another station's token; its high word reads negative (§17.38)
+    assert b.claim(other, max_frames=200) == b.token  # refused: the holder keeps the controller
+    q = b.c.arm.q.copy()
+    assert answer(b, b.command(Command.MOVE_JOINTS, [0.1] * 6, token=other)) == "NOT_CLAIMED"
+    b.frames(50)
+    np.testing.assert_allclose(b.c.arm.q, q, atol=1e-12)
+    assert answer(b, b.command(Command.MOVE_JOINTS, [0.0, 0.0, 0.2, 0.0, 0.5, 0.0])) == "done"  # undisturbed
+    # STOP is obeyed from anyone (safety), and is not a claim
+    assert answer(b, b.command(Command.STOP, token=other)) == "done" and b.read("claim_owner") == b.token
+    # the holder names itself, then gives the controller back: all of the block is cleared
+    b.write("claim_host", 0x7F000001)
+    b.write("claim_pid", 4711)
+    b.write("claim_since", 1796199978)
+    b.write("claim_request", release_code(b.token))
+    b.until(lambda: b.read("claim_owner") == 0, 200)
+    assert [b.read(n) for n in ("claim_request", "claim_host", "claim_pid", "claim_since")] == [0, 0, 0, 0]
+    assert b.claim(other) == other
+    # the holder dies: hb_pc silent; no new claim is granted meanwhile, and the watchdog frees it
+    b.pc_heartbeat = False
+    frames = b.until(lambda: b.read("claim_owner") == 0, 2000)
+    assert 1.0 <= frames * FRAME_S <= 1.3  # WATCHDOG_MS = 1000 of controller time, checked every 0.1 s
+    assert b.claim(max_frames=300) == 0  # no live heartbeat: nobody is granted the controller
+    b.pc_heartbeat = True
+    b.until(lambda: b.read("claim_owner") == b.token, 200)  # the request stood; granted once hb_pc lives

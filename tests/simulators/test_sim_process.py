@@ -65,7 +65,7 @@ def test_map_version_option_is_refused_by_the_driver():
         c = ModbusController(host, port, heartbeat_period=None, timeout=2.0)
         with pytest.raises(MapVersionError) as info:
             c.connect()
-        assert (info.value.found, info.value.supported) == (7, (2,))
+        assert (info.value.found, info.value.supported) == (7, (3,))
         c.close()
     finally:
         assert _stop(p) == 0

@@ -111,7 +111,7 @@ def test_closed_stderr_in_the_signal_handler_still_aborts_cleanly(tmp_path):
     db = tmp_path / "runs.sqlite"
     p = _popen([*SHORT, "--db", db], tmp_path)
     p.stderr.close()
-    _wait_for_run(db)
+    _wait_for_run(db, 1, p)
     p.send_signal(signal.SIGTERM)  # the handler's "stopping at the next safe point" is lost
     out, _ = p.communicate(timeout=60)
     s = _one_json(out)
@@ -153,20 +153,27 @@ def test_every_command_into_a_closed_pipe_exits_with_its_outcome(files, args):
 
 # --- stop signals --------------------------------------------------------------------------------
 
-def _wait_for_run(db: Path, timeout_s: float = 60.0) -> None:
-    """Until the run has its first measurement (the session is under way)."""
-    end = time.monotonic() + timeout_s
-    while time.monotonic() < end:
-        if db.exists():
-            try:
-                with RunDB(db) as rdb:
-                    runs = rdb.runs()
-                    if runs and rdb.completed_steps(runs[0].id):
-                        return
-            except Exception:  # noqa: BLE001 - the station is still creating it
-                pass
-        time.sleep(0.05)
-    raise AssertionError("the run did not start")
+def _committed_steps(db: Path) -> int:
+    """Steps of the (first) run committed to the database so far; 0 while it is being created."""
+    if not db.exists():
+        return 0
+    try:
+        with RunDB(db) as rdb:
+            runs = rdb.runs()
+            return len(rdb.completed_steps(runs[0].id)) if runs else 0
+    except Exception:  # noqa: BLE001 - the station is still creating it
+        return 0
+
+
+def _wait_for_run(db: Path, steps: int = 1, proc: subprocess.Popen | None = None) -> None:
+    """Until the run has ``steps`` measurements committed: the test syncs on the database, never
+    on a clock (the poll interval only spares the CPU)."""
+    while _committed_steps(db) < steps:
+        if proc is not None and proc.poll() is not None:
+            out, err = proc.communicate()
+            raise AssertionError(f"the station ended (exit {proc.returncode}) before {steps} committed steps:\n"
+                                 f"{out}\n{err[-3000:] if err else ''}")
+        time.sleep(0.02)
 
 
 def test_sigterm_from_the_first_moment_the_handlers_exist_is_aborted_with_one_json(tmp_path):
@@ -186,7 +193,7 @@ def test_sigterm_from_the_first_moment_the_handlers_exist_is_aborted_with_one_js
 def test_a_signal_during_the_run_stops_at_a_safe_point(tmp_path, sig):
     db = tmp_path / "runs.sqlite"
     p = _popen([*SHORT, "--db", db], tmp_path)
-    _wait_for_run(db)
+    _wait_for_run(db, 1, p)
     p.send_signal(sig)
     out, err = p.communicate(timeout=60)
     s = _one_json(out)
@@ -198,7 +205,7 @@ def test_a_signal_during_the_run_stops_at_a_safe_point(tmp_path, sig):
 def test_a_second_sigterm_stops_at_once_marks_the_run_aborted_and_it_resumes(tmp_path):
     db = tmp_path / "runs.sqlite"
     p = _popen([*SHORT, "--db", db], tmp_path)
-    _wait_for_run(db)
+    _wait_for_run(db, 1, p)
     p.send_signal(signal.SIGTERM)
     p.send_signal(signal.SIGTERM)
     out, err = p.communicate(timeout=60)
@@ -213,32 +220,41 @@ def test_a_second_sigterm_stops_at_once_marks_the_run_aborted_and_it_resumes(tmp
 
 
 def test_sigterm_at_spread_moments_always_gives_one_outcome(tmp_path):
-    """Five SIGTERMs from the first moment to the run's end (about 4 s here), side by side:
-    each process answers exactly one JSON object whose exit code it exits with, and a run it
-    created is marked with that outcome."""
-    delays = (0.0, 0.8, 1.6, 2.4, 3.2)
+    """Five SIGTERMs, side by side: one the moment the handlers exist, the others once 1, 8, 16
+    and 32 steps are committed to the run database (synced on the database, not on a clock).
+    Each process answers exactly one JSON object whose exit code it exits with, each kill after
+    a committed step lands mid-run (ABORTED, the run marked so), and the run keeps every step it
+    had committed."""
+    moments = (0, 1, 8, 16, 32)  # committed steps before the signal; 0: when the handlers exist
 
-    def one(i_delay: tuple[int, float]) -> tuple[float, int, str, Path]:
-        i, delay = i_delay
+    def one(i_steps: tuple[int, int]) -> tuple[int, int, str, Path]:
+        i, steps = i_steps
         d = tmp_path / f"p{i}"
         d.mkdir()
-        p = _popen([*SHORT, "--db", d / "runs.sqlite"], d)
-        time.sleep(delay)
+        db = d / "runs.sqlite"
+        p = _popen([*SHORT, "--db", db], d)
+        if steps:
+            _wait_for_run(db, steps, p)
+        else:
+            while not _handlers_installed(p.pid) and p.poll() is None:
+                time.sleep(0.0005)
         p.send_signal(signal.SIGTERM)
         out, _ = p.communicate(timeout=120)
-        return delay, p.returncode, out, d
+        return steps, p.returncode, out, d
 
-    with ThreadPoolExecutor(len(delays)) as pool:
-        results = list(pool.map(one, enumerate(delays)))
-    for delay, rc, out, d in results:
-        if delay == 0.0 and rc == -signal.SIGTERM and out == "":
-            continue  # before the interpreter reached main(): nothing of the station existed yet
+    with ThreadPoolExecutor(len(moments)) as pool:
+        results = list(pool.map(one, enumerate(moments)))
+    for steps, rc, out, d in results:
         s = _one_json(out)
-        assert rc == s["exit_code"] and s["outcome"] in ("ABORTED", "NOT_UPLOADED"), (delay, rc, s)
-        if s["run_id"] is not None:
-            assert _status(d / "runs.sqlite", s["run_id"]) == ("aborted" if rc == ABORTED else "identified")
+        assert rc == s["exit_code"], (steps, rc, s)
         assert not list(d.glob("station-error-*.log"))
-    assert sum(rc == ABORTED for _, rc, _, _ in results) >= 3  # most of them landed inside the run
+        if steps == 0:
+            assert s["outcome"] == "ABORTED" and s["run_id"] is None, s
+            continue
+        # landed mid-run: stopped at the next safe point, with what it had measured kept
+        assert s["outcome"] == "ABORTED" and rc == ABORTED, (steps, s)
+        assert _status(d / "runs.sqlite", s["run_id"]) == "aborted"
+        assert _committed_steps(d / "runs.sqlite") >= steps
 
 
 # --- --json answers usage errors; values refused -------------------------------------------------

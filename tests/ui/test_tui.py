@@ -37,6 +37,7 @@ from station.cell.run.events import (
 from station.cell.run.runcontrol import RunAborted, RunControl
 from station.errors import ConfigError, Outcome
 from station.ui.tui.app import ConfirmScreen, StationApp
+from station.ui.tui.result_panel import HEADLINE_FIGURES
 
 N = 5
 LABELS = [f"point C{i}.a, elbow +1" for i in range(N)]
@@ -182,10 +183,17 @@ async def test_full_run_progress_table_and_summary():
         text = panel(app)
         assert app.query_one("#summary").display
         assert row(text, "outcome").startswith("SUCCESS")
-        assert row(text, "robot") == "SR 800"
-        # every headline figure of the summary, formatted as the summary says
+        assert row(text, "run") == "#42 (robot SR 800, cell sim)"
+        # every headline figure of the summary, formatted as the summary says; the others two to a row
         for label, value, unit, digits in SUMMARY.figures():
-            assert row(text, label) == f"{value:.{digits}f}{' ' + unit if unit else ''}"
+            if label in HEADLINE_FIGURES:
+                assert row(text, label) == f"{value:.{digits}f}{' ' + unit if unit else ''}"
+        assert row(text, "ISO 9283 after") == "AP max 35.5 µm, RP max 30.2 µm"
+        assert row(text, "identification") == "20 parameters, residual RMS 9.9 µm"
+        assert row(text, "upload") == "read back, active in 1.23 s"
+        # what next, and the table the controller is left with, by its CRC
+        assert text.startswith("Next: nothing to fix: table CRC-32 deadbeef is active")
+        assert row(text, "active table") == "CRC-32 deadbeef (kept)"
         assert row(text, "RMS before") == "812.4 µm" and row(text, "improvement ratio") == "34.4 ×"
         assert row(text, "exit code") == "0"
         assert app.summary is SUMMARY and app.outcome == "SUCCESS" and app.exit_code == 0
@@ -267,10 +275,10 @@ async def test_abort_with_confirmation_is_outcome_aborted(on_abort):
         assert app.exit_code == Outcome.ABORTED == 6
         text = panel(app)
         assert "ABORTED" in text and row(text, "exit code") == "6"
-        # the hint names the run and the one key that continues it (no CLI line: the UI was not
+        # Next names the run and the one key that continues it (no CLI line: the UI was not
         # told the command line it runs for, and a command with a placeholder is not shown)
-        assert "then press c to continue run #42" in text and "CONFIG" not in text
-        assert row(text, "continue").startswith("press c: run #42")
+        assert row(text, "Next:").startswith("press c: run #42 goes on at its next step") and "CONFIG" not in text
+        assert "What to do" not in text and "then press" not in text  # no advice that starts with "then"
         await pilot.press("q")
         await wait_until(pilot, lambda: not app.is_running, "app exit")
     assert app.return_code == 6

@@ -4,6 +4,7 @@ codes as the CLI has them, a device fault included."""
 from __future__ import annotations
 
 import re
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -15,9 +16,7 @@ from station.errors import Outcome
 from station.ui.simulated_cell import load_cell
 from station.ui.tui import launch as tui_launch
 from station.ui.tui.app import ConfirmScreen, StationApp
-
-# the template's example controller is on a private network: tests never reach out to it
-LOOPBACK_CONTROLLER = '"127.0.0.1:9"'
+from station.ui.tui.result_panel import HEADLINE_FIGURES
 
 
 def panel(app: StationApp) -> str:
@@ -40,14 +39,20 @@ async def wait_until(pilot, cond, what: str, rounds: int = 3000) -> None:
 
 
 @pytest.fixture
-def missing_probe_request(tmp_path: Path) -> CellRequest:
-    """A valid cell configuration whose probe head is a serial device that does not exist."""
+def missing_probe_request(tmp_path: Path) -> Iterator[CellRequest]:
+    """A valid cell configuration whose probe head is a serial device that does not exist; its
+    controller is the simulated one, which answers (the session connects the controller first)."""
+    from simulators import start_simulated_cell
+
     tty = tmp_path / "no-such-tty"
-    text = TEMPLATE.replace('"192.168.0.10:502"', LOOPBACK_CONTROLLER).replace('probe_head = "/dev/ttyUSB0"', f'probe_head = "{tty.as_posix()}"')
-    assert str(tty) in text
-    config = tmp_path / "cell.toml"
-    config.write_text(text, encoding="utf-8")
-    return CellRequest(config=str(config), db=str(tmp_path / "runs.sqlite"))
+    with start_simulated_cell() as servers:
+        controller = f'"{servers.controller_host}:{servers.controller_port}"'
+        text = TEMPLATE.replace('"192.168.0.10:502"', controller).replace(
+            'probe_head = "/dev/ttyUSB0"', f'probe_head = "{tty.as_posix()}"')
+        assert str(tty) in text and controller in text
+        config = tmp_path / "cell.toml"
+        config.write_text(text, encoding="utf-8")
+        yield CellRequest(config=str(config), db=str(tmp_path / "runs.sqlite"))
 
 
 async def test_probe_head_fault_is_a_device_fault_not_an_internal_error(missing_probe_request, tmp_path):
@@ -64,7 +69,7 @@ async def test_probe_head_fault_is_a_device_fault_not_an_internal_error(missing_
         assert failure is not None and failure.error_type == "ProbeDisconnected" and failure.log_file is None
         text = panel(app)
         assert "no-such-tty" in text  # the message names the device
-        assert failure.hint and failure.hint in text and "What to do" in text
+        assert failure.hint and f"Next: {failure.hint}" in text
         assert exit_code_row(text) == "7"
         await pilot.press("q")
         await wait_until(pilot, lambda: not app.is_running, "app exit")
@@ -108,7 +113,9 @@ async def test_simulated_calibration_through_the_ui(tmp_path):
         assert summary.db == request.db  # the returned summary, not only the event's
         text = panel(app)
         for label, *_ in summary.figures():
-            assert label in text
+            if label in HEADLINE_FIGURES:
+                assert label in text
+        assert "ISO 9283 after" in text and "identification" in text and "Next: " in text
         assert exit_code_row(text) == str(summary.exit_code)
         assert app.query_one("#measurements", DataTable).row_count > 0
         await pilot.press("q")
@@ -131,4 +138,4 @@ async def test_operator_abort_of_the_simulated_cell_is_exit_code_6(tmp_path):
         assert app.summary is not None and app.summary.outcome is Outcome.ABORTED, panel(app)
         assert app.state == "aborted" and app.exit_code == 6
         assert app.summary.run_id is not None
-        assert f"then press c to continue run #{app.summary.run_id}" in panel(app)
+        assert f"Next: press c: run #{app.summary.run_id} goes on at its next step" in panel(app)

@@ -223,7 +223,9 @@ def test_title_names_the_cell_and_devices_have_their_kind(tmp_path):
     real = cell_context(CellRequest(config=str(SCARA600 / "cell.toml")))
     assert real.title() == "example SCARA 600 cell" and real.probe == "serial" and real.controller == "tcp"
     assert device_kind("socket://10.0.0.7:4001") == "tcp" and device_kind("COM3") == "serial"
-    assert cell_context(CellRequest(simulated=True)).title() == "simulated cell · simulated"
+    # the built-in cell: its configuration is written when a run starts, so the title does not name it
+    assert cell_context(CellRequest(simulated=True)).title() == "built-in simulated cell"
+    assert cell_context(CellRequest(simulated=True, robot="irb2600")).title() == "built-in simulated cell (irb2600)"
     assert "Recheck" in cell_context(CellRequest(simulated=True), recheck=True).title()
 
 

@@ -18,10 +18,16 @@ async def wait_until(pilot, cond, what: str, rounds: int = 4000) -> None:
         if cond():
             return
         await pilot.pause(0.01)
-    raise AssertionError(f"timed out waiting for: {what}")
+    app = pilot.app
+    summary = app.summary
+    how = (f"state {app.state}, screen {type(app.screen).__name__}, outcome "
+           f"{summary.outcome.name if summary else None}, failure {summary.failure if summary else None}")
+    notices = "\n".join(line.plain for line in app.query_one("#notices")._lines[-12:])
+    raise AssertionError(f"timed out waiting for: {what} ({how})\nlast notices:\n{notices}")
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(300)  # two whole simulated runs through the UI: minutes on a loaded 2-core machine
 @pytest.mark.parametrize("size", [(80, 24), (160, 48)])
 async def test_full_simulated_run_with_pause_abort_resume_upload_and_roll_back(tmp_path, size):
     app = make_app(CellRequest(simulated=True, db=str(tmp_path / "runs.sqlite")))
@@ -36,6 +42,9 @@ async def test_full_simulated_run_with_pause_abort_resume_upload_and_roll_back(t
         assert table.row_count == n and not app.eta.running
         await pilot.press("p")
         await wait_until(pilot, lambda: table.row_count > n, "running again")
+        # the abort key acts on the main screen of a running run (a modal screen takes the keys,
+        # and the app's bindings are not reached under it): wait for that, not for a clock
+        await wait_until(pilot, lambda: app.state == "running" and not app.screen.is_modal, "running, main screen")
         await pilot.press("a")
         await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), "abort?")
         await pilot.press("y")

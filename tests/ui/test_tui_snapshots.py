@@ -115,6 +115,7 @@ def test_aborted_continue_with_one_key(snap_compare):
         await wait_until(pilot, lambda: isinstance(pilot.app.screen, ConfirmScreen), "abort?")
         await pilot.press("y")
         session.open()
+        await wait_until(pilot, lambda: pilot.app.report_path is not None, "report")  # an aborted run's too
         await settled(pilot)
 
     assert snap_compare(cell_app(session), terminal_size=SIZE, run_before=before)
@@ -158,6 +159,33 @@ def test_results_parameters(snap_compare):
         await pilot.pause()
 
     assert snap_compare(app_for(FakeSession(gated=False, ask=False)), terminal_size=SIZE, run_before=before)
+
+
+def test_failed_correction_with_its_next_line(snap_compare):
+    """A failure while the correction table is built: what to change and how to resume, no "press c"
+    (issue 29); the whole panel in view at 80×24."""
+    from test_tui_next import failed_in_correction
+
+    async def before(pilot):
+        await pilot.press("s")
+        await wait_until(pilot, lambda: pilot.app.report_path is not None, "report")
+        await settled(pilot)
+
+    assert snap_compare(cell_app(failed_in_correction), terminal_size=SIZE, run_before=before)
+
+
+def test_results_of_a_stored_run_in_a_new_session(snap_compare):
+    """v with no run in this session: a run picked from the database's list (issue 29)."""
+    async def before(pilot):
+        await pilot.press("v")
+        await wait_until(pilot, lambda: isinstance(pilot.app.screen, ResumeScreen), "list")
+        await pilot.press("enter")
+        await wait_until(pilot, lambda: isinstance(pilot.app.screen, ResultsScreen), "results")
+        pilot.app.clear_notifications()  # "Loading the results …" would cover the figures
+        for _ in range(2):
+            await pilot.pause()
+
+    assert snap_compare(cell_app(FakeSession()), terminal_size=SIZE, run_before=before)
 
 
 def test_help(snap_compare):

@@ -9,6 +9,7 @@ template's comments (:mod:`station.cell.config.template`) take them from here.
 
 from __future__ import annotations
 
+import difflib
 import re
 import reprlib
 from typing import Annotated, Any, Literal
@@ -297,6 +298,12 @@ class _Simulation(_Section):
     step_tool_um: tuple[Annotated[float, Field(ge=-10000.0, le=10000.0)], ...] = Field(
         (0.0, 0.0, 0.0), min_length=3, max_length=3, strict=False,
         description="a bumped tool: shift of the head x, y, z [µm], each within ±10000")
+    # joint errors beyond geometry (issue 30, simulators/joint_errors.py): "six-axis" is a 1.6 m arm's
+    # compliance under gravity and once-per-turn gear errors; "none" (the default, and the SCARA's) none
+    joint_errors: Literal["none", "six-axis"] = Field(
+        "none", description='"six-axis": the joints bend under gravity and err once per turn (a 1.6 m arm\'s '
+        'values, docs/error-terms.md); "none": a rigid robot')
+    joint_errors_scale: float = _num(1.0, ge=0.0, le=10.0, what="factor on every joint error of joint_errors")
 
 
 class _Verification(_Section):
@@ -516,9 +523,12 @@ def _describe(err: dict) -> str:
     parent, info = _field_info(loc)
     if typ == "extra_forbidden":
         where = _key(loc[:-1]) or "the file"
-        allowed = ", ".join(parent.model_fields) if parent is not None and not isinstance(loc[-1], int) else ""
-        return (f"{where}: unknown key {loc[-1]!r}; allowed: {allowed} (check the spelling: an unknown "
-                f"key would otherwise be ignored)")
+        known = list(parent.model_fields) if parent is not None and not isinstance(loc[-1], int) else []
+        # the nearest known name first: a typo is the usual cause (issue 33, as for robot files)
+        close = difflib.get_close_matches(str(loc[-1]), known, n=1, cutoff=0.6)
+        hint = f"did you mean {close[0]!r}? " if close else ""
+        return (f"{where}: unknown key {loc[-1]!r}; {hint}allowed: {', '.join(known)} (check the spelling: "
+                f"an unknown key would otherwise be ignored)")
     what = info.description if info is not None and info.description else ""
     rng = bounds_text(info) if info is not None else ""
     if typ == "missing":

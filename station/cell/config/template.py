@@ -33,6 +33,8 @@ def _toml_value(v: Any) -> str:
         return "[" + ", ".join(_toml_value(x) for x in v) + "]"
     if isinstance(v, float):
         return repr(v)
+    if isinstance(v, str):  # a choice ("none", "six-axis"): a TOML string
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
     return str(v)
 
 

@@ -10,6 +10,7 @@ import time
 
 import numpy as np
 
+from drivers.controller_errors import ClaimNotGranted
 from drivers.controller_map import (
     INFO_PAGES,
     ORDER_CHECK_VALUE,
@@ -21,13 +22,18 @@ from drivers.controller_map import (
     ErrorCode,
     WordOrder,
     decode,
+    encode,
     implausible_limits,
+    release_code,
 )
-from station.cell.conformance.kit import _Answer, _KitBase, _next
+from drivers.controller_session import new_token
+from station.cell.conformance.kit import _ANSWER_TIMEOUT, _Answer, _KitBase, _next
+from station.cell.conformance.report import FAILED
 from station.cell.limits.motion_guard import MotionGuard
 from station.errors import UnreachableError
 
 _HEARTBEAT_WINDOW = 1.5  # seconds to watch the heartbeats
+_CLAIM_WAIT = 0.5  # seconds a refused claim is given to be (wrongly) granted: five heartbeat periods
 
 
 class _HandshakeChecks(_KitBase):
@@ -77,6 +83,12 @@ class _HandshakeChecks(_KitBase):
                      f"publish order_check = {ORDER_CHECK_VALUE} as a u32 at offsets {REG['order_check'].address}.."
                      f"{REG['order_check'].end - 1} of the window, in the link's word order")
             return False
+        try:  # before any transfer request: a station that another holds is refused here (ControllerClaimed)
+            link.claim()
+        except ClaimNotGranted as exc:
+            self.req["claim"].failed(str(exc), "take claim_request as the map's u32 (signed 16-bit words, the "
+                                     "link's word order) and copy it to claim_owner unchanged")
+            link.claim_failed = True
         link.sync_transfer()
         lim_reg = INFO_PAGES["soft_limits"][1]
         try:
@@ -143,6 +155,63 @@ class _HandshakeChecks(_KitBase):
         else:
             r.passed("hb_pc follows the station's heartbeat")
 
+    def claim_rules(self) -> None:
+        """One station per controller: a second claim is refused, a command with another token is
+        refused with NOT_CLAIMED, the holder's release frees the controller, and a holder that stops
+        its heartbeat loses it by the program's watchdog. The kit holds the controller afterwards."""
+        r, link = self.req["claim"], self.link
+        if link.claim_failed:  # failed at identification: the kit holds no claim to test the rules with
+            return
+        other = new_token()
+        while other in (link.claim_token, release_code(link.claim_token)):
+            other = new_token()
+        link.write_registers(REG["claim_request"].address, encode("claim_request", other, link.word_order))
+        time.sleep(_CLAIM_WAIT)  # a refusal is an answer that changes nothing: give the program its passes
+        owner = int(link.read_entry("claim_owner"))
+        if owner != link.claim_token:
+            r.failed(f"a second station's claim was granted while the kit held the controller (claim_owner reads "
+                     f"{owner:#010x}, the kit's token is {link.claim_token:#010x})",
+                     "grant a claim_request only while claim_owner is 0 (compare and set in the program)")
+            link.write_registers(REG["claim_request"].address,
+                                 encode("claim_request", release_code(owner), link.word_order))
+            self._await_owner(0)
+            link.claim()
+        ans = self._command(Command.RESET, token=other)  # harmless if obeyed: nothing is latched at this point
+        if not ans.error_is(ErrorCode.NOT_CLAIMED):
+            r.failed(f"a command with another station's token: {ans.describe()}",
+                     "refuse every command but STOP whose cmd_token is not claim_owner with NOT_CLAIMED (17)")
+        link.release()
+        if not self._await_owner(0):
+            r.failed("writing the holder's release code (0xFFFFFFFF - token) to claim_request did not free the "
+                     "controller", "free the claim when claim_request holds 0xFFFFFFFF - claim_owner")
+            link.claim()  # still the kit's: it goes on holding it
+            return
+        link.claim()
+        link._stop_heartbeat()  # the kit plays a station that died
+        wd = int(link.read_entry("watchdog_ms")) / 1000.0
+        t0 = time.monotonic()
+        freed = self._await_owner(0, wd + 2.0)
+        dt = time.monotonic() - t0
+        link._heartbeat_once()  # hb_pc live again before anything else: no watchdog fires on the next move
+        link.claim()
+        link._start_heartbeat()
+        if not freed:
+            r.failed(f"the claim was not freed {dt:.2f} s after the holder's heartbeat stopped (watchdog_ms "
+                     f"{wd * 1000:.0f})", "clear claim_owner (and the holder's request, host, PID and since) when "
+                     "hb_pc has not changed for watchdog_ms: a dead station's claim must expire by itself")
+            return
+        if r.status != FAILED:
+            r.passed(f"a second claim was refused, a command with its token refused NOT_CLAIMED, the release freed "
+                     f"the controller, and the watchdog freed a silent holder's claim after {dt:.2f} s")
+
+    def _await_owner(self, owner: int, timeout: float = _ANSWER_TIMEOUT) -> bool:
+        deadline = time.monotonic() + timeout
+        while int(self.link.read_entry("claim_owner")) != owner:
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(0.01)
+        return True
+
     def prepare_motion(self) -> None:
         """The park zone, its guards, and whether the robot may be moved at all."""
         conf, lim = self.conf, self.ctrl_limits
@@ -181,7 +250,7 @@ class _HandshakeChecks(_KitBase):
             return False
         j = int(np.argmax(d))
         r.failed(f"{what} moved the robot: joint {j + 1} by {d[j]:.6g} (rad | mm), from {q0[j]:.6g} to {q1[j]:.6g}",
-                 "a refused command, and a move to the joints the robot stands at, must not move it: decode cmd_joints "
+                 "a refused command, and a move to the joints the robot stands at, must not move it: decode cmd_target "
                  "as the map's scaled signed i32 in the link's word order (a UR's read_port_register returns the "
                  "signed value -32768 .. 32767, docs/robot-program.md); jog the robot back to "
                  "[conformance].park_joints before the next run")

@@ -26,6 +26,9 @@ REQUIREMENTS: tuple[tuple[str, str], ...] = (
                        "published"),
     ("word_order", "32-bit values use the link's word order"),
     ("heartbeat", "heartbeat both ways: hb_robot advances every period, hb_pc is taken from the PC"),
+    ("claim", "one station per controller: a second claim is refused, a command with another token is refused "
+              "with NOT_CLAIMED, the holder's release frees the controller, the watchdog frees a silent holder's "
+              "claim"),
     ("ack", "every command is acknowledged with its sequence number in ack_seq"),
     ("done", "done_seq is set to the command's number only after the motion has arrived"),
     ("sequence", "a wrong sequence number is refused with SEQUENCE_ERROR, the next right one accepted; neither "

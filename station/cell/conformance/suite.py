@@ -28,7 +28,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from drivers.controller import ControllerConnectionError
+from drivers.controller import ControllerClaimed, ControllerConnectionError
 from drivers.controller_map import ControllerError, WordOrder
 from station.cell.config.cell_config import CellConfig
 from station.cell.conformance.checks import _HandshakeChecks
@@ -58,7 +58,7 @@ __all__ = ["REQUIREMENTS", "Requirement", "ConformanceReport", "run_conformance"
 
 #: what to do when the kit's own motion guard refuses a target (the robot left the park zone)
 _GUARD_FIX = ("the robot is not where the kit sent it: a program that decodes the command registers wrongly "
-              "(signed 16-bit words read as unsigned, the word order) moves where it was not sent - decode cmd_joints "
+              "(signed 16-bit words read as unsigned, the word order) moves where it was not sent - decode cmd_target "
               "as the map's scaled signed i32 (docs/robot-program.md); jog the robot back to [conformance].park_joints "
               "and run the kit again")
 
@@ -113,7 +113,7 @@ class _Kit(_HandshakeChecks, _TableChecks, _SlotKeeper):
         self.emit("identification and word order")
         try:
             identified = self.identification()
-        except ControllerConnectionError:
+        except (ControllerConnectionError, ControllerClaimed):  # no controller to check, or another station's
             raise
         except ControllerError as exc:  # a window too small for the map, a refused info page
             self.req["identification"].failed(f"{type(exc).__name__}: {exc}", "serve the map's 128-register window "
@@ -126,6 +126,8 @@ class _Kit(_HandshakeChecks, _TableChecks, _SlotKeeper):
             return
         self.emit("heartbeats")
         self._step("heartbeat", self.heartbeat)
+        self.emit("one station per controller")
+        self._step("claim", self.claim_rules)
         if not self.uses_table:  # compensated targets: the program holds no table (robot-programs/ur)
             for rid in _TABLE_REQUIREMENTS:
                 self.req[rid].not_applicable("this cell's robot is not a SCARA: the station sends compensated "

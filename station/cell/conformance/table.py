@@ -1,4 +1,4 @@
-"""The conformance checks of the correction table on register map 2: the table through the
+"""The conformance checks of the correction table on register map 3: the table through the
 transfer block (pages written and read back, the page CRC and page refusals, the whole-table
 CRC-32, TABLE_STAGE), the slot reads, and the slot rules of TABLE_ACTIVATE, TABLE_DEACTIVATE,
 TABLE_ROLLBACK and TABLE_DISCARD_PREVIOUS. The slots the kit found are put back afterwards by

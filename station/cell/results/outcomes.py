@@ -14,6 +14,7 @@ from pathlib import Path
 
 from drivers.controller import (
     CommandRejected,
+    ControllerClaimed,
     ControllerConnectionError,
     ControllerLinkLost,
     DriveFault,
@@ -22,7 +23,7 @@ from drivers.controller import (
     ModbusExceptionError,
     MotionTimeout,
 )
-from drivers.controller_errors import MapVersionError, ModbusResponseError, WordOrderError
+from drivers.controller_errors import ClaimNotGranted, MapVersionError, ModbusResponseError, WordOrderError
 from drivers.controller_map import ControllerError
 from drivers.correction_table import TableError, TableVerifyError
 from drivers.probe_protocol import (
@@ -34,6 +35,7 @@ from drivers.probe_protocol import (
 )
 from station.cell.correction.design import CorrectionRefused
 from station.cell.records.summary import Failure, RunSummary
+from station.cell.run.device_errors import ControllerHeld
 from station.core.table_data import TableError as TableDataError
 from station.errors import Outcome, RunAborted, StationError
 
@@ -65,12 +67,19 @@ _TABLE: tuple[_Row, ...] = (
          "the controller refused the table; check its capacity and map version, then resume", device="controller"),
     _Row((HandshakeTimeout,), Outcome.DEVICE_FAULT,
          f"the motion command was NOT re-sent; check the robot program, {RESUME}", device="controller", link=True),
+    _Row((ControllerHeld, ControllerClaimed), Outcome.DEVICE_FAULT,
+         "another station holds the controller (the message names it): let its run end or stop it there, then start "
+         "again; a station that died frees the controller by the robot program's watchdog", device="controller"),
+    _Row((ClaimNotGranted,), Outcome.DEVICE_FAULT,
+         "the robot program does not keep the claim block as the map says: install the program from robot-programs/ "
+         "and check it with 'station conformance CONFIG'", device="controller"),
     _Row((ControllerLinkLost,), Outcome.DEVICE_FAULT, f"check the network cable and the controller, {RESUME}", device="controller", link=True),
     _Row((ControllerConnectionError,), Outcome.DEVICE_FAULT,
          "check [devices].controller (host:port), that the robot program runs, and the network", device="controller", link=True),
     _Row((WordOrderError,), Outcome.CONFIG_ERROR, "set [devices].word_order as the message says, then run again", device="controller"),
     _Row((MapVersionError,), Outcome.DEVICE_FAULT,
-         "the robot program implements another register map version: install the one the station supports", device="controller"),
+         "the robot program implements another register map version: install the one the station supports, from "
+         "robot-programs/ (docs/robot-program.md)", device="controller"),
     _Row((ModbusResponseError,), Outcome.DEVICE_FAULT,
          "the controller answered with the wrong function: check that the device at [devices].controller is "
          "the robot controller and device_id is right", device="controller"),
@@ -124,12 +133,15 @@ def classify(exc: BaseException) -> Outcome:
 def hint_for(exc: BaseException, run_id: int | None = None) -> str:
     """What the operator should do about ``exc`` (RUN replaced by the run number when known)."""
     text = ""
+    own = getattr(exc, "hint", None)  # a station error that knows more than its class (ControllerHeld)
     for row in _TABLE:
         if isinstance(exc, row.types):
             text = row.hint
             break
     else:  # a station error's message says what to do; the hint says it in one line, never empty
         text = _OUTCOME_HINTS.get(classify(exc), _OUTCOME_HINTS[Outcome.INTERNAL_ERROR])
+    if isinstance(own, str) and own:
+        text = own
     if run_id is not None:
         return text.replace("RUN", str(run_id))
     # nothing was measured yet: there is no run to resume

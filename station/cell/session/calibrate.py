@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from drivers.controller import ModbusController
+from drivers.controller import ControllerClaimed, ModbusController
 from drivers.controller_map import WordOrder
 from drivers.probe_head import ProbeHead as SerialProbeHead
 from station.cell.config.cell_config import CellConfig, load_config
@@ -30,6 +30,7 @@ from station.cell.records.summary import RunSummary
 from station.cell.results.outcomes import classify, failure_summary, hint_for
 from station.cell.results.pipeline import Options, run_calibration
 from station.cell.run.device_check import controller_lines, probe_lines, wired_channels_invalid
+from station.cell.run.device_errors import ControllerHeld
 from station.cell.run.devices import CellController, ProbeHead
 from station.cell.run.events import Event, Notice, PhaseChanged, RunFailed, RunStarted
 from station.cell.run.questions import Confirm
@@ -112,16 +113,29 @@ def open_controller(cfg: CellConfig, stack: ExitStack) -> CellController:
                               word_order=WordOrder.BIG if d.word_order == "big" else WordOrder.LITTLE,
                               timeout=d.controller_timeout_s, register_base=d.controller_register_base,
                               link_timeout=d.controller_link_timeout_s)
-    driver.connect()
+    try:
+        driver.connect()
+    except ControllerClaimed as exc:  # one station per controller: refused before any command
+        raise ControllerHeld(
+            f"controller {d.controller_host}:{d.controller_port}: {exc}",
+            f"another station runs on this controller ({exc.holder.describe()}): let its run end or stop it "
+            f"there, then start again; a station that died frees the controller by the robot program's "
+            f"watchdog, nothing to clear by hand") from exc
     stack.callback(driver.close)
     controller: CellController = driver
     return controller
 
 
 def open_cell(cfg: CellConfig, stack: ExitStack) -> Devices:
-    """Connect the probe head and the controller named in ``cfg``; both are closed when
-    ``stack`` closes."""
-    return Devices(open_probe(cfg, stack), open_controller(cfg, stack))
+    """Connect the controller and the probe head named in ``cfg``; both are closed when ``stack``
+    closes. The controller first: its claim is what refuses a second station, and a refused
+    station must not have opened the probe head the holder's run reads either - except a probe
+    device path that does not exist, which is reported as the probe's fault (nobody reads it)."""
+    probe_path = cfg.devices.probe_head
+    if probe_path.startswith("/") and not Path(probe_path).exists():
+        open_probe(cfg, stack)  # raises the probe's own error: not plugged in, or the wrong path
+    controller = open_controller(cfg, stack)
+    return Devices(open_probe(cfg, stack), controller)
 
 
 def describe_devices(devices: Devices) -> dict[str, str]:

@@ -170,8 +170,20 @@ def cmd_compensate(args) -> int:
         raise ConfigError(f"{args.targets} line {line_of[bad]}: a SCARA has only the elbow configuration; "
                           f"leave shoulder and wrist empty")
     n = len(poses)
-    res = compensated_targets(nominal, model.nominal, pose_to_matrix(poses), setup=args.setup,
-                              configuration=cfgs, allow_singular=args.allow_singular)
+    from station.ui.cli.commands_model import gear_ratios_of, gravity_of, joint_delta_of, stored_terms
+
+    terms = stored_terms(args.model)  # [error_terms] (issue 30): the joints stand at q + Δq(q)
+    if terms is not None and terms.names:
+        from station.core.term_compensation import compensated_targets_with_terms
+
+        res = compensated_targets_with_terms(nominal, model.nominal,
+                                             joint_delta_of(model, terms, gravity_of(args.model, model),
+                                                            gear_ratios_of(args.model, model)),
+                                             pose_to_matrix(poses), setup=args.setup, configuration=cfgs,
+                                             allow_singular=args.allow_singular)
+    else:
+        res = compensated_targets(nominal, model.nominal, pose_to_matrix(poses), setup=args.setup,
+                                  configuration=cfgs, allow_singular=args.allow_singular)
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(_out_header(nominal))
@@ -187,6 +199,7 @@ def cmd_compensate(args) -> int:
         "max_correction_arcsec": float(np.max(res.correction_arcsec[ok])) if ok.any() else None,
         "max_residual_um": float(np.max(res.residual_um[ok])) if ok.any() else None,
         "max_residual_arcsec": float(np.max(res.residual_arcsec[ok])) if ok.any() else None,
+        "error_terms": [] if terms is None else list(terms.names),
     }
     if args.joint_offsets:
         summary["joint_offsets"] = _joint_offsets(nominal, model.nominal, res, jmap)

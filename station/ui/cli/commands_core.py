@@ -54,6 +54,13 @@ MAX_ANALYZE_POSES = 10_000
 MAX_ANALYZE_DISTANCES = 10_000_000
 
 
+#: the complete minimal model's count beyond 4R + 2P per objective (Everett, Hollerbach): full
+#: poses 6 (the set-up and the tool frame), positions 3 (no tool orientation), distances −3 (nor
+#: the set-up); a tool point on the last axis takes 2 more (that axis's tilt), e.g. irb2600's 25
+COMPLETE_COUNT = {"pose": (6, "poses"), "position": (3, "positions of a point off the last axis"),
+                  "distance": (-3, "distances between such points")}
+
+
 def _check_analyze_args(args) -> None:
     """Refuse counts that would give an empty or meaningless analysis, naming the range."""
     low = 2 if args.objective == "distance" else 1  # a distance needs two points
@@ -87,11 +94,15 @@ def cmd_analyze(args) -> int:
     if args.json:
         _print_json({"robot": model.name, "objective": objective, "kind": objective, "poses": len(q), **a.to_dict()})
         return 0
-    print(f"robot {model.name}: {model.n_params} parameters, complete minimal model "
-          f"4R+2P+6 = {model.minimal_param_count}")
+    extra, what = COMPLETE_COUNT[objective]
+    print(f"robot {model.name}: {model.n_params} parameters, complete minimal model for {what} "
+          f"4R+2P{extra:+d} = {model.minimal_param_count - 6 + extra}")
     print(f"{objective} measurements at {len(q)} poses{' in one plane' if args.planar else ''}"
           f"{f', {len(pairs)} distances' if pairs is not None else ''}")
-    print(f"identifiable parameters (rank): {a.rank}")
+    print(f"identifiable parameters (rank): {a.rank}"
+          + (f" (the chain itself: {a.chain_rank})" if a.lost_to_gimbal_lock else ""))
+    if a.gimbal_note():
+        print(f"note: {a.gimbal_note()}")
     print(f"condition (scaled columns):     {a.condition:.1f} (chosen set {a.chosen_condition:.1f})")
     print(f"minimal set: {', '.join(a.chosen)}")
     if a.held:
@@ -207,7 +218,7 @@ def _tool_unknown(args) -> tuple[bool, list[str]]:
 
 
 def cmd_identify(args) -> int:
-    from station.core.identification import identify
+    from station.core.identification import MAX_EVALUATIONS, identify, require_converged
     from station.core.model import robot_to_toml
     from station.io.datafile import read_measurement_file
     from station.io.robot_files import joint_map_toml
@@ -225,16 +236,23 @@ def cmd_identify(args) -> int:
         start[-6:-3] = fit_marker_offset(model, q, measured[:, :3, 3] if kind == "pose" else measured).offset_mm
     res = identify(model, data, start=start, prefer=_names(args.prefer) or None, fix=_names(args.fix),
                    exclude=_names(args.exclude), tool_unknown=tool_unknown,
-                   loss=getattr(args, "loss", "linear"))
+                   loss=getattr(args, "loss", "linear"), max_nfev=getattr(args, "max_evaluations", MAX_EVALUATIONS))
+    require_converged(res)
+    from station.ui.cli.commands_model import identify_terms, output_params, print_terms, terms_toml
+
+    terms = identify_terms(args, model, data, res, mf, jmap)  # --model (issue 30); None: the geometric fit alone
     file_notes = [f"{args.data}: {n}" for n in mf.notes] + tool_note
     if args.output:
-        write_file(args.output, robot_to_toml(model, res.params, angle_unit="rad")
-                   + joint_map_toml(jmap, model, angle_unit="rad"))
+        write_file(args.output, robot_to_toml(model, output_params(res, terms), angle_unit="rad")
+                   + joint_map_toml(jmap, model, angle_unit="rad")
+                   + terms_toml(terms, args.robot, model, args.base_link, args.tip_link, data, res))
     if args.json:
         rep = identify_report(model, res, data, objective, args.pairs if objective == "distance" else None)
         rep["output"] = args.output
         rep["joint_map"] = jmap.describe()
         rep["notes"] = file_notes + rep["notes"]
+        if terms is not None:
+            rep["error_model"] = terms.to_dict()
         _print_json(_succeeded(rep))
         return 0
     ident = res.identifiability
@@ -270,6 +288,8 @@ def cmd_identify(args) -> int:
         print(f"suspected outliers (rows): {', '.join(str(i + 1) for i in res.outliers)}")
     else:
         print("suspected outliers: none")
+    if terms is not None:
+        print_terms(terms)
     if args.output:
         print(f"identified model written to {args.output}")
     return 0
@@ -277,8 +297,9 @@ def cmd_identify(args) -> int:
 
 # --- validate -------------------------------------------------------------------------------
 
-def _errors(model, q, kind, measured, setup_pose=None):
-    """Per-row position errors [mm] (n,) and orientation errors [rad] (n,) or None."""
+def _errors(model, q, kind, measured, setup_pose=None, delta_q=None):
+    """Per-row position errors [mm] (n,) and orientation errors [rad] (n,) or None; ``delta_q``: the
+    model file's error terms, ``q ↦ Δq(q)`` (the joints stand at q + Δq; issue 30)."""
     from station.core.kinematics import forward
     from station.core.transforms import pose_error
 
@@ -286,7 +307,7 @@ def _errors(model, q, kind, measured, setup_pose=None):
     if setup_pose is not None:
         params = np.array(model.nominal)
         params[:6] = setup_pose
-    T = forward(model, q, params)
+    T = forward(model, q if delta_q is None else q + delta_q(q), params)
     if kind == "pose":
         e = pose_error(T, measured)
         return e[:, :3], e[:, 3:]
@@ -328,6 +349,11 @@ SETUP_UNKNOWN_FACTOR = 10.0
 ORIENTATION_UNKNOWN_RAD = np.radians(1.0)
 
 
+#: poses over the model's joint ranges on which validate places the nominal robot onto the model
+#: (without --calibration): enough that the rigid fit no longer depends on the draw
+NOMINAL_PLACEMENT_POSES = 200
+
+
 def _calibration_frame(args, model):
     """``(joints, positions)`` of ``--calibration`` for ``model`` (None without it)."""
     from station.io.datafile import read_measurement_file
@@ -366,12 +392,19 @@ def cmd_validate(args) -> int:
         raise ConfigError("--sigma-position must be a positive number of µm")
     calib = _calibration_frame(args, model)
     notes = [f"{args.data}: {n}" for n in mf.notes]
+    from station.ui.cli.commands_model import gear_ratios_of, gravity_of, joint_delta_of, stored_terms
+
+    terms = stored_terms(args.model)  # [error_terms] (issue 30): the model's joints stand at q + Δq(q)
+    dq = None
+    if terms is not None and terms.names:
+        dq = joint_delta_of(model, terms, gravity_of(args.model, model), gear_ratios_of(args.model, model))
+        notes.append(f"error terms of the model applied: {', '.join(terms.names)} (drift and backlash at zero)")
     if calib is not None:  # the model registered on its calibration data, never on the held-out rows
         reg_m = register(model, jmap.to_model(calib[0]), calib[1], sigma, params=model.nominal)
-        e_pos, e_ang = _errors(model, q, kind, measured, setup_pose=reg_m.setup_pose)
+        e_pos, e_ang = _errors(model, q, kind, measured, setup_pose=reg_m.setup_pose, delta_q=dq)
         setup = f"registered on {args.calibration}"
     else:
-        e_pos, e_ang = _errors(model, q, kind, measured)
+        e_pos, e_ang = _errors(model, q, kind, measured, delta_q=dq)
         _check_own_setup(model, q, pos, e_pos, kind)
         setup = "the model's own (identified)"
     if e_ang is not None and np.sqrt(np.mean(np.sum(e_ang**2, axis=1))) > ORIENTATION_UNKNOWN_RAD:
@@ -398,12 +431,25 @@ def cmd_validate(args) -> int:
         q_nominal = nominal_map.to_model(q_controller)
         if calib is not None:  # registered the same way as the model: on the calibration data
             nominal_setup = register(nominal, nominal_map.to_model(calib[0]), calib[1], sigma).setup_pose
-        else:  # the model's set-up: registering on the held-out rows would hide part of its error
-            nominal_setup = np.asarray(model.nominal[:6])
+            nominal_how = setup
+        else:
+            # Onto the model's own points over its workspace, as a registration on calibration data
+            # spread there would place it. Not the model's R: the identified set-up is split between
+            # R and what merges with it (A1.x, A1.y, A2.yaw), so R alone can miss by metres; not the
+            # held-out rows, nor these joints: a fit to them would hide part of the nominal's error.
+            from station.core.kinematics import forward
+            from station.core.poses import spread_joints
+            from station.core.registration import rigid_setup
+
+            q_spread = spread_joints(model, NOMINAL_PLACEMENT_POSES, np.random.default_rng(0))
+            nominal_setup = rigid_setup(nominal, nominal_map.to_model(jmap.to_controller(q_spread)),
+                                        forward(model, q_spread)[:, :3, 3])
+            nominal_how = (f"registered on the model's own points at {NOMINAL_PLACEMENT_POSES} poses spread over "
+                           f"its joint ranges (no measured value used)")
         n_pos, n_ang = _errors(nominal, q_nominal, kind, measured, setup_pose=nominal_setup)
         result["nominal"] = nominal.name
         result["nominal_errors"] = {**_summary(n_pos, n_ang if e_ang is not None else None),
-                                    "registered": True, "setup": setup}
+                                    "registered": True, "setup": nominal_how}
         result["improvement"] = result["nominal_errors"]["rms_position_um"] / max(result["model_errors"]["rms_position_um"], 1e-12)
     result = _succeeded(result)
     if args.json:
@@ -417,7 +463,7 @@ def cmd_validate(args) -> int:
         print(f"  {'model, orientation':28s} {m['rms_orientation_arcsec']:9.1f}″ {m['max_orientation_arcsec']:9.1f}″")
     if "nominal_errors" in result:
         n = result["nominal_errors"]
-        print(f"  {'nominal (same set-up), pos.':28s} {n['rms_position_um']:8.1f}µm {n['max_position_um']:8.1f}µm")
+        print(f"  {'nominal (registered), pos.':28s} {n['rms_position_um']:8.1f}µm {n['max_position_um']:8.1f}µm")
         if e_ang is not None:
             print(f"  {'nominal, orientation':28s} {n['rms_orientation_arcsec']:9.1f}″ {n['max_orientation_arcsec']:9.1f}″")
         print(f"  improvement (RMS position): {result['improvement']:.1f}×")
@@ -428,6 +474,8 @@ def cmd_validate(args) -> int:
     worst = sorted(result["per_row"], key=lambda r: -r["position_um"])[:5]
     print("  worst rows: " + ", ".join(f"{r['row']}: {r['position_um']:.1f} µm" for r in worst))
     print(f"  set-up: {setup}")
+    if "nominal_errors" in result and result["nominal_errors"]["setup"] != setup:
+        print(f"  nominal set-up: {result['nominal_errors']['setup']}")
     for note in notes:
         print(f"note: {note}")
     return 0
@@ -438,13 +486,30 @@ def cmd_validate(args) -> int:
 def cmd_export_model(args) -> int:
     from station.io.robot_export import export_model
     from station.io.robot_files import joint_map_toml
+    from station.io.robot_terms import gears_toml, gravity_toml
+    from station.ui.cli.commands_model import gear_ratios_of, gravity_of, lost_in_format, stored_terms
 
     model, jmap = _robot(args, args.model)
-    res = export_model(model, args.format, setup=not args.base)
+    terms = stored_terms(args.model)
+    gravity = gravity_of(args.model, model)
+    exported = model  # a format without the terms gets the geometric fit of the same data (issue 30)
+    if args.format != "toml" and terms is not None and terms.geometric_params is not None:
+        exported = model.with_params(np.asarray(terms.geometric_params, dtype=float))
+    res = export_model(exported, args.format, setup=not args.base)
     notes = list(res.notes)
+    ratios = gear_ratios_of(args.model, model)
+    lost = lost_in_format(model, terms, args.format, gravity=gravity, ratios=ratios)  # only TOML holds the terms
+    if lost:
+        notes.append(lost)
     text = res.text
     if args.format == "toml":
         text += joint_map_toml(jmap, model, angle_unit="rad")
+        if terms is not None and terms.names:
+            from station.io.robot_terms import error_terms_toml
+
+            text += error_terms_toml(terms.families, terms.names, terms.values, terms.sigma, terms.units,
+                                     terms.effect_on_fit_um, terms.geometric_params)
+        text += gravity_toml(gravity) + gears_toml(ratios)
     elif not jmap.is_identity:
         notes.append(f"the joint map ({'; '.join(jmap.describe())}) is not written in {args.format.upper()}: the "
                      f"file's joints are the model's; export --format toml to keep it")
@@ -467,17 +532,20 @@ def cmd_export_model(args) -> int:
 # --- predict --------------------------------------------------------------------------------
 
 def cmd_predict(args) -> int:
-    from station.core.kinematics import forward
     from station.core.transforms import matrix_to_pose
     from station.io.datafile import joints_from_table, read_table
+    from station.ui.cli.commands_model import forward_with_terms
 
     model, jmap = _robot(args, args.model)
     q = jmap.to_model(joints_from_table(read_table(args.joints), model))
-    poses = matrix_to_pose(forward(model, q, setup=not args.base))
+    T, term_notes, _ = forward_with_terms(model, args.model, q, setup=not args.base)  # [error_terms] (issue 30)
+    poses = matrix_to_pose(T)
     if args.json:
         _print_json(_succeeded({"robot": model.name, "frame": "base" if args.base else "measurement",
-                                "poses_mm_rad": poses.tolist()}))
+                                "poses_mm_rad": poses.tolist(), "notes": term_notes}))
         return 0
+    for n in term_notes:
+        print(f"# {n}")
     print("x [mm],y [mm],z [mm],roll [deg],pitch [deg],yaw [deg]")
     for p in poses:
         print(",".join([f"{v:.6f}" for v in p[:3]] + [f"{np.degrees(v):.8f}" for v in p[3:]]))

@@ -106,8 +106,14 @@ def cmd_fleet(args: argparse.Namespace) -> int:
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
+    if any(getattr(args, k, None) for k in ("opcua", "init_pki", "add_user")):  # the line's OPC UA server (issue 32)
+        from station.ui.opcua.command import cmd_serve_opcua
+
+        return cmd_serve_opcua(args)
     from station.ui.dashboard.app import DashboardAuth, create_app
 
+    args.host = args.host or "127.0.0.1"
+    args.port = args.port or 8031
     url = _url(args)
     token = None
     if args.token_file:

@@ -157,8 +157,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--tool", choices=["file", "unknown"], default=None,
                    help="unknown: fit the tool/marker point too (a reflector or marker offset); file: hold the robot "
                         "file's (default: file, or unknown where the robot file has [tool] unknown = true)")
+    p.add_argument("--model", dest="error_model", metavar="MODEL", default="geometric",
+                   help="error terms beyond geometry: geometric (default), auto (chosen by cross-validation), or "
+                        "terms joined by '+': compliance, cyclic, cyclic2, cyclic.q<j>, drift, backlash")
     p.add_argument("--loss", choices=["linear", "huber"], default="linear",
                    help="huber: robust fit for outliers, listing the rows it down-weighted (default linear)")
+    p.add_argument("--max-evaluations", type=count(100_000), default=200,
+                   help="the fit's evaluations at most; a fit that has not converged by then exits 3 (default 200)")
     _add_prefs(p)
     p.add_argument("--json", action="store_true")
     p.set_defaults(func="station.ui.cli.commands_core:cmd_identify")
@@ -329,10 +334,12 @@ def _add_fleet(sub) -> None:
     p.add_argument("--migrate", action="store_true", help="the store's administrator: create or update its schema")
     p.set_defaults(func="station.ui.cli.commands_fleet:cmd_fleet")
 
-    p = sub.add_parser("serve", help="the read-only QA dashboard over the fleet store (localhost by default)")
+    p = sub.add_parser("serve", help="the read-only QA dashboard over the fleet store (localhost by default); "
+                                      "with --opcua CONFIG the station as a secure OPC UA server (docs/opcua.md)")
     p.add_argument("--fleet", dest="url", metavar="URL", help=url_help)
-    p.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1; another needs auth)")
-    p.add_argument("--port", type=count(65535), default=8031, help="port (default 8031)")
+    p.add_argument("--host", default=None, help="address to bind (dashboard: default 127.0.0.1, another needs auth; "
+                                                "--opcua: default 0.0.0.0, every interface)")
+    p.add_argument("--port", type=count(65535), default=None, help="port (dashboard: default 8031; --opcua: 4840)")
     p.add_argument("--token-file", metavar="FILE", help="a file holding the bearer token remote readers send")
     p.add_argument("--basic-auth-file", metavar="FILE", help="a file holding USER:PASSWORD (HTTP basic auth)")
     p.add_argument("--tls-cert", metavar="PEM", help="serve HTTPS with this certificate")
@@ -340,7 +347,27 @@ def _add_fleet(sub) -> None:
     p.add_argument("--behind-proxy", action="store_true", help="a reverse proxy on this host terminates TLS")
     p.add_argument("--interval-days", type=count(3650), default=30,
                    help="days between rechecks for runs that name none (default 30)")
+    _add_opcua(p)
     p.set_defaults(func="station.ui.cli.commands_fleet:cmd_serve")
+
+
+def _add_opcua(p) -> None:
+    """``station serve --opcua CONFIG``: the station as an OPC UA server for the line (issue 32,
+    station/ui/opcua/); ``--init-pki`` and ``--add-user`` prepare it."""
+    g = p.add_argument_group("OPC UA server (docs/opcua.md)")
+    g.add_argument("--opcua", metavar="CONFIG", help="serve this cell's station over OPC UA (secured; no anonymous access)")
+    g.add_argument("--simulated", action="store_true", help="with --opcua: runs on the simulated cell of CONFIG")
+    g.add_argument("--seed", type=seed, default=None, help="simulated cell seed (default [simulation].seed, else 1)")
+    g.add_argument("--time-scale", type=time_scale, default=0.0, help="simulated motion: 0 instant, 1 real time")
+    g.add_argument("--db", default="runs.sqlite", help="run database (default runs.sqlite)")
+    g.add_argument("--users", metavar="FILE", help="users and roles (password hashes or user certificates)")
+    g.add_argument("--pki", metavar="DIR", help="the server's certificate, key and trust list (made by --init-pki)")
+    g.add_argument("--cert", metavar="DER", help="the server's application certificate, if not in --pki")
+    g.add_argument("--key", metavar="PEM", help="and its private key")
+    g.add_argument("--trust", metavar="DIR", help="folder of trusted client certificates (default PKI/trusted)")
+    g.add_argument("--init-pki", metavar="DIR", help="write the server's key and certificate and an empty trust list, then exit")
+    g.add_argument("--add-user", metavar="NAME", help="add a user to --users (password from the terminal or stdin), then exit")
+    g.add_argument("--role", choices=("observer", "operator"), default="observer", help="with --add-user")
 
 
 def main(argv: Sequence[str] | None = None) -> int:

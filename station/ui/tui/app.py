@@ -14,8 +14,10 @@ results) and writing the report are injected callables too, run in thread worker
 How a run ended is the :class:`~station.cell.records.summary.RunSummary` alone: the exit code shown and
 returned is ``summary.exit_code``.  An exception that escapes ``start_run`` (the session never
 lets one) is classified by type like the session does; an internal error writes its traceback
-to a log file the UI names.  A run that stopped before its end is continued with one key (c);
-what to do is told for the cell's kind of devices (:class:`~station.ui.tui.result_panel.CellContext`).
+to a log file the UI names.  A run that stopped before its end is continued with one key (c) where
+continuing it as it is can succeed; every end has one "Next: …" line, chosen by the kind of failure
+and told for the cell's kind of devices (:mod:`station.ui.tui.result_panel`); the end is shown by
+:class:`~station.ui.tui.ending.RunEnd`.
 
     app = StationApp(start_run, title="SR 800 calibration")
     app.run()
@@ -24,7 +26,6 @@ what to do is told for the cell's kind of devices (:class:`~station.ui.tui.resul
 
 from __future__ import annotations
 
-import dataclasses
 import inspect
 import time
 from collections.abc import Callable
@@ -57,10 +58,10 @@ from station.cell.run.events import (
     StepStarted,
 )
 from station.cell.run.runcontrol import RunControl
-from station.errors import Outcome
 from station.ui.report.writer import ReportData
-from station.ui.tui.result_panel import CONTINUE_KEY, CellContext, advice, can_continue, summary_markup
-from station.ui.tui.side import EventMessage, QuestionMessage, SideActions
+from station.ui.tui.ending import RunEnd
+from station.ui.tui.result_panel import CONTINUE_KEY, CellContext, can_continue, summary_markup
+from station.ui.tui.side import EventMessage, QuestionMessage
 from station.ui.tui.widgets import (
     ABORTED,
     ABORTING,
@@ -81,6 +82,7 @@ from station.ui.tui.widgets import (
     activity_text,
     esc,
     fmt_num,
+    passed_phases,
     phase_markup,
 )
 
@@ -105,7 +107,7 @@ def _shorten(label: str, width: int = LABEL_WIDTH) -> str:
     return label if len(label) <= width else label[: width // 2 - 1] + "…" + label[-(width - width // 2):]
 
 
-class StationApp(SideActions):
+class StationApp(RunEnd):
     """Operator UI for one calibration run at a time.
 
     ``start_run(emit, control)`` runs the whole calibration (blocking, in a worker thread); it
@@ -129,8 +131,12 @@ class StationApp(SideActions):
         Binding(CONTINUE_KEY, "continue_run", "Continue run"),
         Binding("r", "resume_run", "Resume run"),
         Binding("p", "pause", "Pause"),
+        Binding("p", "resume", "Resume"),  # the same key; the footer names what it does now (check_action)
         Binding("a", "abort", "Abort"),
         Binding("v", "results", "Results"),
+        # the result panel scrolls without Tab first, whatever has the focus (a hidden table)
+        Binding("pagedown", "result_page(1)", "More", show=False, priority=True),
+        Binding("pageup", "result_page(-1)", "Back", show=False, priority=True),
         Binding("question_mark,h,f1", "help", "Help"),
         Binding("q", "quit", "Quit"),
         Binding("ctrl+q", "quit", "Quit", show=False, priority=True),
@@ -198,7 +204,7 @@ class StationApp(SideActions):
         """The result panel's text, one line per row (the panel wraps long values in their column)."""
         if self.summary is None:
             return ""
-        return Content.from_markup(summary_markup(self.summary, self.step_index, self.cell)).plain
+        return Content.from_markup(summary_markup(self.summary, self.step_index, self.cell, phase=self.phase)).plain
 
     # ------------------------------------------------------------------ layout
     def compose(self) -> ComposeResult:
@@ -259,17 +265,23 @@ class StationApp(SideActions):
     def check_action(self, action: str, parameters: tuple[object, ...]) -> bool | None:
         # the footer shows the keys that do something now (80 columns hold no more)
         if action == "continue_run":
-            return not self.running and can_continue(self.summary)
-        if action in ("pause", "abort"):
+            return not self.running and can_continue(self.summary, self.phase)
+        if action == "pause":
+            return self.state == RUNNING
+        if action == "resume":
+            return self.state in (PAUSING, PAUSED)
+        if action == "abort":
             return self.state in (RUNNING, PAUSING, PAUSED)
         if action in ("start", "resume_run"):
             return not self.running
+        if action == "result_page":  # only on the main screen, once the result is shown
+            return self.summary is not None and self.screen is self.screen_stack[0]
         return True
 
     def _set_state(self, state: str) -> None:
         self.state = state
         text = STATE_TEXT[state]
-        if state in (ABORTED, FAILED) and can_continue(self.summary):
+        if state in (ABORTED, FAILED) and can_continue(self.summary, self.phase):
             text += f" — [b]{CONTINUE_KEY}[/] continue run #{self.summary.run_id if self.summary else ''}"
         self.query_one("#state", Static).update(text)
         self.query_one("#start", Button).disabled = state in ACTIVE_STATES
@@ -296,18 +308,21 @@ class StationApp(SideActions):
             eta.update(self.eta.text() if self.run_id is not None else "")
 
     def _note(self, *parts: str | tuple[str, str]) -> None:
-        """Append a line to the notices log; parts are plain text or (text, rich style)."""
-        self.query_one("#notices", NoticeLog).write(Text.assemble(*parts))
+        """Append a line to the notices log; parts are plain text or (text, rich style). A report
+        written while the app closes finds no log any more: nothing to append to (query, not query_one)."""
+        for log in self.query("#notices").results(NoticeLog):
+            log.write(Text.assemble(*parts))
 
     def _emit(self, event: Event) -> None:
         """Called by the runner, from its thread: forward the event into the app's queue."""
         self.post_message(EventMessage(event))
 
     def _poll_control(self) -> None:
-        # A runner that does not announce Paused still shows up as standing in checkpoint().
+        # A runner that does not announce Paused still shows up as standing in checkpoint(): the state
+        # line says so. The notice is the Paused event's alone; a note here as well raced with it (two
+        # lines or one, as the timer fell: a flaky 80×24 snapshot).
         if self.state == PAUSING and self.control is not None and self.control.waiting:
             self._set_state(PAUSED)
-            self._note(("Paused", "yellow"), " — the robot stands at a safe point")
 
     def _show_phases(self, current: str | None) -> None:
         self.query_one("#phases", Static).update(phase_markup(current, self._visited))
@@ -329,7 +344,7 @@ class StationApp(SideActions):
         self.query_one("#progress", ProgressBar).update(total=1, progress=0)
         self.query_one("#run-id", Static).update("run —")
         self._show_phases(None)
-        self.query_one("#phase-detail", Static).update("")
+        self._show_activity("", end=None)
         self.query_one("#step", Static).update("step —")
         self.query_one("#summary", Static).update("")
         self.query_one("#summary", Static).remove_class("-ok", "-failed")
@@ -361,7 +376,7 @@ class StationApp(SideActions):
 
     def action_continue_run(self) -> None:
         """The one-key resume: continue the run that just stopped at its next step."""
-        if not self.running and can_continue(self.summary) and self.summary is not None:
+        if not self.running and can_continue(self.summary, self.phase) and self.summary is not None:
             self.action_start(resume=self.summary.run_id)
 
     def action_pause(self) -> None:
@@ -377,7 +392,11 @@ class StationApp(SideActions):
             self._note("Resume requested")
 
     def _confirm_abort(self, question: str, then_quit: bool) -> None:
+        asked = question.split("\n")[0] + " (y / n)"
+        self._waiting(asked, True)  # the activity line says so, not what ran before the dialog
+
         def answered(yes: bool | None) -> None:
+            self._waiting(asked, False)
             # The run may have ended while the dialog was open.
             if yes and self.control is not None and self.running:
                 self._quit_when_done = then_quit
@@ -446,9 +465,9 @@ class StationApp(SideActions):
                 self._before_upload = self._phase_event
             self._phase_event = ev
             self.phase = ev.phase
-            self._visited.add(ev.phase)
+            self._visited = passed_phases(ev.phase, self._visited)  # a resumed run passed the earlier ones
             self._show_phases(ev.phase)
-            self.query_one("#phase-detail", Static).update(esc(activity_text(ev.phase, ev.detail)))
+            self._show_activity(esc(activity_text(ev.phase, ev.detail)))
             self._note((activity_text(ev.phase, ev.detail), "bold"))
         elif isinstance(ev, StepStarted):
             if self.phase == "upload" and self._before_upload is not None:  # the oracle's upload
@@ -466,7 +485,7 @@ class StationApp(SideActions):
             self._show_eta()
         elif isinstance(ev, Notice):
             if self.phase == "upload":  # read back, activation: shown where the operator looks
-                self.query_one("#phase-detail", Static).update(esc(activity_text("upload", ev.message)))
+                self._show_activity(esc(activity_text("upload", ev.message)))
             if ev.level == "warning":
                 self._note(("WARNING ", "bold yellow"), (ev.message, "yellow"))
                 self.notify(ev.message, severity="warning")
@@ -505,59 +524,7 @@ class StationApp(SideActions):
         if key in table.rows:
             table.move_cursor(row=table.get_row_index(key), animate=False)
 
-    # ------------------------------------------------------------------ end of run
-    def _show_summary(self, summary: RunSummary) -> None:
-        """Show how the run ended; called again with the worker's return value, which wins
-        over the event's copy (the session completes it, e.g. with the database path)."""
-        if summary == self.summary:
-            return
-        first = self.summary is None
-        self.summary = summary
-        if self.cell is not None and summary.cell and summary.cell != self.cell.name:
-            self.cell = dataclasses.replace(self.cell, name=summary.cell)  # as the session read it
-            self.title = self.cell.title()
-        self._show_result()
-        for widget in (self.query_one("#summary", Static), self.query_one("#summary-box")):
-            widget.set_class(summary.ok, "-ok")
-            widget.set_class(not summary.ok, "-failed")
-            widget.add_class("-shown")
-        self.add_class("-ended")
-        self.call_after_refresh(self._mark_more)
-        if summary.failure is None:
-            self._visited.add("done")
-            self._show_phases("done")
-            self.query_one("#phase-detail", Static).update("Done — [b]v[/] shows the results")
-            self._set_state(FINISHED)
-        else:
-            resume = f" — [b]{CONTINUE_KEY}[/] continues run #{summary.run_id}" if can_continue(summary) else ""
-            self.query_one("#phase-detail", Static).update(f"Stopped{resume}")
-            self._set_state(ABORTED if summary.outcome is Outcome.ABORTED else FAILED)
-        if first:
-            self._announce(summary)
-
-    def _show_result(self) -> None:
-        """The result panel at its width (again after a resize: its long values wrap under their
-        column)."""
-        for panel in self.query("#summary").results(Static):
-            if self.summary is not None:
-                width = panel.content_region.width or None
-                panel.update(summary_markup(self.summary, self.step_index, self.cell, width))
-                if width is None:  # not laid out yet: once it is
-                    self.call_after_refresh(self._show_result)
-
-    def _mark_more(self) -> None:
-        # what does not fit says so on the frame (the first rows hold what matters)
-        for box in self.query("#summary-box").results(VerticalScroll):
-            box.border_subtitle = "more: Tab, then PgDn ↓" if box.max_scroll_y > 0 else ""
-
-    def _announce(self, summary: RunSummary) -> None:
-        name = summary.outcome.name
-        if summary.failure is None:
-            self._note(("Run finished", "bold green" if summary.ok else "bold yellow"), f": {name}")
-        else:
-            message, _ = advice(summary.failure, self.cell, summary.run_id)
-            self._note((f"{name} (exit code {summary.exit_code})", "bold red"), f": {message}")
-
+    # ------------------------------------------------------------------ end of run (and station.ui.tui.ending)
     def on_worker_state_changed(self, event: Worker.StateChanged) -> None:
         if event.worker is not self.worker:
             return
@@ -579,9 +546,8 @@ class StationApp(SideActions):
                 self._show_summary(failure_summary(error, run_id=self.run_id, log_dir=self.log_dir))
         else:
             return
-        s = self.summary
-        if (s is not None and s.failure is None and s.run_id is not None and s.report is None
-                and self._write_report is not None):
+        s = self.summary  # every run that has a number gets its report, failed or aborted: it says how far it got
+        if s is not None and s.run_id is not None and s.report is None and self._write_report is not None:
             self._note("Writing the report …")
             self._make_report(s.run_id)
         if self._quit_when_done:

@@ -119,7 +119,10 @@ def cell_context(request: CellRequest, recheck: bool = False) -> CellContext:
     section = table.get("cell")
     name = section.get("name") if isinstance(section, dict) else None
     if not isinstance(name, str) or not name:
-        name = "simulated cell" if request.simulated and not request.config else Path(request.config or "cell").name
+        # the built-in cell's configuration is written by the simulators when a run starts: the title
+        # names it as such rather than change to that file's name mid-run
+        builtin = "built-in simulated cell" + (f" ({request.robot})" if request.robot else "")
+        name = builtin if request.simulated and not request.config else Path(request.config or "cell").name
     devices = table.get("devices")
     port = devices.get("probe_head") if isinstance(devices, dict) else None
     return CellContext(name=name, config=request.config, simulated=request.simulated, seed=request.seed,

@@ -111,6 +111,7 @@ class ResultsScreen(Screen[None]):
 
     DEFAULT_CSS = """
     ResultsScreen #results-head { height: auto; padding: 0 1; }
+    ResultsScreen TabbedContent { height: 1fr; }  /* the head stays in view: the screen never scrolls */
     ResultsScreen DataTable { height: 1fr; }
     ResultsScreen PlotextPlot { height: 1fr; min-height: 8; }
     ResultsScreen .text { height: auto; padding: 0 1; }

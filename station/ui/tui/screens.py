@@ -1,5 +1,5 @@
-"""The operator UI's dialogs: help, the list of unfinished runs to resume, and the questions
-the pipeline asks before it changes the controller (upload the table? keep it?).
+"""The operator UI's dialogs: help, the database's runs (to resume one, or to see its results),
+and the questions the pipeline asks before it changes the controller (upload the table? keep it?).
 
 They know nothing of a running app: each is given plain data and dismisses with the answer.
 """
@@ -7,6 +7,7 @@ They know nothing of a running app: each is given plain data and dismisses with 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 from rich.text import Text
 from textual import on
@@ -21,17 +22,18 @@ from station.cell.run.questions import KeepCorrection, Question, UploadProposal
 from station.core.units import ARCSEC, UM
 from station.ui.tui.widgets import esc
 
-__all__ = ["HelpScreen", "ResumeScreen", "QuestionScreen", "question_markup", "HELP_TEXT"]
+__all__ = ["HelpScreen", "ResumeScreen", "RunPick", "QuestionScreen", "question_markup", "HELP_TEXT"]
 
 HELP_TEXT = """\
 [b]Keys[/]
   [b]s[/]      start a new run (clears the screen)
-  [b]c[/]      continue the run that just stopped (aborted or failed) at its next step
+  [b]c[/]      continue the stopped run at its next step, if it can go on as is
   [b]r[/]      resume an interrupted run: pick it from the list of unfinished runs
   [b]p[/]      pause / resume at the next safe point (never during a probe touch)
   [b]a[/]      abort at the next safe point, after a confirmation
   [b]v[/]      results of the last run: parameters with σ, correlations,
-         residuals, verification before/after/oracle, predicted accuracy
+         residuals, verification before/after/oracle, predicted accuracy;
+         without one, pick a run of the database (also v in the r list)
   [b]?[/] [b]h[/] [b]F1[/] this help          [b]q[/] quit (asks while a run is in progress)
 
 [b]Screen[/]
@@ -43,9 +45,10 @@ HELP_TEXT = """\
   Devices: controller state and heartbeat, joints (° / mm), each probe as a bar over
   its stroke (centre ┃), a red ▒ bar when out of range.
   Notices: phases, warnings, upload read-back and activation.
-  Result (at the end): outcome, exit code, RMS before / after, gain, after /
-  oracle and the report first; what to do and the exact command line after a
-  failure. Tab, then PgDn scrolls a long one.
+  Result (at the end): "Next:" what to do now, for every outcome; the outcome,
+  exit code, RMS before / after, gain, after / oracle, the table left active
+  and the report; the exact command line that resumes. PgDn / PgUp
+  scroll a long one.
 
 [b]Upload[/]
   Before the table is sent the station shows it (values, grid, interpolation bound,
@@ -53,8 +56,9 @@ HELP_TEXT = """\
   keep it — [b]n[/] rolls the controller back. Either "no" ends as NOT_UPLOADED (11).
 
 [b]Report[/]
-  After a run that reached its end the report is written next to the run database
-  (report-<database name>-run-N/); the Result panel shows its path.
+  After every run with a run number (failed and aborted ones say how far they got)
+  the report is written next to the run database (report-<database name>-run-N/);
+  the Result panel shows its path.
 
 Esc, q or ? closes this help."""
 
@@ -77,10 +81,20 @@ class HelpScreen(ModalScreen[None]):
         self.dismiss(None)
 
 
-class ResumeScreen(ModalScreen[int | None]):
-    """The unfinished runs of the database, newest first; Enter resumes the chosen one."""
+@dataclass(frozen=True)
+class RunPick:
+    """A run picked from the database's list: to resume it, or to see its results (``results``)."""
 
-    BINDINGS = [Binding("escape", "cancel", "Cancel")]
+    run_id: int
+    results: bool = False
+
+
+class ResumeScreen(ModalScreen[RunPick | None]):
+    """The database's runs, newest first. To resume (``results=False``): the unfinished ones; Enter
+    resumes the chosen one, ``v`` shows its results. For the results view (``results=True``): the
+    calibrations that ended (whatever their outcome); Enter or ``v`` shows the chosen one's."""
+
+    BINDINGS = [Binding("escape", "cancel", "Cancel"), Binding("v", "results", "Results")]
 
     DEFAULT_CSS = """
     ResumeScreen { align: center middle; }
@@ -90,19 +104,23 @@ class ResumeScreen(ModalScreen[int | None]):
     ResumeScreen #resume-help { color: $text-muted; }
     """
 
-    def __init__(self, runs: Sequence[RunInfo], where: str = "") -> None:
+    def __init__(self, runs: Sequence[RunInfo], where: str = "", results: bool = False) -> None:
         super().__init__()
-        self.runs = [r for r in runs if r.resumable]
+        self.for_results = results
+        self.runs = [r for r in runs if (r.outcome is not None and r.kind == "calibration" if results else r.resumable)]
         self.where = where
 
     def compose(self) -> ComposeResult:
+        where = f" in {esc(self.where)}" if self.where else ""
         with Vertical() as box:
-            box.border_title = "Resume an interrupted run"
+            box.border_title = "Results of which run?" if self.for_results else "Resume an interrupted run"
             if not self.runs:
-                yield Label(f"No unfinished runs{' in ' + esc(self.where) if self.where else ''}.", id="no-runs")
+                what = "ended calibration runs" if self.for_results else "unfinished runs"
+                yield Label(f"No {what}{where}.", id="no-runs")
             else:
                 yield DataTable(id="runs", cursor_type="row", zebra_stripes=True)
-            yield Label("Enter: resume the selected run · Esc: cancel", id="resume-help")
+            yield Label("Enter or v: its results · Esc: cancel" if self.for_results
+                        else "Enter: resume the selected run · v: its results · Esc: cancel", id="resume-help")
 
     def on_mount(self) -> None:
         if not self.runs:
@@ -119,7 +137,14 @@ class ResumeScreen(ModalScreen[int | None]):
     def _selected(self, event: DataTable.RowSelected) -> None:
         event.stop()
         if event.row_key.value is not None:
-            self.dismiss(int(event.row_key.value))
+            self.dismiss(RunPick(int(event.row_key.value), self.for_results))
+
+    def action_results(self) -> None:
+        for table in self.query("#runs").results(DataTable):
+            if table.row_count:
+                key = table.coordinate_to_cell_key(table.cursor_coordinate).row_key.value
+                if key is not None:
+                    self.dismiss(RunPick(int(key), results=True))
 
     def action_cancel(self) -> None:
         self.dismiss(None)

@@ -25,7 +25,8 @@ from textual.widgets import Button, Label, Static
 from station.cell.run.events import DeviceSnapshot
 
 __all__ = ["APP_CSS", "ConfirmScreen", "DevicePanel", "Eta", "NoticeLog", "PHASES", "PHASE_NAMES", "STATE_TEXT",
-           "ACTIVE_STATES", "fmt_num", "fmt_clock", "esc", "phase_markup", "activity_text", "device_text"]
+           "ACTIVE_STATES", "fmt_num", "fmt_clock", "esc", "phase_markup", "passed_phases", "activity_text",
+           "device_text"]
 
 PHASES: tuple[str, ...] = ("connect", "plan", "measure", "identify", "correct", "upload", "verify", "done")
 
@@ -64,12 +65,13 @@ APP_CSS = """
     .-short #buttons { display: none; }
     .-wide #devices { width: 72; }
     .-ended #devices { display: none; }
-    .-ended #bottom { height: 1fr; max-height: 100%; }
-    .-ended #measurements { height: 1fr; }
+    /* after the end the result panel has the room: at 120×40 it shows whole, the table a few rows */
+    .-ended #bottom { height: 3fr; max-height: 100%; }
+    .-ended #measurements { height: 1fr; min-height: 6; }
     .-ended #summary-box { width: 2fr; }
     /* 80×24 after the end: the result and the notices take the screen (the table is in 'v') */
-    .-short.-ended #measurements, .-short.-ended #phases, .-short.-ended #step, .-short.-ended #progress {
-        display: none; }
+    .-short.-ended #measurements, .-short.-ended #phases, .-short.-ended #step, .-short.-ended #progress,
+    .-short.-ended #phase-detail { display: none; }
 """
 
 # Run states shown in the status line (and readable as StationApp.state).
@@ -125,6 +127,18 @@ def phase_markup(current: str | None, visited: set[str]) -> str:
         else:
             parts.append(f"[dim]{label}[/]")
     return " › ".join(parts)
+
+
+def passed_phases(current: str, visited: set[str]) -> set[str]:
+    """The phases ticked once ``current`` runs: those visited, and every one the run passes before
+    ``current`` (a resumed run starts at Measure or later: its Connect and Plan are done). The
+    verification before the correction comes before the upload, so Verify does not tick Upload."""
+    if current not in PHASES:
+        return visited | {current}
+    before = set(PHASES[:PHASES.index(current)])
+    if current == "verify" and "upload" not in visited:
+        before.discard("upload")
+    return visited | before | {current}
 
 
 def activity_text(phase: str, detail: str = "") -> str:

@@ -1,0 +1,74 @@
+"""Where the simulated robot really is: forward kinematics written from the robot file's
+definition, sharing no code with ``station.core`` (issue 33, part 7).
+
+The station's end-to-end tests compare what the station identifies with the simulated truth. If
+the truth were computed by the station's own ``station.core.kinematics.forward``, a fault there
+(a flipped sign, a wrong rotation order) would move truth and model together and every test would
+still agree with itself. So the truth follows the robot file's documented convention
+(docs/robot-file.md, "Transforms") directly, with scipy's rotations:
+
+    T_i = Trans(x, y, z) · Rz(yaw) · Ry(pitch) · Rx(roll)   then, for a joint transform,
+          · Rz(q) (revolute) or · Trans(0, 0, q) (prismatic)
+
+and the chain is the product over the transforms in file order, the set-up R first and the tool
+K last. ``scipy.spatial.transform.Rotation.from_euler("xyz", …)`` with lower-case (extrinsic)
+axes is exactly Rz(yaw)·Ry(pitch)·Rx(roll).
+
+Only the chain's structure (which transform carries which kind of joint) and the parameter
+vector are taken from the robot model: plain data, no computation.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+__all__ = ["true_forward"]
+
+
+def _static(params6: np.ndarray) -> np.ndarray:
+    """One transform's (4, 4) from its x, y, z [mm], roll, pitch, yaw [rad]."""
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_euler("xyz", params6[3:6]).as_matrix()
+    T[:3, 3] = params6[:3]
+    return T
+
+
+def _joint(kind: str, q: np.ndarray) -> np.ndarray:
+    """``(n, 4, 4)`` of the joint motion for joint values ``q`` ``(n,)`` [rad | mm]."""
+    T = np.broadcast_to(np.eye(4), (len(q), 4, 4)).copy()
+    if kind == "revolute":
+        T[:, :3, :3] = Rotation.from_rotvec(np.outer(q, [0.0, 0.0, 1.0])).as_matrix()
+    elif kind == "prismatic":
+        T[:, 2, 3] = q
+    else:
+        raise ValueError(f"unknown joint kind {kind!r}")
+    return T
+
+
+def true_forward(joint_kinds: Sequence[str | None], params: np.ndarray, joints: np.ndarray,
+                 setup: bool = True) -> np.ndarray:
+    """World←tool ``(n, 4, 4)`` of the true robot.
+
+    ``joint_kinds``: per transform, ``None`` (set-up, tool, fixed links), ``"revolute"`` or
+    ``"prismatic"``; ``params``: ``(6 · len(joint_kinds),)`` [mm, rad], transform by transform;
+    ``joints``: ``(n, g)`` [rad | mm], g the number of joint transforms. ``setup=False`` leaves
+    out the first transform (the robot's base frame, where a controller works).
+    """
+    p = np.asarray(params, dtype=float).reshape(len(joint_kinds), 6)
+    q = np.atleast_2d(np.asarray(joints, dtype=float))
+    n_joints = sum(kind is not None for kind in joint_kinds)
+    if q.shape[-1] != n_joints:
+        raise ValueError(f"expected {n_joints} joint values per row, got shape {q.shape}")
+    T = np.broadcast_to(np.eye(4), (q.shape[0], 4, 4)).copy()
+    j = 0
+    for t, kind in enumerate(joint_kinds):
+        if t == 0 and not setup:
+            continue
+        T = T @ _static(p[t])
+        if kind is not None:
+            T = T @ _joint(kind, q[:, j])
+            j += 1
+    return T
