@@ -20,8 +20,10 @@ body, and what the probe head touches.
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -64,6 +66,8 @@ class CellTruth:
     backlash: np.ndarray
     encoder_resolution: np.ndarray
     seed: int = 0
+    #: simulators.joint_errors.JointErrors of the arm (None: none): the oracle must know them too
+    joint_errors: Any = None
 
     def __post_init__(self) -> None:
         for name in ("params", "repeatability", "backlash", "encoder_resolution"):
@@ -143,7 +147,15 @@ class CellTruth:
     def with_change(self, delta: np.ndarray) -> "CellTruth":
         """The same robot after a step change ``delta`` (n_params,) of its parameters."""
         return CellTruth(self.model, self.params + np.asarray(delta, dtype=float), self.repeatability,
-                         self.backlash, self.encoder_resolution, self.seed)
+                         self.backlash, self.encoder_resolution, self.seed, self.joint_errors)
+
+    def joint_delta(self, q_commanded: np.ndarray) -> np.ndarray:
+        """``(n, g)`` [rad] how far the joints stand from the commanded ``(n, g)`` beyond the
+        backlash: the joint errors (compliance, gear harmonics; zeros without)."""
+        q = np.atleast_2d(np.asarray(q_commanded, dtype=float))
+        if self.joint_errors is None:
+            return np.zeros(q.shape)
+        return self.joint_errors.delta(self.model, self.params, q)
 
 
 @dataclass(frozen=True)
@@ -258,6 +270,8 @@ class SimulatedCell:
         self.thermal = thermal if thermal is not None and thermal.active else None
         # joints that bend under gravity and err once per turn (simulators/joint_errors.py; issue 30)
         self.joint_errors = joint_errors if joint_errors is not None and joint_errors.active else None
+        if self.joint_errors is not None:  # the truth the oracle is built from carries them
+            self.truth = dataclasses.replace(self.truth, joint_errors=self.joint_errors)
         self._motion_time_s = 0.0
         self.body = body if body is not None else CalibrationBody.generate(seed=seed)
         self.probe = probe if probe is not None else ProbeHeadPhysics(noise_mm=probe_noise_mm, seed=seed + 1)

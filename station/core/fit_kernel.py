@@ -19,9 +19,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import leastsq
+from scipy.optimize import _minpack
 
-from station.core.kinematics import _cross, _joint_matrix
+from station.core.kinematics import _joint_matrix
 from station.core.measurements import MeasurementSet
 from station.core.model import RobotModel
 from station.core.transforms import pose_error, pose_to_matrix
@@ -44,7 +44,8 @@ class FixedJointsChain:
                 motions.append(_joint_matrix(spec.joint, q[:, j]))
                 j += 1
         self._motions = motions
-        self._eye = np.broadcast_to(np.eye(4), (self.n, 4, 4))
+        self._eye = np.ascontiguousarray(np.broadcast_to(np.eye(4), (self.n, 4, 4)))
+        self._eye.flags.writeable = False
 
     def frames(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World←tool ``(n, 4, 4)`` and the frame in front of every transform ``(nt, n, 4, 4)``."""
@@ -63,6 +64,19 @@ class FixedJointsChain:
                 T = T @ m
         return T, P
 
+    def tool(self, p: np.ndarray, setup: bool) -> np.ndarray:
+        """World←tool ``(n, 4, 4)`` at ``p`` with or without the set-up transform: :meth:`frames`'s
+        chain (and so :func:`station.core.kinematics.forward`'s values) without the frames."""
+        C = pose_to_matrix(p.reshape(self.nt, 6))
+        n = self.n
+        T = self._eye
+        for t in range(0 if setup else 1, self.nt):
+            T = (T.reshape(4 * n, 4) @ C[t]).reshape(n, 4, 4)
+            m = self._motions[t]
+            if m is not None:
+                T = T @ m
+        return T
+
     def jacobian(self, T: np.ndarray, P: np.ndarray, p: np.ndarray) -> np.ndarray:
         """Geometric Jacobian ``(n, 6, n_params)`` from :meth:`frames`: forward_with_jacobian's
         columns, transform by transform (translations: the frame's axes; rotations about the
@@ -80,17 +94,27 @@ class FixedJointsChain:
         local[:, 0, 0], local[:, 1, 0], local[:, 2, 0] = cz * cy, sz * cy, -sy
         local[:, 0, 1], local[:, 1, 1] = -sz, cz
         local[:, 2, 2] = 1.0
-        RL = np.empty((nt, n, 3, 3))  # Rp @ local: one (3n, 3) · (3, 3) product per transform
-        for t in range(nt):
-            RL[t] = (Rp[t].reshape(3 * n, 3) @ local[t]).reshape(n, 3, 3)
-        lever = (T[None, :, :3, 3] - origin)[..., None, :]
+        # Rp @ local: one (3n, 3) · (3, 3) product per transform, all in one stacked call
+        RL = (Rp.reshape(nt, 3 * n, 3) @ local).reshape(nt, n, 3, 3)
+        lever = T[None, :, :3, 3] - origin  # (nt, n, 3)
+        l0, l1, l2 = lever[..., 0, None], lever[..., 1, None], lever[..., 2, None]
+        a0, a1, a2 = RL[:, :, 0], RL[:, :, 1], RL[:, :, 2]  # (nt, n, 3 [roll, pitch, yaw]) per coordinate
         J = np.zeros((n, 6, nt, 6))
-        J[:, :3, :, :3] = np.moveaxis(Rp, 0, 2)
-        J[:, :3, :, 3:] = np.moveaxis(_cross(np.swapaxes(RL, -1, -2), lever), (0, 3), (2, 1))
-        J[:, 3:, :, 3:] = np.moveaxis(RL, 0, 2)
+        J[:, :3, :, :3] = Rp.transpose(1, 2, 0, 3)
+        # axis × lever (kinematics._cross's products and differences), each coordinate written
+        # straight to its Jacobian row
+        J[:, 0, :, 3:] = (a1 * l2 - a2 * l1).transpose(1, 0, 2)
+        J[:, 1, :, 3:] = (a2 * l0 - a0 * l2).transpose(1, 0, 2)
+        J[:, 2, :, 3:] = (a0 * l1 - a1 * l0).transpose(1, 0, 2)
+        J[:, 3:, :, 3:] = RL.transpose(1, 2, 0, 3)
         if not self.setup:
             J[:, :, 0] = 0.0
         return J.reshape(n, 6, nt * 6)
+
+
+#: the entries of a rotation whose differences are its rotation vector's direction (pose_error's vee)
+_VEE_PLUS = (slice(None), np.array([2, 0, 1]), np.array([1, 2, 0]))
+_VEE_MINUS = (slice(None), np.array([1, 2, 0]), np.array([2, 0, 1]))
 
 
 class DataEvaluator:
@@ -137,8 +161,9 @@ class DataEvaluator:
         rotations' transposes kept and fewer array operations: the same values (rotations near
         180° take pose_error itself)."""
         dR = T[:, :3, :3] @ self._RmT
-        angle = np.arccos(np.clip((dR[:, 0, 0] + dR[:, 1, 1] + dR[:, 2, 2] - 1.0) / 2.0, -1.0, 1.0))
-        if np.any(angle > np.pi - 1e-6):
+        cos = (dR[:, 0, 0] + dR[:, 1, 1] + dR[:, 2, 2] - 1.0) / 2.0
+        angle = np.arccos(np.minimum(np.maximum(cos, -1.0), 1.0))  # np.clip's values, without its layers
+        if (angle > np.pi - 1e-6).any():
             return pose_error(T, self._meas).reshape(-1)
         small = angle < 1e-6
         if small.any():
@@ -147,9 +172,8 @@ class DataEvaluator:
             factor = angle / (2.0 * np.sin(angle))
         out = np.empty((self.chain.n, 6))
         out[:, :3] = T[:, :3, 3] - self._meas_p
-        out[:, 3] = (dR[:, 2, 1] - dR[:, 1, 2]) * factor
-        out[:, 4] = (dR[:, 0, 2] - dR[:, 2, 0]) * factor
-        out[:, 5] = (dR[:, 1, 0] - dR[:, 0, 1]) * factor
+        # (R21 − R12, R02 − R20, R10 − R01) · factor, the three rows at once
+        out[:, 3:] = (dR[_VEE_PLUS] - dR[_VEE_MINUS]) * factor[:, None]
         return out.reshape(-1)
 
     def _jacobian_rows(self, T: np.ndarray, J: np.ndarray) -> np.ndarray:
@@ -232,10 +256,19 @@ def minpack_lm(prob: FitProblem, x0: np.ndarray, max_nfev: int, tol: float = 1e-
     """Levenberg–Marquardt on ``prob`` from ``x0``: MINPACK's ``lmder`` with exactly the arguments
     scipy ``least_squares(method="lm", x_scale="jac")`` gives it (the same iterates, bit for
     bit), without that wrapper's per-call layers and its extra Jacobian at the end."""
-    x0 = np.array(x0, dtype=float)
-    if not np.all(np.isfinite(prob.fun(x0))):
+    x0 = np.array(x0, dtype=float).reshape(-1)
+    f0 = prob.fun(x0)
+    if not np.all(np.isfinite(f0)):
         raise ValueError("Residuals are not finite in the initial point.")
-    x, _, info, _, ier = leastsq(prob.fun, x0, Dfun=prob.jac, full_output=True, col_deriv=False, ftol=tol,
-                                 xtol=tol, gtol=tol, maxfev=max_nfev, factor=100.0, diag=None)
+    if np.size(f0) < x0.size:
+        raise TypeError(f"Improper input: func input vector length N={x0.size} must not exceed func output "
+                        f"vector length M={np.size(f0)}")
+    # MINPACK's lmder itself, called as scipy's ``leastsq`` calls it (the same compiled routine with the
+    # same arguments, so the same iterates), without leastsq's trial calls of fun and jac and the
+    # covariance it builds from MINPACK's factor at the end, which nothing here reads. The Jacobian goes
+    # over as its transpose (col_deriv): numpy lays it out column-major for MINPACK faster than the
+    # wrapper's element-by-element transposition does; the numbers are the same.
+    x, info, ier = _minpack._lmder(prob.fun, lambda x: prob.jac(x).T, x0, (), 1, 1, tol, tol, tol,
+                                   max_nfev if max_nfev > 0 else 100 * (x0.size + 1), 100.0, None)
     status = _STATUS.get(int(ier), -1)  # 6–8 (a tolerance below round-off) cannot occur at tol > eps
     return LMSolution(np.asarray(x, dtype=float), int(info["nfev"]), status, _MESSAGES[status])

@@ -15,11 +15,15 @@ Procedure (chapter §2.4/§3.3):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import functools
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import scipy.linalg
 
+from station.core.blas_threads import single_blas_thread
 from station.core.fit_kernel import DataEvaluator
 from station.core.measurements import MeasurementSet, residuals_and_jacobian
 from station.core.model import RobotModel
@@ -49,7 +53,10 @@ class Dependency:
 
 @dataclass(frozen=True)
 class Identifiability:
-    """Result of :func:`analyze`. Singular values are of the scaled candidate columns."""
+    """Result of :func:`analyze`. Singular values are of the scaled candidate columns.
+
+    ``dependencies`` are worked out when first read (a least-squares fit of every parameter left
+    out, which a fit never reads and a report reads once); ``find_dependencies`` computes them."""
 
     param_names: tuple[str, ...]
     candidates: tuple[str, ...]
@@ -59,14 +66,31 @@ class Identifiability:
     singular_values: np.ndarray
     condition: float
     chosen: tuple[str, ...]
-    chosen_singular_values: np.ndarray
-    chosen_condition: float
-    dependencies: tuple[Dependency, ...]
+    #: the chosen parameters' unit columns (of the triangular factor): their singular values
+    chosen_columns: np.ndarray = field(repr=False, compare=False)
+    find_dependencies: Callable[[], tuple[Dependency, ...]] = field(repr=False, compare=False)
     #: transforms at pitch ±90°, the gimbal lock of roll-pitch-yaw (:func:`gimbal_locked`)
     gimbal_locked: tuple[str, ...] = ()
     #: where a transform is locked: the rank of the chain itself (:func:`chain_jacobian`), which
     #: exceeds ``rank`` by the rotations the lock takes from this parametrisation; else None
     chain_rank: int | None = None
+
+    @cached_property
+    def chosen_singular_values(self) -> np.ndarray:
+        """Singular values of the chosen parameters' unit columns (worked out when first read)."""
+        with single_blas_thread():
+            return np.linalg.svd(self.chosen_columns, compute_uv=False)
+
+    @property
+    def chosen_condition(self) -> float:
+        sc = self.chosen_singular_values
+        return float(sc[0] / sc[-1]) if len(sc) else float("inf")
+
+    @cached_property
+    def dependencies(self) -> tuple[Dependency, ...]:
+        """Every parameter left out and what its effect merges into (empty from ``describe=False``)."""
+        with single_blas_thread():
+            return self.find_dependencies()
 
     @property
     def lost_to_gimbal_lock(self) -> int:
@@ -112,11 +136,20 @@ def structural_params(model: RobotModel, params) -> np.ndarray:
     (e.g. R.z ≡ K.z) into a near one that would pass a rank test as round-off-sized rank, so
     the choice of parameters is made at the design point and the fit then starts from ``params``."""
     p = np.array(params, dtype=float)
-    ang = model.is_angle()
-    snapped = np.round(p[ang] / (np.pi / 2)) * (np.pi / 2)
-    near = np.abs(p[ang] - snapped) < STRUCTURAL_SNAP_RAD
-    p[np.nonzero(ang)[0][near]] = snapped[near]
+    ang = _angle_index(p.size)
+    pa = p[ang]
+    snapped = np.round(pa / (np.pi / 2)) * (np.pi / 2)
+    near = np.abs(pa - snapped) < STRUCTURAL_SNAP_RAD
+    p[ang[near]] = snapped[near]
     return p
+
+
+@functools.cache
+def _angle_index(n_params: int) -> np.ndarray:
+    """The positions of the angles in a parameter vector of ``n_params`` (``RobotModel.is_angle``'s)."""
+    out = np.nonzero(np.tile(np.array([False, False, False, True, True, True]), n_params // 6))[0]
+    out.flags.writeable = False
+    return out
 
 
 def weighted_jacobian(model: RobotModel, data: MeasurementSet, params=None) -> np.ndarray:
@@ -176,6 +209,19 @@ def _rank(Js: np.ndarray) -> tuple[int, np.ndarray]:
     return int(np.sum(s > RANK_RTOL * s[0])) if s[0] > 0 else 0, s
 
 
+def _pivot_order(Js: np.ndarray) -> list[int]:
+    """The column order of ``scipy.linalg.qr(Js, pivoting=True)`` (strongest first): LAPACK's geqp3
+    called as that function calls it (a workspace query, then the factorisation), without its
+    layers and the R it builds, which nothing here reads."""
+    if Js.size == 0:
+        return list(range(Js.shape[1]))
+    lwork = scipy.linalg.lapack.dgeqp3(Js, lwork=-1)[-2][0].real.astype(np.int_)
+    _, jpvt, _, _, info = scipy.linalg.lapack.dgeqp3(Js, lwork=lwork)
+    if info < 0:
+        raise ValueError(f"illegal value in {-info}th argument of internal geqp3")
+    return (jpvt - 1).tolist()
+
+
 def _greedy(J: np.ndarray, norms: np.ndarray, order: list[int], rank: int) -> list[int]:
     """The columns of ``J`` taken in ``order`` when each is taken whose unit column has a part
     outside the span of those taken before it above ``GS_RTOL``, up to ``rank`` of them: the
@@ -188,7 +234,9 @@ def _greedy(J: np.ndarray, norms: np.ndarray, order: list[int], rank: int) -> li
     check agrees, the choice is Gram-Schmidt's; otherwise Gram-Schmidt itself decides."""
     if order and J.shape[0] >= len(order):
         V = J[:, order] / norms[order]
-        d = np.abs(np.diagonal(np.linalg.qr(V, mode="r"))).tolist()
+        # R's diagonal as LAPACK left it (mode "raw": the factor untouched, its transpose; mode "r"
+        # would copy out the whole triangle for the diagonal alone)
+        d = np.abs(np.diagonal(np.linalg.qr(V, mode="raw")[0])).tolist()
         taken: list[int] = []  # positions in order
         left: list[tuple[int, int]] = []  # (position, number taken before it)
         for k, dk in enumerate(d):
@@ -228,9 +276,10 @@ def analyze(model: RobotModel, data: MeasurementSet, params=None, prefer=(), fix
             describe: bool = True, jacobian: np.ndarray | None = None) -> Identifiability:
     """Identifiability of ``model``'s parameters from ``data`` at ``params`` (default nominal).
 
-    ``describe=False`` skips naming the dependencies (a least-squares fit per parameter left
-    out), which identification does not need. ``jacobian``: :func:`weighted_jacobian` at
-    ``params`` when the caller already has it.
+    ``describe=False``: no dependencies (``dependencies`` is empty); with ``describe`` they are
+    named when first read (a least-squares fit per parameter left out, which a fit does not need),
+    as are the chosen set's singular values. ``jacobian``: :func:`weighted_jacobian` at ``params``
+    when the caller already has it.
     """
     names = model.param_names
     for n in (*prefer, *fix, *exclude):
@@ -243,11 +292,12 @@ def analyze(model: RobotModel, data: MeasurementSet, params=None, prefer=(), fix
     norms = np.linalg.norm(J, axis=0)
     zero = norms <= ZERO_COLUMN_RTOL * norms.max()
     held = set(fix) | set(exclude)
-    cand = [i for i in range(len(names)) if not zero[i] and names[i] not in held]
+    is_zero = zero.tolist()
+    cand = [i for i in range(len(names)) if not is_zero[i] and names[i] not in held]
     Js = J[:, cand] / norms[cand]
     rank, s = _rank(Js)
     # Preference order: user's list first, then column-pivoted QR order (strongest first).
-    _, piv = scipy.linalg.qr(Js, mode="r", pivoting=True, check_finite=False)  # the order only
+    piv = _pivot_order(Js)
     index = {n: i for i, n in enumerate(names)}
     in_cand = set(cand)
     pref = [index[n] for n in prefer if index[n] in in_cand]
@@ -256,10 +306,35 @@ def analyze(model: RobotModel, data: MeasurementSet, params=None, prefer=(), fix
     chosen = sorted(_greedy(J, norms, order, rank))
     nc = norms[chosen]
     Jc = J[:, chosen] / nc
-    sc = np.linalg.svd(Jc, compute_uv=False)
+    cond = float(s[0] / s[rank - 1]) if rank else float("inf")
+    locked = gimbal_locked(model, params)
+    chain_rank = None
+    if locked:  # the count of the chain, to tell what the lock costs (only then: it is one more chain)
+        chain_rank = _scaled_rank(chain_jacobian(model, data, params), held, names)
+    return Identifiability(
+        param_names=names,
+        candidates=tuple(names[i] for i in cand),
+        zero_effect=tuple(names[i] for i, z in enumerate(is_zero) if z),
+        held=tuple(n for n in names if n in held),
+        rank=rank,
+        singular_values=s,
+        condition=cond,
+        chosen=tuple(names[i] for i in chosen),
+        chosen_columns=Jc,
+        # a partial, not a closure: the result pickles like any other
+        find_dependencies=functools.partial(_dependencies, names, J, norms, zero, chosen, Jc, nc) if describe else tuple,
+        gimbal_locked=locked,
+        chain_rank=chain_rank,
+    )
+
+
+def _dependencies(names: tuple[str, ...], J: np.ndarray, norms: np.ndarray, zero: np.ndarray, chosen: list[int],
+                  Jc: np.ndarray, nc: np.ndarray) -> tuple[Dependency, ...]:
+    """:func:`analyze`'s dependencies: every parameter left out, with the chosen ones its unit
+    column is a combination of (none: no effect)."""
     deps = []
     chosen_set = set(chosen)
-    left = [i for i in range(len(names)) if describe and i not in chosen_set and not zero[i]]
+    left = [i for i in range(len(names)) if i not in chosen_set and not zero[i]]
     fits: dict[int, tuple[float, list[float], list[bool]]] = {}
     if left:
         # Solve on unit columns (mm and rad comparable), all left-out columns at once; report
@@ -271,7 +346,7 @@ def analyze(model: RobotModel, data: MeasurementSet, params=None, prefer=(), fix
         keep = (np.abs(CS) > 1e-6).T.tolist()
         fits = {i: (resid[k], coef[k], keep[k]) for k, i in enumerate(left)}
     chosen_names = [names[c] for c in chosen]
-    for i in range(len(names) if describe else 0):
+    for i in range(len(names)):
         if i in chosen_set:
             continue
         if zero[i]:
@@ -281,26 +356,7 @@ def analyze(model: RobotModel, data: MeasurementSet, params=None, prefer=(), fix
         if res_i > 1e-6:
             continue  # held by the user but not a combination: identifiable, just not chosen
         deps.append(Dependency(names[i], tuple((n, c) for n, c, k in zip(chosen_names, coef_i, keep_i) if k)))
-    cond = float(s[0] / s[rank - 1]) if rank else float("inf")
-    locked = gimbal_locked(model, params)
-    chain_rank = None
-    if locked:  # the count of the chain, to tell what the lock costs (only then: it is one more chain)
-        chain_rank = _scaled_rank(chain_jacobian(model, data, params), held, names)
-    return Identifiability(
-        param_names=names,
-        candidates=tuple(names[i] for i in cand),
-        zero_effect=tuple(names[i] for i in np.nonzero(zero)[0]),
-        held=tuple(n for n in names if n in held),
-        rank=rank,
-        singular_values=s,
-        condition=cond,
-        chosen=tuple(names[i] for i in chosen),
-        chosen_singular_values=sc,
-        chosen_condition=float(sc[0] / sc[-1]) if len(sc) else float("inf"),
-        dependencies=tuple(deps),
-        gimbal_locked=locked,
-        chain_rank=chain_rank,
-    )
+    return tuple(deps)
 
 
 def require_parameters(model: RobotModel, names) -> list[int]:

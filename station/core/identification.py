@@ -48,7 +48,7 @@ from station.core.kinematics import forward
 from station.core.measurements import MeasurementSet
 from station.core.model import RobotModel
 from station.core.registration import DataInformation, Registration, data_information, likely_unit, register
-from station.core.transforms import pose_to_matrix
+from station.core.transforms import rpy_to_matrix
 from station.core.uncertainty import (
     LinearUncertainty,
     body_sandwich,
@@ -236,11 +236,12 @@ def _identify(model: RobotModel, data: MeasurementSet, start, prefer, fix, exclu
                 f"the measured distances are {scale:.4g}× the nominal model's"
                 + (f": they look like {likely[0]}, not mm. Label the columns with their unit or {likely[1]}"
                    if likely else "; check the length unit of the data and of the robot file"))
-    elif register_frame:
+    evaluator = DataEvaluator(model, data)  # one chain for the registration, the analysis, the fit and its result
+    if data.kind != "distance" and register_frame:
         pos = data.measured[:, :3, 3] if data.kind == "pose" else data.measured
         try:
             reg = register(model, data.joints, pos, _position_sigma(data), params=p0, tool_unknown=tool_unknown,
-                           explain_marker=start is None)
+                           explain_marker=start is None, base_points=evaluator.chain.tool(p0, setup=False)[:, :3, 3])
         except IdentificationError:
             if start is None:
                 raise
@@ -256,13 +257,12 @@ def _identify(model: RobotModel, data: MeasurementSet, start, prefer, fix, exclu
             # translation enters linearly; a rotation within REGISTRATION_START_ANGLE does), so
             # parameters that merge into R keep their file values; otherwise start from the
             # registration (an instrument turned or flipped far from the file's R).
-            R_file = pose_to_matrix(p0[:6])[:3, :3]
+            R_file = rpy_to_matrix(p0[3:6])  # pose_to_matrix(p0[:6])'s rotation
             angle = float(np.arccos(np.clip((np.trace(R_file.T @ reg.transform[:3, :3]) - 1) / 2, -1, 1)))
             if angle > REGISTRATION_START_ANGLE:
                 p0[:6] = reg.setup_pose
                 notes.append(f"set-up R started from the registration (the robot file's R is turned "
                              f"{np.degrees(angle):.0f}° from the instrument's frame)")
-    evaluator = DataEvaluator(model, data)  # one chain for the analysis, the fit and its result
     p_struct = structural_params(model, p0)
     ident = analyze(model, data, p_struct, prefer=model.prefer if prefer is None else prefer,
                     fix=fix, exclude=exclude, describe=True,
@@ -332,8 +332,9 @@ def _identify(model: RobotModel, data: MeasurementSet, start, prefer, fix, exclu
     if data.has_body_sigma:
         notes.append(body_note(data))
     rn = (r * w).reshape(data.n_items, data.rows_per_item)
-    per_item = np.sqrt(np.mean(rn**2, axis=1))
-    rms = float(np.sqrt(np.mean(rn**2)))
+    rn2 = rn**2  # np.mean's sums and divisions, without its layers
+    per_item = np.sqrt(np.add.reduce(rn2, 1) / rn2.shape[1])
+    rms = float(np.sqrt(np.add.reduce(rn2, None) / rn2.size))
     if not np.all(np.isfinite(p)) or rms > max_rms_normalized:
         raise IdentificationError(_diverged(rms, sol.nfev, reg, loss))
     if unc.rank < len(idx):

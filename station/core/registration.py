@@ -92,6 +92,17 @@ class Registration:
         }
 
 
+def _centroid(x: np.ndarray) -> np.ndarray:
+    """``x.mean(0)`` of points ``(n, 3)``: numpy's own sum and division, without its layers."""
+    return np.add.reduce(x, 0) / x.shape[0]
+
+
+def _rms_norm(x: np.ndarray) -> float:
+    """``float(np.sqrt(np.mean(np.sum(x**2, axis=1))))``: the RMS length of the rows of ``x`` by
+    numpy's own sums and division, without its layers."""
+    return float(np.sqrt(np.add.reduce(np.add.reduce(x**2, 1)) / x.shape[0]))
+
+
 def likely_unit(scale: float) -> tuple[str, str] | None:
     for s, unit, fix in _UNITS:
         if abs(np.log(scale / s)) < np.log(1.15):
@@ -99,11 +110,14 @@ def likely_unit(scale: float) -> tuple[str, str] | None:
     return None
 
 
-def _similarity(b: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
+def _similarity(b: np.ndarray, m: np.ndarray, bc: np.ndarray | None = None, mc: np.ndarray | None = None,
+                B: np.ndarray | None = None) -> tuple[np.ndarray, float, np.ndarray]:
     """Rotation (3, 3), scale and translation (3,) with ``m ≈ s R b + t`` (least squares). The
-    rotation is also the rigid fit's (the same centred points): ``m ≈ R b + mc − R bc``."""
-    bc, mc = b.mean(axis=0), m.mean(axis=0)
-    B, M = b - bc, m - mc
+    rotation is also the rigid fit's (the same centred points): ``m ≈ R b + mc − R bc``.
+    ``bc``, ``mc``: the centroids of ``b`` and ``m``, ``B``: ``b − bc``, where the caller has them."""
+    bc = b.mean(axis=0) if bc is None else bc
+    mc = m.mean(axis=0) if mc is None else mc
+    B, M = b - bc if B is None else B, m - mc
     rot, _ = Rotation.align_vectors(M, B)
     R = rot.as_matrix()
     s = float(np.sum(M * (B @ R.T)) / np.sum(B * B))
@@ -168,7 +182,8 @@ def _marker_refusal(fit: MarkerFit, rms_rigid: float) -> ConfigError:
 
 
 def register(model: RobotModel, joints: np.ndarray, measured_mm: np.ndarray, sigma_mm: float,
-             params=None, tool_unknown: bool = False, explain_marker: bool = True) -> Registration:
+             params=None, tool_unknown: bool = False, explain_marker: bool = True,
+             base_points: np.ndarray | None = None) -> Registration:
     """Register measured tool positions ``(n, 3)`` [mm] to ``model`` at ``joints`` ``(n, g)``.
 
     Raises :class:`ConfigError` for a unit mistake (scale far from 1: names m, inch, µm) and
@@ -179,13 +194,17 @@ def register(model: RobotModel, joints: np.ndarray, measured_mm: np.ndarray, sig
     ``tool_unknown``: the tool point (K's translation) is fitted with the frame
     (:func:`station.core.tool_frame.fit_marker_offset`); ``Registration.tool_offset_mm`` holds it.
     ``explain_marker=False`` skips the marker diagnosis (a caller that goes on from its own start).
+    ``base_points``: ``(n, 3)`` the model's tool points at ``joints`` and ``params`` without the
+    set-up (``forward(..., setup=False)``'s), where the caller has them.
     """
     q = np.asarray(joints, dtype=float)
     m = np.asarray(measured_mm, dtype=float)
     p = np.array(model.nominal if params is None else params, dtype=float)
-    b = forward(model, q, p, setup=False)[:, :3, 3]
-    spread_b = float(np.sqrt(np.mean(np.sum((b - b.mean(0)) ** 2, axis=1))))
-    spread_m = float(np.sqrt(np.mean(np.sum((m - m.mean(0)) ** 2, axis=1))))
+    b = forward(model, q, p, setup=False)[:, :3, 3] if base_points is None else base_points
+    bc, mc = _centroid(b), _centroid(m)
+    Bc = b - bc  # the centred points, shared by the spread, the line check and the rigid fit
+    spread_b = _rms_norm(Bc)
+    spread_m = _rms_norm(m - mc)
     if spread_b < 1e-6 * max(1.0, float(np.abs(b).max())):
         raise ConfigError("the nominal model puts every row at the same tool position; measure "
                           "poses spread over the workspace (move every joint)")
@@ -193,7 +212,7 @@ def register(model: RobotModel, joints: np.ndarray, measured_mm: np.ndarray, sig
         raise ConfigError("every measured position is the same point; check the export of the "
                           "instrument (all rows equal or zero) and measure poses spread over the workspace")
     # Rotation needs two independent directions in the nominal points.
-    sv = np.linalg.svd(b - b.mean(0), compute_uv=False)
+    sv = np.linalg.svd(Bc, compute_uv=False)
     if sv[1] < 1e-6 * sv[0]:
         raise ConfigError("the tool positions lie on one line, which leaves the tracker frame's "
                           "rotation about it open; measure poses that move at least two axes")
@@ -208,19 +227,22 @@ def register(model: RobotModel, joints: np.ndarray, measured_mm: np.ndarray, sig
                 f"the joint order and units of the data file and that the robot file is this robot")
         p[-6:-3] = marker.offset_mm
         b = forward(model, q, p, setup=False)[:, :3, 3]
-    R_sim, s, _ = _similarity(b, m)
+        bc = _centroid(b)
+        Bc = b - bc
+    R_sim, s, _ = _similarity(b, m, bc, mc, Bc)
     # Rigid fit: the start of the set-up transform, and the residual check.
     if marker is not None:
         T = marker.transform
     else:
-        bc, mc = b.mean(0), m.mean(0)
         T = np.eye(4)
         T[:3, :3] = R_sim  # Rotation.align_vectors(m - mc, b - bc): the similarity fit's rotation
         T[:3, 3] = mc - T[:3, :3] @ bc
     res = np.linalg.norm(m - (b @ T[:3, :3].T + T[:3, 3]), axis=1)
     rms = float(np.sqrt(np.mean(res**2)))
     worst = tuple(int(i) for i in np.argsort(-res)[:5])
-    rows = ", ".join(f"row {i + 1}: {res[i]:.1f} mm" for i in worst)
+
+    def rows() -> str:  # the worst rows, for a refusal only
+        return ", ".join(f"row {i + 1}: {res[i]:.1f} mm" for i in worst)
     unit = "consistent (similarity scale {:.5f})".format(s)
     if marker is not None:
         d = marker.shift_mm
@@ -242,7 +264,7 @@ def register(model: RobotModel, joints: np.ndarray, measured_mm: np.ndarray, sig
         raise IdentificationError(
             f"the measured positions are {s:.4g}× the nominal model's (spread {spread_m:.4g} vs "
             f"{spread_b:.4g} mm), which no unit and no tool offset explains, and the best rigid alignment "
-            f"misses by {rms:.3g} mm RMS (worst {rows}; {_limit_text(limit, sigma_mm, spread_b)}): check the "
+            f"misses by {rms:.3g} mm RMS (worst {rows()}; {_limit_text(limit, sigma_mm, spread_b)}): check the "
             f"joint order and joint units of the data file, the length unit of x, y, z, and that the robot "
             f"file is this robot")
     reg = Registration(T, s, res, rms, limit, worst, unit,
@@ -252,7 +274,7 @@ def register(model: RobotModel, joints: np.ndarray, measured_mm: np.ndarray, sig
         raise IdentificationError(
             f"after the best rigid alignment the measured positions still miss the nominal model by "
             f"{rms:.3g} mm RMS (an uncalibrated robot misses by about {limit:.3g} mm at most: "
-            f"{_limit_text(limit, sigma_mm, spread_b)}); worst {rows}. Check the joint order and joint "
+            f"{_limit_text(limit, sigma_mm, spread_b)}); worst {rows()}. Check the joint order and joint "
             f"units (deg/rad, mm/m) of the data file, the sign conventions, and that the robot file is "
             f"this robot; if the instrument is noisier than σ, give its σ with --sigma-position")
     return reg
@@ -303,27 +325,31 @@ def data_information(model: RobotModel, joints: np.ndarray, measured: np.ndarray
     uncertainty too small)."""
     q = np.asarray(joints, dtype=float)
     n = q.shape[0]
+    mm = None
     if measured is not None:
         mm = np.asarray(measured, dtype=float).reshape(n, -1)
         big = np.nonzero(np.abs(mm) > MAX_ABS_MM)[0]
         if big.size:
             raise ConfigError(f"row {big[0] + 1}: a measured value beyond ±{MAX_ABS_MM:.0e} mm is not a "
                               f"robot cell; repair the export (overflow, wrong column) and measure again")
-        rows = np.concatenate([q, mm], axis=1)
-    else:
-        rows = q
     if np.any(np.abs(q) > MAX_ABS_MM):
         bad = int(np.nonzero(np.any(np.abs(q) > MAX_ABS_MM, axis=1))[0][0])
         raise ConfigError(f"row {bad + 1}: joint values beyond ±{MAX_ABS_MM:.0e} are not a robot; "
                           f"repair the data file")
     dup: tuple[tuple[int, int], ...] = ()
-    if measured is not None:  # equal joints alone are a legitimate repeat; equal readings are not
-        first = _first_equal_row(rows)
-        dup = tuple((int(first[i]), i) for i in np.flatnonzero(first != np.arange(n)).tolist())
     n_distinct = int(np.count_nonzero(_first_equal_row(q) == np.arange(n)))
+    # equal joints alone are a legitimate repeat; equal readings are not (a row repeats another
+    # only where its joints do, so with every joint row distinct there is nothing to look for)
+    if mm is not None and n_distinct < n:
+        first = _first_equal_row(np.concatenate([q, mm], axis=1))
+        dup = tuple((int(first[i]), i) for i in np.flatnonzero(first != np.arange(n)).tolist())
     spread = q.max(axis=0) - q.min(axis=0) if n else np.zeros(q.shape[1])
-    pts = None if measured is None else np.asarray(measured, dtype=float).reshape(n, -1)[:, :3]
-    ps = 0.0 if pts is None else float(np.sqrt(np.mean(np.sum((pts - pts.mean(0)) ** 2, axis=1))))
+    pts = None
+    if measured is not None:
+        m = np.asarray(measured, dtype=float)
+        # poses are (n, 4, 4): their points are the translation column, not the first matrix row
+        pts = m[:, :3, 3] if m.ndim == 3 and m.shape[1:] == (4, 4) else m.reshape(n, -1)[:, :3]
+    ps = 0.0 if pts is None else _rms_norm(pts - _centroid(pts))
     info = DataInformation(n, n_distinct, dup, spread, ps)
     need = model.minimal_param_count
     min_distinct = max(3, -(-need // max(1, rows_per_item)))

@@ -177,3 +177,78 @@ def test_median_is_numpys():
         assert _median(x) == float(np.median(x))
         assert _median(x.reshape(1, -1)) == float(np.median(x.reshape(1, -1)))
     assert np.isnan(_median(np.array([1.0, np.nan, 2.0])))
+
+
+@pytest.mark.parametrize("robot", sorted(ROBOTS))
+def test_chain_tool_is_forward_and_registration_from_it_is_the_same(robot):
+    from station.core.fit_kernel import FixedJointsChain
+    from station.core.kinematics import forward
+    from station.core.registration import register
+
+    model, true, data = _data(robot, "pose", 30, seed=6)
+    chain = FixedJointsChain(model, data.joints, setup=True)
+    for p in (model.nominal, true):
+        for setup in (True, False):
+            assert np.array_equal(chain.tool(p, setup=setup), forward(model, data.joints, p, setup=setup))
+    pos = data.measured[:, :3, 3]
+    ref = register(model, data.joints, pos, 0.01)
+    fast = register(model, data.joints, pos, 0.01, base_points=chain.tool(model.nominal, setup=False)[:, :3, 3])
+    assert np.array_equal(fast.transform, ref.transform) and np.array_equal(fast.residuals_mm, ref.residuals_mm)
+    assert (fast.scale, fast.rms_mm, fast.worst_rows) == (ref.scale, ref.rms_mm, ref.worst_rows)
+
+
+def test_duplicate_rows_are_found_only_where_joints_repeat():
+    from station.core.registration import data_information
+    from station.errors import ConfigError
+
+    model, _, data = _data("sr800", "pose", 20, seed=7)
+    q = np.array(data.joints)
+    q[5] = q[2]  # a repeated pose measured again: other readings, accepted
+    meas = np.array(data.measured)
+    info = data_information(model, q, meas, rows_per_item=6)
+    assert info.n_distinct_joints == 19 and info.duplicate_rows == ()
+    meas[5] = meas[2]  # the same reading too: a copied row
+    with pytest.raises(ConfigError, match="repeat another row exactly"):
+        data_information(model, q, meas, rows_per_item=6)
+
+
+def test_analysis_reads_its_dependencies_and_chosen_singular_values_when_asked():
+    model, _, data = _data("sr800", "pose", 25, seed=8)
+    p = structural_params(model, model.nominal)
+    a = analyze(model, data, p, prefer=model.prefer)
+    assert "dependencies" not in vars(a) and "chosen_singular_values" not in vars(a)
+    R = np.linalg.qr(weighted_jacobian(model, data, p), mode="r")
+    idx = a.chosen_indices()
+    unit = R[:, idx] / np.linalg.norm(R, axis=0)[idx]
+    assert np.array_equal(a.chosen_singular_values, np.linalg.svd(unit, compute_uv=False))
+    assert a.dependencies and a.dependencies is a.dependencies  # computed once, then kept
+    assert analyze(model, data, p, prefer=model.prefer, describe=False).dependencies == ()
+
+
+def test_registrations_sums_are_numpys():
+    from station.core.registration import _centroid, _rms_norm
+
+    rng = np.random.default_rng(5)
+    for _ in range(300):
+        n, scale = int(rng.integers(1, 200)), 10.0 ** rng.uniform(-3, 4)
+        frames = rng.standard_normal((n, 4, 4)) * scale
+        for x in (rng.standard_normal((n, 3)) * scale, frames[:, :3, 3]):  # strided: a frame's points
+            assert np.array_equal(_centroid(x), x.mean(0))
+            assert _rms_norm(x) == float(np.sqrt(np.mean(np.sum(x**2, axis=1))))
+
+
+def test_the_point_spread_of_pose_data_is_the_spread_of_their_positions():
+    # pose data are (n, 4, 4): the spread is that of the translation column (it once read the
+    # rotation's first row, about 1 "mm" whatever the robot's reach)
+    from station.core.kinematics import forward
+    from station.core.registration import data_information
+    from station.io.robot_files import load_robot
+
+    model = load_robot("sr800")
+    q = np.random.default_rng(3).uniform(model.joint_limits[:, 0], model.joint_limits[:, 1], (30, model.n_joints))
+    T = forward(model, q)
+    info = data_information(model, q, T, rows_per_item=6)
+    p = T[:, :3, 3]
+    expected = float(np.sqrt(np.mean(np.sum((p - p.mean(axis=0)) ** 2, axis=1))))
+    assert info.point_spread_mm == pytest.approx(expected, rel=1e-12) and info.point_spread_mm > 50.0
+    assert data_information(model, q, p).point_spread_mm == pytest.approx(expected, rel=1e-12)

@@ -12,7 +12,7 @@ from station.core.kinematics import forward, scara_ik
 from station.core.model import RobotModel
 from station.core.poses import spread_joints
 from station.core.transforms import pose_error, pose_to_matrix
-from station.errors import ConfigError
+from station.errors import ConfigError, UnreachableError
 from station.io.robot_files import load_robot
 from station.io.robot_import import robot_from_dh
 
@@ -150,7 +150,7 @@ def test_unreachable_and_near_singular_targets_are_flagged():
     s = solve_ik(ARM, T, configuration=configuration(ARM, q))
     assert s.status[0] is IKStatus.NEAR_SINGULARITY and "singularity" in s.reason[0]
     assert s.has_joints[0] and not s.ok[0]
-    with pytest.raises(Exception, match="cannot be reached"):
+    with pytest.raises(UnreachableError, match="cannot be reached"):
         s.raise_for_failures()
     np.testing.assert_array_equal(s.raise_for_failures(allow_singular=True), s.joints)
 

@@ -21,6 +21,7 @@ from station.core.registration import rigid_residual_mm
 from station.core.tool_frame import fit_marker_offset
 from station.core.transforms import matrix_to_pose
 from station.core.units import DEG
+from station.errors import ConfigError
 from station.io.datafile import read_measurement_file, read_table
 from station.io.robot_files import load_robot
 from station.ui.cli.main import main
@@ -212,13 +213,13 @@ def test_utf16_and_semicolon_exports_are_read(tmp_path):
     assert t.columns["q1"][0] == pytest.approx(1.5 * DEG) and t.columns["x"][0] == pytest.approx(3.25)
     assert any("UTF-16" in n for n in t.notes)
     (tmp_path / "b.csv").write_bytes(b"q1 [deg],x [mm]\n1,\x002\n")
-    with pytest.raises(Exception, match="NUL bytes"):
+    with pytest.raises(ConfigError, match="NUL bytes"):
         read_table(tmp_path / "b.csv")
 
 
 def test_a_known_column_still_needs_its_unit(tmp_path):
     (tmp_path / "u.csv").write_text("Q1,x [mm]\n1,2\n")
-    with pytest.raises(Exception, match="column 'Q1' has no unit"):
+    with pytest.raises(ConfigError, match="column 'Q1' has no unit"):
         read_table(tmp_path / "u.csv")
 
 

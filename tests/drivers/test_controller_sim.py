@@ -7,6 +7,7 @@ import pytest
 
 from drivers.controller import (
     ControllerConnectionError,
+    ControllerError,
     ControllerLinkLost,
     DriveFault,
     EmergencyStop,
@@ -93,7 +94,7 @@ def test_pending_motion_blocks_new_motion_and_stop_aborts():
             ModbusController("127.0.0.1", sim.port, heartbeat_period=0.05) as c:
         st = c.move_joints([2.0, 0.0, -100.0, 0.0], speed=0.2)  # ~4 s
         wait_for(lambda: c.status().moving, 2.0, "moving bit")
-        with pytest.raises(Exception, match="still in progress"):
+        with pytest.raises(ControllerError, match="still in progress"):
             c.move_joints([0.0, 0.0, -100.0, 0.0])
         c.stop(timeout=2.0)
         with pytest.raises(MotionAborted):

@@ -6,7 +6,10 @@ One simulated calibration is made; the three other runs are derived from its dat
 those runs end (the measurements a run never took removed, its stored outcome replaced), which
 costs no second calibration. The print test drives Debian's Chromium through Selenium (CDP
 ``Page.printToPDF``, the report's own print style sheet) and reads the PDF with poppler's
-``pdftotext``; it is skipped where they are not installed (.ci/run installs them).
+``pdftotext``; it is skipped where they are not installed (.ci/run installs them). Every printed
+page is also compared with the page images and facts kept in tests/ui/data/report_pages/ (a layout
+regression, tolerant of changed digits: report_pages.py; STATION_UPDATE_REPORT_PAGES=1 rewrites
+them), and the "before" figure says what it is measured on.
 """
 
 from __future__ import annotations
@@ -17,11 +20,13 @@ import re
 import shutil
 import sqlite3
 import subprocess
+import warnings
 from html import unescape
 from html.parser import HTMLParser
 from pathlib import Path
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 
 from station.cell.records.summary import ErrorStats, RunSummary
@@ -143,6 +148,10 @@ def test_every_run_that_ends_gets_a_report_saying_how_far_it_got(runs):
     # how the AP/RP test departs from ISO 9283's
     departures = ok.by_id["iso-departures"]
     assert "where ISO 9283 measures 30" in departures and "P1 … P5" in departures and "rated load" in departures
+    # what "before" is measured on, and why the plan changes it (in this test: each test of the
+    # module that a worker runs costs it the calibration)
+    _check_before_basis(runs)
+    _check_held_out_poses_move_with_the_plan(runs)
 
 
 def test_a_report_that_cannot_be_built_is_a_bare_one_not_exit_1(runs, monkeypatch, capsys):
@@ -159,6 +168,60 @@ def test_a_report_that_cannot_be_built_is_a_bare_one_not_exit_1(runs, monkeypatc
     page = _parse(out / "report.html")
     assert "IDENTIFICATION_FAILED" in page.by_id["outcome"] and "log-scaled" in page.by_id["progress"] + str(page.by_id)
     assert not list(out.glob("station-error-*.log"))  # the traceback goes beside the database, not into the report
+
+
+def _check_before_basis(runs) -> None:
+    """Issue 29: "before" read 3243.6 µm in one run and 821.2 µm in another of one cell with only
+    [plan] repeats and verification_cycles changed. The report says what it is measured on."""
+    ok = _parse(runs.html["success"])
+    basis = ok.by_id["before-basis"]
+    assert basis.startswith("'Before' is measured on 11 held-out poses × 5 cycles (55 readings), with no correction "
+                            "table active")
+    assert "set-up R.* identified in this run" in basis and "[plan] repeats and verification_cycles" in basis
+    md = (runs.html["success"].parent / "report.md").read_text(encoding="utf-8")
+    assert "'Before' is measured on 11 held-out poses × 5 cycles (55 readings)" in md
+    assert "before-basis" not in _parse(runs.html["aborted"]).by_id  # no 'before' measured: nothing to explain
+
+
+def _check_held_out_poses_move_with_the_plan(runs) -> None:
+    """Why "before" moves with [plan] repeats and verification_cycles: the soft-limit check covers
+    the last repetition's approach, which they widen, so fewer (point, elbow) pass and others are
+    held out. The built-in cell's stored configuration, planned again (nothing moves)."""
+    from station.cell.config.cell_config import parse_text
+    from station.cell.plan.measurement_plan import build_plan
+
+    with sqlite3.connect(runs.dbs["success"]) as c:
+        text = c.execute("SELECT config_toml FROM runs WHERE id = 1").fetchone()[0]
+
+    def held(repeats: int, cycles: int) -> list[tuple[str, int]]:
+        plan = text.replace("repeats = 4\n", f"repeats = {repeats}\n").replace(
+            "verification_cycles = 5\n", f"verification_cycles = {cycles}\n")
+        assert plan != text or (repeats, cycles) == (4, 5)
+        return [(t.point_id, t.elbow) for t in build_plan(parse_text(plan, "<stored>")).verification]
+
+    assert held(1, 1) == held(4, 5) and len(held(4, 5)) == 11
+    wide = held(20, 30)
+    assert len(wide) == 8 and set(wide) < set(held(4, 5))
+
+
+def test_the_text_summary_says_what_before_is_measured_on():
+    import io
+
+    from station.ui.cli.commands_cell import print_error_table
+    from station.ui.report.before_basis import before_basis
+
+    def stats(n_poses, cycles, n):
+        return ErrorStats(n=n, rms_um=682.8, max_um=915.3, ap_max_um=905.7, rp_max_um=31.8, n_poses=n_poses,
+                          cycles=cycles)
+    out = io.StringIO()
+    print_error_table(RunSummary(Outcome.SUCCESS, before=stats(11, 5, 55), after=stats(11, 5, 55)), out)
+    assert ("  before: 11 held-out poses × 5 cycles (55 readings), no correction table active, targets through "
+            "the nominal model and this run's set-up R") in out.getvalue()
+    # two plans, two bases: the figures alone would read alike
+    assert before_basis(stats(11, 5, 55)) != before_basis(stats(8, 30, 240))
+    assert "8 held-out poses × 30 cycles (240 readings)" in (before_basis(stats(8, 30, 240)) or "")
+    assert "11 held-out poses × up to 5 cycles (53 readings)" in (before_basis(stats(11, 5, 53)) or "")
+    assert before_basis(None) is None
 
 
 def test_the_rp_note_never_contradicts_its_numbers():
@@ -212,7 +275,7 @@ def printed(runs, tmp_path_factory):
     return pdfs
 
 
-def test_printed_pages_carry_page_x_of_y_and_the_document_id_and_no_orphaned_heading(runs, printed):
+def test_printed_pages_carry_page_x_of_y_and_the_document_id_and_no_orphaned_heading(runs, printed, tmp_path):
     # one test for the four reports (not one each): under -n auto each worker that runs a test of
     # this module pays for the calibration and the browser
     for name in ("success", "target-missed", "correction-failed", "aborted"):
@@ -232,3 +295,73 @@ def test_printed_pages_carry_page_x_of_y_and_the_document_id_and_no_orphaned_hea
             for k, line in enumerate(body):
                 if any(line == h or (len(h) > 30 and line.startswith(h[:30])) for h in headings):
                     assert len(body) - 1 - k >= 2, f"{name}: heading {line!r} orphaned at the foot of page {i}"
+    _check_layout(runs, printed, tmp_path)  # in this test too, for the same reason
+
+
+# ----------------------------------------------------------------------------- layout regression
+def _check_layout(runs, printed, tmp_path: Path) -> None:
+    """Every page of the four printed reports against the kept page images and facts
+    (tests/ui/data/report_pages/, report_pages.py says how they compare): the same pages, the same
+    headings on each, and no page whose coarse ink map moved. STATION_UPDATE_REPORT_PAGES=1
+    rewrites the references (docs/report.md, "Layout regression")."""
+    if not shutil.which("pdftoppm"):
+        pytest.skip("needs poppler-utils' pdftoppm")
+    import report_pages as rp
+
+    current = {}
+    for name, pdf in printed.items():
+        headings = [h for h in _parse(runs.html[name]).headings if h.strip()]
+        current[name] = rp.Pages(rp.ink_maps(pdf), rp.headings_per_page(_pdf_pages(pdf), headings))
+    if rp.updating():
+        for name, pages in current.items():
+            rp.save(name, pages)
+        rp.save_renderer()
+        pytest.skip(f"references rewritten in {rp.DATA} ({rp.UPDATE_ENV} set): nothing compared")
+    here, then = rp.renderer(), rp.kept_renderer()
+    if then is not None and here != then:
+        warnings.warn(f"report page images not compared: they were printed by {then}, this machine has {here} "
+                      f"({rp.UPDATE_ENV}=1 rewrites them for this renderer)", stacklevel=2)
+        return
+    problems = []
+    for name, pages in current.items():
+        kept = rp.load(name)
+        if kept is None:
+            problems.append(f"{name}: no reference kept; run with {rp.UPDATE_ENV}=1 to write one")
+            continue
+        rp.save(name, pages, tmp_path)  # the pages as printed now, beside the reference, for a look
+        if len(pages.maps) != len(kept.maps):
+            problems.append(f"{name}: {len(pages.maps)} pages, the reference has {len(kept.maps)}")
+        for i, (now, then) in enumerate(zip(pages.headings, kept.headings), 1):
+            if now != then:
+                problems.append(f"{name} page {i}: headings {now}, the reference has {then}")
+        for i, (now, then) in enumerate(zip(pages.maps, kept.maps), 1):
+            share = rp.changed_share(now, then)
+            if share > rp.MAX_CHANGED:
+                problems.append(f"{name} page {i}: {share:.0%} of the page's blocks moved (at most "
+                                f"{rp.MAX_CHANGED:.0%})")
+    assert not problems, ("the printed layout changed (pages as printed now: " + str(tmp_path) + "; if "
+                          "intended, " + rp.UPDATE_ENV + "=1 rewrites the references):\n  " + "\n  ".join(problems))
+
+
+def test_the_page_comparison_sees_a_moved_block_and_not_a_changed_digit():
+    """The comparison itself, on a kept page's ink map: a digit's few pixels (one block changed)
+    pass, the page's lower half moved down by three lines (a table pushed, a heading carried over)
+    and a plot gone fail."""
+    import report_pages as rp
+
+    kept = rp.load("success")
+    if kept is None:
+        pytest.skip("no reference kept yet")
+    page = max(kept.maps, key=lambda m: float(m.mean()))  # the page with the most on it
+    rows = page.shape[0]
+    digit = page.copy()
+    r, c = np.argwhere(page > 0.5)[0]
+    digit[r, c] = 0.0
+    assert rp.changed_share(page, digit) < rp.MAX_CHANGED
+    moved = page.copy()
+    moved[rows // 2 + 3:] = page[rows // 2:-3]
+    moved[rows // 2:rows // 2 + 3] = 0.0
+    assert rp.changed_share(page, moved) > rp.MAX_CHANGED
+    gone = page.copy()
+    gone[rows // 4:rows // 2] = 0.0
+    assert rp.changed_share(page, gone) > rp.MAX_CHANGED

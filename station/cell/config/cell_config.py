@@ -17,12 +17,14 @@ Every key is checked before anything moves, in two stages:
 
 Every failure is a :class:`ConfigError` (exit code 2); a malformed file never gives a traceback.
 
-This module holds the validated configuration (the frozen dataclasses), stage 2 and the loading;
-the template is :mod:`station.cell.config.template`. The names of both stay importable from here.
+This module holds the validated configuration (:class:`CellConfig`), stage 2 and the loading; the
+sections' dataclasses are :mod:`station.cell.config.sections`, the template
+:mod:`station.cell.config.template`. Their names stay importable from here.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 import tomllib
@@ -83,6 +85,19 @@ from station.cell.config.schema import (
     _Warmup,
     bounds_text,
 )
+from station.cell.config.sections import (
+    CellIdentity,
+    ConformanceConfig,
+    CorrectionConfig,
+    DeviceConfig,
+    FleetConfig,
+    IdentificationConfig,
+    PlanConfig,
+    RecheckConfig,
+    ToolConfig,
+    VerificationConfig,
+    WarmupConfig,
+)
 from station.cell.config.template import TEMPLATE
 from station.core.model import RobotModel
 from station.core.table_grid import GridSpec
@@ -96,166 +111,6 @@ from station.io.robot_files import load_robot, read_user_text
 #: a body of 5 000 points is ~0.5 MB)
 MAX_CONFIG_BYTES = 4 * 1024 * 1024
 
-
-@dataclass(frozen=True)
-class DeviceConfig:
-    probe_head: str
-    baudrate: int  # checked against the dialect's unit; the factory default when the file gives none
-    probe_timeout_s: float
-    controller_host: str
-    controller_port: int
-    device_id: int
-    word_order: str
-    controller_timeout_s: float
-    motion_timeout_s: float
-    probe_protocol: str = "keyence-dl-rs1a"
-    probe_bytesize: int = 8
-    probe_parity: str = "none"
-    controller_register_base: int = 0
-    probe_refresh_s: float | None = None  # None: the dialect's
-    controller_link_timeout_s: float = 1.0
-
-
-@dataclass(frozen=True)
-class PlanConfig:
-    elbows: tuple[int, ...]
-    approach_deg: float
-    approach_mm: float
-    clearance_mm: float
-    speed: float
-    settle_s: float
-    samples: int
-    max_spread_um: float
-    both_directions: bool
-    verification_every: int  # every k-th (point, elbow) is held out for verification
-    verification_cycles: int
-    select: int  # > 0: keep this many identification steps, chosen by D-optimality
-    repeats: int  # visits per identification target (each with a slightly varied approach)
-    recenter_attempts: int
-    recenter_margin_mm: float
-    max_residual_um: float
-    remeasure_attempts: int = 1  # re-touches when a redundant head's probes disagree
-
-
-@dataclass(frozen=True)
-class IdentificationConfig:
-    objective: str
-    sigma_position_um: float
-    sigma_angle_arcsec: float
-    prefer: tuple[str, ...]
-    fix: tuple[str, ...]
-    exclude: tuple[str, ...]
-
-    def pose_sigma(self) -> np.ndarray:
-        """σ of the six pose residual rows (x, y, z [mm], rx, ry, rz [rad])."""
-        s, a = self.sigma_position_um * 1e-3, self.sigma_angle_arcsec * ARCSEC
-        return np.array([s, s, s, a, a, a])
-
-
-@dataclass(frozen=True)
-class CorrectionConfig:
-    """[correction]: x/y/z_mm (start, stop, step) [mm], all or none (designed); region (lo, hi) per axis or None."""
-    x_mm: tuple[float, float, float] | None
-    y_mm: tuple[float, float, float] | None
-    z_mm: tuple[float, float, float] | None
-    yaw_step_deg: float | None
-    max_interpolation_um: float
-    region: tuple[tuple[float, float], tuple[float, float], tuple[float, float]] | None = None
-
-    @property
-    def explicit(self) -> bool:  # the grid is given (x_mm, y_mm, z_mm), not designed
-        return self.x_mm is not None and self.y_mm is not None and self.z_mm is not None
-
-
-@dataclass(frozen=True)
-class RecheckConfig:
-    """``station recheck``: how many poses, and the tolerances (0: derived from the baseline)."""
-
-    poses: int = 10
-    tolerance_um: float = 0.0  # RMS position drift accepted; 0: 3× the baseline's accuracy
-    offset_tolerance_arcsec: float = 0.0  # 0: tolerance_um over a 500 mm lever
-    length_tolerance_um: float = 0.0  # 0: tolerance_um
-    repeat_tolerance_um: float = 0.0  # first pose vs its repeat at the end; 0: tolerance_um
-
-
-@dataclass(frozen=True)
-class FleetConfig:
-    """``[fleet]``: where finished runs are published (None: nowhere, unless STATION_FLEET_URL),
-    this station's name there, and the days between rechecks the fleet's due dates use."""
-
-    url: str | None = None
-    station: str | None = None
-    recheck_interval_days: int = 30
-
-
-@dataclass(frozen=True)
-class VerificationConfig:
-    """``[verification]``: the accuracy specification the report judges the held-out poses by
-    after correction (ISO 9283 AP and RP per pose [µm]; None: not judged) and the test conditions
-    it states (air temperature [°C], mass on the flange [kg]; None: not recorded)."""
-
-    max_ap_um: float | None = None
-    max_rp_um: float | None = None
-    temperature_c: float | None = None
-    load_kg: float | None = None
-
-
-@dataclass(frozen=True)
-class CellIdentity:
-    """``[cell]``'s traceability: the robot's serial number, the controller (make, model, serial)
-    and the operator, as the report names them ("": not given)."""
-
-    robot_serial: str = ""
-    controller: str = ""
-    operator: str = ""
-
-
-@dataclass(frozen=True)
-class WarmupConfig:
-    """A warm-up before measuring: cycles of a motion program over the workspace, each ended by
-    a measurement of one reference pose, until its extrapolated remaining drift is below
-    ``converged_um`` (``until = "converged"``) or for ``minutes`` (``until = "time"``)."""
-
-    until: str = "converged"
-    minutes: float = 20.0
-    max_cycles: int = 200
-    converged_um: float = 2.0
-    program_poses: int = 8
-
-
-@dataclass(frozen=True, eq=False)
-class ConformanceConfig:
-    """``station conformance``: where the robot is parked and how far the kit may move it.
-    ``park_joints`` [rad | mm]; the park zone is ``park_joints ± test_move_joint`` per joint."""
-
-    park_joints: np.ndarray
-    test_move_joint: np.ndarray  # test_move in joint units (rad for revolute, mm for prismatic)
-    move_speed: float
-    position_tolerance_joint: np.ndarray  # in joint units
-
-    def zone(self) -> np.ndarray:
-        """The park zone ``(n_joints, 2)`` [lower, upper] (rad | mm)."""
-        return np.stack([self.park_joints - self.test_move_joint, self.park_joints + self.test_move_joint], axis=1)
-
-
-@dataclass(frozen=True, eq=False)
-class ToolConfig:
-    """A tool that replaces the probe head after the calibration (``[[tool]]``).
-
-    ``tcp``: ``(6,)`` x, y, z [mm], roll, pitch, yaw [rad] of the tool centre point in the flange
-    (tool-mount) frame, from the tool's own measurement (the file holds degrees).
-    ``correction``: the grid its table is built on: ``[correction]`` with the tool's own
-    ``x_mm`` / ``y_mm`` / ``z_mm`` where it gives them (a tool works at other heights than the head).
-    """
-
-    name: str
-    tcp: np.ndarray
-    correction: CorrectionConfig
-
-    @property
-    def tcp_matrix(self) -> np.ndarray:
-        """``(4, 4)`` flange ← TCP [mm]."""
-        return pose_to_matrix(self.tcp)
 
 
 @dataclass(frozen=True, eq=False)  # identity: it holds arrays, and caches key on it
@@ -471,6 +326,33 @@ def _probe_line(d: Any, source: str) -> Any:
         raise ConfigError(f"{source}: [devices]: {exc}") from None
 
 
+def _check_terms(ident: IdentificationConfig, model: RobotModel, source: str, robot_file: str) -> IdentificationConfig:
+    """``[identification] model``: the error terms beyond geometry need an articulated arm
+    (compensated targets; a SCARA's correction table holds the geometric model) and poses. With
+    terms, the robot file's ``[gravity]`` and ``[gears]`` (TOML; docs/error-terms.md) join it."""
+    if ident.terms == ("geometric",):
+        return ident
+    where = f"{source}: identification.model = {ident.model!r}"
+    if model.is_scara:
+        raise ConfigError(f"{where}: the SCARA's correction table is built from the geometric model; error terms "
+                          f"beyond geometry are not in it yet. Write model = \"geometric\" (or leave it out); "
+                          f"'station identify DATA.csv --model auto' fits them on exported data")
+    if ident.objective != "pose":
+        raise ConfigError(f"{where}: the error terms are fitted to poses; write objective = \"pose\" or "
+                          f"model = \"geometric\"")
+    if ident.terms != ("auto",):
+        from station.core.model_selection import expand_families
+
+        try:
+            expand_families(model, ident.terms)
+        except ConfigError as exc:
+            raise ConfigError(f"{where}: {exc}") from None
+    from station.io.robot_terms import read_gear_ratios, read_gravity
+
+    return dataclasses.replace(ident, gravity=read_gravity(robot_file, model.n_joints),
+                               gear_ratios=read_gear_ratios(robot_file, model.n_joints))
+
+
 def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellConfig:
     """A validated :class:`CellConfig` from parsed TOML; :class:`ConfigError` names the key."""
     if not isinstance(data, dict):
@@ -506,7 +388,9 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
     ident = IdentificationConfig(
         objective=i.objective, sigma_position_um=i.sigma_position_um,
         sigma_angle_arcsec=i.sigma_angle_arcsec,
-        prefer=tuple(model.prefer if i.prefer is None else i.prefer), fix=tuple(i.fix), exclude=tuple(i.exclude))
+        prefer=tuple(model.prefer if i.prefer is None else i.prefer), fix=tuple(i.fix), exclude=tuple(i.exclude),
+        model=i.model.strip())
+    ident = _check_terms(ident, model, source, _robot_path(f.robot.model, source))
     for key in ("prefer", "fix", "exclude"):
         for n in getattr(ident, key):
             try:
@@ -589,7 +473,7 @@ def parse_text(text: str, source: str = "<config>") -> CellConfig:
 
 __all__ = [  # the loading's names, the template, and the schema's (config_schema) re-exported
     "MAX_CONFIG_BYTES", "DeviceConfig", "PlanConfig", "IdentificationConfig", "CorrectionConfig", "RecheckConfig",
-    "WarmupConfig", "VerificationConfig", "CellIdentity", "ConformanceConfig", "ToolConfig", "CellConfig", "correction_grid", "parse_config",
+    "WarmupConfig", "VerificationConfig", "CellIdentity", "ConformanceConfig", "ToolConfig", "FleetConfig", "CellConfig", "correction_grid", "parse_config",
     "simulation_settings", "load_config", "parse_text", "TEMPLATE", "MAX_MM", "_NO_CONTROL", "Text", "PathText",
     "PointId", "ParamName", "Mm", "Deg", "Pose", "GridStep", "GridAxis", "_POSE_WHAT", "_num", "_absent", "_Section",
     "_Cell", "_Robot", "_Limits", "_Point", "_Body", "_CONTROLLER", "_Devices", "_Plan", "_Identification",

@@ -196,6 +196,22 @@ class _Identification(_Section):
     prefer: list[ParamName] = _absent(max_length=500, description='parameter names such as "K.x"')
     fix: list[ParamName] = Field([], max_length=500, description='parameter names such as "K.x"')
     exclude: list[ParamName] = Field([], max_length=500, description='parameter names such as "K.x"')
+    # the error terms beyond geometry (issue 30, docs/error-terms.md): what `identify --model` takes
+    model: Text = Field("geometric", description='"geometric", "auto", or terms joined by "+" such as '
+                                                 '"compliance+cyclic"')
+
+    @field_validator("model")
+    @classmethod
+    def _model_terms(cls, v: str) -> str:
+        names = [n.strip() for n in v.split("+")]
+        if v.strip() == "auto" or all(_TERM.match(n) for n in names):
+            return v
+        raise ValueError('write "geometric", "auto", or terms joined by "+": compliance, cyclic, cyclic2, '
+                         'cyclic.q<j>, cyclic2.q<j>, drift (e.g. "compliance+cyclic")')
+
+
+#: one term family of ``[identification] model`` (backlash needs approach signs a cell's plan does not give)
+_TERM = re.compile(r"^(geometric|compliance|cyclic2?|cyclic2?\.q[1-9][0-9]?|drift)$")
 
 
 class _Region(_Section):

@@ -183,6 +183,9 @@ sigma_angle_arcsec = 20.0        # 0.01 … 3600
 # prefer = ["K.x", ...]          # minimal-set preferences; default: the robot file's
 # fix = []
 # exclude = []
+model = "geometric"              # error terms beyond geometry (docs/error-terms.md): "geometric", "auto"
+#                                # (kept where cross-validation says so) or terms such as "compliance+cyclic";
+#                                # a six-axis arm only (a SCARA's correction table is geometric)
 
 [correction]
 # The correction table's grid describes the head frame's origin (MKKS, the point the head's CMM

@@ -197,6 +197,33 @@ class CompensationSummary:
 
 
 @dataclass(frozen=True)
+class ErrorTermEstimate:
+    """A fitted error term beyond geometry: value and σ in ``unit`` (rad, rad/(N·m), mm, …)."""
+
+    name: str
+    value: float
+    sigma: float
+    unit: str
+
+
+@dataclass(frozen=True)
+class ErrorModelSummary:
+    """``[identification] model`` (issue 30, docs/error-terms.md): the families ``chosen`` (empty:
+    the geometric fit), how they were chosen (``summary``, ``cv``), the cross-validated position RMS
+    of the geometric and of the chosen model [µm], the kept ``terms``, and the identification's
+    position residual RMS with them [µm]."""
+
+    model: str
+    chosen: tuple[str, ...]
+    summary: str
+    cv: str
+    cv_geometric_um: float
+    cv_chosen_um: float
+    rms_residual_um: float
+    terms: tuple[ErrorTermEstimate, ...] = ()
+
+
+@dataclass(frozen=True)
 class RecentringStats:
     """Readings of one kind that were re-centred to bring the probes into their stroke
     (:mod:`station.cell.run.recentring`): how many of how many, and the displacement's position
@@ -249,6 +276,7 @@ class RunSummary:
     #: why a run that identified ends NOT_UPLOADED by itself: "correction_bound" (no table within the
     #: controller's capacity meets correction.max_interpolation_um for the identified robot); None otherwise
     not_uploaded_reason: str | None = None
+    error_model: ErrorModelSummary | None = None  # [identification] model other than geometric (issue 30)
 
     @property
     def exit_code(self) -> int:
@@ -339,7 +367,7 @@ class RunSummary:
         if self.db is not None:
             out["db"] = self.db
         for key in ("identification", "correction", "compensation", "before", "after", "oracle", "upload",
-                    "reversal", "failure", "tables"):
+                    "reversal", "failure", "tables", "error_model"):
             value = getattr(self, key)
             if value is not None:
                 out[key] = _plain(dataclasses.asdict(value))
@@ -361,7 +389,8 @@ class RunSummary:
             out["tools"] = [{**_plain(dataclasses.asdict(t)), "after_vs_oracle": t.after_vs_oracle}
                             for t in self.tools]
         out["units"] = {"lengths": "µm (keys *_um)", "times": "s (keys *_s, seconds)",
-                        "parameters": "mm and rad (identification.parameters)"}
+                        "parameters": "mm and rad (identification.parameters)",
+                        "error terms": "each term's own unit (error_model.terms[].unit)"}
         return out
 
     @classmethod
@@ -383,7 +412,7 @@ class RunSummary:
             tools=tuple(_build(ToolSummary, t) for t in d.get("tools", ())),
             compensation=sub("compensation", CompensationSummary), tables=sub("tables", TableSummary),
             recentring=tuple(_build(RecentringStats, r) for r in d.get("recentring", ())),
-            not_uploaded_reason=d.get("not_uploaded_reason"))
+            not_uploaded_reason=d.get("not_uploaded_reason"), error_model=sub("error_model", ErrorModelSummary))
 
 
 _KIND_WORDS = {"identification": "identification", "reversal": "reversal", "verification_before": "before",
@@ -409,6 +438,8 @@ def _build(typ: type, value: Any) -> Any:
         v = value[f.name]
         if f.name == "parameters":
             v = tuple(ParameterEstimate(**p) for p in v)
+        elif f.name == "terms" and typ is ErrorModelSummary:
+            v = tuple(ErrorTermEstimate(**t) for t in v)
         elif isinstance(v, Sequence) and not isinstance(v, str):
             v = tuple(v)
         kwargs[f.name] = v

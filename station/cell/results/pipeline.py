@@ -275,9 +275,11 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
         emit(Notice("warning", f"suspected outliers among identification measurements: {list(res.outliers)}"))
     R_id = res.params[:6]
     if not cfg.model.is_scara:  # an articulated arm: compensated targets, no table (issue 9)
+        from station.cell.results.pipeline_terms import select_terms  # [identification] model (issue 30)
+
         return articulated_correction(cfg, runner, db, run_id, steps, emit, with_oracle, summary, res,
                                       upload=options.upload, min_gain=options.min_gain,
-                                      oracle_truth=options.oracle_truth)
+                                      oracle_truth=options.oracle_truth, terms=select_terms(cfg, records, res))
 
     emit(PhaseChanged("correct"))
     assert pre.design is not None  # a SCARA's pre-motion check designs its table

@@ -25,10 +25,19 @@ from station.cell.results.pipeline_results import (
     verification_orientation_errors,
     verified_outcome,
 )
+from station.cell.results.pipeline_terms import (
+    JointDelta,
+    error_model_record,
+    error_model_summary,
+    terms_delta,
+    terms_note,
+    truth_delta,
+)
 from station.cell.run.events import Event, Notice, PhaseChanged
 from station.cell.run.recentring import stored_recentring
 from station.cell.run.runner import Procedure, Runner, approach_and_read
 from station.core.identification import IdentificationResult
+from station.core.model_selection import Selection
 from station.core.transforms import invert, matrix_to_pose, pose_to_matrix
 from station.errors import Outcome
 
@@ -36,12 +45,15 @@ __all__ = ["articulated_targets", "joint_offset_figures", "articulated_correctio
 
 
 def articulated_targets(cfg: CellConfig, steps: Sequence[PlannedStep], params: np.ndarray | None,
-                        R_world_base: np.ndarray) -> dict[tuple[int, int], tuple[np.ndarray, np.ndarray]]:
+                        R_world_base: np.ndarray, delta: JointDelta | None = None
+                        ) -> dict[tuple[int, int], tuple[np.ndarray, np.ndarray]]:
     """Per verification target (point, configuration code): the joints the controller will
     command and the Cartesian command (base frame, (6,)). ``params`` None: the plain target
     through the nominal IK (before correction); else the target compensated with ``params``
     (:func:`station.core.compensation.compensated_targets`, in the configuration of the planned
-    joints). Raises :class:`UnreachableError` naming a target that cannot be compensated."""
+    joints) and, where given, the joint errors ``delta`` beyond geometry
+    (:func:`station.core.term_compensation.compensated_targets_with_terms`). Raises
+    :class:`UnreachableError` naming a target that cannot be compensated."""
     from station.core.compensation import compensated_targets
     from station.core.ik import configuration as arm_configuration
     from station.core.ik import solve_ik
@@ -65,7 +77,13 @@ def articulated_targets(cfg: CellConfig, steps: Sequence[PlannedStep], params: n
     else:
         p = np.array(params, dtype=float)
         p[:6] = R_world_base
-        comp = compensated_targets(cfg.model, p, T_world, q0=q0, setup=True, allow_singular=True)
+        if delta is None:
+            comp = compensated_targets(cfg.model, p, T_world, q0=q0, setup=True, allow_singular=True)
+        else:
+            from station.core.term_compensation import compensated_targets_with_terms
+
+            comp = compensated_targets_with_terms(cfg.model, p, delta, T_world, q0=q0, setup=True,
+                                                  allow_singular=True)
         bad = [(i, r) for i, s, r in comp.failures()]
         joints, commands = comp.joints, comp.commands
     if bad:
@@ -119,13 +137,26 @@ def joint_offset_figures(cfg: CellConfig, steps: Sequence[PlannedStep], records:
 def articulated_correction(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tuple[PlannedStep, ...],
                            emit: Callable[[Event], None], with_oracle: bool, summary: RunSummary,
                            res: IdentificationResult, *, upload: bool, min_gain: float,
-                           oracle_truth: Any) -> RunSummary:
+                           oracle_truth: Any, terms: Selection | None = None) -> RunSummary:
     """Correct and verify an articulated arm: no table; the held-out targets are commanded as
     Cartesian targets, before correction as they are, after it compensated with the identified
     model (and, in simulation, with the true one: the oracle). Beside the full model: what
-    joint-zero offsets alone would reach on the same targets, and the orientation errors."""
+    joint-zero offsets alone would reach on the same targets, and the orientation errors.
+    ``terms``: the error model of ``[identification] model`` (:mod:`station.cell.results.pipeline_terms`);
+    with terms kept, the targets are compensated with the geometry fitted with them and the terms,
+    and the oracle with the simulator's joint errors as well as its geometry."""
     total = len(steps)
-    R_id = res.params[:6]
+    params, delta = res.params, None
+    if terms is not None:
+        es = error_model_summary(cfg, terms)
+        db.save_result(run_id, "error_model", error_model_record(cfg, terms))
+        note = terms_note(es)
+        emit(Notice("info", note))
+        summary = summary.replace(error_model=es, notes=(*summary.notes, note))
+        delta = terms_delta(cfg, terms)
+        if delta is not None:
+            params = np.asarray(terms.fit.params, dtype=float)
+    R_id = params[:6]
     ARCSEC_RAD = np.pi / 180.0 / 3600.0
 
     def measure(kind: StepKind, targets: dict) -> ErrorStats | None:
@@ -139,15 +170,18 @@ def articulated_correction(cfg: CellConfig, runner: Runner, db: RunDB, run_id: i
 
     orient: dict[str, dict[str, float]] = {}
     emit(PhaseChanged("correct"))
-    after_targets = articulated_targets(cfg, steps, res.params, R_id)  # every target compensable, before moving
-    extra: dict[str, Any] = {"method": "compensated targets", "n_targets": len(after_targets)}
+    after_targets = articulated_targets(cfg, steps, params, R_id, delta)  # every target compensable, before moving
+    extra: dict[str, Any] = {"method": "compensated targets" + (" with error terms" if delta else ""),
+                             "n_targets": len(after_targets)}
     p_true = oracle_params(cfg, oracle_truth) if oracle_truth is not None else None
+    true_delta = truth_delta(oracle_truth)  # the simulator's joint errors: the oracle knows them too
     if cfg.tools:  # [[tool]]: each tool's own compensated targets, stored as tool:<name>
         summary = summary.replace(tools=run_tools(cfg, db, run_id, steps, res.params, None, p_true,
                                                   oracle_truth, emit))
     try:
         extra["joint_offsets_only"] = joint_offset_figures(
-            cfg, steps, db.measurements(run_id, kind=StepKind.IDENTIFICATION.value), res.params, p_true)
+            cfg, steps, db.measurements(run_id, kind=StepKind.IDENTIFICATION.value), res.params,
+            p_true if true_delta is None else None)  # a geometric truth misses a bending arm: predicted then
     except Exception as exc:  # noqa: BLE001 - a figure beside the result must not stop the run
         emit(Notice("warning", f"joint-offset-only figure not computed: {exc}"))
     runner.guard.table = None
@@ -156,7 +190,10 @@ def articulated_correction(cfg: CellConfig, runner: Runner, db: RunDB, run_id: i
         controller.deactivate_table()
 
     emit(PhaseChanged("verify", "before correction"))
-    summary = summary.replace(before=measure(StepKind.VERIFY_BEFORE, articulated_targets(cfg, steps, None, R_id)))
+    # before: the plain targets through the geometric fit's set-up, as in a geometric session (the
+    # set-up fitted with the terms may differ along what R and A1 share, and the gain compares alike)
+    summary = summary.replace(before=measure(StepKind.VERIFY_BEFORE,
+                                             articulated_targets(cfg, steps, None, res.params[:6])))
     if not upload:
         return _articulated_done(db, run_id, summary.replace(upload_skipped=True, outcome=Outcome.NOT_UPLOADED),
                                  extra, orient, emit)
@@ -164,7 +201,8 @@ def articulated_correction(cfg: CellConfig, runner: Runner, db: RunDB, run_id: i
     summary = summary.replace(after=measure(StepKind.VERIFY_AFTER, after_targets))
     if with_oracle and p_true is not None:
         emit(PhaseChanged("verify", "oracle (true parameters)"))
-        summary = summary.replace(oracle=measure(StepKind.ORACLE, articulated_targets(cfg, steps, p_true, p_true[:6])))
+        summary = summary.replace(oracle=measure(StepKind.ORACLE, articulated_targets(cfg, steps, p_true, p_true[:6],
+                                                                                      true_delta)))
     outcome, missed = verified_outcome(cfg, summary, min_gain)
     summary = summary.replace(notes=(*summary.notes, *missed))
     db.set_status(run_id, "verified")
@@ -176,7 +214,7 @@ def _articulated_done(db: RunDB, run_id: int, summary: RunSummary, extra: dict[s
     """Store the articulated arm's figures (result ``articulated``) and state them as notes."""
     extra["orientation"] = orient
     db.save_result(run_id, "articulated", extra)
-    notes = ["correction: compensated targets (an articulated arm takes no correction table)"]
+    notes = [f"correction: {extra.get('method', 'compensated targets')} (an articulated arm takes no correction table)"]
     if orient:
         notes.append("orientation error RMS: " + ", ".join(
             f"{k.replace('verification_', '')} {v['rms_arcsec']:.1f}″" for k, v in orient.items()))

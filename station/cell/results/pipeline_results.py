@@ -28,7 +28,7 @@ from station.core.table_grid import GridSpec
 from station.core.transforms import invert
 from station.errors import IdentificationError, Outcome
 
-__all__ = ["verified_outcome", "reversal_error", "identify_run", "verification_errors", "verification_orientation_errors",
+__all__ = ["verified_outcome", "reversal_error", "identify_run", "run_measurements", "verification_errors", "verification_orientation_errors",
            "oracle_params", "grid_for", "build_table_for"]
 
 
@@ -71,6 +71,13 @@ def reversal_error(cfg: CellConfig, forward_records: Sequence[MeasurementRecord]
 def identify_run(cfg: CellConfig, records: Sequence[MeasurementRecord]) -> IdentificationResult:
     """Identification from the run's stored measurements (pose or distance objective), with the
     body's CMM uncertainty (``cfg.body_sigma``) in the weights and the σ when it is not 0."""
+    return identify(cfg.model, run_measurements(cfg, records), prefer=cfg.identification.prefer or None,
+                    fix=cfg.identification.fix, exclude=cfg.identification.exclude)
+
+
+def run_measurements(cfg: CellConfig, records: Sequence[MeasurementRecord]) -> MeasurementSet:
+    """The :class:`MeasurementSet` :func:`identify_run` fits: the valid identification records in
+    their order, pose or distance objective, the body's CMM σ in the weights."""
     T, q, pts = _world_heads(cfg, records)
     if len(T) < 5:
         raise IdentificationError(
@@ -91,8 +98,7 @@ def identify_run(cfg: CellConfig, records: Sequence[MeasurementRecord]) -> Ident
         # the lever runs from the point's origin to the measured head frame
         idx = np.asarray(pts, dtype=int)
         data = data.with_body(idx, cfg.body_sigma, T[:, :3, 3] - cfg.body_points[idx, :3, 3])
-    return identify(cfg.model, data, prefer=cfg.identification.prefer or None,
-                    fix=cfg.identification.fix, exclude=cfg.identification.exclude)
+    return data
 
 
 def verification_errors(cfg: CellConfig, steps: Sequence[PlannedStep], records: Sequence[MeasurementRecord],

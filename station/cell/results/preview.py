@@ -55,6 +55,8 @@ class PlanPreview:
     motion_s_estimate: float | None = None
     #: an articulated arm's identification design: how many poses and why, σ at the held-out targets
     design: IdentificationDesign | None = None
+    #: [identification] model: "geometric", or the error terms beyond geometry chosen after the measurement
+    error_model: str = "geometric"
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -75,6 +77,7 @@ class PlanPreview:
             "settle_s_total": self.settle_s_total,
             "motion_s_estimate": self.motion_s_estimate,
             "identification_design": None if self.design is None else dataclasses.asdict(self.design),
+            "error_model": self.error_model,
             "motion_estimate_basis": "each move at the slowest joint's maximum speed × [plan].speed, no acceleration",
             "units": {"joints": "rad | mm", "limit_margin": "deg | mm", "reach_margin_mm": "mm"},
         }
@@ -155,7 +158,8 @@ def preview(cfg: CellConfig, with_upload: bool = True) -> PlanPreview:
         sigma_position_um=(float(pos.min()), float(pos.mean()), float(pos.max())),
         sigma_orientation_arcsec=(float(ori.min()), float(ori.mean()), float(ori.max())),
         settle_s_total=float(len(steps) * cfg.plan.settle_s), joint_types=tuple(cfg.model.joint_types),
-        motion_s_estimate=motion_seconds(cfg, steps), design=getattr(plan, "design", None))
+        motion_s_estimate=motion_seconds(cfg, steps), design=getattr(plan, "design", None),
+        error_model=cfg.identification.model)
 
 
 def describe(p: PlanPreview) -> list[str]:
@@ -174,6 +178,9 @@ def describe(p: PlanPreview) -> list[str]:
         lines.append(f"  predicted accuracy at the {p.n_verification_targets} held-out targets (body frame, as the "
                      f"verification measures them): position σ {d.sigma_held_um[0]:.1f}–{d.sigma_held_um[2]:.1f} µm, "
                      f"RMS {d.sigma_held_um[1]:.1f} µm")
+    if p.error_model != "geometric":  # the terms are chosen from the measurements (docs/error-terms.md)
+        lines.append(f"  error model: {p.error_model} (terms beyond geometry, fitted after the measurement; the "
+                     f"predicted accuracy above is the geometric model's)")
     if p.travel_clearance_mm is not None:
         lines.append(f"  travel height: {p.travel_clearance_mm:.1f} mm above the highest target")
     if p.motion_s_estimate is None:

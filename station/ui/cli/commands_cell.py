@@ -34,6 +34,7 @@ from station.ui.cli.output import DISK_ERRNOS
 from station.ui.cli.progress_clock import ProgressClock, plan_seconds
 from station.ui.cli.stop_signals import current as current_stop_signals
 from station.ui.cli.stop_signals import safe_stop_on_signals
+from station.ui.report.before_basis import before_basis_line
 from station.ui.report.paths import report_dir
 from station.ui.simulated_cell import load_cell
 
@@ -157,6 +158,8 @@ def print_error_table(s: RunSummary, stream: TextIO) -> None:
         print(f"  {key:7s} {v.rms_um:9.1f} {v.max_um:9.1f}  {v.ap_max_um:17.1f}  {rp:>17s}", file=stream)
     print("  AP: ISO 9283 pose accuracy, |mean attained − commanded position| of a pose's cycles; "
           "RP: its repeatability, l̄ + 3·S_l (— with one cycle per pose)", file=stream)
+    if (basis := before_basis_line(s.before)) is not None:  # runs with other plans are not compared blindly
+        print(f"  {basis}", file=stream)
 
 
 def cmd_init(args: argparse.Namespace) -> int:

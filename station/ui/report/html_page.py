@@ -14,6 +14,7 @@ import numpy as np
 from station.ui.report import plots
 from station.ui.report import signoff as so
 from station.ui.report import tables as t
+from station.ui.report.before_basis import before_basis
 from station.ui.report.data import ReportData
 
 _CSS = """
@@ -366,7 +367,9 @@ def _verification(d: ReportData) -> str:
                     row_classes=["total" if r[0] == "largest" else "" for r in so.iso_rows(d)])
            + ('<p class="note">How this test departs from ISO 9283\'s (cycles, poses, load, speed): see '
               '<a href="#conditions">Test conditions</a>.</p>') if d.iso_poses else "")
-    return (f'<p class="note">{_e(note)}</p>' + "<h3>Per elbow</h3>"
+    basis = before_basis(d.summary.before if d.summary else None)
+    return (f'<p class="note">{_e(note)}</p>'
+            + (f'<p class="note" id="before-basis">{_e(basis)}</p>' if basis else "") + "<h3>Per elbow</h3>"
             + _table(elbow_head, t.per_elbow_rows(d), table_id="verification-elbows")
             + "<h3>Per pose</h3>" + table + iso
             + _img(plots.plot_verification(d), "verification errors per pose",

@@ -7,6 +7,7 @@ from collections.abc import Sequence
 
 from station.ui.report import signoff as so
 from station.ui.report import tables as t
+from station.ui.report.before_basis import before_basis
 from station.ui.report.data import HTML_NAME, ReportData
 
 
@@ -84,6 +85,8 @@ def render_markdown(d: ReportData) -> str:
                        + ([t.fmt(g.rms_ori_arcsec)] if ori else []) + [g.outliers or ""] for g in groups])
 
     L += ["## Verification before and after correction", ""]
+    if (basis := before_basis(d.summary.before if d.summary else None)) is not None:
+        L += [basis, ""]
     L += _table(("elbow", "poses", "before RMS µm", "after RMS µm", "oracle RMS µm"), t.per_elbow_rows(d))
     oracle = d.oracle_after_um is not None and bool(d.oracle_after_um.size)
     after = bool(d.errors_after_um.size)

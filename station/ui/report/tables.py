@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from station.core.units import ARCSEC, DEG, UM
+from station.ui.report.before_basis import before_basis_line
 from station.ui.report.data import ReportData
 
 #: |r| above this marks a strong correlation
@@ -111,6 +112,8 @@ def summary_rows(d: ReportData, *, outcome: bool = True) -> list[tuple[str, str]
         elbows = sorted({e for _, e, _ in poses if e is not None}, reverse=True)
         rows.append(("verification", f"{len(poses)} held-out poses, {n_cycles} measurements; elbows "
                                      f"{', '.join(f'{e:+d}' for e in elbows) or '—'}"))
+    if s is not None and (line := before_basis_line(s.before)) is not None:
+        rows.append(("'before' measured on", line.removeprefix("before: ")))
     if s is not None and (recentred := s.recentring_text()) is not None:
         rows.append(("re-centred readings", recentred))
     return rows
