@@ -264,7 +264,7 @@ def publish_finished(db_path: str, run_id: int | None, cfg: CellConfig, emit: Ca
     """Queue a finished run for the fleet store and try to send it ([fleet] url or
     STATION_FLEET_URL; nothing when neither is set). Never raises: a run never depends on the network."""
     try:
-        from station.fleet.outbox import publish_or_queue  # the fleet's code only where a run ends
+        from station.cell.records.fleet_outbox import publish_or_queue  # the fleet's code only where a run ends
 
         line = publish_or_queue(db_path, run_id, cfg)
         if line is not None:

@@ -20,8 +20,8 @@ from pathlib import Path
 from typing import Any
 
 from station.cell.config.cell_config import CellConfig
+from station.cell.records.fleet_payload import build_publication
 from station.cell.records.rundb import RunDB, utc_now
-from station.fleet.payload import build_publication
 from station.fleet.settings import fleet_url
 
 log = logging.getLogger(__name__)
@@ -33,7 +33,7 @@ OUTBOX_TABLE = """CREATE TABLE IF NOT EXISTS fleet_outbox (
     run_uuid        TEXT PRIMARY KEY,       -- the publication's identity in the fleet store
     run_id          INTEGER NOT NULL REFERENCES runs(id) ON DELETE CASCADE,
     summary_utc     TEXT NOT NULL,          -- the ending it publishes (a resumed run ends again)
-    publication     TEXT NOT NULL,          -- JSON: what the store receives (station/fleet/payload.py)
+    publication     TEXT NOT NULL,          -- JSON: what the store receives (station/cell/records/fleet_payload.py)
     queued_utc      TEXT NOT NULL,
     sent_utc        TEXT,                   -- NULL: not yet in the store
     attempts        INTEGER NOT NULL DEFAULT 0,
