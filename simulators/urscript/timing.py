@@ -50,7 +50,7 @@ class Bench:
             self.until(lambda: self.read("claim_owner") not in (0, owner0) or self.read("claim_owner") == token,
                        max_frames)
         except TimeoutError:
-            pass
+            pass  # a refused claim changes nothing: no change within max_frames is the program's answer
         return int(self.read("claim_owner"))
 
     def frames(self, n: int) -> None:

@@ -246,6 +246,24 @@ def _urdf_link(path: Path, j: ET.Element, tag: str) -> str:
     return link
 
 
+def urdf_root(path: Path) -> ET.Element:
+    """The parsed URDF's root element; XML that does not parse is a :class:`ConfigError`."""
+    try:
+        return ET.parse(path).getroot()
+    except ET.ParseError as exc:
+        raise ConfigError(f"{path}: not valid XML ({exc})") from None
+
+
+def urdf_joint_origin(path: Path, joint: ET.Element) -> np.ndarray:
+    """A ``<joint>``'s ``<origin>`` as a (4, 4) transform [mm, rad] (URDF default: identity)."""
+    origin = joint.find("origin")
+    xyz, rpy = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
+    if origin is not None:
+        xyz = [v * 1000.0 for v in _urdf_numbers(path, joint, "origin", "xyz", origin.get("xyz", "0 0 0"), 3)]
+        rpy = _urdf_numbers(path, joint, "origin", "rpy", origin.get("rpy", "0 0 0"), 3)
+    return pose_to_matrix(np.array(xyz + rpy))
+
+
 def _urdf_numbers(path: Path, j: ET.Element, tag: str, attr: str, text: str, n: int) -> list[float]:
     """``n`` numbers from the attribute ``attr`` (value ``text``) of joint ``j``'s ``<tag>``."""
     try:
@@ -437,21 +455,13 @@ def robot_from_urdf(path: Path, base: str | None = None, tip: str | None = None)
     ``<axis>`` are optional with the URDF defaults (identity, x axis). A revolute or prismatic
     joint without ``<limit>`` gets ±2π rad / ±1000 mm.
     """
-    try:
-        root = ET.parse(path).getroot()
-    except ET.ParseError as exc:
-        raise ConfigError(f"{path}: not valid XML ({exc})") from None
+    root = urdf_root(path)
     base, joints = _urdf_chain(path, root, base, tip)
     link, carry = base, np.eye(4)
     specs, poses, limits = [TransformSpec("R")], [np.zeros(6)], []
     while link in joints:
         j = joints[link]
-        origin = j.find("origin")
-        xyz, rpy = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
-        if origin is not None:
-            xyz = [v * 1000.0 for v in _urdf_numbers(path, j, "origin", "xyz", origin.get("xyz", "0 0 0"), 3)]
-            rpy = _urdf_numbers(path, j, "origin", "rpy", origin.get("rpy", "0 0 0"), 3)
-        T = carry @ pose_to_matrix(np.array(xyz + rpy))
+        T = carry @ urdf_joint_origin(path, j)
         kind = j.get("type")
         if kind == "fixed":
             carry = T

@@ -17,9 +17,18 @@ from pathlib import Path
 import numpy as np
 
 from station.core.error_terms import GravityModel
-from station.core.transforms import invert, pose_to_matrix
+from station.core.transforms import invert
 from station.errors import ConfigError
-from station.io.robot_import import _T, _axis_to_z, _off_gimbal_lock, _urdf_chain, _urdf_link, _urdf_numbers
+from station.io.robot_import import (
+    _T,
+    _axis_to_z,
+    _off_gimbal_lock,
+    _urdf_chain,
+    _urdf_link,
+    _urdf_numbers,
+    urdf_joint_origin,
+    urdf_root,
+)
 
 __all__ = ["urdf_gravity"]
 
@@ -54,10 +63,7 @@ def urdf_gravity(path: str | Path, base: str | None = None, tip: str | None = No
     """The :class:`GravityModel` (masses and centres of mass per moving joint) of the URDF chain
     ``base`` … ``tip``, or None when no link of the chain moves with an ``<inertial>``."""
     path = Path(path)
-    try:
-        root = ET.parse(path).getroot()
-    except ET.ParseError as exc:
-        raise ConfigError(f"{path}: not valid XML ({exc})") from None
+    root = urdf_root(path)
     base, joints = _urdf_chain(path, root, base, tip)
     links = {el.get("name"): el for el in root.findall("link")}
     link, carry = base, np.eye(4)
@@ -67,12 +73,7 @@ def urdf_gravity(path: str | Path, base: str | None = None, tip: str | None = No
     found = False
     while link in joints:
         j = joints[link]
-        origin = j.find("origin")
-        xyz, rpy = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]
-        if origin is not None:
-            xyz = [v * 1000.0 for v in _urdf_numbers(path, j, "origin", "xyz", origin.get("xyz", "0 0 0"), 3)]
-            rpy = _urdf_numbers(path, j, "origin", "rpy", origin.get("rpy", "0 0 0"), 3)
-        T_origin = pose_to_matrix(np.array(xyz + rpy))
+        T_origin = urdf_joint_origin(path, j)
         T = carry @ T_origin
         if j.get("type") == "fixed":
             carry = T

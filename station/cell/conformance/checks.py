@@ -33,7 +33,10 @@ from station.cell.limits.motion_guard import MotionGuard
 from station.errors import UnreachableError
 
 _HEARTBEAT_WINDOW = 1.5  # seconds to watch the heartbeats
-_CLAIM_WAIT = 0.5  # seconds a refused claim is given to be (wrongly) granted: five heartbeat periods
+#: a refused claim changes nothing, so its answer is the program having run on: this many advances
+#: of hb_robot (0.1 s each) after the request, or _CLAIM_WAIT_MAX seconds where hb_robot stands
+_CLAIM_PASSES = 5
+_CLAIM_WAIT_MAX = 2.0
 
 
 class _HandshakeChecks(_KitBase):
@@ -155,6 +158,15 @@ class _HandshakeChecks(_KitBase):
         else:
             r.passed("hb_pc follows the station's heartbeat")
 
+    def _program_passes(self, n: int) -> None:
+        """Until hb_robot has advanced ``n`` times (the program's cyclic task has run on), at most
+        ``_CLAIM_WAIT_MAX`` seconds (a program without a heartbeat fails its own check)."""
+        link = self.link
+        start = int(link.read_entry("hb_robot"))
+        end = time.monotonic() + _CLAIM_WAIT_MAX
+        while (int(link.read_entry("hb_robot")) - start) % 65536 < n and time.monotonic() < end:
+            time.sleep(0.02)
+
     def claim_rules(self) -> None:
         """One station per controller: a second claim is refused, a command with another token is
         refused with NOT_CLAIMED, the holder's release frees the controller, and a holder that stops
@@ -166,7 +178,7 @@ class _HandshakeChecks(_KitBase):
         while other in (link.claim_token, release_code(link.claim_token)):
             other = new_token()
         link.write_registers(REG["claim_request"].address, encode("claim_request", other, link.word_order))
-        time.sleep(_CLAIM_WAIT)  # a refusal is an answer that changes nothing: give the program its passes
+        self._program_passes(_CLAIM_PASSES)  # a refusal changes nothing: the program must have run on
         owner = int(link.read_entry("claim_owner"))
         if owner != link.claim_token:
             r.failed(f"a second station's claim was granted while the kit held the controller (claim_owner reads "
