@@ -7,6 +7,9 @@ from __future__ import annotations
 
 import os
 import re
+import socket
+import struct
+import threading
 
 import pytest
 
@@ -15,6 +18,64 @@ from simulators.reference_cell import cell_config_text
 from station.cell.run.events import MeasurementRecorded
 from station.cell.session.calibrate import CellRequest, run_calibration_session
 from station.errors import Outcome
+
+
+class ModbusTcpRelay:
+    """A loopback relay in front of the simulated controller that records the Modbus TCP requests
+    (function code, address, count) of the one station that connects through it: the controller
+    serves both stations, and only the relay can tell whose request a request was (the first
+    station's heartbeat thread keeps writing while the second station tries)."""
+
+    def __init__(self, host: str, port: int) -> None:
+        self.target = (host, port)
+        self.requests: list[tuple[int, int, int]] = []
+        self._listener = socket.create_server(("127.0.0.1", 0))
+        self.port = self._listener.getsockname()[1]
+        self._threads: list[threading.Thread] = []
+        self._spawn(self._accept)
+
+    def _spawn(self, target, *args) -> None:
+        t = threading.Thread(target=target, args=args, daemon=True)
+        t.start()
+        self._threads.append(t)
+
+    def _accept(self) -> None:
+        try:
+            client, _ = self._listener.accept()
+        except OSError:
+            return  # closed before anyone connected
+        server = socket.create_connection(self.target)
+        self._spawn(self._pump, client, server, True)
+        self._spawn(self._pump, server, client, False)
+
+    def _pump(self, src: socket.socket, dst: socket.socket, requests: bool) -> None:
+        pending = b""
+        try:
+            while data := src.recv(4096):
+                dst.sendall(data)
+                if not requests:
+                    continue
+                pending += data
+                # MBAP header (Modbus Messaging on TCP/IP Implementation Guide V1.0b, section 3.1.3):
+                # transaction id, protocol id, length (of unit id + PDU), unit id; then the PDU
+                while len(pending) >= 7 and len(pending) >= 6 + struct.unpack(">H", pending[4:6])[0]:
+                    size = 6 + struct.unpack(">H", pending[4:6])[0]
+                    pdu, pending = pending[7:size], pending[size:]
+                    address, count = struct.unpack(">HH", pdu[1:5]) if len(pdu) >= 5 else (-1, -1)
+                    self.requests.append((pdu[0], address, count))
+        except OSError:
+            pass
+        finally:
+            for s in (src, dst):
+                try:
+                    s.shutdown(socket.SHUT_RDWR)
+                except OSError:
+                    pass
+
+    def close(self) -> None:
+        self._listener.close()
+        for t in self._threads:
+            t.join(timeout=5)
 
 
 @pytest.mark.slow
@@ -30,12 +91,18 @@ def test_a_second_station_is_refused_before_any_command_and_the_first_ends_succe
             # holding the claim), the second station starts: its own database, the same cell
             if isinstance(event, MeasurementRecorded) and event.index == 3 and not second:
                 owner = ctrl.register("claim_owner")
-                commands, requests = len(ctrl.command_log), ctrl.requests
+                commands = len(ctrl.command_log)
                 events: list = []
-                summary = run_calibration_session(CellRequest(config=str(cfg), db=str(tmp_path / "second.sqlite")),
-                                                  events.append)
-                second.update(summary=summary, owner=owner, events=events,
-                              commands=ctrl.command_log[commands:], requests=ctrl.requests - requests)
+                relay = ModbusTcpRelay(sim.controller_host, sim.controller_port)
+                cfg2 = tmp_path / "cell-second.toml"
+                cfg2.write_text(cfg.read_text().replace(f":{sim.controller_port}\"", f":{relay.port}\""))
+                try:
+                    summary = run_calibration_session(CellRequest(config=str(cfg2), db=str(tmp_path / "second.sqlite")),
+                                                      events.append)
+                finally:
+                    relay.close()
+                second.update(summary=summary, owner=owner, events=events, relay_port=relay.port,
+                              commands=ctrl.command_log[commands:], requests=list(relay.requests))
 
         first = run_calibration_session(CellRequest(config=str(cfg), db=str(tmp_path / "first.sqlite")),
                                         first_station)
@@ -54,8 +121,9 @@ def test_a_second_station_is_refused_before_any_command_and_the_first_ends_succe
     # nothing of the second station reached the controller's command block: it read the window and
     # the holder's name (3 reads) and wrote nothing, not even a heartbeat; the controller is
     # claimed before the probe head is opened, so it never opened the probe head the first run reads
-    assert second["commands"] == [] and second["requests"] == 3
-    assert b.failure.message.startswith(f"controller {sim.controller_host}:{sim.controller_port}: ")
+    assert second["commands"] == [] and len(second["requests"]) == 3, second["requests"]
+    assert {fc for fc, _address, _count in second["requests"]} == {3}  # read holding registers only
+    assert b.failure.message.startswith(f"controller {sim.controller_host}:{second['relay_port']}: ")
     # every command of the whole session carried the first station's token; it gave the controller
     # back at its orderly end
     assert second["owner"] != 0 and {token for _code, _seq, token in log} == {second["owner"]}

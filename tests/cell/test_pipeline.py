@@ -307,6 +307,28 @@ def test_the_operator_declines_the_upload(cell):
     assert "declined" in " ".join(summary.notes)
 
 
+def test_an_abort_at_the_upload_question_is_an_abort_not_a_decline(cell):
+    # the operator aborts while "Upload?" is open: the open question is answered "no" by the abort
+    # (the TUI's _release_question), and the run is ABORTED and resumable at that question, not
+    # NOT_UPLOADED with "declined by the operator" in its record
+    from station.cell.run.questions import UploadProposal
+    from station.cell.run.runcontrol import RunAborted, RunControl
+
+    control = RunControl()
+
+    def confirm(question):
+        assert isinstance(question, UploadProposal)
+        control.abort()
+        return False
+
+    with pytest.raises(RunAborted, match="upload question"):
+        cell.run(control=control, options=Options(confirm=confirm))
+    run = cell.db.latest_run()
+    assert run.status == "aborted" and cell.srv.controller_server.active_table is None
+    summary = cell.run(resume_run=run.id)  # the same run goes on to its question again
+    assert summary.outcome is Outcome.SUCCESS and summary.run_id == run.id
+
+
 def test_the_operator_rolls_the_new_table_back(cell):
     from station.cell.run.questions import KeepCorrection, UploadProposal
 

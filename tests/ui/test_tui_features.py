@@ -325,6 +325,35 @@ async def test_declining_the_upload_and_abort_during_a_question():
         assert session.answers == [False]  # the abort answered "no": nothing was uploaded
 
 
+@pytest.mark.parametrize("abort", [False, True])
+async def test_a_question_that_arrives_under_the_abort_dialog_waits_for_its_answer(abort):
+    # the run reaches "Upload?" while the operator's "Abort?" dialog is open (a fast run on a loaded
+    # machine did, in CI): pushed over the dialog, the question would take the "y" meant for the
+    # abort and upload the table. It waits; "n" to the abort then asks it, "y" answers it "no".
+    session = FakeSession(gated=True)
+    app = make_app(session)
+    async with app.run_test(size=(80, 24)) as pilot:
+        table = app.query_one("#measurements", DataTable)
+        await pilot.press("s")
+        session.open(2)
+        await wait_until(pilot, lambda: table.row_count >= 2, "2 rows")
+        await pilot.press("a")
+        await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), "abort?")
+        session.open(N - 2)  # the run goes on under the dialog and asks its question
+        await wait_until(pilot, lambda: app.deferred_question is not None, "the question, held back")
+        assert isinstance(app.screen, ConfirmScreen) and "Asked:" not in app.query_one("#notices").text
+        await pilot.press("y" if abort else "n")
+        if abort:
+            await wait_until(pilot, lambda: app.state not in ("running", "aborting"), "ended")
+            assert session.answers == [False] and "Asked:" not in app.query_one("#notices").text
+        else:
+            await wait_until(pilot, lambda: isinstance(app.screen, QuestionScreen), "upload question")
+            assert app.screen.question == PROPOSAL and app.deferred_question is None
+            await pilot.press("n")
+            await wait_until(pilot, lambda: app.state == "finished", "finished")
+            assert session.answers == [False] and app.exit_code == 11
+
+
 async def test_resume_lists_unfinished_runs_and_resumes_the_picked_one():
     session = FakeSession(gated=False, ask=False)
     calls = []

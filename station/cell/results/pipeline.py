@@ -316,6 +316,9 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
         interpolation_bound_um=float(table.interpolation_bound_um), crc32=f"{table.data.crc32():08x}",
         max_correction=tuple(float(v) for v in table.max_correction), joint_types=tuple(cfg.model.joint_types))
     if options.confirm is not None and not options.confirm(proposal):
+        if runner.control.aborted:  # the abort answered the open question "no": an abort, not a decline,
+            # so the run stays resumable at this question (its measurements are all stored)
+            raise RunAborted("run aborted by the operator at the upload question; nothing was uploaded")
         emit(Notice("info", "upload declined by the operator: the controller's table of the run's start is kept"))
         return summary.replace(upload_skipped=True, outcome=Outcome.NOT_UPLOADED,
                                notes=(*summary.notes, "upload declined by the operator"))

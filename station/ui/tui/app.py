@@ -175,6 +175,10 @@ class StationApp(RunEnd):
         self.summary: RunSummary | None = None
         self.step_index: int | None = None
         self.question: QuestionMessage | None = None  # the question waiting for the operator
+        # a question of the run that arrived while the operator's "Abort?" dialog was open: it waits
+        # under that dialog's answer (a "y" meant for the abort must never answer "Upload?")
+        self.deferred_question: QuestionMessage | None = None
+        self.abort_asked = False
         self.report_path: Path | None = None
         self._quit_when_done = False
         self._settled = False  # the worker has ended; its return value is final
@@ -397,6 +401,7 @@ class StationApp(RunEnd):
 
         def answered(yes: bool | None) -> None:
             self._waiting(asked, False)
+            self.abort_asked = False
             # The run may have ended while the dialog was open.
             if yes and self.control is not None and self.running:
                 self._quit_when_done = then_quit
@@ -405,7 +410,9 @@ class StationApp(RunEnd):
                 what = "Quit confirmed" if then_quit else "Abort confirmed"
                 self._note((what, "bold red"), " — stopping at the next safe point")
                 self._release_question()
+            self._ask_deferred_question()  # asked now (or answered "no" by the abort)
 
+        self.abort_asked = True
         self.push_screen(ConfirmScreen(question), answered)
 
     def action_abort(self) -> None:

@@ -70,6 +70,8 @@ class SideActions(App[RunSummary | None]):
     summary: RunSummary | None
     step_index: int | None
     question: QuestionMessage | None
+    deferred_question: QuestionMessage | None
+    abort_asked: bool
     report_path: Path | None
     # the activity line: what the station does (markup), whether that is the run's end, and the
     # dialogs waiting for the operator (newest last)
@@ -138,6 +140,11 @@ class SideActions(App[RunSummary | None]):
             if (control is not None and control.aborted) or (worker is not None and worker.is_cancelled):
                 return False  # aborted, or the app is closing
         return message.answer
+
+    def _ask_deferred_question(self) -> None:
+        message, self.deferred_question = self.deferred_question, None
+        if message is not None:
+            self.on_question_message(message)
 
     def _release_question(self) -> None:
         """An abort answers the open question "no" and closes its dialog."""
@@ -238,6 +245,11 @@ class SideActions(App[RunSummary | None]):
     def on_question_message(self, message: QuestionMessage) -> None:
         if self.control is not None and self.control.aborted:
             message.reply(False)
+            return
+        if self.abort_asked:
+            # The operator's "Abort?" dialog is open: a question pushed over it would take the "y"
+            # meant for the abort (and upload a table). It is asked once that dialog is answered.
+            self.deferred_question = message
             return
         self.question = message
         self.eta.pause()  # waiting for the operator is not run time
