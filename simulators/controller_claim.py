@@ -19,7 +19,8 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from drivers.controller_map import REG, WordOrder, decode, encode, release_code
+from drivers.controller_map import REG, WordOrder
+from simulators.program_words import get_value, put_value
 
 __all__ = ["ClaimRules", "CLAIM_QUIRKS"]
 
@@ -35,12 +36,10 @@ class ClaimRules:
         self.quirks = frozenset(quirks)
 
     def u32(self, regs: list[int], name: str) -> int:
-        r = REG[name]
-        return int(decode(r, regs[r.address:r.end], self.order))
+        return int(get_value(regs, REG[name], self.order))
 
     def _put(self, regs: list[int], name: str, value: int) -> None:
-        r = REG[name]
-        regs[r.address:r.end] = encode(r, value, self.order)
+        put_value(regs, REG[name], value, self.order)
 
     def owner(self, regs: list[int]) -> int:
         return self.u32(regs, "claim_owner")
@@ -53,7 +52,9 @@ class ClaimRules:
         """One pass of the program over the claim block (level-triggered: a pending request is
         granted on the first pass that finds the controller free and the heartbeat live)."""
         owner, req = self.owner(regs), self.u32(regs, "claim_request")
-        if owner and req == release_code(owner):
+        # docs/protocols.md, "One station per controller": the holder gives the controller back
+        # by writing 0xFFFFFFFF - token to claim_request
+        if owner and req == 0xFFFFFFFF - owner:
             self.free(regs)
         elif req and req != owner and heartbeat_live and (not owner or "claim_always_granted" in self.quirks):
             self._put(regs, "claim_owner", req)

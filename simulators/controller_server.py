@@ -12,7 +12,9 @@ motion-time model scaled by ``time_scale`` (0 = instant), and reports done or er
 same sequence number. Cartesian moves use the controller's NOMINAL kinematics in the robot base
 frame (``station.core.kinematics.scara_ik``; for an articulated arm general inverse kinematics
 from the joints the robot stands at, which keeps its configuration) plus the multilinear table correction
-(:meth:`station.core.table_data.CorrectionTableData.interpolate`) when a table is active; the
+(:meth:`simulators.program_words.ProgramTable.correction`, the rule of ``docs/protocols.md`` written again,
+not the station's) when a table is active; registers are read and written with the program's own
+words (:mod:`simulators.program_words`), not the driver's codec; the
 table area itself is :class:`simulators.controller_tables.TableSlots`. One station per controller:
 the claim block follows :class:`simulators.controller_claim.ClaimRules` - a request is served at
 once, the watchdog (``hb_pc`` silent for ``watchdog``) frees a claim on the program tick, and every
@@ -54,16 +56,14 @@ from drivers.controller_map import (
     ErrorCode,
     StatusBit,
     WordOrder,
-    decode,
-    encode,
     register_span,
 )
 from simulators.controller_claim import ClaimRules
 from simulators.controller_faults import QUIRKS, FaultInjection, ModbusFault
 from simulators.controller_tables import TableSlots, serve_transfer
+from simulators.program_words import OutsideTable, ProgramTable, get_value, put_value
 from station.core.kinematics import forward, inverse_kinematics, scara_ik
 from station.core.model import RobotModel
-from station.core.table_data import CorrectionTableData, TableRangeError
 from station.core.transforms import matrix_to_pose, pose_to_matrix
 from station.errors import UnreachableError
 from station.io.robot_files import load_robot
@@ -189,9 +189,7 @@ class SimulatedController(FaultInjection):
 
     # ------------------------------------------------------------------ registers
     def _set(self, name: str, value) -> None:
-        r = REG[name]
-        words = encode(r, value, self.word_order)
-        self._regs[r.address:r.address + len(words)] = words
+        put_value(self._regs, REG[name], value, self.word_order)
 
     @staticmethod
     def _word(v: int) -> int:
@@ -202,7 +200,8 @@ class SimulatedController(FaultInjection):
         # §17.38), then made the map's word, as robot-programs/ur does (tests/robot_programs/test_sim_signed_words.py)
         r = REG[name]
         signed = [w - 0x10000 if w >= 0x8000 else w for w in self._regs[r.address:r.end]]
-        return decode(r, [self._word(v) for v in signed], self.word_order)
+        value = get_value([self._word(v) for v in signed], r, self.word_order, base=-r.address)
+        return np.asarray(value, dtype=float) if r.count > 1 else value
 
     def _init_registers(self) -> None:
         self._set("map_version", self.map_version)
@@ -225,11 +224,16 @@ class SimulatedController(FaultInjection):
         if number == INFO_PAGES["soft_limits"][0]:
             lim = np.zeros(2 * MAX_JOINTS)
             lim[:2 * self.g] = self.soft_limits.ravel()
-            return encode(INFO_PAGES["soft_limits"][1], lim, self.word_order)
+            return self._page_words(INFO_PAGES["soft_limits"][1], lim)
         if number == INFO_PAGES["act_pose"][0]:
             T = forward(self.model, self._q[None], setup=False)[0]
-            return encode(INFO_PAGES["act_pose"][1], matrix_to_pose(T), self.word_order)
+            return self._page_words(INFO_PAGES["act_pose"][1], matrix_to_pose(T))
         return None
+
+    def _page_words(self, entry, values) -> list[int]:
+        page = [0] * entry.n_registers
+        put_value(page, entry, values, self.word_order, base=-entry.address)
+        return page
 
     def _transfer(self) -> None:
         """The program's side of a transfer request (caller holds the lock)."""
@@ -359,7 +363,7 @@ class SimulatedController(FaultInjection):
         return self._q.copy()
 
     @property
-    def active_table(self) -> CorrectionTableData | None:
+    def active_table(self) -> ProgramTable | None:
         return self._tables.active
 
     def register(self, name: str):
@@ -488,7 +492,7 @@ class SimulatedController(FaultInjection):
             raise _Abort(ErrorCode.UNREACHABLE)
         try:
             return self._tables.correct(q, pose, elbow)
-        except TableRangeError as exc:
+        except OutsideTable as exc:
             raise _Abort(ErrorCode.TARGET_OUTSIDE_TABLE) from exc
 
     def _error(self, seq: int, code: ErrorCode, joint: int = 0, bound: int = 0) -> None:

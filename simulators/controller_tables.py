@@ -3,7 +3,9 @@
 Implements the table side of the robot program (``docs/protocols.md``, section "Correction
 table"): the pages written through the transfer block (header page and value pages, each
 checked against its page CRC), the table commands of the handshake on them, and the correction
-that the active table adds to the nominal inverse kinematics of a Cartesian target. Used by
+that the active table adds to the nominal inverse kinematics of a Cartesian target. Words, header,
+CRCs and interpolation are the program's own (:mod:`simulators.program_words`), not the driver's
+codec. Used by
 :class:`simulators.controller_server.SimulatedController`, which holds its lock around every call.
 """
 
@@ -18,27 +20,32 @@ from drivers.controller_map import (
     MAX_TABLE_VALUES,
     PAGE_DATA_REGISTERS,
     REG,
-    TABLE_HEADER_REGISTERS,
-    TABLE_VALUE_SCALE,
     Command,
     ErrorCode,
     StatusBit,
     WordOrder,
     XferOp,
-    decode,
-    decode_i32_raw,
-    encode,
-    encode_i32_array,
-    raw_crc32,
-    registers_crc32,
 )
-from drivers.correction_table import TableError, decode_header, header_registers, n_value_pages, value_pages
-from station.core.table_data import CorrectionTableData, TableAxis
+from simulators.program_words import (
+    HEADER_REGISTER_COUNT,
+    PAGE_VALUE_COUNT,
+    VALUE_SCALE,
+    ProgramTable,
+    counts_from_words,
+    crc32_of_counts,
+    crc32_of_registers,
+    get_value,
+    header_page,
+    put_value,
+    read_header,
+    value_page_words,
+    words_from_counts,
+)
 
 __all__ = ["TableSlots", "serve_transfer"]
 
-#: value pages the store holds (a table of MAX_TABLE_VALUES values)
-MAX_PAGES = n_value_pages(MAX_TABLE_VALUES)
+#: value pages the store holds (a table of MAX_TABLE_VALUES values: 1104)
+MAX_PAGES = -(-MAX_TABLE_VALUES // PAGE_VALUE_COUNT)
 
 
 class TableSlots:
@@ -53,15 +60,15 @@ class TableSlots:
         #: the pages as the PC wrote them: the header page, value page k (data registers)
         self.header: list[int] | None = None
         self.pages: dict[int, list[int]] = {}
-        self.staged: CorrectionTableData | None = None
-        self.active: CorrectionTableData | None = None
-        self.previous: CorrectionTableData | None = None
+        self.staged: ProgramTable | None = None
+        self.active: ProgramTable | None = None
+        self.previous: ProgramTable | None = None
 
     def store(self, header: bool, index: int, data: list[int]) -> ErrorCode:
         """A page written through the transfer block (its page CRC already checked). A header
         page starts a new table: the stored value pages are dropped."""
         if header:
-            if index != 0 or len(data) != TABLE_HEADER_REGISTERS:
+            if index != 0 or len(data) != HEADER_REGISTER_COUNT:
                 return ErrorCode.PAGE_INVALID
             self.header, self.pages = list(data), {}
             return ErrorCode.NONE
@@ -77,8 +84,8 @@ class TableSlots:
         if table is None:
             return None
         if header:
-            return header_registers(table, word_order) if index == 0 else None
-        pages = value_pages(table, word_order)
+            return header_page(table, word_order) if index == 0 else None
+        pages = value_page_words(table, word_order)
         return pages[index] if 0 <= index < len(pages) else None
 
     def stored(self, header: bool, index: int) -> list[int] | None:
@@ -92,33 +99,30 @@ class TableSlots:
         values' CRC-32, and keep the table as the staged one."""
         if self.header is None:
             return ErrorCode.TABLE_SHAPE_INVALID
-        try:
-            h = decode_header(self.header, word_order)
-        except TableError:
+        h = read_header(self.header, word_order)
+        if h is None:
             return ErrorCode.TABLE_SHAPE_INVALID
-        n_pages = n_value_pages(h["n_values"])
+        n_pages = -(-h["n_values"] // PAGE_VALUE_COUNT)
         if any(k not in self.pages for k in range(n_pages)) or h["n_joints"] != n_joints:
             return ErrorCode.TABLE_SHAPE_INVALID
         data = [w for k in range(n_pages) for w in self.pages[k]]
         if len(data) != 2 * h["n_values"]:
             return ErrorCode.TABLE_SHAPE_INVALID
-        raw = decode_i32_raw(data, word_order)
+        raw = counts_from_words(data, word_order)
         crc = (zlib.crc32(raw.astype("<i4").tobytes()) & 0xFFFFFFFF if self.crc_little_endian
-               else raw_crc32(raw))
+               else crc32_of_counts(raw))
         if crc != h["crc"]:
             return ErrorCode.TABLE_CRC_MISMATCH
         shape = (h["n_configs"], *[a.count for a in h["axes"]], h["n_joints"])
-        vals = (raw.astype(np.float64) * TABLE_VALUE_SCALE).astype(np.float32)
-        axes = tuple(TableAxis(a.start, a.step, a.count, a.periodic) for a in h["axes"])
-        self.staged = CorrectionTableData(axes, vals.reshape(shape))
+        self.staged = ProgramTable(h["axes"], raw.reshape(shape))
         return ErrorCode.NONE
 
     def corrupt_value(self, index: int, delta: float, word_order: WordOrder) -> None:
         """Fault injection: value ``index`` of the stored pages changes by ``delta``."""
-        page, at = divmod(index, PAGE_DATA_REGISTERS // 2)
+        page, at = divmod(index, PAGE_VALUE_COUNT)
         data = self.pages[page]
-        raw = int(decode_i32_raw(data[2 * at:2 * at + 2], word_order)[0])
-        data[2 * at:2 * at + 2] = encode_i32_array([raw * TABLE_VALUE_SCALE + delta], TABLE_VALUE_SCALE, word_order)
+        raw = int(counts_from_words(data[2 * at:2 * at + 2], word_order)[0])
+        data[2 * at:2 * at + 2] = words_from_counts([raw + int(round(delta / VALUE_SCALE))], word_order)
 
     def switch(self, cmd: Command) -> ErrorCode:
         """TABLE_ACTIVATE, TABLE_DEACTIVATE, TABLE_ROLLBACK or TABLE_DISCARD_PREVIOUS (anything
@@ -161,13 +165,14 @@ class TableSlots:
 
     def correct(self, q: np.ndarray, pose: np.ndarray, elbow: int) -> np.ndarray:
         """Nominal IK joints ``q`` for ``pose`` plus the active table's correction (``q`` itself
-        when no table is active). Raises :class:`station.core.table_data.TableRangeError`."""
+        when no table is active): the interpolation rule, step 3. Raises
+        :class:`simulators.program_words.OutsideTable`."""
         table = self.active
         if table is None:
             return q
         cfg = 0 if (elbow == 1 or table.n_configs == 1) else 1
-        point = np.array([pose[0], pose[1], pose[2], pose[5]])[:len(table.axes)]
-        return q + table.interpolate(point, cfg)
+        point = [pose[0], pose[1], pose[2], pose[5]][:len(table.axes)]
+        return q + table.correction(point, cfg)
 
 
 _SLOT_READS = {XferOp.READ_STAGED_HEADER: ("staged", True), XferOp.READ_STAGED_PAGE: ("staged", False),
@@ -184,12 +189,10 @@ def serve_transfer(regs: list[int], tables: TableSlots, word_order: WordOrder,
     arrived with one bit flipped (fault injection)."""
 
     def get(name: str) -> int:
-        r = REG[name]
-        return int(decode(r, regs[r.address:r.end], word_order))
+        return int(get_value(regs, REG[name], word_order))
 
     def put(name: str, value: int) -> None:
-        r = REG[name]
-        regs[r.address:r.end] = encode(r, value, word_order)
+        put_value(regs, REG[name], value, word_order)
 
     op, index, n = get("xfer_op"), get("page_index"), get("page_len")
     a = REG["page_data"].address
@@ -200,7 +203,7 @@ def serve_transfer(regs: list[int], tables: TableSlots, word_order: WordOrder,
             data = [data[0] ^ 0x0001, *data[1:]]
         if n > PAGE_DATA_REGISTERS:
             error = ErrorCode.PAGE_INVALID
-        elif registers_crc32(data) != get("page_crc") and "page_crc_ignored" not in tables.quirks:
+        elif crc32_of_registers(data) != get("page_crc") and "page_crc_ignored" not in tables.quirks:
             error = ErrorCode.PAGE_CRC_MISMATCH
         else:
             error = tables.store(op == XferOp.WRITE_HEADER, index, data)
@@ -219,7 +222,7 @@ def serve_transfer(regs: list[int], tables: TableSlots, word_order: WordOrder,
         else:
             regs[a:a + PAGE_DATA_REGISTERS] = list(page) + [0] * (PAGE_DATA_REGISTERS - len(page))
             put("page_len", len(page))
-            put("page_crc", registers_crc32(page))
+            put("page_crc", crc32_of_registers(page))
     else:
         error = ErrorCode.PAGE_INVALID
     put("xfer_error", int(error))

@@ -1,4 +1,10 @@
-"""Simulated probe interfaces of the real vendors, byte for byte from :mod:`drivers.probe_dialects`.
+"""Simulated probe interfaces of the real vendors, byte for byte as their documents describe them.
+
+The frames are built and the requests read by :mod:`simulators.probe_wire`, the simulator's own
+encoding written from the documents; from :mod:`drivers.probe_dialects` and
+:mod:`drivers.probe_protocol` only the shared tables are imported (commands, error codes, data
+numbers, limits), never the drivers' codecs, so that an encoding error of the driver cannot hide
+behind the same error in the simulator.
 
 * :class:`StationUnit`: the station's own dialect (zero/preset offsets, ``ID``).
 * :class:`KeyenceUnit`: a DL-RS1A with ``n`` GT2 amplifiers (IDs 00 ..). It answers only its
@@ -24,8 +30,10 @@ from typing import Callable
 
 import numpy as np
 
-from drivers.probe_dialects import keyence_dl_rs1a as kd
-from drivers.probe_dialects import mitutoyo_ga as md
+from drivers.probe_dialects.keyence_dl_rs1a import DATA_NUMBERS as KEYENCE_DATA_NUMBERS
+from drivers.probe_dialects.keyence_dl_rs1a import MAX_AMPLIFIERS as KEYENCE_MAX_AMPLIFIERS
+from drivers.probe_dialects.mitutoyo_ga import MAX_CHANNELS as MITUTOYO_MAX_CHANNELS
+from drivers.probe_dialects.mitutoyo_ga import VALUE_LIMIT_MM as MITUTOYO_VALUE_LIMIT_MM
 from drivers.probe_protocol import (
     ERR_BUSY,
     ERR_NO_CHANNEL,
@@ -33,12 +41,9 @@ from drivers.probe_protocol import (
     ERR_OUT_OF_RANGE,
     VALUE_LIMIT_MM,
     ChannelStatus,
-    ProbeDeviceError,
-    ProbeFrameError,
-    format_error,
-    format_reply,
-    parse_request,
 )
+from simulators import probe_wire as wire
+from simulators.probe_wire import Refusal
 
 __all__ = ["StationUnit", "KeyenceUnit", "MitutoyoUnit"]
 
@@ -73,46 +78,45 @@ class StationUnit:
         return self._raw() - self.offsets  # inf/NaN stay markers
 
     def busy_reply(self, line: bytes) -> bytes | None:
-        name = line[:2].decode("ascii", "replace") if line[:2].isalnum() else "??"
-        return format_error(name, ERR_BUSY)
+        return wire.station_error(wire.busy_echo(line), ERR_BUSY)
 
     def handle(self, line: bytes) -> bytes:
         """Reply (CR LF terminated) to one request line without its terminator."""
         self.requests += 1
         try:
-            req = parse_request(line)
-            return self._execute(req.name, req.args)
-        except ProbeDeviceError as exc:
-            return format_error(exc.command, exc.code)
+            name, args = wire.station_request(line)
+            return self._execute(name, args)
+        except Refusal as exc:
+            return wire.station_error(exc.command, exc.code)
 
     def _check(self, name: str, ch: int) -> None:
         if ch >= self.n:
-            raise ProbeDeviceError(name, ERR_NO_CHANNEL)
+            raise Refusal(name, ERR_NO_CHANNEL)
 
     def _execute(self, name: str, args: tuple) -> bytes:
         if name == "M0":
-            return format_reply("M0", *self._displayed())
+            return wire.station_m0(self._displayed())
         if name == "MS":
             self._check(name, args[0])
-            return format_reply("MS", args[0], self._displayed()[args[0]])
+            return wire.station_ms(args[0], self._displayed()[args[0]])
         if name == "ID":
-            return format_reply("ID", self.model, self.firmware, self.n)
+            return wire.station_id(self.model, self.firmware, self.n)
         ch = args[0]
         self._check(name, ch)
         if name == "ZC":
             self.offsets[ch] = 0.0
-            return format_reply("ZC", ch)
+            return wire.station_ack("ZC", ch)
         raw = self._raw()[ch]
         if not math.isfinite(raw):
-            raise ProbeDeviceError(name, ERR_NOT_MEASURING)
+            raise Refusal(name, ERR_NOT_MEASURING)
         if name == "ZS":
             self.offsets[ch] = raw
-            return format_reply("ZS", ch)
+            return wire.station_ack("ZS", ch)
         # PS: the present reading becomes the preset value
         if abs(args[1]) > VALUE_LIMIT_MM:
-            raise ProbeDeviceError(name, ERR_OUT_OF_RANGE)
+            raise Refusal(name, ERR_OUT_OF_RANGE)
         self.offsets[ch] = raw - args[1]
-        return format_reply("PS", ch, args[1])
+        return wire.station_ps(ch, args[1])
 
 
 class _Source:
@@ -137,12 +141,12 @@ class KeyenceUnit(_Source):
 
     def __init__(self, source: Callable[[], np.ndarray], n_channels: int, faults, refresh_s: float = 0.02,
                  writable: bool = False) -> None:
-        if not 1 <= n_channels <= kd.MAX_AMPLIFIERS:
-            raise ValueError(f"a DL-RS1A serves 1 .. {kd.MAX_AMPLIFIERS} amplifiers, not {n_channels}")
+        if not 1 <= n_channels <= KEYENCE_MAX_AMPLIFIERS:
+            raise ValueError(f"a DL-RS1A serves 1 .. {KEYENCE_MAX_AMPLIFIERS} amplifiers, not {n_channels}")
         super().__init__(source, n_channels, faults)
         self.refresh_s = refresh_s
         self.writable = writable
-        self.data = [{no: v for no, (_, v) in kd.DATA_NUMBERS.items()} for _ in range(n_channels)]
+        self.data = [{no: v for no, (_, v) in KEYENCE_DATA_NUMBERS.items()} for _ in range(n_channels)]
         self._buffer: np.ndarray | None = None
         self._buffered_at = -math.inf
         self._lock = threading.Lock()
@@ -158,56 +162,55 @@ class KeyenceUnit(_Source):
 
     def busy_reply(self, line: bytes) -> bytes | None:
         """Amplifiers starting up: ``ER,<cmd>,22`` (the manual: "resend the command")."""
-        name = line[:2].decode("ascii", "replace") if line[:2].isalnum() else "??"
-        return kd.format_error(name, 22)
+        return wire.keyence_error(wire.busy_echo(line), wire.KEYENCE_PARAMETER)
 
     def handle(self, line: bytes) -> bytes | None:
         self.requests += 1
         try:
-            name, params = kd.parse_request(line)
+            name, params = wire.keyence_request(line)
             return self._execute(name, params)
-        except ProbeDeviceError as exc:
-            return kd.format_error(exc.command, exc.code)
+        except Refusal as exc:
+            return wire.keyence_error(exc.command, exc.code)
 
     def _amp(self, name: str, field: bytes) -> int:
         amp = int(field)
         if amp >= self.n:
-            raise ProbeDeviceError(name, 65, errors=kd.ERRORS, dialect=kd.NAME)
+            raise Refusal(name, wire.KEYENCE_ID_NUMBER)
         return amp
 
     def _number(self, name: str, field: bytes) -> int:
         no = int(field)
-        if no not in kd.DATA_NUMBERS:  # this simulator serves only the documented GT2 items
-            raise ProbeDeviceError(name, 22, errors=kd.ERRORS, dialect=kd.NAME)
+        if no not in KEYENCE_DATA_NUMBERS:  # this simulator serves only the documented GT2 items
+            raise Refusal(name, wire.KEYENCE_PARAMETER)
         return no
 
     def _execute(self, name: str, params: tuple[bytes, ...]) -> bytes:
         if name == "M0":
-            return b"M0," + b",".join(kd.format_value(v) for v in self._buffered()) + b"\r\n"
+            return wire.keyence_m0(self._buffered())
         if name == "MS":
             # [?] GT2 control-output digits; "0" (all outputs off) as no judgment limits are set
-            return b"MS," + b",".join(b"0," + kd.format_value(v) for v in self._buffered()) + b"\r\n"
+            return wire.keyence_ms(self._buffered(), output=0)
         if name == "SR":
             amp, no = self._amp(name, params[0]), self._number(name, params[1])
-            return b"SR,%02d,%03d,%s\r\n" % (amp, no, self.data[amp][no])
+            return wire.keyence_sr(amp, no, self.data[amp][no])
         if not self.writable:
-            raise ProbeDeviceError(name, 67, errors=kd.ERRORS, dialect=kd.NAME)
+            raise Refusal(name, wire.KEYENCE_WRITE_CONTROL)
         if name == "SW":
             amp, no = self._amp(name, params[0]), self._number(name, params[1])
             self.data[amp][no] = params[2]
-            return b"SW,%02d,%03d\r\n" % (amp, no)
+            return wire.keyence_sw(amp, no)
         no = self._number(name, params[0])  # AW
         for item in self.data:
             item[no] = params[1]
-        return b"AW,%03d\r\n" % no
+        return wire.keyence_aw(no)
 
 
 class MitutoyoUnit(_Source):
     """Digimatic indicators with IDs 01 .. n (:mod:`drivers.probe_dialects.mitutoyo_ga`)."""
 
     def __init__(self, source: Callable[[], np.ndarray], n_channels: int, faults) -> None:
-        if not 1 <= n_channels <= md.MAX_CHANNELS:
-            raise ValueError(f"the Mitutoyo dialect serves 1 .. {md.MAX_CHANNELS} indicators, not {n_channels}")
+        if not 1 <= n_channels <= MITUTOYO_MAX_CHANNELS:
+            raise ValueError(f"the Mitutoyo dialect serves 1 .. {MITUTOYO_MAX_CHANNELS} indicators, not {n_channels}")
         super().__init__(source, n_channels, faults)
         self.modes = [b"N"] * n_channels
         self.offsets = np.zeros(n_channels)
@@ -217,30 +220,30 @@ class MitutoyoUnit(_Source):
 
     def handle(self, line: bytes) -> bytes | None:
         self.requests += 1
-        body = bytes(line).rstrip(b"\r\n")
-        cmd, ident, rest = body[:2].decode("ascii", "replace"), body[2:4], body[4:]
-        if cmd not in md.COMMANDS or not ident.isdigit() or not 1 <= int(ident) <= self.n:
+        request = wire.mitutoyo_request(line)
+        if request is None or not 1 <= request[1] <= self.n:
             return None
-        k = int(ident) - 1
+        cmd, ident, rest = request
+        k = ident - 1
         if cmd == "GA" and not rest:
             v = self.values()[k]
             # [?] over range / no reading have no documented form: the largest value, which the
             # driver decodes as not a measurement
-            shown = v - self.offsets[k] if math.isfinite(v) else (-md.VALUE_LIMIT_MM if v < 0 else md.VALUE_LIMIT_MM)
-            shown = float(np.clip(shown, -md.VALUE_LIMIT_MM, md.VALUE_LIMIT_MM))
-            return b"G%s%s,%s\r\n" % (self.modes[k], ident, md.format_value(shown))
+            limit = MITUTOYO_VALUE_LIMIT_MM
+            shown = v - self.offsets[k] if math.isfinite(v) else (-limit if v < 0 else limit)
+            shown = float(np.clip(shown, -limit, limit))
+            return wire.mitutoyo_data(self.modes[k], ident, shown)
         if cmd in ("CN", "CX", "CM", "CW") and not rest:
             self.modes[k] = cmd[1:].encode("ascii")
         elif cmd == "CR" and not rest:
             v = self.values()[k]
             self.offsets[k] = v if math.isfinite(v) else self.offsets[k]
         elif cmd == "CP" and rest[:1] == b",":
-            try:
-                preset, _ = md.parse_value(rest[1:])
-            except ProbeFrameError:
+            preset = wire.mitutoyo_parse_value(rest[1:])
+            if preset is None:
                 return None
             v = self.values()[k]
             self.offsets[k] = v - preset if math.isfinite(v) else self.offsets[k]
         else:
             return None
-        return b"CH%s\r\n" % ident
+        return wire.mitutoyo_ack(ident)
