@@ -8,7 +8,16 @@ a table of joint corrections::
     Δq(node, elbow) = IK_identified(T_node, elbow) − IK_nominal(T_node, elbow)
 
 (revolute differences wrapped to (−π, π]), so that the real robot — described by the identified
-model — reaches what the nominal model promised. The grid and the interpolation rule are in
+model — reaches what the nominal model promised.
+
+With error terms beyond geometry (issue 30, docs/error-terms.md: joint compliance, gear
+harmonics) the identified robot stands at ``q + δ(q)`` when it is commanded ``q`` (δ evaluated at
+the commanded joints, as :mod:`station.core.error_terms` fits it). A node's value is then
+``q_cmd − IK_nominal(T_node)`` with ``q_cmd`` the joints at which the identified model *with its
+terms* reaches the node: ``FK_identified(q_cmd + δ(q_cmd)) = T_node``, the fixed point
+``q_cmd = IK_identified(T_node) − δ(q_cmd)`` (:func:`station.core.term_compensation.commanded_joints`).
+The interpolation bound is evaluated on the same robot: the pose reached at
+``q + δ(q)``, ``q = q_nom + interpolated Δq``. The grid and the interpolation rule are in
 :mod:`station.core.table_grid`; robots without a table use :mod:`station.core.compensation`;
 the verified upload is the cell's (:mod:`station.cell.correction.upload`). Pure numerics: mm and rad
 inside, µm and arc seconds only in reported figures.
@@ -28,6 +37,7 @@ from station.core.kinematics import forward, scara_ik
 from station.core.model import RobotModel
 from station.core.table_data import CorrectionTableData, TableAxis
 from station.core.table_grid import GridSpec, _cell_coords, interpolate_table
+from station.core.term_compensation import JointDelta, commanded_joints
 from station.core.transforms import pose_to_matrix, rotation_log
 from station.core.units import ARCSEC, wrap_angle
 from station.errors import ConfigError, UnreachableError
@@ -37,6 +47,7 @@ __all__ = [
     "InterpolationCheck",
     "build_correction_table",
     "interpolation_error",
+    "node_joints",
 ]
 
 #: an IK solution must reproduce the target position to this [mm] to count as reached
@@ -84,6 +95,28 @@ def _ik_masked(model: RobotModel, params: np.ndarray, T: np.ndarray, elbow: int)
 
     solve(np.flatnonzero(_planar_reachable(params, T)))
     return q, ok
+
+
+def node_joints(model: RobotModel, params, T: np.ndarray, elbow: int, delta: JointDelta | None = None):
+    """The joints to command so that the robot ``params`` (``(n_params,)`` [mm, rad]) with the
+    joint errors ``delta`` reaches each target ``T`` ``(m, 4, 4)`` (base frame, x, y, z, yaw):
+    ``(q (m, g) [rad | mm] with NaN where unreachable, ok (m,) bool)``. Without ``delta``, the
+    IK of ``params``; with it, the fixed point ``q = IK(T) − δ(q)`` (a row whose fixed point does
+    not converge counts as unreachable)."""
+    p = np.asarray(params, dtype=float)
+    q, ok = _ik_masked(model, p, np.asarray(T, dtype=float).reshape(-1, 4, 4), elbow)
+    if delta is None or not ok.any():
+        return q, ok
+    qc, conv = commanded_joints(q[ok], delta)
+    q[ok] = qc
+    q[np.flatnonzero(ok)[~conv]] = np.nan
+    ok[np.flatnonzero(ok)[~conv]] = False
+    return q, ok
+
+
+def _stands(q: np.ndarray, delta: JointDelta | None) -> np.ndarray:
+    """Where a robot commanded ``q`` ``(m, g)`` stands: ``q + δ(q)`` (``q`` without terms)."""
+    return q if delta is None or not q.size else q + delta(q)
 
 
 def _planar_reachable(params: np.ndarray, T: np.ndarray, margin: float = 1e-9) -> np.ndarray:
@@ -146,6 +179,8 @@ class CorrectionTable:
     ``_arcsec``: bound of the interpolation error over all cells whose corners are all reachable
     (see :func:`build_correction_table`). ``max_correction``: ``(n_joints,)`` largest |Δq| per
     joint over reachable nodes [rad | mm]. ``check``: the sampled check the bound includes.
+    ``delta``: the error terms' joint error ``q ↦ δ(q)`` the nodes were solved with (None: the
+    geometric model; see :func:`build_correction_table`).
     """
 
     data: CorrectionTableData
@@ -161,6 +196,12 @@ class CorrectionTable:
     elbows: tuple[int, ...] = (1, -1)
     cell_bound_um: np.ndarray | None = None
     cell_bound_arcsec: np.ndarray | None = None
+    delta: JointDelta | None = None
+
+    @property
+    def with_terms(self) -> bool:
+        """The nodes carry error terms beyond geometry (``delta``)."""
+        return self.delta is not None
 
     @property
     def n_values(self) -> int:
@@ -207,10 +248,11 @@ def _fill_nearest(values: np.ndarray, ok: np.ndarray) -> np.ndarray:
 
 
 def _pose_errors(nominal: RobotModel, identified: np.ndarray, points: np.ndarray, elbow: int,
-                 corr: np.ndarray, q_nom: np.ndarray, q_id: np.ndarray):
-    """Position [µm] and orientation [″] errors of q_nom + corr on the identified robot."""
+                 corr: np.ndarray, q_nom: np.ndarray, q_id: np.ndarray, delta: JointDelta | None = None):
+    """Position [µm] and orientation [″] errors of q_nom + corr on the identified robot (standing
+    at ``q + δ(q)`` with terms); ``q_id``: its geometry's IK of the targets (where it must stand)."""
     T = _targets(points)
-    T_reach = forward(nominal, q_nom + corr, identified, setup=False)
+    T_reach = forward(nominal, _stands(q_nom + corr, delta), identified, setup=False)
     T_exact = forward(nominal, q_id, identified, setup=False)
     pos = np.linalg.norm(T_reach[:, :3, 3] - T[:, :3, 3], axis=1) * 1000.0
     dR = T_reach[:, :3, :3] @ np.swapaxes(T_exact[:, :3, :3], -1, -2)
@@ -239,7 +281,7 @@ def _reduce_to_cells(E: np.ndarray, axes, skip: int | None) -> np.ndarray:
 
 
 def _edge_bound(data: CorrectionTableData, nominal: RobotModel, identified: np.ndarray,
-                elbows: tuple[int, ...], reachable: np.ndarray):
+                elbows: tuple[int, ...], reachable: np.ndarray, delta: JointDelta | None = None):
     """Per cell, the sum over axes of the largest error at the midpoints of the cell's edges
     along that axis; the maximum over all fully reachable cells. Multilinear interpolation is
     the tensor product of 1-D linear interpolations, so its error is at most the sum of the 1-D
@@ -270,7 +312,7 @@ def _edge_bound(data: CorrectionTableData, nominal: RobotModel, identified: np.n
             q_id, ok2 = _ik_masked(nominal, identified, T, elbow)
             ok = ok1 & ok2
             corr = interpolate_table(data, pts[ok], c)
-            pos, ori, _ = _pose_errors(nominal, identified, pts[ok], elbow, corr, q_nom[ok], q_id[ok])
+            pos, ori, _ = _pose_errors(nominal, identified, pts[ok], elbow, corr, q_nom[ok], q_id[ok], delta)
             ep = np.full(len(pts), np.nan)
             eo = np.full(len(pts), np.nan)
             ep[ok], eo[ok] = pos, ori
@@ -285,11 +327,16 @@ def _edge_bound(data: CorrectionTableData, nominal: RobotModel, identified: np.n
 
 
 def build_correction_table(nominal: RobotModel, identified_params, grid: GridSpec | None = None,
-                           *, n_check: int = 4000, seed: int = 0, capacity: int | None = None) -> CorrectionTable:
+                           *, n_check: int = 4000, seed: int = 0, capacity: int | None = None,
+                           delta: JointDelta | None = None) -> CorrectionTable:
     """Joint-correction table for a SCARA: Δq = IK_identified − IK_nominal at every node.
 
     ``nominal``: the model the controller uses (its ``nominal`` parameters); ``identified_params``:
     ``(n_params,)`` identified parameters of the same model [mm, rad] (the set-up R is not used).
+    ``delta``: the identified error terms' joint error ``q ↦ δ(q)`` ``(n, g)`` → ``(n, g)``
+    [rad | mm] at the commanded joints (None: geometric); the nodes are then the joints at which
+    the robot with its terms reaches them (:func:`node_joints`), and the bound is evaluated on that
+    robot (see the module).
     Nodes where either model has no IK solution get the nearest reachable node's value and are
     counted in ``unreachable_nodes``; the interpolation bound covers the cells whose corners are
     all reachable (a target in a cell touching an unreachable node is not covered by it).
@@ -320,21 +367,21 @@ def build_correction_table(nominal: RobotModel, identified_params, grid: GridSpe
     reachable = np.zeros((n_cfg,) + shape, dtype=bool)
     for c, elbow in enumerate(grid.elbows):
         q_nom, ok1 = _ik_masked(nominal, nominal.nominal, T, elbow)
-        q_id, ok2 = _ik_masked(nominal, identified, T, elbow)
+        q_cmd, ok2 = node_joints(nominal, identified, T, elbow, delta)
         ok = (ok1 & ok2).reshape(shape)
         if not ok.any():
             raise ConfigError(
                 f"no node of the correction grid is reachable with elbow {elbow:+d}: check the "
                 f"grid ranges (base frame, mm) against the robot's reach")
-        d = np.where((ok1 & ok2)[:, None], _delta(nominal, q_id, q_nom), 0.0).reshape(shape + (g,))
+        d = np.where((ok1 & ok2)[:, None], _delta(nominal, q_cmd, q_nom), 0.0).reshape(shape + (g,))
         values[c] = _fill_nearest(d, ok)
         reachable[c] = ok
     data = CorrectionTableData(axes, values.astype(np.float32))
     max_corr = np.max(np.abs(values[reachable]), axis=0)
     reachable.setflags(write=False)
-    eb_um, eb_as, cb_um, cb_as = _edge_bound(data, nominal, identified, grid.elbows, reachable)
+    eb_um, eb_as, cb_um, cb_as = _edge_bound(data, nominal, identified, grid.elbows, reachable, delta)
     pre = CorrectionTable(data, grid, reachable, int((~reachable).sum()), math.nan, math.nan,
-                          max_corr, elbows=grid.elbows)
+                          max_corr, elbows=grid.elbows, delta=delta)
     chk = interpolation_error(pre, nominal, identified, n_samples=n_check,
                               rng=np.random.default_rng(seed))
     bound_um = float(np.nanmax([eb_um, chk.max_position_um]))
@@ -342,7 +389,7 @@ def build_correction_table(nominal: RobotModel, identified_params, grid: GridSpe
     cb_um.setflags(write=False)
     cb_as.setflags(write=False)
     return CorrectionTable(data, grid, reachable, int((~reachable).sum()), bound_um, bound_as,
-                           max_corr, eb_um, eb_as, chk, grid.elbows, cb_um, cb_as)
+                           max_corr, eb_um, eb_as, chk, grid.elbows, cb_um, cb_as, delta)
 
 
 def _cell_points_ok(table: CorrectionTable, points: np.ndarray, config: int) -> np.ndarray:
@@ -359,7 +406,7 @@ def _cell_points_ok(table: CorrectionTable, points: np.ndarray, config: int) -> 
 
 def interpolation_error(table: CorrectionTable, nominal: RobotModel, identified_params,
                         n_samples: int = 2000, rng: np.random.Generator | None = None,
-                        cell_centres: bool = True) -> InterpolationCheck:
+                        cell_centres: bool = True, delta: JointDelta | None = None) -> InterpolationCheck:
     """Pose error the table leaves on the identified robot.
 
     Targets: ``n_samples`` uniform random points inside the grid (spread over the elbow
@@ -367,9 +414,11 @@ def interpolation_error(table: CorrectionTable, nominal: RobotModel, identified_
     cell corners are all reachable and that both models reach. For each: the controller's
     ``q_nom + interpolated Δq``, the pose the identified robot reaches with it, compared with the
     target (position) and with the exactly corrected pose (orientation); see
-    :class:`InterpolationCheck`.
+    :class:`InterpolationCheck`. ``delta``: the robot's joint errors beyond geometry (default the
+    table's own, :attr:`CorrectionTable.delta`): it stands at ``q + δ(q)``.
     """
     rng = np.random.default_rng() if rng is None else rng
+    delta = table.delta if delta is None else delta
     identified = np.asarray(identified_params, dtype=float)
     axes = table.data.axes
     elbows = table.elbows
@@ -400,7 +449,7 @@ def interpolation_error(table: CorrectionTable, nominal: RobotModel, identified_
         if not ok.any():
             continue
         corr = interpolate_table(table.data, pts[ok], c)
-        pos, ori, tilt = _pose_errors(nominal, identified, pts[ok], elbow, corr, q_nom[ok], q_id[ok])
+        pos, ori, tilt = _pose_errors(nominal, identified, pts[ok], elbow, corr, q_nom[ok], q_id[ok], delta)
         pos_all.append(pos)
         ori_all.append(ori)
         tilt_all.append(tilt)

@@ -27,6 +27,16 @@ configured error sizes, :func:`prior_robots`), never a simulation's true robot: 
 made before anything moves. After identification, :func:`refine_for` checks the identified
 robot's table on the designed grid and refines the grid for that robot where it misses.
 
+Error terms beyond geometry (issue 30: gear harmonics, compliance) are identified from the run's
+data, so the sampled robots before motion carry none: no configured prior of their size exists,
+and the predicted bound is the geometric robots'. A harmonic of the joint angle bends the
+correction little (tests/core/test_correction_table.py: 20″ on joints 1 and 2 move a coarse grid's
+bound from 8.7 to 8.8 µm); one of a motor angle (``[gears] ratios``) cycles r times per joint
+turn, and the identified table's bound shows what its grid leaves of it.
+The identified robot's table carries them where the session fitted them: :func:`refine_for` with
+``delta`` builds and bounds it, and samples its curvature, on the robot standing at ``q + δ(q)``
+(:mod:`station.core.correction_table`).
+
 Pure numerics: arrays in, frozen dataclasses out; mm and rad inside, µm in reported bounds.
 """
 
@@ -39,10 +49,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from station.core.correction_table import CorrectionTable, _delta, _ik_masked, _targets, build_correction_table
+from station.core.correction_table import (
+    CorrectionTable,
+    _delta,
+    _ik_masked,
+    _stands,
+    _targets,
+    build_correction_table,
+    node_joints,
+)
 from station.core.kinematics import forward
 from station.core.model import RobotModel
 from station.core.table_grid import GridSpec
+from station.core.term_compensation import JointDelta
 from station.core.units import TWO_PI
 from station.errors import ConfigError
 
@@ -231,13 +250,15 @@ class Curvature:
 
 def curvature(model: RobotModel, robots: Sequence[np.ndarray], region: Region,
               lattice: tuple[int, int, int, int] = (9, 9, 2, 12), probe: tuple[float, float] = (8.0, 0.15),
-              centres: bool = False) -> Curvature:
+              centres: bool = False, delta: JointDelta | None = None) -> Curvature:
     """Sample the correction's curvature over ``region`` for each robot of ``robots`` (parameter
     vectors of ``model``). ``lattice``: points per axis (x, y, z, yaw; x, y, z without working
     targets); ``probe``: the second difference's step (mm for x, y, z, capped at a quarter of the
     axis's extent; rad for yaw); ``centres``: at the working targets only, not their boxes (a
     cheap look at many robots). Points where a robot or the nominal model cannot reach a probe
-    are left out."""
+    are left out. ``delta``: joint errors beyond geometry the robots stand with (``q + δ(q)``; the
+    identified robot's terms, :func:`refine_for`): the correction is then the joints at which that
+    robot reaches the targets (:func:`station.core.correction_table.node_joints`)."""
     xyz = region.samples((lattice[0], lattice[1], lattice[2]), centres)
     yaw = np.linspace(-math.pi, math.pi, lattice[3], endpoint=False)
     P = np.concatenate([np.repeat(xyz, len(yaw), axis=0), np.tile(yaw, len(xyz))[:, None]], axis=1)
@@ -254,7 +275,7 @@ def curvature(model: RobotModel, robots: Sequence[np.ndarray], region: Region,
     for params in robots:  # rows: robot by robot, each robot's elbows together
         for elbow in region.elbows:
             q_nom, ok_nom = nominal[elbow]
-            q_id, ok_id = _ik_masked(model, params, T, elbow)
+            q_id, ok_id = node_joints(model, params, T, elbow, delta)
             ok = ok_nom & ok_id
             d = np.where(ok[:, None], _delta(model, np.nan_to_num(q_id), np.nan_to_num(q_nom)), np.nan)
             centre, q0 = d[:m], q_id[:m]
@@ -265,8 +286,8 @@ def curvature(model: RobotModel, robots: Sequence[np.ndarray], region: Region,
                 good = np.all(np.isfinite(second), axis=1) & np.all(np.isfinite(q0), axis=1)
                 if not good.any():
                     continue
-                base = forward(model, q0[good], params, setup=False)[:, :3, 3]
-                moved = forward(model, q0[good] + second[good], params, setup=False)[:, :3, 3]
+                base = forward(model, _stands(q0[good], delta), params, setup=False)[:, :3, 3]
+                moved = forward(model, _stands(q0[good] + second[good], delta), params, setup=False)[:, :3, 3]
                 coeff[good, k] = np.linalg.norm(moved - base, axis=1) * 1000.0 / steps[k] ** 2
             rows.append(coeff)
     return Curvature(np.concatenate(rows) if rows else np.zeros((0, 4)))
@@ -476,25 +497,27 @@ def _predicted(model: RobotModel, built: Sequence[np.ndarray], more: Sequence[np
 
 
 def refine_for(model: RobotModel, params: np.ndarray, design: TableDesign, *,
-               rounds: int = 3) -> tuple[CorrectionTable, TableDesign, float]:
+               rounds: int = 3, delta: JointDelta | None = None) -> tuple[CorrectionTable, TableDesign, float]:
     """The identified robot's table: on the designed grid, refined (more nodes on the axes where
     this robot's correction bends) while its bound over the region's working cells misses the
     design's limit and the capacity allows. Returns the table, the design it was built on and
-    that bound [µm]; the caller judges it against the limit."""
+    that bound [µm]; the caller judges it against the limit. ``delta``: the identified error
+    terms' joint error ``q ↦ δ(q)`` (see the module): the tables are built, bounded and refined
+    with them."""
     limit, region = design.limit_um, design.region
-    table = build_correction_table(model, params, design.grid)
+    table = build_correction_table(model, params, design.grid, delta=delta)
     bound = region.bound_um(table)
     if not bound > limit:
         return table, design, bound
     g, n_el = model.n_joints, len(region.elbows)
-    curv = curvature(model, [params], region)
+    curv = curvature(model, [params], region, delta=delta)
     cur, target = list(design.counts), DESIGN_MARGIN * limit
     for _ in range(rounds):
         grown, est = _grow(curv, region, cur, target, g, design.capacity, frozenset(design.frozen))
         if grown == cur:
             break
         cur = grown
-        trial = build_correction_table(model, params, region.grid(cur))
+        trial = build_correction_table(model, params, region.grid(cur), delta=delta)
         b = region.bound_um(trial)
         if b < bound:
             table, bound = trial, b

@@ -5,8 +5,10 @@ harmonics: :mod:`station.core.error_terms`). :func:`station.core.compensation.co
 finds the joints ``q_geo`` at which the identified *geometry* reaches the target; the joints to
 command are then those the robot turns into ``q_geo``: ``q + Δq(q) = q_geo``, solved by fixed-point
 iteration ``q ← q_geo − Δq(q)`` (Δq changes by micro-radians per radian, so it converges in a few
-steps; the residual after it is reported). The commands are the nominal model's poses at those
-joints, as without terms. Pure numerics, mm and rad.
+steps; the residual after it is reported; :func:`commanded_joints`). The commands are the nominal
+model's poses at those joints, as without terms. A SCARA's correction table solves its nodes the
+same way (:func:`station.core.correction_table.build_correction_table` with ``delta``). Pure
+numerics, mm and rad.
 """
 
 from __future__ import annotations
@@ -21,14 +23,38 @@ from station.core.kinematics import forward
 from station.core.model import RobotModel
 from station.core.transforms import invert, pose_error, pose_to_matrix
 
-__all__ = ["compensated_targets_with_terms"]
+__all__ = ["JointDelta", "commanded_joints", "compensated_targets_with_terms"]
 
 #: fixed-point steps at most and the joint change [rad] below which it has converged
 MAX_STEPS = 20
 TOLERANCE = 1e-12
+#: a joint change [rad, mm] still above this after :data:`MAX_STEPS` steps: not converged
+CONVERGED = 1e-9
+
+#: ``q ↦ Δq(q)``: ``(n, g)`` commanded joints [rad | mm] → ``(n, g)`` how far the identified robot
+#: really stands from them (it stands at ``q + Δq(q)``)
+JointDelta = Callable[[np.ndarray], np.ndarray]
 
 
-def compensated_targets_with_terms(nominal: RobotModel, identified_params, delta_q: Callable[[np.ndarray], np.ndarray],
+def commanded_joints(q_geo: np.ndarray, delta_q: JointDelta) -> tuple[np.ndarray, np.ndarray]:
+    """The joints ``q`` ``(n, g)`` [rad | mm] to command so that a robot standing at ``q + Δq(q)``
+    stands at ``q_geo`` ``(n, g)`` (the identified geometry's IK of a target): the fixed point
+    ``q = q_geo − Δq(q)`` from ``q_geo``, and ``(n,)`` bool whether each row converged (its last
+    step below :data:`CONVERGED`). Δq changes by micro-radians per radian (a gear harmonic's
+    amplitude times its ratio), so each step shrinks the error by that factor."""
+    q_geo = np.asarray(q_geo, dtype=float)
+    q = q_geo.copy()
+    step = np.zeros(q.shape[0])
+    for _ in range(MAX_STEPS):
+        q_new = q_geo - delta_q(q)
+        step = np.max(np.abs(q_new - q), axis=1) if q.size else step
+        q = q_new
+        if not q.size or float(step.max()) < TOLERANCE:
+            break
+    return q, step < CONVERGED
+
+
+def compensated_targets_with_terms(nominal: RobotModel, identified_params, delta_q: JointDelta,
                                    targets, setup: bool = False, **kwargs) -> CompensatedTargets:
     """:func:`~station.core.compensation.compensated_targets` for a robot whose joints stand at
     ``q + delta_q(q)`` (``delta_q``: ``(n, g)`` → ``(n, g)`` [rad, mm]). ``kwargs`` as there
@@ -38,14 +64,7 @@ def compensated_targets_with_terms(nominal: RobotModel, identified_params, delta
     has = np.all(np.isfinite(res.joints), axis=1)
     if not np.any(has):
         return res
-    q_geo = res.joints[has]
-    q = q_geo.copy()
-    for _ in range(MAX_STEPS):
-        q_new = q_geo - delta_q(q)
-        step = float(np.max(np.abs(q_new - q)))
-        q = q_new
-        if step < TOLERANCE:
-            break
+    q, _ = commanded_joints(res.joints[has], delta_q)
     Tt = np.asarray(targets, dtype=float).reshape(-1, 4, 4)
     if setup:
         Tt = invert(pose_to_matrix(identified[0:6]))[None] @ Tt

@@ -318,3 +318,58 @@ def test_compensated_targets_six_axes():
     np.testing.assert_allclose(res.commands, forward(six, res.joints, six.nominal, setup=False))
     # a controller without correction would miss by the model error
     assert np.max(np.linalg.norm(res.commands[:, :3, 3] - T[:, :3, 3], axis=1)) > 0.05
+
+
+# --- error terms beyond geometry in the table (issue 30) -----------------------------------------
+
+def harmonics(amp_arcsec=((20.0, -10.0), (-8.0, 15.0), (0.0, 0.0), (0.0, 0.0))):
+    """A gear harmonic of joints 1 and 2 at the commanded joints: δ(q) = a cos q + b sin q [rad]."""
+    ab = np.asarray(amp_arcsec) * ARCSEC
+
+    def delta(q):
+        q = np.asarray(q, dtype=float)
+        return ab[:, 0] * np.cos(q) * [1, 1, 0, 1] + ab[:, 1] * np.sin(q) * [1, 1, 0, 1]
+
+    return delta
+
+
+def test_a_node_with_terms_puts_the_robot_with_its_terms_on_target(robot, identified):
+    """The fixed point q = IK_identified(T) − δ(q): the robot standing at q + δ(q) reaches every
+    target to 1e-9 mm, where the geometric IK's joints miss by the terms' effect."""
+    from station.core.correction_table import node_joints
+
+    delta = harmonics()
+    T = targets(random_points(GridSpec(), 300, np.random.default_rng(21)))
+    for elbow in (1, -1):
+        q, ok = node_joints(robot, identified, T, elbow, delta)
+        assert ok.all()
+        reached = forward(robot, q + delta(q), identified, setup=False)
+        assert np.max(np.linalg.norm(reached[:, :3, 3] - T[:, :3, 3], axis=1)) < 1e-9
+        q_geo, _ = node_joints(robot, identified, T, elbow)
+        exact = forward(robot, q_geo, identified, setup=False)  # the orientation the IK reaches (yaw; tilts uncorrectable)
+        ang = np.linalg.norm(rotation_log(reached[:, :3, :3] @ np.swapaxes(exact[:, :3, :3], -1, -2)), axis=1)
+        assert ang.max() < 1e-12
+        missed = forward(robot, q_geo + delta(q_geo), identified, setup=False)
+        assert np.median(np.linalg.norm(missed[:, :3, 3] - T[:, :3, 3], axis=1)) > 0.01  # mm
+
+
+def test_a_table_with_terms_corrects_the_robot_with_its_terms_within_its_bound(robot, identified):
+    delta = harmonics()
+    grid = GridSpec(x_step=60.0, y_step=500 / 7)
+    t = build_correction_table(robot, identified, grid, n_check=400, delta=delta)
+    geo = build_correction_table(robot, identified, grid, n_check=400)
+    assert t.with_terms and not geo.with_terms
+    # the node values: the joints at which the robot with its terms reaches the node, minus the nominal IK
+    p = np.array([[a.nodes[k] for a, k in zip(t.data.axes, (2, 3, 0, 5))]])
+    q_nom = scara_ik(robot, targets(p), 1, robot.nominal, check_limits=False)
+    q = q_nom + t.data.values[(0, 2, 3, 0, 5)]
+    np.testing.assert_allclose(forward(robot, q + delta(q), identified, setup=False)[0, :3, 3],
+                               targets(p)[0, :3, 3], atol=2e-5)  # mm: the wire's 1e-8 rad steps
+    # the bound is the robot's with its terms: it holds at fresh points (the table's own δ) ...
+    fresh = interpolation_error(t, robot, identified, n_samples=1500, rng=np.random.default_rng(7),
+                                cell_centres=False)
+    assert fresh.max_position_um <= t.interpolation_bound_um
+    # ... where the geometric table leaves the terms' whole effect on the same robot
+    missed = interpolation_error(geo, robot, identified, n_samples=1500, rng=np.random.default_rng(7),
+                                 cell_centres=False, delta=delta)
+    assert missed.rms_position_um > 5 * fresh.rms_position_um and missed.max_position_um > 20.0

@@ -327,19 +327,17 @@ def _probe_line(d: Any, source: str) -> Any:
 
 
 def _check_terms(ident: IdentificationConfig, model: RobotModel, source: str, robot_file: str) -> IdentificationConfig:
-    """``[identification] model``: the error terms beyond geometry need an articulated arm
-    (compensated targets; a SCARA's correction table holds the geometric model) and poses. With
-    terms, the robot file's ``[gravity]`` and ``[gears]`` (TOML; docs/error-terms.md) join it."""
+    """``[identification] model``: the error terms beyond geometry are fitted to poses (an
+    articulated arm's compensated targets and a SCARA's correction table carry them). With terms,
+    the robot file's ``[gravity]`` and ``[gears]`` (TOML; docs/error-terms.md) join it. A SCARA's
+    compliance is refused when named: gravity along its vertical axes loads none of them."""
     if ident.terms == ("geometric",):
         return ident
     where = f"{source}: identification.model = {ident.model!r}"
-    if model.is_scara:
-        raise ConfigError(f"{where}: the SCARA's correction table is built from the geometric model; error terms "
-                          f"beyond geometry are not in it yet. Write model = \"geometric\" (or leave it out); "
-                          f"'station identify DATA.csv --model auto' fits them on exported data")
     if ident.objective != "pose":
-        raise ConfigError(f"{where}: the error terms are fitted to poses; write objective = \"pose\" or "
-                          f"model = \"geometric\"")
+        raise ConfigError(f"{where}: the error terms are fitted to poses; the distance objective (distances between "
+                          f"measured points, robot only) is fitted geometric only, the terms are not identified "
+                          f"from it. Write objective = \"pose\" or model = \"geometric\"")
     if ident.terms != ("auto",):
         from station.core.model_selection import expand_families
 
@@ -349,8 +347,15 @@ def _check_terms(ident: IdentificationConfig, model: RobotModel, source: str, ro
             raise ConfigError(f"{where}: {exc}") from None
     from station.io.robot_terms import read_gear_ratios, read_gravity
 
-    return dataclasses.replace(ident, gravity=read_gravity(robot_file, model.n_joints),
-                               gear_ratios=read_gear_ratios(robot_file, model.n_joints))
+    gravity = read_gravity(robot_file, model.n_joints)
+    if model.is_scara and "compliance" in ident.terms:
+        g = (0.0, 0.0, -1.0) if gravity is None else gravity.gravity
+        if math.hypot(g[0], g[1]) <= 1e-6 * math.hypot(*g):
+            raise ConfigError(f"{where}: a SCARA's compliance is not identifiable: its joints 1, 2 and 4 turn about "
+                              f"vertical axes, so gravity puts no torque on them, and the quill carries the same "
+                              f"load in every pose, so its give merges with its zero. Leave compliance out "
+                              f"(e.g. model = \"cyclic\" or \"auto\")")
+    return dataclasses.replace(ident, gravity=gravity, gear_ratios=read_gear_ratios(robot_file, model.n_joints))
 
 
 def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellConfig:

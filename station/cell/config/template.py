@@ -185,7 +185,8 @@ sigma_angle_arcsec = 20.0        # 0.01 … 3600
 # exclude = []
 model = "geometric"              # error terms beyond geometry (docs/error-terms.md): "geometric", "auto"
 #                                # (kept where cross-validation says so) or terms such as "compliance+cyclic";
-#                                # a six-axis arm only (a SCARA's correction table is geometric)
+#                                # objective = "pose" only; a SCARA's table carries them (its vertical
+#                                # axes take no compliance: "cyclic" or "auto")
 
 [correction]
 # The correction table's grid describes the head frame's origin (MKKS, the point the head's CMM

@@ -278,10 +278,13 @@ def check_correction(cfg: CellConfig, plan: Any = None) -> TableDesign | None:
     return d
 
 
-def identified_table(cfg: CellConfig, params: np.ndarray, design: TableDesign) -> tuple[CorrectionTable, TableDesign, float]:
+def identified_table(cfg: CellConfig, params: np.ndarray, design: TableDesign,
+                     delta: Any = None) -> tuple[CorrectionTable, TableDesign, float]:
     """The identified robot's table on ``design``, refined where it misses the bound: the table,
-    the design it was built on and its bound over the region's working cells [µm]."""
-    return refine_for(cfg.model, params, design)
+    the design it was built on and its bound over the region's working cells [µm]. ``delta``: the
+    identified error terms' joint error ``q ↦ δ(q)`` (issue 30; None: geometric): the nodes, the
+    bound and the refinement carry them (:func:`station.core.table_design.refine_for`)."""
+    return refine_for(cfg.model, params, design, delta=delta)
 
 
 

@@ -207,6 +207,27 @@ def _not_uploaded(cfg: CellConfig, summary: RunSummary, run_id: int, table: Any,
                            notes=(*summary.notes, note))
 
 
+def _scara_terms(cfg: CellConfig, db: RunDB, run_id: int, terms: Any, summary: RunSummary, res: IdentificationResult,
+                 emit: Callable[[Event], None]) -> tuple[RunSummary, np.ndarray, Any]:
+    """A SCARA's ``[identification] model`` (issue 30): the selection stored (result ``error_model``),
+    its note and the summary's ``error_model``; returns the summary, the parameters the table is
+    built from (the geometry fitted with the kept terms, else ``res``'s) and the terms' joint error
+    ``δ(q)`` (None: nothing beyond geometry kept, or ``model = "geometric"``)."""
+    if terms is None:
+        return summary, res.params, None
+    from station.cell.results.pipeline_terms import error_model_record, error_model_summary, terms_delta, terms_note
+
+    es = error_model_summary(cfg, terms)
+    db.save_result(run_id, "error_model", error_model_record(cfg, terms))
+    note = terms_note(es)
+    delta = terms_delta(cfg, terms)
+    if delta is not None:
+        note += "; the correction table's nodes carry the terms (drift left out)"
+    emit(Notice("info", note))
+    summary = summary.replace(error_model=es, notes=(*summary.notes, note))
+    return summary, (res.params if delta is None else np.asarray(terms.fit.params, dtype=float)), delta
+
+
 def _identification_summary(res: IdentificationResult) -> IdentificationSummary:
     return IdentificationSummary(
         objective=res.kind, n_measurements=int(res.residuals.shape[0]), n_parameters=len(res.chosen),
@@ -274,16 +295,22 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
     if res.outliers:
         emit(Notice("warning", f"suspected outliers among identification measurements: {list(res.outliers)}"))
     R_id = res.params[:6]
-    if not cfg.model.is_scara:  # an articulated arm: compensated targets, no table (issue 9)
-        from station.cell.results.pipeline_terms import select_terms  # [identification] model (issue 30)
+    from station.cell.results.pipeline_terms import select_terms, truth_delta  # [identification] model (issue 30)
 
+    terms = select_terms(cfg, records, res)
+    if not cfg.model.is_scara:  # an articulated arm: compensated targets, no table (issue 9)
         return articulated_correction(cfg, runner, db, run_id, steps, emit, with_oracle, summary, res,
                                       upload=options.upload, min_gain=options.min_gain,
-                                      oracle_truth=options.oracle_truth, terms=select_terms(cfg, records, res))
+                                      oracle_truth=options.oracle_truth, terms=terms)
 
+    # a SCARA with error terms: the table's nodes carry them, on the geometry fitted with them, and the
+    # targets after correction are commanded in that fit's base frame (before: the geometric fit's)
+    summary, params, delta = _scara_terms(cfg, db, run_id, terms, summary, res, emit)
+    R_after = params[:6]
     emit(PhaseChanged("correct"))
     assert pre.design is not None  # a SCARA's pre-motion check designs its table
-    table, used, bound = identified_table(cfg, res.params, pre.design)
+    table, used, bound = (identified_table(cfg, params, pre.design) if delta is None
+                          else identified_table(cfg, params, pre.design, delta))
     limit = float(cfg.correction.max_interpolation_um)
     summary = summary.replace(correction=CorrectionSummary(
         n_values=int(table.data.n_values), interpolation_bound_um=bound, crc32=f"{table.data.crc32():08x}",
@@ -291,7 +318,8 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
         refined=used.counts != pre.design.counts, limit_um=limit))
     db.save_result(run_id, "correction_grid", {**grid_to_json(used.grid), "bound_um": bound,
                                                "predicted_bound_um": pre.design.predicted_bound_um,
-                                               "sampled_bounds_um": list(pre.design.bounds_um)})
+                                               "sampled_bounds_um": list(pre.design.bounds_um),
+                                               "error_terms": table.with_terms})  # its nodes carry the terms
     if used.counts != pre.design.counts:
         emit(Notice("info", f"the correction grid was refined for the identified robot: {used.describe()}"))
     if not bound <= limit:
@@ -328,12 +356,13 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
     db.set_status(run_id, "uploaded")
     summary = summary.replace(upload=UploadSummary(crc32=f"{upload.crc32:08x}", seconds=upload.total_s))
     emit(PhaseChanged("verify", "after correction"))
-    measure({StepKind.VERIFY_AFTER}, R_id)
+    measure({StepKind.VERIFY_AFTER}, R_after)
     summary = summary.replace(after=stats(StepKind.VERIFY_AFTER))
     if with_oracle:
         emit(PhaseChanged("verify", "oracle (true parameters)"))
         p_true = oracle_params(cfg, options.oracle_truth)
-        oracle_table = build_table_for(cfg, p_true, used.grid).data
+        # a simulated arm whose joints err (truth.joint_delta): the oracle's table carries them too
+        oracle_table = build_table_for(cfg, p_true, used.grid, truth_delta(options.oracle_truth)).data
         verified_upload(controller, oracle_table, emit)
         runner.guard.table = oracle_table
         emit(PhaseChanged("verify", "oracle (true parameters)"))  # back from the upload's phase

@@ -145,11 +145,13 @@ def grid_for(cfg: CellConfig) -> GridSpec:
     return design_for(cfg).grid
 
 
-def build_table_for(cfg: CellConfig, params: np.ndarray, grid: GridSpec | None = None) -> CorrectionTable:
+def build_table_for(cfg: CellConfig, params: np.ndarray, grid: GridSpec | None = None,
+                    delta: Any = None) -> CorrectionTable:
     """The correction table of ``params`` on ``grid`` (default :func:`grid_for`; the controller's
-    nominal model)."""
+    nominal model); ``delta``: joint errors beyond geometry ``q ↦ δ(q)`` the robot stands with
+    (the identified terms, or a simulator's truth; None: geometric)."""
     return build_correction_table(cfg.model, params, grid_for(cfg) if grid is None else grid,
-                                  capacity=MAX_TABLE_VALUES)
+                                  capacity=MAX_TABLE_VALUES, delta=delta)
 
 
 def verification_orientation_errors(cfg: CellConfig, steps: Sequence[PlannedStep], records: Sequence[MeasurementRecord],

@@ -5,7 +5,8 @@ run's measurements are extended by the terms the same way as ``station identify 
 (:func:`station.core.model_selection.select_model`: ``auto`` chooses by cross-validation, a list
 of families forces them), with the robot file's ``[gravity]`` and ``[gears]``. An articulated arm's
 verification targets are then compensated with the full model
-(:func:`station.core.term_compensation.compensated_targets_with_terms`).
+(:func:`station.core.term_compensation.compensated_targets_with_terms`); a SCARA's correction table
+carries the terms (:func:`station.core.correction_table.build_correction_table` with ``delta``).
 
 The oracle must know what the simulator knows: a simulated arm whose joints bend and err once per
 turn (``[simulation] joint_errors``) has them in its truth (``truth.joint_delta``), and the
