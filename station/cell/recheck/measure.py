@@ -65,11 +65,19 @@ class Baseline:
 
     run_id: int
     created_utc: str
-    params: np.ndarray  # (n_params,) the identified model [mm, rad]
+    params: np.ndarray  # (n_params,) the identified model [mm, rad] (with terms: the geometry fitted with them)
     sigma: Mapping[str, float]  # σ of the identified parameters by name
     after_rms_um: float | None  # the baseline's verification after correction
-    residual_rms_um: float | None  # its identification residual
+    residual_rms_um: float | None  # its identification residual (with terms: the fit with them)
     outcome: str | None
+    #: ``Δq(q)`` of the error terms the baseline kept (issue 30): the robot commanded ``q`` stands at
+    #: ``q + Δq(q)``; None: the baseline's model is geometric
+    joint_delta: Callable[[np.ndarray], np.ndarray] | None = None
+    terms: tuple[str, ...] = ()  # the kept families, for the report
+
+    def standing(self, q: np.ndarray) -> np.ndarray:
+        """``(n, g)`` joints where the baseline's model says a robot that read ``q`` stands."""
+        return q if self.joint_delta is None else q + self.joint_delta(q)
 
     @property
     def accuracy_um(self) -> float:
@@ -84,8 +92,10 @@ def _is_recheck(db: RunDB, run_id: int) -> bool:
     return bool(plan) and all(rec.get("kind") == StepKind.RECHECK.value for rec in plan)
 
 
-def load_baseline(db: RunDB, run_id: int) -> Baseline:
-    """The calibration ``run_id`` as a baseline (ConfigError when it has no identified model)."""
+def load_baseline(db: RunDB, run_id: int, cfg: CellConfig) -> Baseline:
+    """The calibration ``run_id`` as a baseline (ConfigError when it has no identified model). A
+    calibration that kept error terms beyond geometry (result ``error_model``) is compared with that
+    model, terms and all: the geometric fit alone would count what the terms explain as drift."""
     run = db.run(run_id)
     if _is_recheck(db, run_id):
         raise ConfigError(f"run {run_id} is a recheck, not a calibration; give a calibration run as --baseline")
@@ -97,11 +107,18 @@ def load_baseline(db: RunDB, run_id: int) -> Baseline:
     summary = RunSummary.from_json(stored) if stored else None
     names = list(ident.get("chosen", []))
     sig = dict(zip(names, (float(s) for s in ident.get("sigma", []))))
-    return Baseline(run_id=run_id, created_utc=run.created_utc, params=np.asarray(ident["params"], dtype=float),
+    from station.cell.results.pipeline_terms import stored_error_model
+
+    terms = stored_error_model(cfg, db.load_result(run_id, "error_model", default=None))
+    residual = summary.identification.rms_residual_um if summary and summary.identification else None
+    return Baseline(run_id=run_id, created_utc=run.created_utc,
+                    params=np.asarray(ident["params"] if terms is None else terms.params, dtype=float),
                     sigma=sig,
                     after_rms_um=summary.after.rms_um if summary and summary.after else None,
-                    residual_rms_um=summary.identification.rms_residual_um if summary and summary.identification else None,
-                    outcome=summary.outcome.name if summary else None)
+                    residual_rms_um=residual if terms is None or terms.rms_residual_um is None else terms.rms_residual_um,
+                    outcome=summary.outcome.name if summary else None,
+                    joint_delta=None if terms is None else terms.joint_delta(cfg),
+                    terms=() if terms is None else terms.families)
 
 
 def check_baseline_cell(db: RunDB, run_id: int, cfg: CellConfig) -> None:
@@ -343,7 +360,7 @@ def analyse_recheck(cfg: CellConfig, steps: Sequence[PlannedStep], records: Sequ
     params: list[ParameterDrift] = []
     repeat = None
     if main:
-        q = np.array([r.joints_read for r, _ in main])
+        q = baseline.standing(np.array([r.joints_read for r, _ in main]))  # like with like: the baseline's model
         T_meas = np.array([T for _, T in main])
         T_pred = forward(cfg.model, q, params=baseline.params, setup=True)
         e = _pose_error(T_meas, T_pred)
@@ -438,7 +455,9 @@ class RecheckSummary:
         b = self.baseline
         out["baseline"] = {"run_id": b.run_id, "created_utc": b.created_utc, "outcome": b.outcome,
                            "after_rms_um": b.after_rms_um, "residual_rms_um": b.residual_rms_um,
-                           "accuracy_um": b.accuracy_um}
+                           "accuracy_um": b.accuracy_um,
+                           # the model the recheck compares with: geometric, or with the terms it kept
+                           "error_terms": list(b.terms)}
         if self.result is not None:
             out["recheck"] = self.result.to_json()
         if self.warmup is not None:
@@ -481,7 +500,7 @@ def run_recheck(cfg: CellConfig, probe: ProbeHead, controller: CellController, d
     if resume_run is None:
         base_id = options.baseline if options.baseline is not None else find_baseline(db, cfg)
         check_baseline_cell(db, base_id, cfg)
-        baseline = load_baseline(db, base_id)
+        baseline = load_baseline(db, base_id, cfg)
         emit(PhaseChanged("plan", f"recheck against run {base_id}"))
         steps = plan_recheck(cfg, baseline.params, options.poses)
         run_id = db.create_run(cfg.source_text, [st.to_record() for st in steps], seed=seed,
@@ -500,7 +519,7 @@ def run_recheck(cfg: CellConfig, probe: ProbeHead, controller: CellController, d
         except (KeyError, ValueError, TypeError) as exc:
             raise RunDatabaseError(f"run {run_id}: the stored plan is not readable ({exc}); start a new recheck") from None
         base_id = int(db.load_result(run_id, "recheck_baseline")["run_id"])
-        baseline = load_baseline(db, base_id)
+        baseline = load_baseline(db, base_id, cfg)
         resumed = len(db.completed_steps(run_id, ok_only=True))
     if devices_info:
         db.save_result(run_id, "devices", devices_info)

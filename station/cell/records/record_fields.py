@@ -185,12 +185,38 @@ def check_result_fields(value: Any, run_id: int, key: str, n_steps: int) -> None
     elif key == "identification" and value is not None:
         if not isinstance(value, dict) or not _numbers(value.get("params")):
             raise bad("json.params", "not a list of finite parameters")
+    elif key == "error_model" and value is not None:
+        _check_error_model(value, bad)
     elif key == "recheck_baseline" and value is not None:
         rid = value.get("run_id") if isinstance(value, dict) else None
         if isinstance(rid, bool) or not isinstance(rid, int) or not 1 <= rid <= MAX_SQL_INT:
             raise bad("json.run_id", f"{str(rid)[:40]} is not a run number")
     elif key.startswith("tool:"):  # the station stores an object, also for a tool that failed
         _check_tool(value, bad)
+
+
+def _check_error_model(value: Any, bad: Any) -> None:
+    """The fields a recheck rebuilds the baseline's terms from (pipeline_terms.stored_error_model)."""
+    if not isinstance(value, dict):
+        raise bad("json", f"a JSON {_json_type(value)} where an object belongs")
+    chosen = value.get("chosen")
+    if not isinstance(chosen, list) or not all(isinstance(c, str) for c in chosen):
+        raise bad("json.chosen", "not a list of term families")
+    if not _numbers(value.get("params")):
+        raise bad("json.params", "not a list of finite parameters")
+    terms = value.get("terms")
+    if not isinstance(terms, list):
+        raise bad("json.terms", "not a list")
+    for i, t in enumerate(terms):
+        if not isinstance(t, dict) or not isinstance(t.get("name"), str) or not _numbers([t.get("value")], 1):
+            raise bad(f"json.terms[{i}]", "not a term with a name and a finite value")
+    g = value.get("gravity")
+    if g is not None and (not isinstance(g, dict) or not _numbers(g.get("gravity"), 3)
+                          or (g.get("masses") is not None and not _numbers(g.get("masses")))):
+        raise bad("json.gravity", "not a gravity model (a finite gravity vector, masses a list of numbers or null)")
+    ratios = value.get("gear_ratios")
+    if ratios is not None and not _numbers(ratios):
+        raise bad("json.gear_ratios", "not a list of finite numbers")
 
 
 def _check_tool(value: Any, bad: Any) -> None:

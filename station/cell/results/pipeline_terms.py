@@ -17,7 +17,9 @@ the records and the truth; nothing moves or writes.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import dataclasses
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
@@ -30,7 +32,7 @@ from station.core.model_selection import Selection
 from station.core.units import UM
 
 __all__ = ["JointDelta", "select_terms", "terms_delta", "truth_delta", "error_model_summary", "error_model_record",
-           "terms_note"]
+           "terms_note", "StoredErrorModel", "stored_error_model"]
 
 #: ``q ↦ Δq(q)``: ``(n, g)`` joints [rad | mm] → ``(n, g)`` where they really stand, minus ``q``
 JointDelta = Callable[[np.ndarray], np.ndarray]
@@ -103,11 +105,68 @@ def error_model_record(cfg: CellConfig, sel: Selection) -> dict[str, Any]:
     identifiability (:meth:`Selection.to_dict`, units stated), the configured model, and the
     geometry fitted together with the terms ``params`` [mm, rad] (the one the terms belong to)."""
     out = sel.to_dict()
-    out.update(model=cfg.identification.model, params=np.asarray(sel.fit.params, dtype=float).tolist(),
-               rms_residual_um=float(sel.fit.rms_position_mm() / UM))
+    ident = cfg.identification
+    out.update(model=ident.model, params=np.asarray(sel.fit.params, dtype=float).tolist(),
+               rms_residual_um=float(sel.fit.rms_position_mm() / UM),
+               # what the terms' basis was computed from, so that a later reader (a recheck) rebuilds Δq(q)
+               # exactly, whatever the robot file says by then
+               gravity=None if ident.gravity is None else dataclasses.asdict(ident.gravity),
+               gear_ratios=None if ident.gear_ratios is None else list(ident.gear_ratios))
     out["units"] = {**out.get("units", {}), "params": "mm and rad (the model's parameter order)",
-                    "rms_residual_um": "µm"}
+                    "rms_residual_um": "µm", "gravity": "m/s², kg and mm (station.core.error_terms.GravityModel)"}
     return out
+
+
+@dataclass(frozen=True)
+class StoredErrorModel:
+    """A run's stored error model with terms kept (result ``error_model``): the geometry fitted with
+    the terms ``params`` [mm, rad], the kept ``families``, the terms' ``names`` and ``values`` (in
+    their units), and what their basis is computed from."""
+
+    params: np.ndarray
+    families: tuple[str, ...]
+    names: tuple[str, ...]
+    values: np.ndarray
+    gravity: Any  # station.core.error_terms.GravityModel | None
+    gear_ratios: tuple[float, ...] | None
+    rms_residual_um: float | None
+
+    def joint_delta(self, cfg: CellConfig) -> JointDelta:
+        """``Δq(q)`` of the kept terms (drift and backlash left at zero, as for any new joints)."""
+        from station.core.error_terms import prediction_basis
+
+        def delta(q: np.ndarray) -> np.ndarray:
+            basis, _ = prediction_basis(cfg.model, q, self.families, self.names, self.gravity, self.gear_ratios)
+            return basis.joint_delta(self.values)
+
+        return delta
+
+
+def stored_error_model(cfg: CellConfig, record: Mapping[str, Any] | None) -> StoredErrorModel | None:
+    """The stored ``error_model`` result (its fields checked where records are read,
+    ``record_fields.check_result_fields``) as a :class:`StoredErrorModel`; None when the run kept no
+    term (or stored no error model): its geometric identification is its model. A record of older
+    stations without ``gravity`` / ``gear_ratios`` takes the cell's."""
+    if not record or not record.get("chosen") or not record.get("terms"):
+        return None
+    from station.core.error_terms import GravityModel
+
+    g = record.get("gravity")
+    if g is None:
+        gravity = cfg.identification.gravity
+    else:
+        gravity = GravityModel(gravity=tuple(g["gravity"]), masses=None if g.get("masses") is None else tuple(g["masses"]),
+                               com=None if g.get("com") is None else tuple(tuple(c) for c in g["com"]),
+                               payload_kg=float(g.get("payload_kg", 0.0)),
+                               payload_com=tuple(g.get("payload_com", (0.0, 0.0, 0.0))))
+    ratios = record.get("gear_ratios")
+    ratios = cfg.identification.gear_ratios if ratios is None else tuple(float(r) for r in ratios)
+    rms = record.get("rms_residual_um")
+    return StoredErrorModel(params=np.asarray(record["params"], dtype=float), families=tuple(record["chosen"]),
+                            names=tuple(str(t["name"]) for t in record["terms"]),
+                            values=np.array([float(t["value"]) for t in record["terms"]]),
+                            gravity=gravity, gear_ratios=ratios,
+                            rms_residual_um=None if rms is None else float(rms))
 
 
 def terms_note(es: ErrorModelSummary) -> str:
