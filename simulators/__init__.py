@@ -98,7 +98,8 @@ def start_simulated_cell(seed: int = 0, time_scale: float = 0.0, pace: bool = Fa
                          soft_limits: Any = None, register_base: int = 0, register_count: int = 128,
                          correction_state: int = 0,
                          probe_protocol: str = "keyence-dl-rs1a", probe_bytesize: int | None = None,
-                         probe_parity: str | None = None, **physics: float) -> SimulatedCellServers:
+                         probe_parity: str | None = None, joint_errors: str = "none", joint_errors_scale: float = 1.0,
+                         **physics: float) -> SimulatedCellServers:
     """Start the controller and probe-head simulators on one :class:`SimulatedCell`.
     ``map_version``: publish another register-map version (the driver must refuse it).
     ``register_base``/``register_count``: the controller's register window (``[devices]
@@ -116,13 +117,18 @@ def start_simulated_cell(seed: int = 0, time_scale: float = 0.0, pace: bool = Fa
     of :class:`simulators.from_config.SimulationPhysics` (µm, arc seconds, degrees); left out, the
     built-in cell is exactly today's. With ``cell`` given, the drift and physics arguments only
     describe it (the cell already holds them). ``soft_limits`` ``(n_joints, 2)`` [rad | mm]: the
-    controller's (default: the robot's joint limits). A user's cell: :mod:`simulators.from_config`."""
+    controller's (default: the robot's joint limits). ``joint_errors``: ``"scara"`` gives the built-in
+    SCARA's gears once-per-turn errors (:func:`simulators.joint_errors.scara_joint_errors`, times
+    ``joint_errors_scale``; issue 30), ``"none"`` a rigid robot. A user's cell: :mod:`simulators.from_config`."""
     from simulators.cell import CellTruth, SimulatedCell
     from simulators.controller_server import SimulatedController
     from simulators.probe_head_sim import ProbeHeadServer
     from simulators.thermal import ThermalModel, step_change
 
-    recorded: dict[str, float] = {}
+    recorded: dict[str, Any] = {}
+    if joint_errors not in ("none", "scara"):
+        raise ValueError(f"joint_errors = {joint_errors!r}: the built-in simulated cell is a SCARA; its kinds are "
+                         f"\"none\" and \"scara\"")
     if cell is None:
         if physics:
             from simulators.cell import CalibrationBody
@@ -140,6 +146,12 @@ def start_simulated_cell(seed: int = 0, time_scale: float = 0.0, pace: bool = Fa
         model = truth.model
         thermal = ThermalModel.for_model(model, thermal_length_um, thermal_offset_arcsec, thermal_time_constant_s)
         step = step_change(model, step_joint, step_offset_deg, tuple(step_tool_um))  # type: ignore[arg-type]
+        if joint_errors == "scara":  # a different robot, recorded with the run as physics (not drift)
+            from simulators.joint_errors import scara_joint_errors
+
+            cell_kw["joint_errors"] = scara_joint_errors(seed, float(joint_errors_scale))
+            recorded.update(joint_errors="scara", **({"joint_errors_scale": float(joint_errors_scale)}
+                                                     if joint_errors_scale != 1.0 else {}))
         cell = SimulatedCell(seed=seed, thermal=thermal, step=step, **cell_kw)
     ctrl = SimulatedController(cell=cell, host=host, port=port, word_order=word_order,
                                time_scale=time_scale, watchdog=watchdog, soft_limits=soft_limits,

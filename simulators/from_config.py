@@ -185,17 +185,22 @@ def simulated_cell_for(cfg: Any, seed: int) -> SimulatedCell:
 
 
 def _joint_errors(settings: Mapping[str, Any], model: Any, seed: int):
-    """``[simulation] joint_errors``: None, or the six-axis arm's (simulators/joint_errors.py)."""
+    """``[simulation] joint_errors``: None, the six-axis arm's or the SCARA's (simulators/joint_errors.py)."""
     kind = settings.get("joint_errors") or "none"
     if kind == "none":
         return None
-    from simulators.joint_errors import six_axis_joint_errors
+    from simulators.joint_errors import scara_joint_errors, six_axis_joint_errors
     from station.errors import ConfigError
 
+    scale = settings.get("joint_errors_scale")
+    if kind == "scara":
+        if not model.is_scara:
+            raise ConfigError(f"[simulation] joint_errors = \"scara\" is for a SCARA; robot {model.name!r} is not one: "
+                              f"write \"six-axis\" for an arm of six revolute joints, or \"none\"")
+        return scara_joint_errors(seed, 1.0 if scale is None else float(scale))
     if model.n_joints != 6 or any(t != "revolute" for t in model.joint_types):
         raise ConfigError(f"[simulation] joint_errors = {kind!r} is for a six-axis arm of revolute joints; "
                           f"robot {model.name!r} has the joints {', '.join(model.joint_types)}")
-    scale = settings.get("joint_errors_scale")
     return six_axis_joint_errors(seed, 1.0 if scale is None else float(scale))
 
 

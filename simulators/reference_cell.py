@@ -19,6 +19,8 @@ __all__ = ["cell_config_text", "body_and_devices_toml", "CellEndpoints"]
 
 
 def _toml(key: str, v: Any) -> str:
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
     if isinstance(v, (list, tuple)):
         return "[" + ", ".join(repr(float(x)) for x in v) + "]"
     return repr(int(v)) if key == "step_joint" else repr(float(v))

@@ -80,13 +80,13 @@ def _load_simulated(request: CellRequest, stack: ExitStack) -> LoadedCell:
         return LoadedCell(rehearsal.cfg, rehearsal.servers.cell.truth, rehearsal.endpoints())
     sim = simulation_settings(text, str(request.config)) if request.config else {}
     given = sim.pop("seed", None)
-    # joint errors beyond geometry belong to a six-axis arm (issue 30); the built-in cell is a SCARA
-    kind = sim.pop("joint_errors", None) or "none"
-    sim.pop("joint_errors_scale", None)
-    if kind != "none":
+    # joint errors beyond geometry (issue 30): the built-in cell is a SCARA, its kind is "scara"
+    kind = sim.get("joint_errors") or "none"
+    if kind == "six-axis":
         raise ConfigError(f"{request.config}: [simulation] joint_errors = {kind!r} is for a six-axis arm; the "
-                          f"built-in simulated cell is a SCARA: remove the key, or rehearse a six-axis cell "
-                          f"(--robot irb2600, or a configuration with [robot] and [body])")
+                          f"built-in simulated cell is a SCARA: write \"scara\" (its gears err once per turn), "
+                          f"remove the key, or rehearse a six-axis cell (--robot irb2600, or a configuration with "
+                          f"[robot] and [body])")
     seed = request.seed if request.seed is not None else (1 if given is None else int(given))
     window = {"register_count": sim.pop("controller_register_count", 128),
               "correction_state": sim.pop("controller_correction_state", 0)}
@@ -96,11 +96,33 @@ def _load_simulated(request: CellRequest, stack: ExitStack) -> LoadedCell:
                                    **window, **sim)
     stack.callback(servers.stop)
     cell_text = cell_config_text(servers, seed)
+    if isinstance(data.get("identification"), dict):  # e.g. model = "auto" (issue 30) on the built-in cell
+        cell_text = _merge_table(cell_text, "identification", data["identification"])
     taken = {t: data[t] for t in _TAKEN if isinstance(data.get(t), dict)}
     if taken:
         cell_text += "\n" + tomli_w.dumps(taken)
     cfg = parse_text(cell_text, f"<simulated cell{' with ' + request.config if request.config else ''}>")
     return LoadedCell(cfg, servers.cell.truth, servers.endpoints())
+
+
+def _merge_table(text: str, table: str, given: dict[str, Any]) -> str:
+    """``text`` (TOML with a ``[table]``) with the keys ``given`` for that table: a key it has is
+    replaced, one it lacks added under the header; the rest of the text, comments included, stays."""
+    lines = text.splitlines(keepends=True)
+    header = f"[{table}]"
+    start = next((i for i, line in enumerate(lines) if line.strip() == header), None)
+    if start is None:
+        return text + f"\n{header}\n" + tomli_w.dumps(given)
+    end = next((i for i in range(start + 1, len(lines)) if lines[i].lstrip().startswith("[")), len(lines))
+    body = lines[start + 1:end]
+    for key, value in given.items():
+        line = tomli_w.dumps({key: value})
+        at = next((i for i, b in enumerate(body) if b.split("=", 1)[0].strip() == key and "=" in b), None)
+        if at is None:
+            body.insert(0, line)
+        else:
+            body[at] = line
+    return "".join(lines[:start + 1] + body + lines[end:])
 
 
 def _load_builtin_robot_cell(request: CellRequest, stack: ExitStack) -> LoadedCell:

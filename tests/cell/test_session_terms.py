@@ -246,37 +246,23 @@ def test_a_scara_table_with_the_terms_auto_keeps_beats_the_geometric_table_on_th
     assert a_terms < 0.3 * a_geo, (a_terms, a_geo)  # seed 1: 2.2 against 17.7 µm
 
 
-def _scara_session(model: str, tmp_path: Path) -> tuple[RunSummary, object]:
-    """The built-in simulated SCARA (seed 1) whose joints 1, 2, 4 err once per turn, calibrated
-    with ``[identification] model`` over real transports, the oracle knowing the joint errors."""
-    from contextlib import ExitStack
-
-    from simulators import start_simulated_cell
-    from simulators.cell import SimulatedCell
-    from simulators.joint_errors import scara_joint_errors
-    from simulators.reference_cell import cell_config_text
-    from station.cell.results.pipeline import Options, run_calibration
-    from station.cell.session.calibrate import open_cell
-
-    with ExitStack() as stack:
-        srv = start_simulated_cell(seed=1, cell=SimulatedCell(seed=1, joint_errors=scara_joint_errors(1)))
-        stack.callback(srv.stop)
-        text = cell_config_text(srv, 1).replace("[identification]\n", f'[identification]\nmodel = "{model}"\n', 1)
-        cfg = parse_text(text)
-        db = stack.enter_context(RunDB(tmp_path / f"{model}.sqlite"))
-        devices = open_cell(cfg, stack)
-        s = run_calibration(cfg, devices.probe, devices.controller, db, lambda e: None,
-                            options=Options(oracle_truth=srv.cell.truth))
-        assert s.run_id is not None
-        rec = db.load_result(s.run_id, "error_model", default=None)
-    return s, rec
-
-
 @pytest.mark.slow
 def test_a_scara_session_uploads_a_table_with_the_terms_and_meets_an_oracle_that_knows_them(tmp_path):
     """One session (~15 s): the geometric table of the same cell leaves 20.9 µm RMS after correction,
     after/oracle 2.0 (docs/error-terms.md); the comparison on the same data runs fast above."""
-    auto, rec = _scara_session("auto", tmp_path)
+    # the operator's way: the built-in simulated SCARA whose gears err once per turn ([simulation]
+    # joint_errors = "scara"), with [identification] model = "auto" taken from the same file
+    config = tmp_path / "cell.toml"
+    config.write_text('[simulation]\njoint_errors = "scara"\n\n[identification]\nmodel = "auto"\n', encoding="utf-8")
+    db = tmp_path / "runs.sqlite"
+    auto = run_calibration_session(CellRequest(config=str(config), simulated=True, seed=1, db=str(db), time_scale=0.0),
+                                   lambda e: None, load=load_cell)
+    assert auto.run_id is not None
+    with RunDB(db) as runs:
+        rec = runs.load_result(auto.run_id, "error_model", default=None)
+        stored = runs.run(auto.run_id)
+    # the run records the robot it rehearsed: its configuration says the joints erred, and the model asked
+    assert 'joint_errors = "scara"' in stored.config_toml and 'model = "auto"' in stored.config_toml
     assert auto.outcome is Outcome.SUCCESS, auto.failure
     assert auto.after is not None and auto.oracle is not None and auto.before is not None
     em = auto.error_model

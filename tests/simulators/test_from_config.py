@@ -108,6 +108,41 @@ def test_builtin_cell_with_other_physics_records_them():
         assert sim == {"seed": 2, "probe_noise_um": 2.0, "repeatability_um": 8.0}
 
 
+def test_the_builtin_scara_with_joint_errors_takes_the_model_from_the_same_file(tmp_path):
+    """Issue 30: ``[simulation] joint_errors = "scara"`` gives the built-in SCARA gears that err once
+    per turn, recorded with the run as its physics; ``[identification]`` keys of the same file are
+    merged into the built-in configuration (a key it has replaced, its comments kept); the
+    six-axis kind is refused for it, and the SCARA kind for a six-axis arm."""
+    from contextlib import ExitStack
+
+    from station.cell.session.calibrate import CellRequest
+    from station.errors import ConfigError
+    from station.ui.simulated_cell import load_cell
+
+    config = tmp_path / "cell.toml"
+    config.write_text('[simulation]\njoint_errors = "scara"\njoint_errors_scale = 2.0\n\n'
+                      '[identification]\nmodel = "cyclic"\nsigma_position_um = 7.5\n', encoding="utf-8")
+    with ExitStack() as stack:
+        loaded = load_cell(CellRequest(config=str(config), simulated=True, seed=3), stack)
+        cfg, truth = loaded.cfg, loaded.truth
+        assert cfg.identification.terms == ("cyclic",) and cfg.identification.sigma_position_um == 7.5
+        text = cfg.source_text
+        assert text.count("sigma_position_um") == 1 and "# The simulated head" in text
+        sim = tomllib.loads(text)["simulation"]
+        assert sim["joint_errors"] == "scara" and sim["joint_errors_scale"] == 2.0
+        amp = np.hypot(*np.array(truth.joint_errors.cyclic).T) / (np.pi / 180 / 3600)
+        assert amp == pytest.approx([50.0, 40.0, 0.0, 30.0])  # 25″, 20″, 0, 15″ × 2
+        q = np.zeros((1, 4))
+        assert np.abs(truth.joint_delta(q)).max() > 0  # the commanded joints err
+    config.write_text('[simulation]\njoint_errors = "six-axis"\n', encoding="utf-8")
+    with ExitStack() as stack, pytest.raises(ConfigError, match='write "scara"'):
+        load_cell(CellRequest(config=str(config), simulated=True), stack)
+    from simulators.from_config import _joint_errors
+
+    with pytest.raises(ConfigError, match="is for a SCARA"):
+        _joint_errors({"joint_errors": "scara"}, load_robot("irb2600"), 1)
+
+
 # ----------------------------------------------------------------- the cell the files describe
 def test_the_simulated_cell_is_the_one_the_files_describe(tmp_path):
     shutil.copy(ROOT / "station/io/robots/sr800.toml", tmp_path / "my_robot.toml")

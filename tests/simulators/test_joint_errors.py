@@ -47,7 +47,7 @@ def test_a_cell_with_joint_errors_stands_where_the_joints_bend():
     assert SimulatedCell(truth=truth, body=six_axis_body(2), seed=2, joint_errors=NO_JOINT_ERRORS).joint_errors is None
 
 
-def test_simulation_key_is_off_by_default_and_for_six_axis_arms_only():
+def test_simulation_key_is_off_by_default_and_each_kind_for_its_arm():
     assert simulation_settings("[simulation]\nseed = 1\n")["joint_errors"] == "none"
     s = simulation_settings('[simulation]\njoint_errors = "six-axis"\njoint_errors_scale = 0.5\n')
     arm = six_axis_truth(1).model
@@ -56,5 +56,9 @@ def test_simulation_key_is_off_by_default_and_for_six_axis_arms_only():
     assert _joint_errors({"joint_errors": "none"}, arm, 1) is None
     with pytest.raises(ConfigError, match="six-axis arm"):
         _joint_errors(s, load_robot("sr800"), 1)
+    assert simulation_settings('[simulation]\njoint_errors = "scara"\n')["joint_errors"] == "scara"
+    assert _joint_errors({"joint_errors": "scara"}, load_robot("sr800"), 1) is not None
+    with pytest.raises(ConfigError, match="is for a SCARA"):
+        _joint_errors({"joint_errors": "scara"}, arm, 1)
     with pytest.raises(ConfigError):
-        simulation_settings('[simulation]\njoint_errors = "scara"\n')
+        simulation_settings('[simulation]\njoint_errors = "delta"\n')

@@ -315,10 +315,11 @@ class _Simulation(_Section):
         (0.0, 0.0, 0.0), min_length=3, max_length=3, strict=False,
         description="a bumped tool: shift of the head x, y, z [µm], each within ±10000")
     # joint errors beyond geometry (issue 30, simulators/joint_errors.py): "six-axis" is a 1.6 m arm's
-    # compliance under gravity and once-per-turn gear errors; "none" (the default, and the SCARA's) none
-    joint_errors: Literal["none", "six-axis"] = Field(
+    # compliance under gravity and once-per-turn gear errors; "scara" a SCARA's gears erring once per
+    # turn (joints 1, 2, 4); "none" (the default, as the source chapter finds for the SCARA) none
+    joint_errors: Literal["none", "six-axis", "scara"] = Field(
         "none", description='"six-axis": the joints bend under gravity and err once per turn (a 1.6 m arm\'s '
-        'values, docs/error-terms.md); "none": a rigid robot')
+        'values, docs/error-terms.md); "scara": a SCARA\'s joints 1, 2, 4 err once per turn; "none": a rigid robot')
     joint_errors_scale: float = _num(1.0, ge=0.0, le=10.0, what="factor on every joint error of joint_errors")
 
 
