@@ -1,8 +1,9 @@
 """Simulated probe-head unit: physics (true geometry + noise) and a serial server.
 
-* :class:`ProbeHeadPhysics` turns the true cube pose into readings: exact geometry from
-  :mod:`station.core.probe_geometry`, Gaussian noise per probe (default σ 0.5 µm), quantised to the
-  protocol's 0.1 µm, markers where a probe misses or leaves its stroke.
+* :class:`ProbeHeadPhysics` turns the true cube pose into readings: the simulator's own contact
+  physics (:mod:`simulators.probe_contact`, not the station's solver), Gaussian noise per probe
+  (default σ 0.5 µm), quantised to the protocol's 0.1 µm, markers where a probe misses or leaves
+  its stroke.
 * :class:`ProbeHeadServer` speaks one dialect of :mod:`drivers.probe_dialects` on a
   pseudo-terminal (``protocol``: station-ascii, the default; keyence-dl-rs1a; mitutoyo-ga, the
   units of :mod:`simulators.probe_dialect_units`); ``.port`` is the slave device path for
@@ -40,8 +41,9 @@ from drivers.probe_protocol import (
     MAX_REQUEST_BYTES,
     ChannelStatus,
 )
+from simulators.probe_contact import touch_readings
 from simulators.probe_dialect_units import KeyenceUnit, MitutoyoUnit, StationUnit
-from station.core.probe_geometry import ProbeHeadGeometry, default_probe_head, readings_from_pose
+from station.core.probe_geometry import ProbeHeadGeometry, default_probe_head
 
 __all__ = ["ProbeHeadPhysics", "FaultKind", "ProbeFaults", "ProbeHeadServer",
            "ProbeHeadTcpServer"]
@@ -123,7 +125,8 @@ class ProbeHeadPhysics:
             # the far end of its measuring range (a positive reading is further extended), so the
             # unit shows over range there, as a real head parked in the air does, not "invalid".
             return np.full(n, np.inf)
-        exact = readings_from_pose(self.geometry, M_true)
+        g = self.geometry  # the simulator's own contact physics, not the station's solver (probe_contact.py)
+        exact = touch_readings(g.mount_points, g.directions, g.faces, g.tip_radii, g.strokes, g.cube_edge_mm, M_true)
         noisy = exact + (self._rng if rng is None else rng).normal(0.0, self.noise_mm, n)
         noisy = self._faulted(np.asarray(M_true, dtype=float), noisy)
         half = self.geometry.strokes / 2.0
