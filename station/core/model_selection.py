@@ -200,6 +200,13 @@ def fit_model(model: RobotModel, data: MeasurementSet, geometric: Identification
     return fit_terms(model, data, geometric, basis_all.select(columns_of(basis_all.names, families)), start=start)
 
 
+def _both_sides(approach: np.ndarray) -> bool:
+    """Whether some joint's approach sign changes between the rows ``(n, g)`` (backlash identifiable
+    for it; :func:`~station.core.error_terms.term_basis` drops the joints whose sign does not)."""
+    s = np.sign(np.asarray(approach, dtype=float))
+    return bool(s.ndim == 2 and s.shape[0] > 1 and np.any(s.max(axis=0) != s.min(axis=0)))
+
+
 def expand_families(model: RobotModel, names: tuple[str, ...], rows: TermRows | None = None) -> tuple[str, ...]:
     """``--model`` names to families: ``cyclic`` is the first harmonic of every revolute joint,
     ``cyclic2`` the first and second; ``compliance``, ``drift``, ``backlash`` and ``cyclic.q<j>`` as
@@ -214,6 +221,10 @@ def expand_families(model: RobotModel, names: tuple[str, ...], rows: TermRows | 
         elif n == "backlash" and (rows is None or rows.approach is None):
             raise ConfigError("--model backlash needs the approach direction of each joint in the data "
                               "(columns approach_1 … approach_g, ±1)")
+        elif n == "backlash" and rows is not None and rows.approach is not None and not _both_sides(rows.approach):
+            raise ConfigError("backlash: no joint arrived from both sides in these data (every approach sign is the "
+                              "same in every row), so the lost motion merges with the joint zeros and cannot be "
+                              "fitted; measure the poses from both sides, or leave backlash out")
         else:
             known = set(available_families(model, rows)) | {"backlash"}
             known |= {f.replace("cyclic.", "cyclic2.") for f in known if f.startswith("cyclic.")}

@@ -67,8 +67,13 @@ class InProcess:
         out = []
         for st in steps:
             r = self.execute(approach_and_read(self.cfg, st.q, st.direction, cycle=st.cycle))
-            out.append(SimpleNamespace(step_index=st.index, point_id=st.point_id, label=st.label, ok=r.ok,
-                                       pose=r.pose, joints_read=r.joints_read))
+            # the fields of a MeasurementRecord the results read (the error terms' rows: kind, commanded
+            # joints, time stamp; one second apart)
+            out.append(SimpleNamespace(step_index=st.index, kind=st.kind.value, point_id=st.point_id, label=st.label,
+                                       ok=r.ok, pose=r.pose, joints_read=r.joints_read,
+                                       joints_commanded=np.asarray(st.q, dtype=float),
+                                       t_utc=f"2026-01-01T{st.index // 3600:02d}:{st.index // 60 % 60:02d}:"
+                                             f"{st.index % 60:02d}.000000Z"))
         return out
 
 

@@ -326,11 +326,14 @@ def _probe_line(d: Any, source: str) -> Any:
         raise ConfigError(f"{source}: [devices]: {exc}") from None
 
 
-def _check_terms(ident: IdentificationConfig, model: RobotModel, source: str, robot_file: str) -> IdentificationConfig:
+def _check_terms(ident: IdentificationConfig, model: RobotModel, source: str, robot_file: str,
+                 both_directions: bool = False) -> IdentificationConfig:
     """``[identification] model``: the error terms beyond geometry are fitted to poses (an
     articulated arm's compensated targets and a SCARA's correction table carry them). With terms,
     the robot file's ``[gravity]`` and ``[gears]`` (TOML; docs/error-terms.md) join it. A SCARA's
-    compliance is refused when named: gravity along its vertical axes loads none of them."""
+    compliance is refused when named: gravity along its vertical axes loads none of them.
+    ``backlash`` named needs the plan to approach every pose from both sides
+    (``both_directions``): from one side the lost motion merges with the joint zeros."""
     if ident.terms == ("geometric",):
         return ident
     where = f"{source}: identification.model = {ident.model!r}"
@@ -338,11 +341,16 @@ def _check_terms(ident: IdentificationConfig, model: RobotModel, source: str, ro
         raise ConfigError(f"{where}: the error terms are fitted to poses; the distance objective (distances between "
                           f"measured points, robot only) is fitted geometric only, the terms are not identified "
                           f"from it. Write objective = \"pose\" or model = \"geometric\"")
+    if "backlash" in ident.terms and not both_directions:
+        raise ConfigError(f"{where}: backlash (lost motion) is identified where the data show each joint arriving "
+                          f"from both sides, and the plan approaches every pose from one side; set [plan] "
+                          f"both_directions = true (a SCARA: every identification pose is then also measured from "
+                          f"the other side), or leave backlash out (model = \"auto\" tries it only then)")
     if ident.terms != ("auto",):
         from station.core.model_selection import expand_families
 
-        try:
-            expand_families(model, ident.terms)
+        try:  # backlash (checked above) takes the session's approach sides (pipeline_results.run_term_rows)
+            expand_families(model, tuple(t for t in ident.terms if t != "backlash"))
         except ConfigError as exc:
             raise ConfigError(f"{where}: {exc}") from None
     from station.io.robot_terms import read_gear_ratios, read_gravity
@@ -395,7 +403,7 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
         sigma_angle_arcsec=i.sigma_angle_arcsec,
         prefer=tuple(model.prefer if i.prefer is None else i.prefer), fix=tuple(i.fix), exclude=tuple(i.exclude),
         model=i.model.strip())
-    ident = _check_terms(ident, model, source, _robot_path(f.robot.model, source))
+    ident = _check_terms(ident, model, source, _robot_path(f.robot.model, source), plan.both_directions)
     for key in ("prefer", "fix", "exclude"):
         for n in getattr(ident, key):
             try:

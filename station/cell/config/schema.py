@@ -207,11 +207,13 @@ class _Identification(_Section):
         if v.strip() == "auto" or all(_TERM.match(n) for n in names):
             return v
         raise ValueError('write "geometric", "auto", or terms joined by "+": compliance, cyclic, cyclic2, '
-                         'cyclic.q<j>, cyclic2.q<j>, drift (e.g. "compliance+cyclic")')
+                         'cyclic.q<j>, cyclic2.q<j>, drift, backlash (with [plan] both_directions = true) '
+                         '(e.g. "compliance+cyclic")')
 
 
-#: one term family of ``[identification] model`` (backlash needs approach signs a cell's plan does not give)
-_TERM = re.compile(r"^(geometric|compliance|cyclic2?|cyclic2?\.q[1-9][0-9]?|drift)$")
+#: one term family of ``[identification] model`` (backlash: where the plan approaches from both sides,
+#: checked in cell_config._check_terms)
+_TERM = re.compile(r"^(geometric|compliance|cyclic2?|cyclic2?\.q[1-9][0-9]?|drift|backlash)$")
 
 
 class _Region(_Section):

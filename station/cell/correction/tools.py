@@ -26,8 +26,19 @@ Figures per tool (:func:`evaluate_tools`):
   ``[plan].verification_cycles`` cycles per target (the same scatter for all three), as the
   head's own verification does; nothing moves for it.
 
+Error terms beyond geometry (issue 30, ``docs/error-terms.md``): a run that kept terms builds
+every tool's correction with them, on the geometry fitted with them (``params``) and their joint
+error ``delta`` ``q ↦ δ(q)`` — the joints' errors are the robot's, the same whatever tool it carries
+(the SCARA table's nodes carry them, other robots' targets are compensated with them,
+:func:`station.core.term_compensation.compensated_targets_with_terms`). Compliance is the one term
+that depends on the load: ``[[tool]]`` has no mass, so the terms are those identified with the
+probe head (the head's payload is assumed). In simulation the true robot stands at
+``q + δ_true(q)`` when the simulator's truth has joint errors (``truth.joint_delta``), and the
+oracle's correction is built with them too.
+
 Nothing here uploads: the head's table stays the one the pipeline uploads; ``station export
---tool NAME`` writes a tool's table for the controller.
+--tool NAME`` writes a tool's table for the controller (a run with terms: rebuilt with its stored
+error model, :mod:`station.cell.records.stored_error_model`).
 """
 
 from __future__ import annotations
@@ -44,6 +55,7 @@ from station.cell.correction.design import head_in_flange, tool_grid_for
 from station.cell.plan.steps import PlannedStep
 from station.cell.records.rundb import RunDB
 from station.cell.records.stored_config import stored_config
+from station.cell.records.stored_error_model import stored_error_model
 from station.cell.records.summary import ToolSummary
 from station.cell.run.events import Event, Notice
 from station.core.compensation import compensated_targets
@@ -52,6 +64,7 @@ from station.core.kinematics import forward, inverse_kinematics, scara_ik
 from station.core.model import RobotModel
 from station.core.table_data import CorrectionTableData, TableRangeError
 from station.core.table_grid import GridSpec, interpolate_table
+from station.core.term_compensation import JointDelta, commanded_joints, compensated_targets_with_terms
 from station.core.tool_frame import (
     ToolKinematics,
     derive_tool,
@@ -180,6 +193,13 @@ class ToolCorrection:
     table: CorrectionTable | None = None
     commands: np.ndarray | None = None
     commanded_joints: np.ndarray | None = None
+    #: the error terms' joint error it was built with (None: geometric)
+    delta: JointDelta | None = None
+
+    @property
+    def with_terms(self) -> bool:
+        """Built with error terms beyond geometry (a table's nodes or the targets carry them)."""
+        return self.delta is not None or (self.table is not None and self.table.with_terms)
 
     @property
     def kind(self) -> str:
@@ -187,21 +207,26 @@ class ToolCorrection:
 
 
 def build_tool_correction(cfg: CellConfig, tool: ToolConfig, params: np.ndarray,
-                          steps: Sequence[PlannedStep]) -> ToolCorrection:
+                          steps: Sequence[PlannedStep], delta: JointDelta | None = None) -> ToolCorrection:
     """The tool's correction from the identified ``params`` ``(n_params,)`` [mm, rad]: a table on
-    the tool's grid for a SCARA, compensated targets for its verification targets otherwise."""
+    the tool's grid for a SCARA, compensated targets for its verification targets otherwise.
+    ``delta``: the identified error terms' joint error ``q ↦ δ(q)`` (the robot commanded ``q``
+    stands at ``q + δ(q)``; ``params`` then the geometry fitted with them), None: geometric."""
     kin = derive_tool(cfg.model, params, head_in_flange(cfg), tool.tcp_matrix)
     targets = tool_targets(kin, steps, np.asarray(params, dtype=float)[:6])
     if cfg.model.is_scara:
         try:
-            table = build_correction_table(kin.nominal, kin.params, tool_grid(cfg, tool), capacity=MAX_TABLE_VALUES)
+            table = build_correction_table(kin.nominal, kin.params, tool_grid(cfg, tool), capacity=MAX_TABLE_VALUES,
+                                           delta=delta)
         except ConfigError as exc:
             raise ConfigError(f"tool {tool.name!r}: {exc} ([[tool]] x_mm, y_mm, z_mm give the tool its own grid)") from None
-        return ToolCorrection(tool, kin, targets, table=table)
+        return ToolCorrection(tool, kin, targets, table=table, delta=delta)
     if not len(targets.joints):
-        return ToolCorrection(tool, kin, targets, commands=np.zeros((0, 4, 4)), commanded_joints=targets.joints)
-    comp = compensated_targets(kin.nominal, kin.params, targets.base, targets.joints)
-    return ToolCorrection(tool, kin, targets, commands=comp.commands, commanded_joints=comp.joints)
+        return ToolCorrection(tool, kin, targets, commands=np.zeros((0, 4, 4)), commanded_joints=targets.joints,
+                              delta=delta)
+    comp = (compensated_targets(kin.nominal, kin.params, targets.base, targets.joints) if delta is None
+            else compensated_targets_with_terms(kin.nominal, kin.params, delta, targets.base, q0=targets.joints))
+    return ToolCorrection(tool, kin, targets, commands=comp.commands, commanded_joints=comp.joints, delta=delta)
 
 
 # --------------------------------------------------------------------------------------------
@@ -241,24 +266,28 @@ def _scara_commands(nominal: RobotModel, X: np.ndarray, elbows: np.ndarray,
     return q
 
 
-def _exact_correction_joints(nominal: RobotModel, params: np.ndarray, X: np.ndarray, q0: np.ndarray) -> np.ndarray:
-    """Joints ``(n, g)`` that put the robot ``params`` on ``X`` (compensated targets; NaN rows where
-    it cannot reach one)."""
+def _exact_correction_joints(nominal: RobotModel, params: np.ndarray, X: np.ndarray, q0: np.ndarray,
+                             delta: JointDelta | None = None) -> np.ndarray:
+    """Joints ``(n, g)`` that put the robot ``params`` (standing at ``q + delta(q)``) on ``X``
+    (compensated targets; NaN rows where it cannot reach one)."""
     q = np.full((len(X), nominal.n_joints), np.nan)
     for i in range(len(X)):
         try:
-            q[i] = compensated_targets(nominal, params, X[i:i + 1], q0[i:i + 1]).joints[0]
+            q[i] = (compensated_targets(nominal, params, X[i:i + 1], q0[i:i + 1]) if delta is None else
+                    compensated_targets_with_terms(nominal, params, delta, X[i:i + 1], q0=q0[i:i + 1])).joints[0]
         except (UnreachableError, np.linalg.LinAlgError):
             continue
     return q
 
 
 def _head_correction_joints(cfg: CellConfig, kin: ToolKinematics, p_head: np.ndarray, X: np.ndarray,
-                            q0: np.ndarray, elbows: np.ndarray, head_table: CorrectionTable | None) -> np.ndarray:
+                            q0: np.ndarray, elbows: np.ndarray, head_table: CorrectionTable | None,
+                            delta: JointDelta | None = None) -> np.ndarray:
     """Joints the controller commands for the tool's targets with the HEAD's correction as it is:
     its table (SCARA); for other robots the head's joint correction at the nominal tool's joints
-    ``q_n = IK_nom_tool(x)``: the joints that put the identified head where the nominal head is at
-    ``q_n`` (the head is corrected there, the tool's own lever is not)."""
+    ``q_n = IK_nom_tool(x)``: the joints that put the identified head (standing at ``q + delta(q)``
+    with error terms) where the nominal head is at ``q_n`` (the head is corrected there, the tool's
+    own lever is not)."""
     if cfg.model.is_scara:
         if head_table is None:
             return np.full((len(X), kin.nominal.n_joints), np.nan)
@@ -267,21 +296,24 @@ def _head_correction_joints(cfg: CellConfig, kin: ToolKinematics, p_head: np.nda
     for i in range(len(X)):
         try:
             q_n = inverse_kinematics(kin.nominal, X[i:i + 1], q0[i:i + 1])
-            q[i] = inverse_kinematics(cfg.model, forward(cfg.model, q_n, setup=False), q_n, params=p_head)[0]
+            q_geo = inverse_kinematics(cfg.model, forward(cfg.model, q_n, setup=False), q_n, params=p_head)
+            q[i] = q_geo[0] if delta is None else commanded_joints(q_geo, delta)[0][0]
         except (UnreachableError, np.linalg.LinAlgError):
             continue
     return q
 
 
 def _errors(model: RobotModel, p_real: np.ndarray, q_cmd: np.ndarray, world: np.ndarray,
-            scatter: np.ndarray) -> np.ndarray:
+            scatter: np.ndarray, delta: JointDelta | None = None) -> np.ndarray:
     """``(n, cycles)`` position error [µm] of the robot ``p_real`` (set-up included) driven to
-    ``q_cmd`` plus each cycle's joint scatter ``scatter`` ``(cycles, n, g)``, against ``world``
-    (NaN rows where nothing was commanded)."""
+    ``q_cmd`` — standing at ``q_cmd + delta(q_cmd)`` where it has joint errors beyond geometry —
+    plus each cycle's joint scatter ``scatter`` ``(cycles, n, g)``, against ``world`` (NaN rows
+    where nothing was commanded)."""
     out = np.full((len(q_cmd), scatter.shape[0]), np.nan)
     ok = np.all(np.isfinite(q_cmd), axis=1)
     if ok.any():
-        reached = forward(model, q_cmd[ok][None] + scatter[:, ok], p_real)  # (cycles, m, 4, 4)
+        stands = q_cmd[ok] if delta is None else q_cmd[ok] + delta(q_cmd[ok])
+        reached = forward(model, stands[None] + scatter[:, ok], p_real)  # (cycles, m, 4, 4)
         d = reached[..., :3, 3] - world[ok][None, :, :3, 3]
         out[ok] = np.linalg.norm(d, axis=-1).T * 1e3
     return out
@@ -340,7 +372,8 @@ class ToolEvaluation:
             "targets": list(c.targets.labels),
             "head_predicted_um": _listed(self.head_predicted_um),
             "after_um": _listed(self.own_um), "oracle_um": _listed(self.oracle_um), "head_um": _listed(self.head_um),
-            "summary": _json_summary(s), "notes": list(self.notes)}
+            "summary": _json_summary(s), "notes": list(self.notes),
+            "error_terms": c.with_terms}  # built with the run's error terms (its stored error_model)
         if c.table is not None:
             out["table"] = c.table.summary()
         if c.commands is not None:
@@ -369,15 +402,26 @@ def _scatter(truth: Any, n: int, g: int, cycles: int) -> np.ndarray:
     return rng.normal(0.0, 1.0, (cycles, n, g)) * sigma
 
 
+def _truth_delta(truth: Any) -> JointDelta | None:
+    """The simulator's joint errors ``q ↦ δ_true(q)`` at the commanded joints, or None without them
+    (as :func:`station.cell.results.pipeline_terms.truth_delta`, which sits above this layer)."""
+    if truth is None or getattr(truth, "joint_errors", None) is None:
+        return None
+    fn: JointDelta = truth.joint_delta
+    return fn
+
+
 def evaluate_tool(cfg: CellConfig, tool: ToolConfig, params: np.ndarray, steps: Sequence[PlannedStep],
                   head_table: CorrectionTable | None, p_true: np.ndarray | None = None,
-                  truth: Any = None) -> ToolEvaluation:
+                  truth: Any = None, delta: JointDelta | None = None) -> ToolEvaluation:
     """One tool: its correction, the head correction's predicted error at its targets, and — with
     the true parameters ``p_true`` ``(n_params,)`` (simulation; ``truth`` the simulator's
-    :class:`~simulators.cell.CellTruth` for the repeatability) — the real robot's errors with
-    its own, the oracle's and the head's correction."""
+    :class:`~simulators.cell.CellTruth` for the repeatability and its joint errors, under which the
+    real robot stands at ``q + δ_true(q)``) — the real robot's errors with its own, the oracle's
+    and the head's correction. ``delta``: the identified error terms' joint error (``params`` the
+    geometry fitted with them), which the tool's correction, the head's and the prediction carry."""
     p_id = np.asarray(params, dtype=float)
-    corr = build_tool_correction(cfg, tool, p_id, steps)
+    corr = build_tool_correction(cfg, tool, p_id, steps, delta)
     kin, tg = corr.kin, corr.targets
     n, g = len(tg.labels), cfg.model.n_joints
     notes: list[str] = []
@@ -396,12 +440,13 @@ def evaluate_tool(cfg: CellConfig, tool: ToolConfig, params: np.ndarray, steps: 
                          f"covers the whole grid; a finer or smaller grid for this tool: [[tool]] x_mm, y_mm, z_mm)")
         if head_table is not None and head_table.grid != own_table.grid:
             # the head's correction as it is, on the tool's grid so that it covers the tool's targets
-            head_table = build_correction_table(cfg.model, p_id, own_table.grid, capacity=MAX_TABLE_VALUES)
+            head_table = build_correction_table(cfg.model, p_id, own_table.grid, capacity=MAX_TABLE_VALUES,
+                                                delta=head_table.delta)
     else:
         assert corr.commanded_joints is not None
         q_own = corr.commanded_joints
     with_head = head_table is not None or not scara  # a SCARA's head correction is its table
-    q_head = _head_correction_joints(cfg, kin, p_id, tg.base, tg.joints, tg.elbows, head_table)
+    q_head = _head_correction_joints(cfg, kin, p_id, tg.base, tg.joints, tg.elbows, head_table, delta)
     outside = int(np.sum(~np.all(np.isfinite(q_own), axis=1)))
     if outside:
         notes.append(f"{outside} of {n} targets lie outside the tool's grid or reach and are not counted")
@@ -411,41 +456,44 @@ def evaluate_tool(cfg: CellConfig, tool: ToolConfig, params: np.ndarray, steps: 
                      f"figures leave them out")
     no_scatter = np.zeros((1, n, g))
     # what the identified model says the head's correction leaves for this tool (a real cell's figure)
-    head_predicted = _errors(cfg.model, kin.params, q_head, tg.world, no_scatter)
+    head_predicted = _errors(cfg.model, kin.params, q_head, tg.world, no_scatter, delta)
     if p_true is None:
         return ToolEvaluation(corr, head_predicted, notes=tuple(notes))
     p_true = np.asarray(p_true, dtype=float)
     p_true_tool = tool_params(cfg.model, p_true, H, tool.tcp_matrix)
+    true_delta = _truth_delta(truth)  # the simulated robot's joints err: it stands at q + δ_true(q)
     X_oracle = invert(pose_to_matrix(p_true[:6]))[None] @ tg.world
-    if scara:
-        oracle_table = build_correction_table(kin.nominal, p_true_tool, tool_grid(cfg, tool), capacity=MAX_TABLE_VALUES)
+    if scara:  # the oracle knows what the simulator knows: its table carries the true joint errors
+        oracle_table = build_correction_table(kin.nominal, p_true_tool, tool_grid(cfg, tool), capacity=MAX_TABLE_VALUES,
+                                              delta=true_delta)
         q_oracle = _scara_commands(kin.nominal, X_oracle, tg.elbows, oracle_table.data, oracle_table.elbows)
     else:
-        q_oracle = _exact_correction_joints(kin.nominal, p_true_tool, X_oracle, tg.joints)
+        q_oracle = _exact_correction_joints(kin.nominal, p_true_tool, X_oracle, tg.joints, true_delta)
     scatter = _scatter(truth, n, g, max(int(cfg.plan.verification_cycles), 1))
-    own = _errors(cfg.model, p_true_tool, q_own, tg.world, scatter)
-    oracle = _errors(cfg.model, p_true_tool, q_oracle, tg.world, scatter)
-    head = _errors(cfg.model, p_true_tool, q_head, tg.world, scatter) if with_head else None
+    own = _errors(cfg.model, p_true_tool, q_own, tg.world, scatter, true_delta)
+    oracle = _errors(cfg.model, p_true_tool, q_oracle, tg.world, scatter, true_delta)
+    head = _errors(cfg.model, p_true_tool, q_head, tg.world, scatter, true_delta) if with_head else None
     return ToolEvaluation(corr, head_predicted, own, oracle, head, tuple(notes))
 
 
 def evaluate_tools(cfg: CellConfig, params: np.ndarray, steps: Sequence[PlannedStep],
                    head_table: CorrectionTable | None, p_true: np.ndarray | None = None,
-                   truth: Any = None) -> tuple[ToolEvaluation, ...]:
+                   truth: Any = None, delta: JointDelta | None = None) -> tuple[ToolEvaluation, ...]:
     """:func:`evaluate_tool` for every configured tool, in the configuration's order."""
-    return tuple(evaluate_tool(cfg, t, params, steps, head_table, p_true, truth) for t in cfg.tools)
+    return tuple(evaluate_tool(cfg, t, params, steps, head_table, p_true, truth, delta) for t in cfg.tools)
 
 
 
 def run_tools(cfg: CellConfig, db: RunDB, run_id: int, steps: Sequence[PlannedStep], params: np.ndarray,
               head_table: CorrectionTable | None, p_true: np.ndarray | None, truth: Any,
-              emit: Callable[[Event], None]) -> tuple[ToolSummary, ...]:
+              emit: Callable[[Event], None], delta: JointDelta | None = None) -> tuple[ToolSummary, ...]:
     """The pipeline's step after the head's table: every tool's correction and figures, stored as
-    ``tool:<name>`` results; returns their summaries. Nothing is uploaded."""
+    ``tool:<name>`` results; returns their summaries. Nothing is uploaded. With error terms kept,
+    ``params`` is the geometry fitted with them and ``delta`` their joint error (as for the head)."""
     out = []
     for tool in cfg.tools:
         try:
-            ev = evaluate_tool(cfg, tool, params, steps, head_table, p_true, truth)
+            ev = evaluate_tool(cfg, tool, params, steps, head_table, p_true, truth, delta)
         except (StationError, np.linalg.LinAlgError, ValueError) as exc:  # a tool never stops the head's run
             emit(Notice("warning", f"tool {tool.name!r}: no correction was built ({exc}); the head's calibration "
                                    f"goes on"))
@@ -455,7 +503,7 @@ def run_tools(cfg: CellConfig, db: RunDB, run_id: int, steps: Sequence[PlannedSt
         db.save_result(run_id, result_key(s.name), ev.result())
         what = (f"table {s.crc32}, interpolation bound {s.interpolation_bound_um:.1f} µm"
                 if s.crc32 is not None and s.interpolation_bound_um is not None else f"{s.n_targets} compensated targets")
-        line = f"tool {s.name!r}: own correction built ({what})"
+        line = f"tool {s.name!r}: own correction built ({what}{', with the error terms' if ev.correction.with_terms else ''})"
         if s.head_predicted_rms_um is not None:
             line += f"; the head's correction would leave {s.head_predicted_rms_um:.1f} µm RMS at its targets"
         if s.after_rms_um is not None and s.oracle_rms_um is not None:
@@ -511,8 +559,10 @@ class ToolTableBeyondBound(StationError):
 
 def tool_export(db: RunDB, run_id: int, name: str, force: bool = False) -> dict[str, Any]:
     """The tool's correction of run ``run_id`` as JSON types: for a SCARA its table, rebuilt from
-    the run's configuration snapshot and identification and checked against the CRC-32 the run
-    stored; for other robots the compensated targets the run stored. :class:`ConfigError` when the
+    the run's configuration snapshot and identification — a run that kept error terms: its stored
+    error model, the geometry fitted with the terms and their joint error δ(q), as the run built
+    it — and checked against the CRC-32 the run stored; for other robots the compensated targets
+    the run stored (with the terms where it kept them). :class:`ConfigError` when the
     run has no such tool or no identification; :class:`ToolTableBeyondBound` when the table's
     interpolation bound exceeds the tool's ``max_interpolation_um`` and ``force`` is not given
     (with ``force`` the export carries that ``warning``)."""
@@ -527,17 +577,21 @@ def tool_export(db: RunDB, run_id: int, name: str, force: bool = False) -> dict[
     if "error" in stored:
         raise ConfigError(f"run {run_id}: no correction was built for tool {name!r}: {stored['error']}")
     tcp = [float(v) for v in tool.tcp[:3]] + [float(np.degrees(v)) for v in tool.tcp[3:]]
+    em = stored_error_model(cfg, db.load_result(run_id, "error_model", default=None))  # the terms kept, if any
     out: dict[str, Any] = {"format": EXPORT_FORMAT, "run_id": run_id, "tool": name, "tcp_mm_deg": tcp,
                            "robot": cfg.model.name, "joint_types": list(cfg.model.joint_types),
                            "joint_units": ["rad" if k == "revolute" else "mm" for k in cfg.model.joint_types],
                            "tool_params_nominal": stored.get("tool_params_nominal"),
                            "tool_params_identified": stored.get("tool_params_identified"),
                            "units": "lengths mm, angles rad; the controller's nominal model takes tool_params_nominal's "
-                                    "last six values (x, y, z, roll, pitch, yaw) as its tool"}
+                                    "last six values (x, y, z, roll, pitch, yaw) as its tool",
+                           # the error terms beyond geometry the correction carries (docs/error-terms.md)
+                           "error_terms": [] if em is None else list(em.families)}
     if cfg.model.is_scara:
-        table = build_correction_table(derive_tool(cfg.model, np.asarray(ident["params"], dtype=float),
-                                                   head_in_flange(cfg), tool.tcp_matrix).nominal,
-                                       np.asarray(stored["tool_params_identified"], dtype=float), tool_grid(cfg, tool), capacity=MAX_TABLE_VALUES)
+        kin = derive_tool(cfg.model, np.asarray(ident["params"] if em is None else em.params, dtype=float),
+                          head_in_flange(cfg), tool.tcp_matrix)
+        table = build_correction_table(kin.nominal, kin.params, tool_grid(cfg, tool), capacity=MAX_TABLE_VALUES,
+                                       delta=None if em is None else em.joint_delta(cfg))
         want = str(stored.get("summary", {}).get("crc32"))
         if f"{table.data.crc32():08x}" != want:
             raise ConfigError(f"run {run_id}: the rebuilt table of tool {name!r} has CRC-32 {table.data.crc32():08x}, "

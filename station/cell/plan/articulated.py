@@ -353,6 +353,25 @@ def order_for_time(targets: list) -> list:
     return [targets[i] for i in out]
 
 
+def design_terms(cfg: CellConfig):
+    """The error terms the identification poses are designed to determine (``[identification]
+    model``; issue 30), as a :class:`station.core.error_terms.TermSpec`, or None for the geometric
+    model. Named families are designed for as named; ``auto`` for the candidates it scores first,
+    compliance and the first harmonic of every revolute joint: a design blind to them would leave
+    the selection nothing to find. Drift and backlash describe a run, not a pose: no columns."""
+    ident = cfg.identification
+    if ident.terms == ("geometric",):
+        return None
+    from station.core.error_terms import GravityModel, TermSpec
+    from station.core.model_selection import expand_families
+
+    names = ("compliance", "cyclic") if ident.terms == ("auto",) else ident.terms
+    families = tuple(f for f in expand_families(cfg.model, tuple(n for n in names if n not in ("drift", "backlash"))))
+    if not families:
+        return None
+    return TermSpec(families, ident.gravity or GravityModel(), ident.gear_ratios)
+
+
 def _design_jacobians(cfg: CellConfig, q_cand: np.ndarray, q_work: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Noise-weighted pose Jacobians ``(c, 6, p)`` of the candidates and position Jacobians
     ``(m, 3, p)`` [mm per parameter unit] at the working poses, over the minimal parameter set the
@@ -365,6 +384,12 @@ def _design_jacobians(cfg: CellConfig, q_cand: np.ndarray, q_work: np.ndarray) -
     a = analyze(cfg.model, data, prefer=cfg.identification.prefer, fix=cfg.identification.fix,
                 exclude=cfg.identification.exclude, describe=False)
     idx = a.chosen_indices()
+    spec = design_terms(cfg)
+    if spec is not None:  # [identification] model: the terms' columns beside the geometry's (issue 30)
+        from station.core.term_design import design_jacobians
+
+        J, G, _names = design_jacobians(cfg.model, cfg.model.nominal, idx, spec, q_cand, q_work, sig)
+        return J, G
     _, J = residuals_and_jacobian(cfg.model, data, cfg.model.nominal)
     J = (J / data.sigma[:, None])[:, idx].reshape(len(q_cand), 6, -1)
     work = synthetic_set(cfg.model, "pose", q_work, cfg.model.nominal, sigma=sig)

@@ -265,8 +265,8 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
     db.set_status(run_id, "measured")
 
     records = db.measurements(run_id, kind=StepKind.IDENTIFICATION.value)
-    reversal = reversal_error(cfg, records, db.measurements(run_id, kind=StepKind.REVERSAL.value),
-                              stored_recentring(db, run_id))
+    reversal_records = db.measurements(run_id, kind=StepKind.REVERSAL.value)  # the terms' backlash uses them too
+    reversal = reversal_error(cfg, records, reversal_records, stored_recentring(db, run_id))
     if reversal is not None:
         summary = summary.replace(reversal=reversal)
         emit(Notice("info", f"reversal error (both approach directions): RMS {reversal.rms_um:.1f} µm, "
@@ -297,7 +297,7 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
     R_id = res.params[:6]
     from station.cell.results.pipeline_terms import select_terms, truth_delta  # [identification] model (issue 30)
 
-    terms = select_terms(cfg, records, res)
+    terms = select_terms(cfg, records, res, reversal_records)
     if not cfg.model.is_scara:  # an articulated arm: compensated targets, no table (issue 9)
         return articulated_correction(cfg, runner, db, run_id, steps, emit, with_oracle, summary, res,
                                       upload=options.upload, min_gain=options.min_gain,
@@ -326,8 +326,9 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
         return _not_uploaded(cfg, summary, run_id, table, used, bound, emit)
     if cfg.tools:  # [[tool]]: each tool's own correction, stored as tool:<name>; the head's table is uploaded
         truth = options.oracle_truth
-        summary = summary.replace(tools=run_tools(cfg, db, run_id, steps, res.params, table,
-                                                  None if truth is None else oracle_params(cfg, truth), truth, emit))
+        summary = summary.replace(tools=run_tools(cfg, db, run_id, steps, params, table,  # with the terms, as the head's
+                                                  None if truth is None else oracle_params(cfg, truth), truth, emit,
+                                                  delta=delta))
 
     emit(PhaseChanged("verify", "before correction"))
     controller = runner.controller

@@ -176,8 +176,8 @@ def articulated_correction(cfg: CellConfig, runner: Runner, db: RunDB, run_id: i
     p_true = oracle_params(cfg, oracle_truth) if oracle_truth is not None else None
     true_delta = truth_delta(oracle_truth)  # the simulator's joint errors: the oracle knows them too
     if cfg.tools:  # [[tool]]: each tool's own compensated targets, stored as tool:<name>
-        summary = summary.replace(tools=run_tools(cfg, db, run_id, steps, res.params, None, p_true,
-                                                  oracle_truth, emit))
+        summary = summary.replace(tools=run_tools(cfg, db, run_id, steps, params, None, p_true,  # the terms too
+                                                  oracle_truth, emit, delta=delta))
     try:
         extra["joint_offsets_only"] = joint_offset_figures(
             cfg, steps, db.measurements(run_id, kind=StepKind.IDENTIFICATION.value), res.params,

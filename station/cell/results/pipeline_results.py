@@ -16,12 +16,13 @@ import numpy as np
 from drivers.controller_map import MAX_TABLE_VALUES
 from station.cell.config.cell_config import CellConfig, correction_grid
 from station.cell.correction.design import design_for
-from station.cell.plan.measurement_plan import head_targets_world
-from station.cell.plan.steps import PlannedStep
+from station.cell.plan.measurement_plan import all_motion_poses, approach_offsets, head_targets_world
+from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.run_records import MeasurementRecord
 from station.cell.records.summary import ReversalSummary, RunSummary
 from station.cell.run.recentring import head_as_commanded
 from station.core.correction_table import CorrectionTable, build_correction_table
+from station.core.error_terms import TermRows
 from station.core.identification import IdentificationResult, identify
 from station.core.measurements import MeasurementSet
 from station.core.table_grid import GridSpec
@@ -29,7 +30,13 @@ from station.core.transforms import invert
 from station.errors import IdentificationError, Outcome
 
 __all__ = ["verified_outcome", "reversal_error", "identify_run", "run_measurements", "verification_errors", "verification_orientation_errors",
-           "oracle_params", "grid_for", "build_table_for"]
+           "oracle_params", "grid_for", "build_table_for", "arrival_sides", "run_term_rows"]
+
+
+def _kept(records: Sequence[MeasurementRecord]) -> list[MeasurementRecord]:
+    """The records :func:`run_measurements` fits (:func:`_world_heads`), in their order: valid, with a
+    pose and joints read."""
+    return [r for r in records if r.ok and r.pose is not None and r.joints_read is not None]
 
 
 def _world_heads(cfg: CellConfig, records: Sequence[MeasurementRecord]) -> tuple[np.ndarray, np.ndarray, list[int]]:
@@ -37,7 +44,7 @@ def _world_heads(cfg: CellConfig, records: Sequence[MeasurementRecord]) -> tuple
     index = {pid: i for i, pid in enumerate(cfg.point_ids)}
     T, q, pts = [], [], []
     for r in records:
-        if not r.ok or r.pose is None or r.joints_read is None:
+        if not r.ok or r.pose is None or r.joints_read is None:  # as _kept
             continue
         j = index[r.point_id]
         T.append(cfg.body_points[j] @ invert(r.pose))
@@ -99,6 +106,44 @@ def run_measurements(cfg: CellConfig, records: Sequence[MeasurementRecord]) -> M
         idx = np.asarray(pts, dtype=int)
         data = data.with_body(idx, cfg.body_sigma, T[:, :3, 3] - cfg.body_points[idx, :3, 3])
     return data
+
+
+def arrival_sides(cfg: CellConfig, q: np.ndarray, direction: int = 1) -> np.ndarray:
+    """The side (±1) each joint arrives at ``q`` (``(g,)``, or ``(n, g)`` for a SCARA) from, for a
+    measurement approached in ``direction`` (the plan's :class:`PlannedStep` ``.direction``): the
+    sign of the joint's last move in the commanded sequence (approach pose, the pose above the
+    point, the touch; :func:`~station.cell.plan.measurement_plan.all_motion_poses`), negated —
+    a joint that last moved up (+) arrived from below (−1). This is the sign convention of the
+    backlash term (``Δq_j = ½ b_j s_j``, b > 0: the joint stands short of where it was sent) and
+    of a data file's ``approach`` columns. A SCARA's revolute joints arrive against their approach
+    offset (from below in direction +1, from above in −1); its quill comes down from the travel
+    height in both directions (+1), so its lost motion merges with its zero. A joint that does not
+    move in the sequence keeps the side of its approach offset."""
+    poses = all_motion_poses(cfg, np.asarray(q, dtype=float), direction)
+    side = np.broadcast_to(-np.sign(approach_offsets(cfg, direction)), np.shape(poses[-1])).copy()
+    for a, b in zip(poses[:-1], poses[1:]):  # the last move that changes a joint decides its side
+        step = np.sign(np.asarray(b, dtype=float) - np.asarray(a, dtype=float))
+        side = np.where(step != 0, -step, side)
+    return side
+
+
+def run_term_rows(cfg: CellConfig, records: Sequence[MeasurementRecord]) -> TermRows:
+    """The :class:`~station.core.error_terms.TermRows` of the records :func:`run_measurements`
+    fits, row for row: ``order`` the seconds since the first of them (``t_utc``; the row order
+    when a stamp does not parse), ``approach`` the side every joint arrived from
+    (:func:`arrival_sides` at the commanded joints; a reversal record was approached in direction
+    −1, every other in +1, as :func:`station.cell.plan.common.assemble_plan` plans them)."""
+    from datetime import datetime
+
+    kept = _kept(records)
+    try:
+        stamps = [datetime.fromisoformat(r.t_utc[:-1][:26] if r.t_utc.endswith("Z") else r.t_utc) for r in kept]
+        order: np.ndarray | None = np.array([(t - stamps[0]).total_seconds() for t in stamps]) if stamps else None
+    except (AttributeError, TypeError, ValueError):
+        order = None
+    approach = np.array([arrival_sides(cfg, np.asarray(r.joints_commanded, dtype=float),
+                                       -1 if r.kind == StepKind.REVERSAL.value else 1) for r in kept])
+    return TermRows(order=order, approach=approach.reshape(len(kept), cfg.model.n_joints))
 
 
 def verification_errors(cfg: CellConfig, steps: Sequence[PlannedStep], records: Sequence[MeasurementRecord],

@@ -18,14 +18,14 @@ the records and the truth; nothing moves or writes.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
 import numpy as np
 
 from station.cell.config.cell_config import CellConfig
 from station.cell.records.run_records import MeasurementRecord
+from station.cell.records.stored_error_model import StoredErrorModel, stored_error_model  # read back (records)
 from station.cell.records.summary import ErrorModelSummary, ErrorTermEstimate
 from station.core.identification import IdentificationResult
 from station.core.model_selection import Selection
@@ -46,20 +46,61 @@ class _TruthWithJointErrors(Protocol):
     def joint_delta(self, q_commanded: np.ndarray) -> np.ndarray: ...
 
 
-def select_terms(cfg: CellConfig, records: Sequence[MeasurementRecord], res: IdentificationResult) -> Selection | None:
+def select_terms(cfg: CellConfig, records: Sequence[MeasurementRecord], res: IdentificationResult,
+                 reversal: Sequence[MeasurementRecord] = ()) -> Selection | None:
     """The error model ``[identification] model`` asks for, on the run's identification records, with
-    ``res`` (their geometric fit) as the start; None for ``"geometric"`` (nothing is computed)."""
+    ``res`` (their geometric fit) as the start; None for ``"geometric"`` (nothing is computed).
+
+    The rows carry the measurement time (drift runs over the seconds since the first record, not
+    the row order) and the side every joint arrived from
+    (:func:`~station.cell.results.pipeline_results.run_term_rows`). ``reversal``: the run's reversal
+    records (``[plan] both_directions``: the same poses approached from the other side); where the
+    model can take backlash (``auto``, or ``backlash`` named) they join the data, with a geometric
+    fit of both sides as the start, so that backlash is a candidate for every joint that arrived
+    from both sides; otherwise the identification records alone. Kept backlash is folded into the
+    geometry for the side the station's moves arrive from (:func:`_fold_backlash`)."""
     ident = cfg.identification
     if ident.terms == ("geometric",):
         return None
-    from station.cell.results.pipeline_results import run_measurements
+    from station.cell.results.pipeline_results import identify_run, run_measurements, run_term_rows
     from station.core.error_terms import GravityModel, TermSpec
     from station.core.model_selection import select_model
 
+    if reversal and ("auto" in ident.terms or "backlash" in ident.terms):
+        records = [*records, *reversal]
+        res = identify_run(cfg, records)  # the geometric fit of the data the terms extend
     data = run_measurements(cfg, records)
+    rows = run_term_rows(cfg, records)
     spec = TermSpec(gravity=ident.gravity or GravityModel(), ratios=ident.gear_ratios)
     force = None if ident.terms == ("auto",) else ident.terms
-    return select_model(cfg.model, data, spec=spec, geometric=res, force=force)
+    return _fold_backlash(cfg, select_model(cfg.model, data, rows=rows, spec=spec, geometric=res, force=force),
+                          data.joints[0])
+
+
+def _fold_backlash(cfg: CellConfig, sel: Selection, q: np.ndarray) -> Selection:
+    """``sel`` with its kept backlash folded into the joint zeros of the fitted geometry for the side
+    the station's own moves arrive from (direction +1: the verification, a recheck, the table's
+    use; :func:`~station.cell.results.pipeline_results.arrival_sides`), as
+    :func:`~station.cell.results.pipeline_results.oracle_params` folds the simulator's: the fit
+    puts each joint's zero in the middle of its lost motion, and every reader of the model leaves
+    backlash at zero (:func:`~station.core.error_terms.prediction_basis`), which would put every
+    corrected pose half the lost motion off. The geometry so moved stands, at the station's
+    approach, exactly where the fit's geometry and backlash stand (``apply_joint_offsets``); the
+    terms keep their values (the width of each joint's lost motion); the fit's residuals are the
+    fit's. ``q``: joints of a measured pose (the sides do not depend on where). Unchanged without
+    backlash."""
+    from station.cell.results.pipeline_results import arrival_sides
+    from station.core.joint_offsets import apply_joint_offsets
+
+    fit = sel.fit
+    cols = [(k, int(n.split(".q")[1]) - 1) for k, n in enumerate(fit.basis.names) if n.startswith("backlash.q")]
+    if not cols:
+        return sel
+    half = np.zeros(cfg.model.n_joints)
+    for k, j in cols:
+        half[j] = 0.5 * float(fit.values[k])
+    params = apply_joint_offsets(cfg.model, fit.params, half * arrival_sides(cfg, q, 1))
+    return dataclasses.replace(sel, fit=dataclasses.replace(fit, params=params))
 
 
 def terms_delta(cfg: CellConfig, sel: Selection | None) -> JointDelta | None:
@@ -115,58 +156,6 @@ def error_model_record(cfg: CellConfig, sel: Selection) -> dict[str, Any]:
     out["units"] = {**out.get("units", {}), "params": "mm and rad (the model's parameter order)",
                     "rms_residual_um": "µm", "gravity": "m/s², kg and mm (station.core.error_terms.GravityModel)"}
     return out
-
-
-@dataclass(frozen=True)
-class StoredErrorModel:
-    """A run's stored error model with terms kept (result ``error_model``): the geometry fitted with
-    the terms ``params`` [mm, rad], the kept ``families``, the terms' ``names`` and ``values`` (in
-    their units), and what their basis is computed from."""
-
-    params: np.ndarray
-    families: tuple[str, ...]
-    names: tuple[str, ...]
-    values: np.ndarray
-    gravity: Any  # station.core.error_terms.GravityModel | None
-    gear_ratios: tuple[float, ...] | None
-    rms_residual_um: float | None
-
-    def joint_delta(self, cfg: CellConfig) -> JointDelta:
-        """``Δq(q)`` of the kept terms (drift and backlash left at zero, as for any new joints)."""
-        from station.core.error_terms import prediction_basis
-
-        def delta(q: np.ndarray) -> np.ndarray:
-            basis, _ = prediction_basis(cfg.model, q, self.families, self.names, self.gravity, self.gear_ratios)
-            return basis.joint_delta(self.values)
-
-        return delta
-
-
-def stored_error_model(cfg: CellConfig, record: Mapping[str, Any] | None) -> StoredErrorModel | None:
-    """The stored ``error_model`` result (its fields checked where records are read,
-    ``record_fields.check_result_fields``) as a :class:`StoredErrorModel`; None when the run kept no
-    term (or stored no error model): its geometric identification is its model. A record of older
-    stations without ``gravity`` / ``gear_ratios`` takes the cell's."""
-    if not record or not record.get("chosen") or not record.get("terms"):
-        return None
-    from station.core.error_terms import GravityModel
-
-    g = record.get("gravity")
-    if g is None:
-        gravity = cfg.identification.gravity
-    else:
-        gravity = GravityModel(gravity=tuple(g["gravity"]), masses=None if g.get("masses") is None else tuple(g["masses"]),
-                               com=None if g.get("com") is None else tuple(tuple(c) for c in g["com"]),
-                               payload_kg=float(g.get("payload_kg", 0.0)),
-                               payload_com=tuple(g.get("payload_com", (0.0, 0.0, 0.0))))
-    ratios = record.get("gear_ratios")
-    ratios = cfg.identification.gear_ratios if ratios is None else tuple(float(r) for r in ratios)
-    rms = record.get("rms_residual_um")
-    return StoredErrorModel(params=np.asarray(record["params"], dtype=float), families=tuple(record["chosen"]),
-                            names=tuple(str(t["name"]) for t in record["terms"]),
-                            values=np.array([float(t["value"]) for t in record["terms"]]),
-                            gravity=gravity, gear_ratios=ratios,
-                            rms_residual_um=None if rms is None else float(rms))
 
 
 def terms_note(es: ErrorModelSummary) -> str:

@@ -25,6 +25,7 @@ from station.cell.records.run_list import RunInfo, list_runs
 from station.cell.records.run_records import MeasurementRecord
 from station.cell.records.rundb import RunDB
 from station.cell.records.stored_config import stored_config, stored_plan
+from station.cell.records.stored_error_model import stored_error_model
 from station.cell.records.summary import RunSummary
 from station.cell.results.pipeline import Options
 from station.cell.results.pipeline_results import build_table_for, identify_run, verification_errors
@@ -127,6 +128,23 @@ def _table_info(cfg: CellConfig, table: Any) -> dict[str, Any]:
             "unreachable_nodes": int(table.unreachable_nodes),
             "interpolation_bound_arcsec": float(table.interpolation_bound_arcsec),
             "max_correction": ", ".join(corr), "crc32": f"{table.data.crc32():08x}"}
+
+
+def _rebuilt_table(cfg: CellConfig, db: RunDB, run_id: int, res: IdentificationResult, notes: list[str]) -> Any:
+    """The SCARA table the run built, rebuilt: on the grid it was built on (result
+    ``correction_grid``) from the identified parameters — or, where its nodes carried error terms
+    (that result's ``error_terms``, issue 30), from the stored error model: the geometry fitted
+    with the terms and their joint error δ(q) (docs/error-terms.md)."""
+    stored = db.load_result(run_id, "correction_grid", default=None)  # the grid the run's table was built on
+    grid = None if stored is None else grid_from_json(stored)
+    if not (isinstance(stored, Mapping) and stored.get("error_terms")):
+        return build_table_for(cfg, res.params, grid)
+    em = stored_error_model(cfg, db.load_result(run_id, "error_model", default=None))
+    if em is None:
+        notes.append("the run's correction table carried error terms but the run stored no error model; the "
+                     "table is rebuilt from the geometric identification and its CRC-32 differs from the uploaded")
+        return build_table_for(cfg, res.params, grid)
+    return build_table_for(cfg, em.params, grid, em.joint_delta(cfg))
 
 
 def _accuracy_on_grid(cfg: CellConfig, res: IdentificationResult, table: Any) -> tuple[np.ndarray, np.ndarray, list[int], str]:
@@ -342,8 +360,7 @@ def report_data_for_run(db: RunDB, run_id: int, *, operator: str | None = None) 
     table = None
     if cfg.model.is_scara:  # an articulated arm gets compensated targets, no table
         try:
-            stored = db.load_result(run_id, "correction_grid", default=None)  # the grid the run's table was built on
-            table = build_table_for(cfg, res.params, None if stored is None else grid_from_json(stored))
+            table = _rebuilt_table(cfg, db, run_id, res, notes)
         except StationError as exc:
             notes.append(f"the correction table could not be rebuilt for the report ({exc})")
     try:
