@@ -37,7 +37,8 @@ class StoredErrorModel:
     rms_residual_um: float | None
 
     def joint_delta(self, cfg: CellConfig) -> JointDelta:
-        """``Δq(q)`` of the kept terms (drift and backlash left at zero, as for any new joints)."""
+        """``Δq(q)`` of the kept terms: drift and backlash at zero, as for any new joints (a session
+        folds kept backlash into the joint zeros of ``params``, the side its own moves arrive from)."""
         from station.core.error_terms import prediction_basis
 
         def delta(q: np.ndarray) -> np.ndarray:

@@ -225,7 +225,9 @@ def _scara_terms(cfg: CellConfig, db: RunDB, run_id: int, terms: Any, summary: R
         note += "; the correction table's nodes carry the terms (drift left out)"
     emit(Notice("info", note))
     summary = summary.replace(error_model=es, notes=(*summary.notes, note))
-    return summary, (res.params if delta is None else np.asarray(terms.fit.params, dtype=float)), delta
+    # the geometry fitted with what was kept (backlash folded into its zeros, drift alone included), as
+    # the recheck and the report read it back
+    return summary, (np.asarray(terms.fit.params, dtype=float) if terms.chosen else res.params), delta
 
 
 def _identification_summary(res: IdentificationResult) -> IdentificationSummary:

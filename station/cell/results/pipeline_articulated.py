@@ -154,7 +154,7 @@ def articulated_correction(cfg: CellConfig, runner: Runner, db: RunDB, run_id: i
         emit(Notice("info", note))
         summary = summary.replace(error_model=es, notes=(*summary.notes, note))
         delta = terms_delta(cfg, terms)
-        if delta is not None:
+        if terms.chosen:  # the geometry fitted with what was kept (drift alone included), as the recheck reads it
             params = np.asarray(terms.fit.params, dtype=float)
     R_id = params[:6]
     ARCSEC_RAD = np.pi / 180.0 / 3600.0

@@ -104,9 +104,10 @@ def _fold_backlash(cfg: CellConfig, sel: Selection, q: np.ndarray) -> Selection:
 
 
 def terms_delta(cfg: CellConfig, sel: Selection | None) -> JointDelta | None:
-    """``Δq(q)`` of the kept terms (drift left out: it describes the measurement run), or None when
-    nothing beyond geometry was kept."""
-    if sel is None or not sel.fit.basis.size:
+    """``Δq(q)`` of the kept terms (drift left out: it describes the measurement run; kept backlash is
+    folded into the joint zeros, ``_fold_backlash``), or None when nothing that moves a joint was
+    kept (nothing beyond geometry, or only drift and backlash)."""
+    if sel is None or not sel.fit.basis.size or all(f in ("drift", "backlash") for f in sel.chosen):
         return None
     from station.core.error_terms import prediction_basis
 
