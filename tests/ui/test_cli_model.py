@@ -329,3 +329,18 @@ def test_gear_ratios_make_the_harmonics_cycle_with_the_motor(tmp_path, capsys):
     pred = np.array(json.loads(text)["poses_mm_rad"])[:, :3]
     assert rc == 0 and np.max(np.linalg.norm(pred - pts[:4], axis=1)) < 0.1  # near the truth, terms included
     assert np.max(np.linalg.norm(forward(ARM, q[:4], true)[:, :3, 3] - pts[:4], axis=1)) > 0.1
+
+
+def test_study_with_terms_sets_the_linear_sigma_beside_the_monte_carlo_scatter(capsys):
+    """Issue 30, "linear σ and Monte Carlo cover the new parameters": ``station study --model`` fits
+    the geometry and the terms together on synthetic poses and compares each term's linear σ with
+    the scatter over noisy copies (100 sets: the sample σ itself scatters by ~7 %)."""
+    assert main(["study", "--robot", "sr800", "--model", "cyclic", "--sets", "100", "--json"]) == 0
+    study = json.loads(capsys.readouterr().out)["studies"][0]
+    figs = study["figures"]
+    assert figs["terms"] == ["cyclic.q1.cos1", "cyclic.q1.sin1", "cyclic.q2.cos1", "cyclic.q2.sin1",
+                             "cyclic.q4.cos1", "cyclic.q4.sin1"]  # the quill is prismatic: no harmonic
+    lo, hi = figs["ratio_mc_linear_terms"]
+    assert 0.75 < lo <= hi < 1.3 and figs["bias_within_4_sigma"] and figs["monte_carlo_failed"] == 0
+    assert main(["study", "--robot", "sr800", "--model", "drift"]) == 2
+    assert "describe a measurement run" in capsys.readouterr().err

@@ -215,6 +215,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=seed, default=0)
     p.add_argument("--sets", type=count(10_000_000), default=1000, help="Monte Carlo data sets for pose studies")
     p.add_argument("--quick", action="store_true", help="fewer Monte Carlo sets and seeds (a smoke run)")
+    p.add_argument("--model", dest="error_model", metavar="MODEL", default="geometric",
+                   help="instead of the chapter's geometric studies, the σ-versus-scatter study of the geometry with "
+                        "error terms: auto (compliance and every first harmonic), or terms joined by '+': "
+                        "compliance, cyclic, cyclic2, cyclic.q<j> (300 sets by default)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func="station.ui.cli.commands_core:cmd_study")
 
