@@ -220,7 +220,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "error terms: auto (compliance and every first harmonic), or terms joined by '+': "
                         "compliance, cyclic, cyclic2, cyclic.q<j> (300 sets by default)")
     p.add_argument("--json", action="store_true")
-    p.set_defaults(func="station.ui.cli.commands_core:cmd_study")
+    p.set_defaults(func="station.ui.cli.commands_study:cmd_study")
 
 
     p = sub.add_parser("init", help="write a commented cell configuration: the template, or one derived from the "
