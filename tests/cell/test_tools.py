@@ -14,13 +14,12 @@ import pytest
 from simulators import start_simulated_cell
 from simulators.reference_cell import cell_config_text
 from station.cell.config.cell_config import TEMPLATE, parse_text
+from station.cell.correction.tool_export import table_from_json, tool_export
 from station.cell.correction.tools import (
     check_tools,
     evaluate_tool,
     find_tool,
     result_key,
-    table_from_json,
-    tool_export,
 )
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.rundb import RunDB

@@ -12,7 +12,8 @@ import pytest
 
 from station.cell.config.cell_config import TEMPLATE, parse_text
 from station.cell.correction.design import region_for
-from station.cell.correction.tools import evaluate_tool, result_key, tool_export
+from station.cell.correction.tool_export import tool_export
+from station.cell.correction.tools import evaluate_tool, result_key
 from station.cell.records.rundb import RunDB
 from station.cell.results.pipeline import oracle_params
 from station.cell.results.pipeline_results import build_table_for

@@ -450,7 +450,7 @@ def cmd_export(args: argparse.Namespace) -> int:
         if run is None:
             raise ConfigError(f"{args.db} holds no runs")
         if getattr(args, "tool", None):  # a [[tool]]'s own correction (docs/correction.md, "Tools after the head")
-            from station.cell.correction.tools import tool_export
+            from station.cell.correction.tool_export import tool_export
 
             out = tool_export(db, run.id, args.tool, force=getattr(args, "force", False))
             try:
