@@ -4,8 +4,10 @@ fail (issue 33, part 7: "tests that cannot agree with themselves").
 The simulated truth has its own kinematics (simulators/truth_kinematics.py), so a fault in the
 station's kinematics is a robot the station models wrongly: identification, correction and
 verification must show it. This script copies the work tree, plants one fault at a time in the
-copy's ``station/core/kinematics.py``, runs the end-to-end tests there, and prints whether each
-mutant was killed (the tests failed) or survived. The unmutated copy runs first and must pass.
+copy's ``station/core/kinematics.py`` (and, for the symmetric slips a shared simulator would have
+cancelled, in the probe head's face normals and the driver's word order), runs the end-to-end
+tests there, and prints whether each mutant was killed (the tests failed) or survived. The
+unmutated copy runs first and must pass.
 
     .venv/bin/python benchmarks/mutation_check.py            # the default end-to-end tests
     .venv/bin/python benchmarks/mutation_check.py TEST ...   # pytest node ids of your choice
@@ -26,23 +28,33 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 KINEMATICS = "station/core/kinematics.py"
 
-#: (what the fault is, the line as it is, the line with the fault) in station/core/kinematics.py
+#: (what the fault is, the file, ((the line as it is, the line with the fault), ...))
 MUTANTS = (
     # subtle: the fit absorbs it into the joint offsets, so only a truth that does not share the
     # station's kinematics (the oracle, the after/oracle lower bound) can show it
-    ("every revolute joint 1 mrad off (a fit absorbs it)",
-     "        c, s = np.cos(q), np.sin(q)",
-     "        c, s = np.cos(q + 1e-3), np.sin(q + 1e-3)"),
+    ("every revolute joint 1 mrad off (a fit absorbs it)", KINEMATICS,
+     (("        c, s = np.cos(q), np.sin(q)", "        c, s = np.cos(q + 1e-3), np.sin(q + 1e-3)"),)),
     # gross: the plan's reachability checks already refuse the cell before any motion
-    ("joint 2 turns the other way",
-     "            T = T @ _joint_matrix(spec.joint, q[..., j])",
-     "            T = T @ _joint_matrix(spec.joint, -q[..., j] if j == 1 else q[..., j])"),
-    ("a prismatic joint moves along -z",
-     "        T[..., 2, 3] = q",
-     "        T[..., 2, 3] = -q"),
-    ("a revolute joint's sine flipped (a mirrored rotation)",
-     "        T[..., 0, 0], T[..., 0, 1], T[..., 1, 0], T[..., 1, 1] = c, -s, s, c",
-     "        T[..., 0, 0], T[..., 0, 1], T[..., 1, 0], T[..., 1, 1] = c, s, -s, c"),
+    ("joint 2 turns the other way", KINEMATICS,
+     (("            T = T @ _joint_matrix(spec.joint, q[..., j])",
+       "            T = T @ _joint_matrix(spec.joint, -q[..., j] if j == 1 else q[..., j])"),)),
+    ("a prismatic joint moves along -z", KINEMATICS,
+     (("        T[..., 2, 3] = q", "        T[..., 2, 3] = -q"),)),
+    ("a revolute joint's sine flipped (a mirrored rotation)", KINEMATICS,
+     (("        T[..., 0, 0], T[..., 0, 1], T[..., 1, 0], T[..., 1, 1] = c, -s, s, c",
+       "        T[..., 0, 0], T[..., 0, 1], T[..., 1, 0], T[..., 1, 1] = c, s, -s, c"),)),
+    # symmetric slips that a simulator sharing the station's or the driver's code would have made
+    # too, so that they cancelled: the simulated head now touches the cube with its own physics
+    # (simulators/probe_contact.py), the simulated program reads words with its own code
+    # (simulators/program_words.py)
+    ("the tip sphere inside its face (readings and solver)", "station/core/probe_geometry.py",
+     (("        s = (rho + hM - nb) / incidence", "        s = (-rho + hM - nb) / incidence"),
+      ('    f = np.einsum("ni,ni->n", n_f, q) - geom.tip_radii', '    f = np.einsum("ni,ni->n", n_f, q) + geom.tip_radii'))),
+    ("the driver's BIG word order is low word first (both ways)", "drivers/controller_map.py",
+     (("    return [hi, lo] if order is WordOrder.BIG else [lo, hi]",
+       "    return [lo, hi] if order is WordOrder.BIG else [hi, lo]"),
+      ("    hi, lo = (regs[0], regs[1]) if order is WordOrder.BIG else (regs[1], regs[0])",
+       "    hi, lo = (regs[1], regs[0]) if order is WordOrder.BIG else (regs[0], regs[1])"))),
 )
 
 #: a SCARA and a six-axis calibration, end to end against the simulated cells
@@ -84,19 +96,22 @@ def main(argv: list[str]) -> int:
         if not where.startswith(str(copy)):
             print(f"the copy imports the station from {where}, not from the copy", file=sys.stderr)
             return 1
-        source = (copy / KINEMATICS).read_text(encoding="utf-8")
         ok, seconds, tail = _run(copy, tests)
-        print(f"{'baseline (no fault)':<52} {'passes' if ok else 'FAILS':<9} {seconds:6.0f} s  {tail}")
+        print(f"{'baseline (no fault)':<58} {'passes' if ok else 'FAILS':<9} {seconds:6.0f} s  {tail}")
         survived = 0
-        for name, line, fault in MUTANTS:
-            if source.count(line) != 1:
-                print(f"{name:<52} the line to mutate is not found once in {KINEMATICS}", file=sys.stderr)
-                return 1
-            (copy / KINEMATICS).write_text(source.replace(line, fault), encoding="utf-8")
+        for name, path, edits in MUTANTS:
+            source = (copy / path).read_text(encoding="utf-8")
+            faulty = source
+            for line, fault in edits:
+                if source.count(line) != 1:
+                    print(f"{name:<58} the line to mutate is not found once in {path}", file=sys.stderr)
+                    return 1
+                faulty = faulty.replace(line, fault)
+            (copy / path).write_text(faulty, encoding="utf-8")
             passed, seconds, tail = _run(copy, tests)
             survived += passed
-            print(f"{name:<52} {'SURVIVED' if passed else 'killed':<9} {seconds:6.0f} s  {tail}")
-        (copy / KINEMATICS).write_text(source, encoding="utf-8")
+            print(f"{name:<58} {'SURVIVED' if passed else 'killed':<9} {seconds:6.0f} s  {tail}")
+            (copy / path).write_text(source, encoding="utf-8")
     print(f"{len(MUTANTS) - survived} of {len(MUTANTS)} mutants killed by {len(tests)} end-to-end test target(s)")
     return 0 if ok and not survived else 1
 

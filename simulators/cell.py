@@ -27,9 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from simulators.truth_kinematics import true_forward
+from simulators.truth_kinematics import inverse, matrix_pose, pose_matrix, rotation_angle, true_forward
 from station.core.model import RobotModel
-from station.core.transforms import invert, matrix_to_pose, pose_to_matrix, rotation_log
 from station.core.units import ARCMIN, ARCSEC
 from station.io.robot_files import load_robot
 
@@ -208,7 +207,7 @@ class CalibrationBody:
         out = []
         for k, (cx, cy) in enumerate(((0, 0), (E, 0), (E, E), (0, E))):
             p = origin + Rz @ np.array([cx, cy])
-            out.append(pose_to_matrix(np.array([p[0], p[1], top, 0.0, 0.0, cube.yaw + k * np.pi / 2])))
+            out.append(pose_matrix(np.array([p[0], p[1], top, 0.0, 0.0, cube.yaw + k * np.pi / 2])))
         return np.stack(out)
 
     @classmethod
@@ -226,7 +225,7 @@ class CalibrationBody:
         nominal = np.stack(corner_list)
         dev = np.concatenate([rng.normal(0, position_sigma_mm, (len(labels), 3)),
                               rng.normal(0, angle_sigma_rad, (len(labels), 3))], axis=1)
-        true = nominal @ pose_to_matrix(dev)
+        true = nominal @ pose_matrix(dev)
         return cls(cube_edge_mm, tuple(cubes), nominal, true, tuple(labels))
 
     @classmethod
@@ -246,7 +245,7 @@ class CalibrationBody:
         rng = np.random.default_rng(seed + 7919)
         dev = np.concatenate([rng.normal(0.0, 1.0, (n, 3)) * s[:, :1],
                               rng.normal(0.0, 1.0, (n, 3)) * s[:, 1:]], axis=1)
-        true = nominal @ pose_to_matrix(dev)
+        true = nominal @ pose_matrix(dev)
         return cls(float(cube_edge_mm), (), nominal, true, tuple((i, 0) for i in range(n)))
 
 
@@ -386,9 +385,9 @@ class SimulatedCell:
         if d[j] > self.capture_mm:
             return None, None
         rel = expected[:3, :3].T @ frames[j, :3, :3]
-        if np.linalg.norm(rotation_log(rel)) > self.capture_angle_rad:
+        if rotation_angle(rel) > self.capture_angle_rad:
             return None, None
-        return j, invert(T_head) @ frames[j]
+        return j, inverse(T_head) @ frames[j]
 
     def contact(self) -> tuple[int | None, np.ndarray | None]:
         return self.contact_for_head_pose(self.head_pose())
@@ -406,11 +405,11 @@ class SimulatedCell:
     def nominal_head_target(self, point: int, nominal_body: bool = True) -> np.ndarray:
         """World<-MKKS that puts the head at mid-stroke on measuring point ``point``."""
         frames = self.body.nominal if nominal_body else self.body.true
-        return frames[point] @ invert(self._M_nominal)
+        return frames[point] @ inverse(self._M_nominal)
 
     def describe(self) -> dict:
         """Summary of the truth for reports (parameters as names -> error)."""
         m = self.truth.model
-        return {"seed": self.truth.seed, "setup_true": matrix_to_pose(pose_to_matrix(self.truth.setup)).tolist(),
+        return {"seed": self.truth.seed, "setup_true": matrix_pose(pose_matrix(self.truth.setup)).tolist(),
                 "errors": dict(zip(m.param_names, self.truth.errors.tolist())),
                 "n_points": self.body.n_points}

@@ -13,7 +13,7 @@ import numpy as np
 
 from simulators import SimulatedCellServers
 from simulators.cell import DEFAULT_SETUP, SimulatedCell
-from station.core.transforms import matrix_to_pose
+from simulators.truth_kinematics import matrix_pose
 
 __all__ = ["cell_config_text", "body_and_devices_toml", "CellEndpoints"]
 
@@ -65,7 +65,7 @@ def body_and_devices_toml(servers: CellEndpoints, word_order_line: str = "") -> 
     body = servers.cell.body
     lines = []
     for (cube, corner), T in zip(body.labels, body.nominal):
-        p = matrix_to_pose(T)
+        p = matrix_pose(T)
         vals = [*p[:3], *np.degrees(p[3:])]
         lines.append(f'  {{ id = "C{cube + 1}.{"abcd"[corner]}", pose = [{", ".join(repr(float(v)) for v in vals)}] }},')
     return f"""[body]

@@ -25,7 +25,7 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-__all__ = ["true_forward"]
+__all__ = ["true_forward", "pose_matrix", "matrix_pose", "inverse", "rotation_angle"]
 
 
 def _static(params6: np.ndarray) -> np.ndarray:
@@ -34,6 +34,39 @@ def _static(params6: np.ndarray) -> np.ndarray:
     T[:3, :3] = Rotation.from_euler("xyz", params6[3:6]).as_matrix()
     T[:3, 3] = params6[:3]
     return T
+
+
+def pose_matrix(pose: np.ndarray) -> np.ndarray:
+    """``(..., 4, 4)`` of poses ``(..., 6)`` x, y, z [mm], roll, pitch, yaw [rad] in the documented
+    convention, R = Rz(yaw)·Ry(pitch)·Rx(roll) (docs/robot-file.md; the CMM report's poses too)."""
+    p = np.asarray(pose, dtype=float)
+    flat = p.reshape(-1, 6)
+    T = np.broadcast_to(np.eye(4), (len(flat), 4, 4)).copy()
+    T[:, :3, :3] = Rotation.from_euler("xyz", flat[:, 3:6]).as_matrix()
+    T[:, :3, 3] = flat[:, :3]
+    return T.reshape(p.shape[:-1] + (4, 4))
+
+
+def matrix_pose(T: np.ndarray) -> np.ndarray:
+    """The pose ``(..., 6)`` of ``(..., 4, 4)`` in the same convention (pitch within ±90°)."""
+    M = np.asarray(T, dtype=float)
+    flat = M.reshape(-1, 4, 4)
+    out = np.concatenate([flat[:, :3, 3], Rotation.from_matrix(flat[:, :3, :3]).as_euler("xyz")], axis=1)
+    return out.reshape(M.shape[:-2] + (6,))
+
+
+def inverse(T: np.ndarray) -> np.ndarray:
+    """The inverse of a rigid transform ``(4, 4)``: (Rᵀ, −Rᵀt)."""
+    T = np.asarray(T, dtype=float)
+    out = np.eye(4)
+    out[:3, :3] = T[:3, :3].T
+    out[:3, 3] = -T[:3, :3].T @ T[:3, 3]
+    return out
+
+
+def rotation_angle(R: np.ndarray) -> float:
+    """The angle [rad] of the rotation ``(3, 3)``."""
+    return float(Rotation.from_matrix(np.asarray(R, dtype=float)).magnitude())
 
 
 def _joint(kind: str, q: np.ndarray) -> np.ndarray:
