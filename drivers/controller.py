@@ -282,6 +282,10 @@ class ModbusController(SessionKeeper, TablePager):
         self.correction_state = (CorrectionState(state) if state in CorrectionState._value2member_map_
                                  else CorrectionState.UNKNOWN)
         self._watchdog_ms = int(field("watchdog_ms"))
+        # the program sees the PC's heartbeat as live while hb_pc changes: go on from the value it holds,
+        # or a station started again after one that died right after its first heartbeat writes that
+        # same value, which the program cannot tell from silence (and never grants the claim)
+        self._hb_counter = int(field("hb_pc"))
         self.claim(int(field("claim_owner")))  # before any transfer request: the holder's run goes on undisturbed
         self._xfer_seq = int(self._read_entry("xfer_ack"))  # the program answers the next number
         self._soft_limits = self._checked_soft_limits(g)

@@ -155,7 +155,7 @@ class SessionKeeper:
             if self._claimed:
                 log.warning("the claim on the controller lapsed (no heartbeat reached it for %d ms): asking again",
                             self._watchdog_ms)
-            self._heartbeat_once()  # the program grants a claim only while hb_pc is live
+            self._heartbeat_once()  # the program grants a claim only while hb_pc is live (changing)
             self._write(REG["claim_request"].address, encode("claim_request", self.claim_token, self.word_order))
             deadline = time.monotonic() + self.ack_timeout
             while (owner := self._u32("claim_owner")) != self.claim_token:

@@ -130,3 +130,23 @@ def test_a_station_started_right_after_a_killed_one_waits_for_the_watchdog(sim):
         assert sim.register("claim_owner") == c.claim_token and sim.register("claim_pid") == os.getpid()
     finally:
         c.close()
+
+
+def test_a_station_after_one_that_died_on_its_first_heartbeat_is_granted(sim):
+    """The program sees a heartbeat as live while ``hb_pc`` changes. A station killed right after
+    its first heartbeat left hb_pc = 1; a new station counting from 0 would write 1 again, which
+    the program cannot tell from silence, and its claim would never be granted (a CI run of the
+    twenty-kills test met exactly this). The driver goes on from the value the controller holds."""
+    raw = ModbusTcpClient("127.0.0.1", port=sim.port)
+    assert raw.connect()
+    try:
+        assert not raw.write_register(REG["hb_pc"].address, 1).isError()  # the dead station's last heartbeat
+    finally:
+        raw.close()
+    until(lambda: sim._watchdog_expired(), "the program sees no heartbeat for its watchdog period")
+    c = ModbusController("127.0.0.1", sim.port, heartbeat_period=None)
+    c.connect()
+    try:
+        assert sim.register("claim_owner") == c.claim_token and sim.register("hb_pc") == 2
+    finally:
+        c.close()
