@@ -64,13 +64,13 @@ class ModbusTcpRelay:
                     address, count = struct.unpack(">HH", pdu[1:5]) if len(pdu) >= 5 else (-1, -1)
                     self.requests.append((pdu[0], address, count))
         except OSError:
-            pass
+            pass  # one side closed the connection (the station's close, or the relay's): the pump ends
         finally:
             for s in (src, dst):
                 try:
                     s.shutdown(socket.SHUT_RDWR)
                 except OSError:
-                    pass
+                    pass  # already shut down by the other pump
 
     def close(self) -> None:
         self._listener.close()

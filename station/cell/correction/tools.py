@@ -85,6 +85,7 @@ __all__ = [
     "run_tools",
     "tool_grid",
     "tool_targets",
+    "truth_delta",
 ]
 
 #: a SCARA table corrects x, y, z and yaw of a tool whose axis is parallel to the last joint's
@@ -399,9 +400,10 @@ def _scatter(truth: Any, n: int, g: int, cycles: int) -> np.ndarray:
     return rng.normal(0.0, 1.0, (cycles, n, g)) * sigma
 
 
-def _truth_delta(truth: Any) -> JointDelta | None:
-    """The simulator's joint errors ``q ↦ δ_true(q)`` at the commanded joints, or None without them
-    (as :func:`station.cell.results.pipeline_terms.truth_delta`, which sits above this layer)."""
+def truth_delta(truth: Any) -> JointDelta | None:
+    """The simulator's joint errors as ``Δq(q)`` at the commanded joints, or None without them (a
+    real cell, or a simulated arm with ``joint_errors = "none"``): what the oracle and the
+    simulated tool figures know of the true robot (``simulators.cell.CellTruth.joint_delta``)."""
     if truth is None or getattr(truth, "joint_errors", None) is None:
         return None
     fn: JointDelta = truth.joint_delta
@@ -458,7 +460,7 @@ def evaluate_tool(cfg: CellConfig, tool: ToolConfig, params: np.ndarray, steps: 
         return ToolEvaluation(corr, head_predicted, notes=tuple(notes))
     p_true = np.asarray(p_true, dtype=float)
     p_true_tool = tool_params(cfg.model, p_true, H, tool.tcp_matrix)
-    true_delta = _truth_delta(truth)  # the simulated robot's joints err: it stands at q + δ_true(q)
+    true_delta = truth_delta(truth)  # the simulated robot's joints err: it stands at q + δ_true(q)
     X_oracle = invert(pose_to_matrix(p_true[:6]))[None] @ tg.world
     if scara:  # the oracle knows what the simulator knows: its table carries the true joint errors
         oracle_table = build_correction_table(kin.nominal, p_true_tool, tool_grid(cfg, tool), capacity=MAX_TABLE_VALUES,

@@ -19,11 +19,12 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable, Sequence
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
 from station.cell.config.cell_config import CellConfig
+from station.cell.correction.tools import truth_delta  # the oracle's joint errors (one definition, below)
 from station.cell.records.run_records import MeasurementRecord
 from station.cell.records.stored_error_model import StoredErrorModel, stored_error_model  # read back (records)
 from station.cell.records.summary import ErrorModelSummary, ErrorTermEstimate
@@ -36,14 +37,6 @@ __all__ = ["JointDelta", "select_terms", "terms_delta", "truth_delta", "error_mo
 
 #: ``q ↦ Δq(q)``: ``(n, g)`` joints [rad | mm] → ``(n, g)`` where they really stand, minus ``q``
 JointDelta = Callable[[np.ndarray], np.ndarray]
-
-
-class _TruthWithJointErrors(Protocol):
-    """What the oracle needs of a simulator's truth with joint errors (simulators.cell.CellTruth)."""
-
-    joint_errors: Any
-
-    def joint_delta(self, q_commanded: np.ndarray) -> np.ndarray: ...
 
 
 def select_terms(cfg: CellConfig, records: Sequence[MeasurementRecord], res: IdentificationResult,
@@ -119,15 +112,6 @@ def terms_delta(cfg: CellConfig, sel: Selection | None) -> JointDelta | None:
         return basis.joint_delta(values)
 
     return delta
-
-
-def truth_delta(truth: Any) -> JointDelta | None:
-    """The simulator's joint errors as ``Δq(q)`` at the commanded joints, or None without them (a
-    real cell, or a simulated arm with ``joint_errors = "none"``)."""
-    if truth is None or getattr(truth, "joint_errors", None) is None:
-        return None
-    t: _TruthWithJointErrors = truth
-    return t.joint_delta
 
 
 def error_model_summary(cfg: CellConfig, sel: Selection) -> ErrorModelSummary:
