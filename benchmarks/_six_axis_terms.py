@@ -20,11 +20,11 @@ import numpy as np
 from simulators.joint_errors import six_axis_joint_errors
 from simulators.six_axis_cell import LEVERS_MM, six_axis_truth
 from simulators.truth_kinematics import true_forward
-from station.core.error_terms import TermSpec, apply_terms, term_basis
-from station.core.identification import identify
-from station.core.measurements import MeasurementSet, add_noise
-from station.core.model_selection import select_model
-from station.core.poses import spread_joints
+from station.core.identification.identify import identify
+from station.core.kinematics.poses import spread_joints
+from station.core.measurement.measurements import MeasurementSet, add_noise
+from station.core.terms.error_model import TermSpec, apply_terms, term_basis
+from station.core.terms.selection import select_model
 
 SIGMA = np.array([0.015] * 3 + [15 * np.pi / 180 / 3600] * 3)
 

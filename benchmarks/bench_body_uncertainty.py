@@ -18,10 +18,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 from benchmarks._timing import median_time  # noqa: E402
-from station.core.identification import identify  # noqa: E402
-from station.core.measurements import add_body_error, add_noise, residuals_and_jacobian, synthetic_set  # noqa: E402
-from station.core.poses import spread_joints  # noqa: E402
-from station.core.uncertainty import body_sandwich, linear_uncertainty  # noqa: E402
+from station.core.identification.identify import identify  # noqa: E402
+from station.core.kinematics.poses import spread_joints  # noqa: E402
+from station.core.measurement.measurements import add_body_error, add_noise, residuals_and_jacobian, synthetic_set  # noqa: E402
+from station.core.measurement.uncertainty import body_sandwich, linear_uncertainty  # noqa: E402
 from station.core.units import ARCSEC, UM  # noqa: E402
 from station.io.robot_files import load_robot  # noqa: E402
 

@@ -35,13 +35,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 from benchmarks._timing import median_time  # noqa: E402
-from station.core.identification import identify  # noqa: E402
-from station.core.kinematics import forward, forward_with_jacobian  # noqa: E402
-from station.core.measurements import synthetic_set  # noqa: E402
-from station.core.poses import spread_joints  # noqa: E402
-from station.core.study import StudyInputs, perturbed  # noqa: E402
-from station.core.transforms import matrix_to_pose  # noqa: E402
-from station.core.uncertainty import monte_carlo  # noqa: E402
+from station.core.accuracy.studies import StudyInputs, perturbed  # noqa: E402
+from station.core.identification.identify import identify  # noqa: E402
+from station.core.kinematics.forward import forward, forward_with_jacobian  # noqa: E402
+from station.core.kinematics.poses import spread_joints  # noqa: E402
+from station.core.kinematics.transforms import matrix_to_pose  # noqa: E402
+from station.core.measurement.measurements import synthetic_set  # noqa: E402
+from station.core.measurement.uncertainty import monte_carlo  # noqa: E402
 from station.io.robot_export import export_model  # noqa: E402
 from station.io.robot_files import load_robot  # noqa: E402
 

@@ -24,11 +24,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-from station.core.distance_pairs import DEFAULT_STRATEGY, STRATEGIES, distances, make_pairs  # noqa: E402
-from station.core.identification import identify  # noqa: E402
-from station.core.kinematics import forward  # noqa: E402
-from station.core.measurements import MeasurementSet  # noqa: E402
-from station.core.poses import spread_joints  # noqa: E402
+from station.core.identification.identify import identify  # noqa: E402
+from station.core.kinematics.forward import forward  # noqa: E402
+from station.core.kinematics.poses import spread_joints  # noqa: E402
+from station.core.measurement.distance_pairs import DEFAULT_STRATEGY, STRATEGIES, distances, make_pairs  # noqa: E402
+from station.core.measurement.measurements import MeasurementSet  # noqa: E402
 from station.io.robot_files import load_robot  # noqa: E402
 
 TIME_TARGET_S = 2.0

@@ -121,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
         station_url, qa_url = server.url(user="bench_station"), server.url(user="bench_qa")
         from fleet_runs import example_config, finished_run
 
-        from station.cell.records.fleet_outbox import enqueue_run, sync
+        from station.cell.publication.outbox import enqueue_run, sync
 
         cfg = example_config("SR800-00000", station="cart-00")
         with tempfile.TemporaryDirectory() as tmp:

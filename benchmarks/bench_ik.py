@@ -1,4 +1,4 @@
-"""Timing of the general inverse kinematics (station.core.ik) and of compensated targets on the
+"""Timing of the general inverse kinematics (station.core.kinematics.ik) and of compensated targets on the
 six-axis robot: medians of repeated runs after a warm-up.
 
     .venv/bin/python benchmarks/bench_ik.py [--repeat 7] [--robot irb2600] [--steps 300]
@@ -20,11 +20,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 from benchmarks._timing import median_time  # noqa: E402
-from station.core.compensation import compensated_targets  # noqa: E402
-from station.core.ik import ArmConfig, solve_ik  # noqa: E402
-from station.core.joint_offsets import fit_joint_offsets  # noqa: E402
-from station.core.kinematics import forward  # noqa: E402
-from station.core.poses import spread_joints  # noqa: E402
+from station.core.kinematics.compensation import compensated_targets  # noqa: E402
+from station.core.kinematics.forward import forward  # noqa: E402
+from station.core.kinematics.ik import ArmConfig, solve_ik  # noqa: E402
+from station.core.kinematics.joint_offsets import fit_joint_offsets  # noqa: E402
+from station.core.kinematics.poses import spread_joints  # noqa: E402
 from station.io.robot_files import load_robot  # noqa: E402
 
 

@@ -14,7 +14,7 @@ import numpy as np
 
 from drivers.controller import ModbusController
 from simulators.controller_server import SimulatedController
-from station.core.table_data import CorrectionTableData, TableAxis
+from station.core.table.values import CorrectionTableData, TableAxis
 
 
 def main() -> None:

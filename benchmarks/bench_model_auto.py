@@ -7,7 +7,7 @@ Two data sets of the six-axis arm (irb2600), position measurements with 15 µm n
 effect beyond geometry (the selection tries every family once and keeps none), one with compliance
 and first-harmonic errors of joints 2 and 3 (it keeps them, four steps of candidates). Each figure
 is the whole of what ``identify --model auto`` computes beyond reading the file: the geometric fit
-(:func:`station.core.identification.identify`) and :func:`station.core.model_selection.select_model`.
+(:func:`station.core.identification.identify`) and :func:`station.core.terms.selection.select_model`.
 Target: well under a second (0.5 s). Then the whole command in a fresh process, ``station identify
 FILE --robot irb2600 --model auto`` and the same without ``--model`` (interpreter start, imports, reading
 the file and printing included). No asserts.
@@ -28,12 +28,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 from benchmarks._timing import median_time  # noqa: E402
-from station.core.error_terms import TermSpec, apply_terms, term_basis  # noqa: E402
-from station.core.identification import identify  # noqa: E402
-from station.core.measurements import MeasurementSet, add_noise  # noqa: E402
-from station.core.model_selection import select_model  # noqa: E402
-from station.core.poses import spread_joints  # noqa: E402
-from station.core.study import StudyInputs, perturbed  # noqa: E402
+from station.core.accuracy.studies import StudyInputs, perturbed  # noqa: E402
+from station.core.identification.identify import identify  # noqa: E402
+from station.core.kinematics.poses import spread_joints  # noqa: E402
+from station.core.measurement.measurements import MeasurementSet, add_noise  # noqa: E402
+from station.core.terms.error_model import TermSpec, apply_terms, term_basis  # noqa: E402
+from station.core.terms.selection import select_model  # noqa: E402
 from station.io.datafile import write_csv  # noqa: E402
 from station.io.robot_files import load_robot  # noqa: E402
 

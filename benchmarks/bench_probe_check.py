@@ -20,9 +20,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from station.core.probe_check import diagnose, residual_test  # noqa: E402
-from station.core.probe_geometry import FACE_NORMALS, ProbeHeadGeometry, readings_from_pose, solve_pose  # noqa: E402
-from station.core.transforms import pose_to_matrix  # noqa: E402
+from station.core.kinematics.transforms import pose_to_matrix  # noqa: E402
+from station.core.probe.check import diagnose, residual_test  # noqa: E402
+from station.core.probe.geometry import FACE_NORMALS, ProbeHeadGeometry, readings_from_pose, solve_pose  # noqa: E402
 from station.io.head_file import load_head  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

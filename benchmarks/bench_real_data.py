@@ -40,9 +40,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-from station.core.identification import identify  # noqa: E402
-from station.core.measurements import MeasurementSet  # noqa: E402
-from station.core.model_selection import nested_cv, select_model  # noqa: E402
+from station.core.identification.identify import identify  # noqa: E402
+from station.core.measurement.measurements import MeasurementSet  # noqa: E402
+from station.core.terms.selection import nested_cv, select_model  # noqa: E402
 from station.core.units import ARCSEC, UM  # noqa: E402
 from station.io.datafile import read_measurement_file  # noqa: E402
 from station.io.robot_import import read_dh_file  # noqa: E402

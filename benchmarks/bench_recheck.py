@@ -15,8 +15,8 @@ import statistics
 import tempfile
 from pathlib import Path
 
+import station.cell.pipeline.calibration as pipeline
 import station.cell.recheck.measure as recheck
-import station.cell.results.pipeline as pipeline
 from station.cell.recheck.measure import RecheckOptions
 from station.cell.recheck.session import run_recheck_session
 from station.cell.run.runner import Runner

@@ -2,7 +2,7 @@
 (``examples/puma560/cell.toml``) rehearsed in simulation with ``[simulation] joint_errors =
 "six-axis"`` (its joints bend under gravity and err once per turn), identified with
 ``[identification] model = "geometric"`` and ``"auto"``, and without joint errors with ``"auto"``.
-The oracle knows the simulator's joint errors (``station/cell/results/pipeline_terms.py``).
+The oracle knows the simulator's joint errors (``station/cell/pipeline/terms.py``).
 
 Prints per seed and session: outcome, RMS before / after / oracle [µm], after/oracle, the terms
 auto kept and the cross-validated RMS of the geometric and the chosen model [µm]; then the median

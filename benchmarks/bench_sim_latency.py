@@ -47,10 +47,10 @@ class _Beats(ModbusController):
 
 
 def _numerics() -> Callable[[], None]:
-    from station.core.identification import identify
-    from station.core.measurements import synthetic_set
-    from station.core.poses import spread_joints
-    from station.core.study import StudyInputs, perturbed
+    from station.core.accuracy.studies import StudyInputs, perturbed
+    from station.core.identification.identify import identify
+    from station.core.kinematics.poses import spread_joints
+    from station.core.measurement.measurements import synthetic_set
     from station.io.robot_files import load_robot
 
     model = load_robot("sr800")

@@ -94,7 +94,7 @@ def plan_config(robot: str):
 
 
 def plan_figures(robot: str) -> dict:
-    from station.cell.results.preview import motion_seconds, preview
+    from station.cell.pipeline.preview import motion_seconds, preview
 
     cfg = plan_config(robot)
     t0 = time.perf_counter()

@@ -23,9 +23,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-from station.core.measurements import synthetic_set  # noqa: E402
-from station.core.poses import spread_joints  # noqa: E402
-from station.core.study import StudyInputs, perturbed  # noqa: E402
+from station.core.accuracy.studies import StudyInputs, perturbed  # noqa: E402
+from station.core.kinematics.poses import spread_joints  # noqa: E402
+from station.core.measurement.measurements import synthetic_set  # noqa: E402
 from station.io.datafile import write_csv  # noqa: E402
 from station.io.robot_files import load_robot  # noqa: E402
 

@@ -21,10 +21,10 @@ from pathlib import Path
 from simulators import start_simulated_cell
 from simulators.reference_cell import cell_config_text
 from station.cell.config.cell_config import parse_text
+from station.cell.pipeline.calibration import _proc_for
 from station.cell.plan.measurement_plan import build_plan
 from station.cell.plan.steps import StepKind
 from station.cell.records.rundb import RunDB
-from station.cell.results.pipeline import _proc_for
 from station.cell.run.runner import Runner
 from station.cell.session.calibrate import open_cell
 

@@ -15,11 +15,12 @@ import time
 import numpy as np
 
 from drivers.controller_map import MAX_TABLE_VALUES
-from station.cell.config.cell_config import TEMPLATE, parse_text
-from station.cell.correction.tools import evaluate_tool
+from station.cell.config.cell_config import parse_text
+from station.cell.config.template import TEMPLATE
+from station.cell.correction.robot_tools import evaluate_tool
+from station.cell.pipeline.calibration import grid_for
 from station.cell.plan.measurement_plan import build_plan
-from station.cell.results.pipeline import grid_for
-from station.core.correction_table import build_correction_table
+from station.core.table.build import build_correction_table
 
 GRIPPER = '\n[[tool]]\nname = "gripper"\ntcp = [50.0, 0.0, -200.0, 0.0, 0.0, 0.0]\nz_mm = [150.0, 350.0, 200.0]\n'
 

@@ -4,7 +4,7 @@ fail (issue 33, part 7: "tests that cannot agree with themselves").
 The simulated truth has its own kinematics (simulators/truth_kinematics.py), so a fault in the
 station's kinematics is a robot the station models wrongly: identification, correction and
 verification must show it. This script copies the work tree, plants one fault at a time in the
-copy's ``station/core/kinematics.py`` (and, for the symmetric slips a shared simulator would have
+copy's ``station/core/kinematics/forward.py`` (and, for the symmetric slips a shared simulator would have
 cancelled, in the probe head's face normals and the driver's word order), runs the end-to-end
 tests there, and prints whether each mutant was killed (the tests failed) or survived. The
 unmutated copy runs first and must pass.
@@ -26,7 +26,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-KINEMATICS = "station/core/kinematics.py"
+KINEMATICS = "station/core/kinematics/forward.py"
 
 #: (what the fault is, the file, ((the line as it is, the line with the fault), ...))
 MUTANTS = (
@@ -47,7 +47,7 @@ MUTANTS = (
     # too, so that they cancelled: the simulated head now touches the cube with its own physics
     # (simulators/probe_contact.py), the simulated program reads words with its own code
     # (simulators/program_words.py)
-    ("the tip sphere inside its face (readings and solver)", "station/core/probe_geometry.py",
+    ("the tip sphere inside its face (readings and solver)", "station/core/probe/geometry.py",
      (("        s = (rho + hM - nb) / incidence", "        s = (-rho + hM - nb) / incidence"),
       ('    f = np.einsum("ni,ni->n", n_f, q) - geom.tip_radii', '    f = np.einsum("ni,ni->n", n_f, q) + geom.tip_radii'))),
     ("the driver's BIG word order is low word first (both ways)", "drivers/controller_map.py",
@@ -90,7 +90,7 @@ def main(argv: list[str]) -> int:
     with tempfile.TemporaryDirectory(prefix="mutation-") as tmp:
         copy = Path(tmp)
         _copy_tree(copy)
-        where = subprocess.run([sys.executable, "-c", "import station.core.kinematics as k; print(k.__file__)"],
+        where = subprocess.run([sys.executable, "-c", "import station.core.kinematics.forward as k; print(k.__file__)"],
                                cwd=copy, env=dict(os.environ, PYTHONPATH=str(copy)), capture_output=True,
                                text=True).stdout.strip()
         if not where.startswith(str(copy)):

@@ -26,7 +26,7 @@ Safety rules implemented here:
 
 This module knows nothing of the station (no ``station`` import). Units: mm and rad. The errors
 (:mod:`drivers.controller_errors`), the status objects (:mod:`drivers.controller_status`) and the
-table data (:mod:`drivers.correction_table`) live in their own modules and are re-exported here.
+table data (:mod:`drivers.correction_table`) live in their own modules; import them from there.
 """
 
 from __future__ import annotations
@@ -42,23 +42,12 @@ from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOEx
 
 from .controller_errors import (
     ClaimIdentity,
-    ClaimNotGranted,
-    CommandRejected,
-    ControllerClaimed,
     ControllerConnectionError,
-    ControllerLinkLost,
-    DriveFault,
-    EmergencyStop,
     HandshakeTimeout,
     MapVersionError,
     ModbusExceptionError,
     ModbusResponseError,
-    MotionAborted,
-    MotionRejected,
-    MotionTimeout,
     RegisterWindowError,
-    SequenceError,
-    WordOrderError,
     checked_soft_limits,
     error_for,
     word_order_problem,
@@ -82,7 +71,6 @@ from .controller_status import CommandStatus, ControllerStatus, MotionStatus
 from .controller_transfer import TablePager
 from .correction_table import (
     TableError,
-    TablePageError,
     TablePayload,
     TableVerifyError,
     WireTable,
@@ -96,13 +84,7 @@ from .correction_table import (
 )
 
 __all__ = [
-    "ModbusController", "ControllerStatus", "MotionStatus", "CommandStatus", "TablePayload",
-    "WireTable", "ControllerError", "RegisterDecodeError", "ModbusExceptionError",
-    "RegisterWindowError", "ModbusResponseError", "MapVersionError", "WordOrderError",
-    "ControllerConnectionError", "ControllerLinkLost", "CommandRejected", "MotionRejected",
-    "MotionAborted", "EmergencyStop", "DriveFault", "SequenceError", "HandshakeTimeout",
-    "MotionTimeout", "TableError", "TableVerifyError", "TablePageError",
-    "CorrectionState", "WordOrder", "ControllerClaimed", "ClaimIdentity", "ClaimNotGranted",
+    "ModbusController",
 ]
 
 log = logging.getLogger(__name__)

@@ -6,7 +6,7 @@ as scaled 32-bit integers, 29 per page. This module encodes any table shaped lik
 :class:`TablePayload` (axes with ``start``/``step``/``count``/``periodic``, values
 ``(n_configs, *grid_shape, n_joints)``) and decodes what a controller holds into a
 :class:`WireTable`. What a table *means* (its grid, the interpolation rule, how it is built) is
-numerics and lives in the station's core (``station.core.table_data``); the driver knows nothing
+numerics and lives in the station's core (``station.core.table.values``); the driver knows nothing
 of the station, so the payload is a Protocol the station's table satisfies without inheriting.
 Only numpy and the register map are imported here (no pymodbus or pyserial).
 """

@@ -56,7 +56,6 @@ from drivers.probe_protocol import (
     ProbeError,
     ProbeFrameError,
     ProbeLineGarbled,
-    ProbeLineSettingsError,
     ProbeOutOfRange,
     ProbeSpreadError,
     ProbeTimeout,
@@ -74,23 +73,7 @@ except ImportError:  # pragma: no cover - not on POSIX
     _TERMIOS_ERRORS = ()
 
 __all__ = [
-    "ProbeHead",
-    "ProbeSnapshot",
-    "LinkStats",
-    "ChannelStatus",
-    "DeviceInfo",
-    "ProbeError",
-    "ProbeTimeout",
-    "ProbeFrameError",
-    "ProbeDeviceError",
-    "ProbeSpreadError",
-    "ProbeDisconnected",
-    "ProbeOutOfRange",
-    "ProbeConfigError",
-    "ProbeLineSettingsError",
-    "ProbeDialectMismatch",
-    "ProbeLineGarbled",
-    "ProbeUnsettled",
+    "ProbeHead", "ProbeSnapshot", "LinkStats",
 ]
 
 log = logging.getLogger(__name__)

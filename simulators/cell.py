@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from simulators.truth_kinematics import inverse, matrix_pose, pose_matrix, rotation_angle, true_forward
-from station.core.model import RobotModel
+from station.core.kinematics.model import RobotModel
 from station.core.units import ARCMIN, ARCSEC
 from station.io.robot_files import load_robot
 

@@ -10,7 +10,7 @@ writes of the command block on its program loop: it acknowledges,
 validates (soft limits, reachability, correction-table range), moves with a simple max-speed
 motion-time model scaled by ``time_scale`` (0 = instant), and reports done or error with the
 same sequence number. Cartesian moves use the controller's NOMINAL kinematics in the robot base
-frame (``station.core.kinematics.scara_ik``; for an articulated arm general inverse kinematics
+frame (``station.core.kinematics.forward.scara_ik``; for an articulated arm general inverse kinematics
 from the joints the robot stands at, which keeps its configuration) plus the multilinear table correction
 (:meth:`simulators.program_words.ProgramTable.correction`, the rule of ``docs/protocols.md`` written again,
 not the station's) when a table is active; registers are read and written with the program's own
@@ -62,9 +62,9 @@ from simulators.controller_claim import ClaimRules
 from simulators.controller_faults import QUIRKS, FaultInjection, ModbusFault
 from simulators.controller_tables import TableSlots, serve_transfer
 from simulators.program_words import OutsideTable, ProgramTable, get_value, put_value
-from station.core.kinematics import forward, inverse_kinematics, scara_ik
-from station.core.model import RobotModel
-from station.core.transforms import matrix_to_pose, pose_to_matrix
+from station.core.kinematics.forward import forward, inverse_kinematics, scara_ik
+from station.core.kinematics.model import RobotModel
+from station.core.kinematics.transforms import matrix_to_pose, pose_to_matrix
 from station.errors import UnreachableError
 from station.io.robot_files import load_robot
 

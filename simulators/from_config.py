@@ -148,7 +148,7 @@ def simulated_cell_for(cfg: Any, seed: int) -> SimulatedCell:
     """The :class:`SimulatedCell` of a cell configuration (see the module docstring)."""
     from simulators.probe_head_sim import ProbeHeadPhysics
     from simulators.thermal import ThermalModel, step_change
-    from station.core.probe_geometry import default_probe_head
+    from station.core.probe.geometry import default_probe_head
 
     settings = _settings(cfg)
     phys = SimulationPhysics.from_settings(settings)

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from simulators.truth_kinematics import true_forward
-from station.core.model import RobotModel
+from station.core.kinematics.model import RobotModel
 
 __all__ = ["JointErrors", "six_axis_joint_errors", "scara_joint_errors", "NO_JOINT_ERRORS"]
 

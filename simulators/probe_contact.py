@@ -1,7 +1,7 @@
 """Where each probe's tip really touches the cube: the simulated head's readings, written from
 ``docs/probe-head.md`` ("Frames and conventions"), not from the station's solver.
 
-The station turns readings into the cube's pose with :mod:`station.core.probe_geometry`; if the
+The station turns readings into the cube's pose with :mod:`station.core.probe.geometry`; if the
 simulator produced its readings with the same module, a slip in it (a face's normal, a sign of the
 tip radius, the frame a direction is given in) would be made twice and cancel, and every
 end-to-end test would pass (issue 33, item 7). This is the same physics derived again, a

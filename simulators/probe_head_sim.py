@@ -43,7 +43,7 @@ from drivers.probe_protocol import (
 )
 from simulators.probe_contact import touch_readings
 from simulators.probe_dialect_units import KeyenceUnit, MitutoyoUnit, StationUnit
-from station.core.probe_geometry import ProbeHeadGeometry, default_probe_head
+from station.core.probe.geometry import ProbeHeadGeometry, default_probe_head
 
 __all__ = ["ProbeHeadPhysics", "FaultKind", "ProbeFaults", "ProbeHeadServer",
            "ProbeHeadTcpServer"]

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from station.core.model import RobotModel
+from station.core.kinematics.model import RobotModel
 from station.core.units import ARCSEC
 
 __all__ = ["ThermalModel", "step_change", "joint_offset_index", "arm_length_indices", "motion_seconds"]

@@ -1,7 +1,7 @@
 """Outcomes and typed errors of the station: the one source of truth for exit codes.
 
 Every layer imports this module (it imports nothing). An error class names its
-:class:`Outcome`; ``station.cell.results.outcomes`` maps every other exception (driver errors,
+:class:`Outcome`; ``station.cell.pipeline.outcomes`` maps every other exception (driver errors,
 operating-system errors) to an outcome by type, and the CLI, ``--json``, the TUI and ``station
 check`` all read the exit code from there. Every message says what to do about the error.
 """

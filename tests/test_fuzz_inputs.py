@@ -29,7 +29,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from station.cell.config.cell_config import TEMPLATE, parse_config, parse_text
+from station.cell.config.cell_config import parse_config, parse_text
+from station.cell.config.template import TEMPLATE
 from station.errors import StationError
 
 #: seconds one input may take before it counts as a hang (a parse takes milliseconds; an
@@ -277,9 +278,9 @@ def robot_files(draw) -> tuple[str, bytes]:
 # ------------------------------------------------------------------------------ data files
 
 def _pose_file_text() -> str:
-    from station.core.measurements import synthetic_set
-    from station.core.poses import spread_joints
-    from station.core.transforms import matrix_to_pose
+    from station.core.kinematics.poses import spread_joints
+    from station.core.kinematics.transforms import matrix_to_pose
+    from station.core.measurement.measurements import synthetic_set
     from station.io.robot_files import load_robot
 
     model = load_robot("sr800")

@@ -184,7 +184,7 @@ def test_reset_without_a_reachable_controller_exits_7_saying_what_to_check(tmp_p
 # --- numpy warnings: the input is refused before the arithmetic ------------------------------
 
 def test_a_dh_file_with_an_infinite_angle_is_refused_without_a_numpy_warning(tmp_path):
-    # the fuzz campaign's case: -inf reached cos/sin in station/core/transforms.py
+    # the fuzz campaign's case: -inf reached cos/sin in station/core/kinematics/transforms.py
     p = tmp_path / "r.dh.csv"
     p.write_text("type,theta [deg],d [mm],a [mm],alpha [deg],lower [deg|mm],upper [deg|mm]\n"
                  "revolute,0,0,445,0,-130,130\nrevolute,0,0,355,-inf,-140,140\n"

@@ -31,8 +31,8 @@ def test_the_example_cell_is_a_dl_rs1a_at_9600_8n1_and_a_window_at_128():
 
 def test_a_rehearsal_of_the_example_cell_stays_inside_registers_128_to_255(tmp_path):
     from simulators.from_config import simulate_config
+    from station.cell.pipeline.calibration import Options, run_calibration
     from station.cell.records.rundb import RunDB
-    from station.cell.results.pipeline import Options, run_calibration
     from station.cell.session.calibrate import open_cell
     from station.errors import Outcome
 

@@ -139,14 +139,14 @@ class Arm:
         return [*(T[:3, 3] / 1000.0).tolist(), *rv.tolist()]
 
     def forward(self, q, tcp) -> list[float]:
-        from station.core.kinematics import forward
+        from station.core.kinematics.forward import forward
 
         T = forward(self.model, np.asarray(q, dtype=float)[None], setup=False)[0]
         return self._matrix_pose(T @ self._pose_matrix(tcp))
 
     def inverse(self, pose, qnear, tcp, max_pos_m: float, max_rot: float) -> np.ndarray | None:
-        from station.core.kinematics import forward, inverse_kinematics
-        from station.core.transforms import invert
+        from station.core.kinematics.forward import forward, inverse_kinematics
+        from station.core.kinematics.transforms import invert
 
         target = self._pose_matrix(pose) @ invert(self._pose_matrix(tcp))
         try:

@@ -2,5 +2,5 @@
 the fleet's queries.
 
 May import station.errors only. Publishing a finished run from the station's run database (store
-and forward) is the cell's: station.cell.records.fleet_outbox, which calls this store.
+and forward) is the cell's: station.cell.publication.outbox, which calls this store.
 """

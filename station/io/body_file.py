@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from station.core.transforms import pose_to_matrix
+from station.core.kinematics.transforms import pose_to_matrix
 from station.core.units import ARCSEC, DEG, UM
 from station.errors import ConfigError
 from station.io.certificate import Certificate, check_certificate_date, check_certificate_id

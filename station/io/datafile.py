@@ -30,8 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
-from station.core.model import RobotModel
-from station.core.transforms import pose_to_matrix
+from station.core.kinematics.model import RobotModel
+from station.core.kinematics.transforms import pose_to_matrix
 from station.core.units import ARCSEC, DEG, UM
 from station.errors import ConfigError
 

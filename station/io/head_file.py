@@ -6,7 +6,7 @@ Checked in three stages, each failure a :class:`ConfigError` naming the key and 
 1. the schema (pydantic v2, strict, unknown keys refused, every number bounded);
 2. each probe: a unit measuring direction (normalised; a length off by more than 1 % is a typo),
    unique ids and channels;
-3. the arrangement (:func:`station.core.probe_check.check_arrangement`): the probes must fix all
+3. the arrangement (:func:`station.core.probe.check.check_arrangement`): the probes must fix all
    six degrees of freedom of the cube corner at the nominal touch, and every nominal reading
    must lie inside its probe's stroke with a margin (:class:`ProbeHeadGeometry`).
 """
@@ -22,9 +22,9 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from station.core.probe_check import ArrangementReport, check_arrangement, check_head
-from station.core.probe_geometry import ProbeHeadGeometry
-from station.core.transforms import pose_to_matrix
+from station.core.kinematics.transforms import pose_to_matrix
+from station.core.probe.check import ArrangementReport, check_arrangement, check_head
+from station.core.probe.geometry import ProbeHeadGeometry
 from station.core.units import DEG
 from station.errors import ConfigError
 from station.io.certificate import Certificate, check_certificate_date, check_certificate_id
@@ -245,7 +245,7 @@ def load_head(path: str | Path, cube_edge_mm: float = 40.0) -> HeadFile:
 
 def head_to_toml(geom: ProbeHeadGeometry, frame_in_flange: np.ndarray) -> str:
     """A head file for ``geom`` (``frame_in_flange`` (6,) [mm, rad]): how the examples are made."""
-    from station.core.transforms import matrix_to_pose
+    from station.core.kinematics.transforms import matrix_to_pose
 
     def nums(v: Any, digits: int = 6) -> str:
         return "[" + ", ".join(f"{float(x):.{digits}g}" if abs(float(x)) >= 1e-12 else "0.0" for x in v) + "]"

@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from station.core.model import RobotModel
+from station.core.kinematics.model import RobotModel
 from station.errors import ConfigError
 
 #: a length or offset beyond 100 m, or an angle beyond 2π·10 rad, is no robot's

@@ -27,10 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
-from station.core.kinematics import forward
-from station.core.model import RobotModel, robot_to_toml
-from station.core.poses import spread_joints
-from station.core.transforms import invert, matrix_to_pose, pose_error, rot_x, rot_z
+from station.core.kinematics.forward import forward
+from station.core.kinematics.model import RobotModel, robot_to_toml
+from station.core.kinematics.poses import spread_joints
+from station.core.kinematics.transforms import invert, matrix_to_pose, pose_error, rot_x, rot_z
 from station.core.units import ARCSEC, UM
 from station.errors import ConfigError
 
@@ -177,7 +177,7 @@ def mdh_rows(model: RobotModel, params=None, setup: bool = True) -> tuple[list[t
 
 
 def pose_to_frame(pose: np.ndarray) -> np.ndarray:
-    from station.core.transforms import pose_to_matrix
+    from station.core.kinematics.transforms import pose_to_matrix
 
     return pose_to_matrix(np.asarray(pose, dtype=float))
 

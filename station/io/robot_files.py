@@ -1,7 +1,7 @@
 """Robot files: the built-in robots and the files users bring (TOML, DH/MDH CSV, URDF).
 
 Reading files is I/O, so it lives here and not in the numeric core; the core's
-:func:`station.core.model.robot_from_dict` turns the parsed content into a model.
+:func:`station.core.kinematics.model.robot_from_dict` turns the parsed content into a model.
 
 A user file is read only if it is a regular file of a sane size (:func:`read_user_text`): a
 device such as ``/dev/zero`` or a FIFO is refused before anything is read, so it can neither
@@ -9,7 +9,7 @@ exhaust memory nor hang the station. Every model read from a file is checked bef
 finite nominal parameters (a NaN names its parameter) and finite, ordered joint limits.
 
 A robot file may map the controller's joints onto the model's (``[joint_map]``, or the DH
-table's ``sign``, ``offset``, ``coupled_to``, ``k`` columns; :mod:`station.core.joint_map`):
+table's ``sign``, ``offset``, ``coupled_to``, ``k`` columns; :mod:`station.core.kinematics.joint_map`):
 :func:`load_mapped_robot` gives it to the commands that apply it to data files' joints, and
 :func:`load_robot`, which the cell uses, refuses a file that has one.
 
@@ -28,8 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from station.core.joint_map import JointMap, joint_map_from_file_units
-from station.core.model import RobotModel, robot_from_dict
+from station.core.kinematics.joint_map import JointMap, joint_map_from_file_units
+from station.core.kinematics.model import RobotModel, robot_from_dict
 from station.errors import ConfigError
 from station.io.robot_bounds import check_map_plausible, check_plausible
 
@@ -254,7 +254,7 @@ def _toml_joint_map(data: dict, model: RobotModel, source: str) -> JointMap:
 
 def joint_map_toml(jmap: JointMap, model: RobotModel, angle_unit: str = "rad") -> str:
     """The ``[joint_map]`` table of ``jmap`` for a robot file written in ``angle_unit`` and mm
-    (appended to :func:`station.core.model.robot_to_toml`'s text; empty for the identity)."""
+    (appended to :func:`station.core.kinematics.model.robot_to_toml`'s text; empty for the identity)."""
     import tomli_w
 
     if jmap.is_identity:

@@ -1,6 +1,6 @@
 """Import of the robot descriptions users actually hold: DH, modified DH (Craig), URDF.
 
-Every format is converted exactly into the six-parameter chain of :mod:`station.core.model`:
+Every format is converted exactly into the six-parameter chain of :mod:`station.core.kinematics.model`:
 
 * DH link i: ``Rz(θ_i + q_i) · Tz(d_i) · Tx(a_i) · Rx(α_i)``. The joint moves about z *before*
   the link's constants, so the constants of link i become the origin of the station's
@@ -31,14 +31,14 @@ from pathlib import Path
 
 import numpy as np
 
-from station.core.joint_map import JointMap, joint_map_from_file_units
-from station.core.model import RobotModel, TransformSpec
-from station.core.transforms import invert, matrix_to_pose, pose_to_matrix, rot_x, rot_z, rotation_exp
+from station.core.kinematics.joint_map import JointMap, joint_map_from_file_units
+from station.core.kinematics.model import RobotModel, TransformSpec
+from station.core.kinematics.transforms import invert, matrix_to_pose, pose_to_matrix, rot_x, rot_z, rotation_exp
 from station.errors import ConfigError
 from station.io.robot_bounds import nearest
 
 #: cos(pitch) below which a frame in front of a joint is turned off the gimbal lock: sin 5°, the
-#: reach of the structural snap (station.core.identifiability.structural_params), which would put
+#: reach of the structural snap (station.core.identification.identifiability.structural_params), which would put
 #: a pitch within 5° of ±90° onto the lock for the rank analysis
 GIMBAL_COS = math.sin(math.radians(5.0))
 

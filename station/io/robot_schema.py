@@ -2,7 +2,7 @@
 (:mod:`station.cell.config.schema`: pydantic v2 sections in strict mode, unknown keys refused):
 an unknown table or key is refused with the nearest known name (``lenght_unit`` → "did you mean
 'length_unit'?"), so a typo never silently falls back to a default. The semantics (units, limits,
-the joint map's joints) stay with :func:`station.core.model.robot_from_dict` and
+the joint map's joints) stay with :func:`station.core.kinematics.model.robot_from_dict` and
 :mod:`station.io.robot_files`; physical plausibility (:mod:`station.io.robot_bounds`) holds for
 every robot file format. Imported only where a TOML robot file is read (pydantic's import is not
 free: ``station --help`` and the built-in robots do without it).

@@ -20,7 +20,7 @@ between it and the full model at the poses they were fitted on, what such a form
 Only TOML robot files hold them; DH, MDH and URDF files have no place for them.
 
 The ``[gravity]`` table says what the compliance term's gravity torques come from (without it: the
-lumped unit masses of :mod:`station.core.error_terms`)::
+lumped unit masses of :mod:`station.core.terms.error_model`)::
 
     [gravity]
     masses_kg = [0, 120, 60, 20, 8, 2]        # the link each joint moves, one per joint
@@ -40,7 +40,7 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-from station.core.error_terms import STANDARD_GRAVITY, GravityModel
+from station.core.terms.error_model import STANDARD_GRAVITY, GravityModel
 from station.errors import ConfigError
 
 __all__ = ["StoredTerms", "read_error_terms", "error_terms_toml", "read_gravity", "gravity_toml", "read_gear_ratios",

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from station.core.error_terms import GravityModel
-from station.core.transforms import invert
+from station.core.kinematics.transforms import invert
+from station.core.terms.error_model import GravityModel
 from station.errors import ConfigError
 from station.io.robot_import import (
     _T,

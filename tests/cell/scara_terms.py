@@ -40,13 +40,13 @@ def scara_terms() -> ScaraTerms:
     from simulators.joint_errors import scara_joint_errors
     from simulators.reference_cell import cell_config_text
     from station.cell.config.cell_config import parse_text
+    from station.cell.pipeline.terms import terms_delta
     from station.cell.plan.measurement_plan import build_plan
     from station.cell.plan.steps import StepKind
-    from station.cell.results.pipeline_terms import terms_delta
-    from station.core.error_terms import TermSpec
-    from station.core.identification import identify
-    from station.core.measurements import MeasurementSet
-    from station.core.model_selection import select_model
+    from station.core.identification.identify import identify
+    from station.core.measurement.measurements import MeasurementSet
+    from station.core.terms.error_model import TermSpec
+    from station.core.terms.selection import select_model
 
     class Servers:  # what the configuration's text takes of the started servers
         def __init__(self) -> None:

@@ -14,11 +14,12 @@ import pytest
 from simulators import SimulatedCellServers
 from simulators.cell import SimulatedCell
 from simulators.reference_cell import cell_config_text
-from station.cell.config.cell_config import TEMPLATE, load_config, parse_text
+from station.cell.config.cell_config import load_config, parse_text
+from station.cell.config.template import TEMPLATE
+from station.cell.pipeline.calibration import identify_run
 from station.cell.plan.measurement_plan import build_plan, retracted
-from station.cell.results.pipeline import identify_run
 from station.cell.run.runner import Checkpoint, MoveJoints, ReadJoints, ReadProbes, Settle, approach_and_read
-from station.core.transforms import matrix_to_pose
+from station.core.kinematics.transforms import matrix_to_pose
 from station.core.units import ARCSEC, UM
 from station.errors import ConfigError
 

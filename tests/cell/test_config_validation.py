@@ -14,7 +14,9 @@ import pytest
 
 from drivers.controller_map import MAX_TABLE_VALUES
 from station.cell.config import cell_config as cfgmod
-from station.cell.config.cell_config import TEMPLATE, correction_grid, load_config, parse_config, parse_text
+from station.cell.config import schema
+from station.cell.config.cell_config import correction_grid, load_config, parse_config, parse_text
+from station.cell.config.template import TEMPLATE
 from station.cell.records.run_export import csv_text, export_csv
 from station.cell.records.rundb import RunDB
 from station.errors import ConfigError
@@ -49,10 +51,10 @@ def refused(text: str, *patterns: str) -> str:
 
 def _numeric_fields():
     """(section, key, FieldInfo) of every bounded number of the schema."""
-    for section, sinfo in cfgmod._CellFile.model_fields.items():
-        model = cfgmod._section_of(sinfo.annotation)
+    for section, sinfo in schema._CellFile.model_fields.items():
+        model = schema._section_of(sinfo.annotation)
         for key, info in model.model_fields.items():
-            if info.annotation in (int, float) and cfgmod.bounds_text(info):
+            if info.annotation in (int, float) and schema.bounds_text(info):
                 yield section, key, info
 
 
@@ -65,11 +67,11 @@ def test_every_number_has_bounds():
                 "plan.select", "devices.motion_timeout_s", "identification.sigma_position_um",
                 "identification.sigma_angle_arcsec", "correction.yaw_step_deg", "simulation.seed"):
         assert key in keys
-    for section, sinfo in cfgmod._CellFile.model_fields.items():  # no unbounded number anywhere
-        model = cfgmod._section_of(sinfo.annotation)
+    for section, sinfo in schema._CellFile.model_fields.items():  # no unbounded number anywhere
+        model = schema._section_of(sinfo.annotation)
         for key, info in model.model_fields.items():
             if info.annotation in (int, float):
-                assert cfgmod.bounds_text(info), f"{section}.{key} has no bounds"
+                assert schema.bounds_text(info), f"{section}.{key} has no bounds"
 
 
 @pytest.mark.parametrize("section,key,info", [n for n in NUMERIC if n[0] != "simulation"],
@@ -77,7 +79,7 @@ def test_every_number_has_bounds():
 def test_template_states_the_bounds(section, key, info):
     """The template's comment on each number states the schema's bounds (one source)."""
     line = next(ln for ln in TEMPLATE.splitlines() if ln.startswith((f"{key} =", f"# {key} =")))
-    assert cfgmod.bounds_text(info) in line, (line, cfgmod.bounds_text(info))
+    assert schema.bounds_text(info) in line, (line, schema.bounds_text(info))
 
 
 def _limit(info, kind):
@@ -104,7 +106,7 @@ def test_out_of_bounds_names_key_and_range(section, key, info):
     for v in (below, above, "true", '"3"', "nan" if not is_int else "1.5"):
         lines = [ln for ln in text.splitlines() if not ln.startswith(f"{key} =")]
         t = ("\n".join(lines) + "\n").replace(header, f"{header}{key} = {v}\n", 1)
-        refused(t, re.escape(f"{section}.{key}"), re.escape(cfgmod.bounds_text(info)))
+        refused(t, re.escape(f"{section}.{key}"), re.escape(schema.bounds_text(info)))
 
 
 def test_bounds_found_by_the_campaign_hang_no_more():

@@ -15,12 +15,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drivers.controller import ControllerClaimed, ModbusController
+from drivers.controller import ModbusController
+from drivers.controller_errors import ControllerClaimed
 from drivers.controller_map import REGISTERS, Command, ErrorCode, StatusBit, WordOrder
 from simulators.controller_server import QUIRKS, SimulatedController
 from station.cell.config.cell_config import parse_text
 from station.cell.conformance import suite as cf
-from station.core.table_data import CorrectionTableData, TableAxis
+from station.core.table.values import CorrectionTableData, TableAxis
 from station.errors import ConfigError
 from station.ui.cli.main import main
 

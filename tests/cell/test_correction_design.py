@@ -48,7 +48,7 @@ def test_init_from_the_files_then_plan_and_calibrate_succeed_at_the_first_try(tm
 
 
 def test_a_table_over_its_bound_after_identification_is_not_uploaded_with_its_reason(tmp_path, monkeypatch):
-    import station.cell.results.pipeline as pipeline
+    import station.cell.pipeline.calibration as pipeline
 
     real = pipeline.identified_table
 

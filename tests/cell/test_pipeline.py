@@ -6,15 +6,16 @@ from contextlib import ExitStack
 
 import pytest
 
-from drivers.controller import EmergencyStop, HandshakeTimeout, TableVerifyError
+from drivers.controller_errors import EmergencyStop, HandshakeTimeout
+from drivers.correction_table import TableVerifyError
 from drivers.probe_protocol import ProbeDisconnected
 from simulators import start_simulated_cell
 from simulators.reference_cell import cell_config_text
 from station.cell.config.cell_config import parse_text
+from station.cell.pipeline.calibration import Options, run_calibration
+from station.cell.pipeline.outcomes import classify
 from station.cell.plan.steps import StepKind
 from station.cell.records.rundb import RunDB
-from station.cell.results.outcomes import classify
-from station.cell.results.pipeline import Options, run_calibration
 from station.cell.run.events import MeasurementRecorded, Notice, PhaseChanged, RunFinished
 from station.cell.session.calibrate import open_cell
 from station.errors import Outcome
@@ -203,7 +204,7 @@ def test_operator_abort_stops_at_a_safe_point_and_the_run_resumes(cell):
 
 
 def test_drive_fault_is_a_safety_stop(cell):
-    from drivers.controller import DriveFault
+    from drivers.controller_errors import DriveFault
 
     emit = _after_n_measurements(cell, 2, lambda: cell.srv.controller_server.drive_fault_during_next_move(2))
     with pytest.raises(DriveFault) as exc:
@@ -238,7 +239,7 @@ def test_a_probe_that_dies_stops_the_run_names_it_and_uploads_nothing(cell):
 
 
 def test_too_few_valid_identification_poses_are_refused_before_identifying(cell, monkeypatch):
-    import station.cell.results.pipeline as pipeline
+    import station.cell.pipeline.calibration as pipeline
     from station.errors import IdentificationError
 
     monkeypatch.setattr(pipeline, "MIN_VALID_FRACTION", 1.01)  # one more than the plan holds
@@ -249,7 +250,7 @@ def test_too_few_valid_identification_poses_are_refused_before_identifying(cell,
 
 
 def test_a_model_that_fits_garbage_is_refused(cell, monkeypatch):
-    import station.cell.results.pipeline as pipeline
+    import station.cell.pipeline.calibration as pipeline
     from station.errors import IdentificationError
 
     monkeypatch.setattr(pipeline, "MAX_RMS_NORMALIZED", 0.1)  # the real fit (≈ 0.85) now counts as garbage

@@ -14,13 +14,13 @@ from station.cell.plan.articulated import (
     retract_pose,
 )
 from station.cell.plan.measurement_plan import all_motion_poses, build_plan, order_by_travel, retracted
-from station.core.identifiability import analyze
-from station.core.ik import configuration
-from station.core.kinematics import forward
-from station.core.measurements import synthetic_set
-from station.core.poses import spread_joints
-from station.core.probe_geometry import default_probe_head, readings_from_pose
-from station.core.transforms import invert, rotation_log
+from station.core.identification.identifiability import analyze
+from station.core.kinematics.forward import forward
+from station.core.kinematics.ik import configuration
+from station.core.kinematics.poses import spread_joints
+from station.core.kinematics.transforms import invert, rotation_log
+from station.core.measurement.measurements import synthetic_set
+from station.core.probe.geometry import default_probe_head, readings_from_pose
 from station.io.robot_files import builtin_robots, load_robot
 
 
@@ -85,7 +85,7 @@ def test_irb2600_is_built_in_with_the_data_sheet_geometry():
 @pytest.mark.parametrize(("objective", "count"), [("pose", 30), ("position", 25), ("distance", 19)])
 def test_irb2600_identifiable_counts(objective, count):
     """30 from poses; 25 from positions and 19 from distances with the head origin on axis 6."""
-    from station.core.distance_pairs import make_pairs
+    from station.core.measurement.distance_pairs import make_pairs
 
     m = load_robot("irb2600")
     assert m.minimal_param_count == 30

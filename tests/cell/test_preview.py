@@ -10,9 +10,9 @@ import pytest
 from simulators import start_simulated_cell
 from simulators.reference_cell import cell_config_text
 from station.cell.config.cell_config import parse_text
+from station.cell.pipeline.preview import describe, preview
 from station.cell.plan.measurement_plan import build_plan
 from station.cell.plan.steps import StepKind
-from station.cell.results.preview import describe, preview
 from station.ui.cli.main import main
 
 
@@ -59,7 +59,7 @@ def test_preview_estimates_the_motion_time_from_the_robot_files_speeds(text):
 
     import numpy as np
 
-    from station.cell.results.preview import motion_seconds
+    from station.cell.pipeline.preview import motion_seconds
 
     cfg = parse_text(text)
     p = preview(cfg)
@@ -101,7 +101,7 @@ def test_reach_margin_of_each_step_against_the_arm_lengths(text):
     (|L1 - L2|) arm: checked against the planar geometry of the SR 800 (445 mm + 355 mm)."""
     import numpy as np
 
-    from station.core.kinematics import forward
+    from station.core.kinematics.forward import forward
 
     cfg = parse_text(text)
     p = preview(cfg)

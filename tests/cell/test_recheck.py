@@ -12,10 +12,10 @@ import pytest
 from simulators.cell import SimulatedCell
 from simulators.thermal import ThermalModel
 from station.cell.config.cell_config import parse_text
+from station.cell.pipeline.calibration import identify_run
 from station.cell.plan.measurement_plan import build_plan, retracted
 from station.cell.plan.steps import StepKind
 from station.cell.recheck.measure import Baseline, Tolerances, analyse_recheck, plan_recheck
-from station.cell.results.pipeline import identify_run
 from station.cell.run.runner import (
     Checkpoint,
     MoveCartesian,
@@ -120,9 +120,9 @@ def test_a_baseline_with_error_terms_is_rechecked_with_them_like_with_like():
     import json
 
     from simulators.joint_errors import scara_joint_errors
+    from station.cell.pipeline.terms import error_model_record, select_terms, stored_error_model
     from station.cell.records.record_fields import check_result_fields
     from station.cell.records.run_records import RunDatabaseError
-    from station.cell.results.pipeline_terms import error_model_record, select_terms, stored_error_model
 
     cfg = _sim_cfg(1, "")
     cfg = parse_text(cfg.source_text.replace("[identification]\n", '[identification]\nmodel = "auto"\n', 1))

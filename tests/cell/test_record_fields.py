@@ -8,7 +8,8 @@ from __future__ import annotations
 import pytest
 
 from station.cell.records.record_checks import DamagedRecordError
-from station.cell.records.rundb import RunDB, RunNotFoundError
+from station.cell.records.run_records import RunNotFoundError
+from station.cell.records.rundb import RunDB
 from tests.cell.damaged_runs import damaged, run_cli
 
 

@@ -18,16 +18,16 @@ from simulators.cell import CellTruth, SimulatedCell
 from simulators.probe_head_sim import ProbeHeadPhysics
 from simulators.reference_cell import cell_config_text
 from station.cell.config.cell_config import CellConfig, parse_text
+from station.cell.pipeline.calibration import Options, run_calibration
 from station.cell.records.run_records import MeasurementRecord
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import RunSummary
-from station.cell.results.pipeline import Options, run_calibration
 from station.cell.run.events import MeasurementRecorded, Notice
 from station.cell.run.runner import Reading, failure_cause, probe_readings
 from station.cell.session.calibrate import open_cell
-from station.core.kinematics import forward
-from station.core.probe_geometry import FACE_NORMALS, ProbeHeadGeometry
-from station.core.transforms import pose_to_matrix
+from station.core.kinematics.forward import forward
+from station.core.kinematics.transforms import pose_to_matrix
+from station.core.probe.geometry import FACE_NORMALS, ProbeHeadGeometry
 from station.errors import ConfigError, MeasurementFault
 from station.io.head_file import head_to_toml, load_head
 from station.io.robot_files import load_robot

@@ -15,7 +15,7 @@ import pytest
 from simulators.cell import CalibrationBody, CellTruth, CubeSpec
 from station.cell.records.rundb import RunDB
 from station.cell.session.calibrate import CellRequest, run_calibration_session
-from station.core.transforms import matrix_to_pose
+from station.core.kinematics.transforms import matrix_to_pose
 from station.errors import ConfigError, Outcome
 from station.ui.cli.main import main
 from station.ui.simulated_cell import load_cell

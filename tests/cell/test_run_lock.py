@@ -12,7 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from station.cell.records.rundb import RunDB, RunLockedError
+from station.cell.records.run_lock import RunLockedError
+from station.cell.records.rundb import RunDB
 from station.ui.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -19,17 +19,17 @@ import numpy as np
 import pytest
 
 from station.cell.records.run_export import export_csv
-from station.cell.records.rundb import (
+from station.cell.records.run_records import (
     SCHEMA_VERSION,
     DuplicateMeasurementError,
     MeasurementRecord,
     RunDatabaseError,
-    RunDB,
     RunNotFoundError,
     RunRecord,
     SchemaVersionError,
 )
-from station.core.transforms import matrix_to_pose, pose_to_matrix
+from station.cell.records.rundb import RunDB
+from station.core.kinematics.transforms import matrix_to_pose, pose_to_matrix
 from station.errors import StationError
 
 REPO = Path(__file__).resolve().parents[2]

@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from station.cell.limits.motion_guard import MotionGuard
-from station.core.table_data import CorrectionTableData, TableAxis
+from station.core.table.values import CorrectionTableData, TableAxis
 from station.errors import ConfigError, UnreachableError
 
 LIMITS = np.array([[-2.0, 2.0], [-2.4, 2.4], [-190.0, -10.0], [-6.0, 6.0]])

@@ -18,14 +18,14 @@ import pytest
 
 from simulators.cell import SimulatedCell
 from station.cell.config.cell_config import parse_text
+from station.cell.pipeline.results import identify_run, run_measurements, run_term_rows
+from station.cell.pipeline.terms import select_terms
 from station.cell.plan.measurement_plan import build_plan
 from station.cell.plan.steps import StepKind
-from station.cell.results.pipeline_results import identify_run, run_measurements, run_term_rows
-from station.cell.results.pipeline_terms import select_terms
 from station.cell.run.runner import ReadProbes, approach_and_read
-from station.core.error_terms import TermRows, TermSpec, term_basis
-from station.core.kinematics import forward
-from station.core.model_selection import select_model
+from station.core.kinematics.forward import forward
+from station.core.terms.error_model import TermRows, TermSpec, term_basis
+from station.core.terms.selection import select_model
 from station.errors import ConfigError
 from tests.cell.test_recheck import InProcess, _sim_cfg
 
@@ -147,7 +147,7 @@ def test_backlash_is_fitted_only_for_joints_that_arrived_from_both_sides():
     """The core: a joint whose approach sign never changes gets no backlash column (it merges with
     the joint's zero); backlash forced where no joint changes side is refused, not fitted as
     nothing."""
-    from station.core.model_selection import expand_families
+    from station.core.terms.selection import expand_families
 
     cfg = _cfg("auto", True)
     q = np.array([[0.1 * k, 0.5, -50.0, 0.2 * k] for k in range(6)])

@@ -12,7 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from station.cell.config.cell_config import TEMPLATE, parse_text
+from station.cell.config.cell_config import parse_text
+from station.cell.config.template import TEMPLATE
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import RunSummary
 from station.cell.session.calibrate import CellRequest, run_calibration_session
@@ -52,7 +53,7 @@ def test_a_six_axis_model_names_real_joints(tmp_path):
     src = str(tmp_path / "none-compliance+cyclic.q3" / "cell.toml")
     ident = parse_text(text, src).identification
     assert ident.terms == ("compliance", "cyclic.q3") and ident.gravity is None  # no [gravity]: lumped
-    from station.cell.results.preview import describe, preview
+    from station.cell.pipeline.preview import describe, preview
 
     pv = preview(parse_text(text.replace("compliance+cyclic.q3", "auto"), src))
     assert pv.error_model == "auto" and pv.to_json()["error_model"] == "auto"
@@ -155,10 +156,10 @@ def test_the_oracle_of_a_bending_arm_puts_the_true_robot_on_target():
     from simulators.cell import SimulatedCell
     from simulators.joint_errors import six_axis_joint_errors
     from simulators.six_axis_cell import six_axis_body, six_axis_config_text, six_axis_truth
+    from station.cell.pipeline.calibration import articulated_targets, oracle_params
+    from station.cell.pipeline.terms import truth_delta
     from station.cell.plan.measurement_plan import build_plan, head_targets_world
-    from station.cell.results.pipeline import articulated_targets, oracle_params
-    from station.cell.results.pipeline_terms import truth_delta
-    from station.core.kinematics import forward
+    from station.core.kinematics.forward import forward
 
     cell = SimulatedCell(truth=six_axis_truth(2), body=six_axis_body(2), seed=2, joint_errors=six_axis_joint_errors(2))
 
@@ -231,17 +232,17 @@ def test_a_scara_table_with_the_terms_auto_keeps_beats_the_geometric_table_on_th
     from simulators.cell import CellTruth
     from simulators.joint_errors import scara_joint_errors
     from station.cell.correction.design import region_for
+    from station.cell.pipeline.results import build_table_for
+    from station.cell.pipeline.terms import terms_delta
     from station.cell.plan.measurement_plan import build_plan, head_targets_world
     from station.cell.plan.steps import StepKind
-    from station.cell.results.pipeline_results import build_table_for
-    from station.cell.results.pipeline_terms import terms_delta
-    from station.core.error_terms import TermSpec
-    from station.core.identification import identify
-    from station.core.kinematics import scara_ik
-    from station.core.measurements import MeasurementSet
-    from station.core.model_selection import select_model
-    from station.core.table_grid import interpolate_table
-    from station.core.transforms import invert, pose_to_matrix
+    from station.core.identification.identify import identify
+    from station.core.kinematics.forward import scara_ik
+    from station.core.kinematics.transforms import invert, pose_to_matrix
+    from station.core.measurement.measurements import MeasurementSet
+    from station.core.table.grid import interpolate_table
+    from station.core.terms.error_model import TermSpec
+    from station.core.terms.selection import select_model
 
     cfg = _scara_cfg("auto")
     errs = scara_joint_errors(1)

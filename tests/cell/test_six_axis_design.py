@@ -12,7 +12,7 @@ from station.cell.config.cell_config import load_config
 from station.cell.plan.articulated import MIN_HELD_OUT, NOISE_FRACTION
 from station.cell.plan.measurement_plan import build_plan
 from station.cell.plan.steps import StepKind
-from station.core.design_selection import select_i_optimal, spread_indices
+from station.core.identification.pose_design import select_i_optimal, spread_indices
 
 PUMA = Path(__file__).resolve().parents[2] / "examples" / "puma560" / "cell.toml"
 
@@ -68,7 +68,7 @@ def puma():
 def test_puma_from_a_modified_dh_file_identifies_the_full_model(puma):
     cfg, plan = puma
     assert cfg.model.name == "puma560" and cfg.model.n_joints == 6
-    from station.cell.results.preview import preview
+    from station.cell.pipeline.preview import preview
 
     p = preview(cfg)
     assert len(p.identifiable) == 30  # 4·6 + 6: the MDH import keeps every axis tilt
@@ -106,7 +106,7 @@ def test_puma_takes_poses_until_the_noise_rule_is_met(puma):
     assert d.min_poses < d.n_poses < cfg.plan.select  # the rule, not the cap, decided
     assert d.sigma_work_um <= NOISE_FRACTION * cfg.identification.sigma_position_um + 1e-9
     assert d.sigma_held_um[0] <= d.sigma_held_um[1] <= d.sigma_held_um[2] < 2 * d.target_um
-    from station.cell.results.preview import describe, preview
+    from station.cell.pipeline.preview import describe, preview
 
     text = "\n".join(describe(preview(cfg)))
     assert f"{d.n_poses} identification poses" in text and "30 identifiable parameters" in text

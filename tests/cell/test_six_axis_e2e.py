@@ -78,8 +78,8 @@ def test_oracle_folds_the_half_backlash_into_the_joint_zeros_of_tilted_frames():
     joint's zero is not the transform's yaw)."""
     import numpy as np
 
-    from station.cell.results.pipeline import oracle_params
-    from station.core.kinematics import forward
+    from station.cell.pipeline.calibration import oracle_params
+    from station.core.kinematics.forward import forward
 
     cfg, cell = _cfg_and_cell()
     t = cell.truth
@@ -93,10 +93,10 @@ def test_compensated_verification_targets_put_the_true_robot_on_target():
     joints at which the true robot's head lies on the wanted world pose (the oracle's premise)."""
     import numpy as np
 
+    from station.cell.pipeline.calibration import articulated_targets, oracle_params
     from station.cell.plan.measurement_plan import build_plan, head_targets_world
-    from station.cell.results.pipeline import articulated_targets, oracle_params
-    from station.core.kinematics import forward
-    from station.core.transforms import pose_to_matrix
+    from station.core.kinematics.forward import forward
+    from station.core.kinematics.transforms import pose_to_matrix
 
     cfg, cell = _cfg_and_cell()
     steps = build_plan(cfg).run_steps(1, True)

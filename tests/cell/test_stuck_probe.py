@@ -16,16 +16,16 @@ import pytest
 
 from simulators.from_config import simulate_config
 from station.cell.config.cell_config import parse_text
+from station.cell.pipeline.calibration import Options, run_calibration
 from station.cell.records.run_records import MeasurementRecord
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import RunSummary
-from station.cell.results.pipeline import Options, run_calibration
 from station.cell.run.events import MeasurementRecorded, Notice
 from station.cell.run.stuck_probes import StuckLog, still_stuck, usable_head
 from station.cell.session.calibrate import open_cell
-from station.core.probe_check import diagnose, residual_test
-from station.core.probe_geometry import readings_from_pose, solve_pose
-from station.core.transforms import pose_to_matrix
+from station.core.kinematics.transforms import pose_to_matrix
+from station.core.probe.check import diagnose, residual_test
+from station.core.probe.geometry import readings_from_pose, solve_pose
 from station.errors import Outcome
 from station.io.head_file import load_head
 

@@ -13,12 +13,12 @@ from simulators import start_simulated_cell
 from simulators.reference_cell import cell_config_text
 from station.cell.config.cell_config import parse_text
 from station.cell.correction.table_keeping import RESULT_KEY
+from station.cell.pipeline.calibration import Options, run_calibration
 from station.cell.records.rundb import RunDB
-from station.cell.results.pipeline import Options, run_calibration
 from station.cell.run.events import MeasurementRecorded, PhaseChanged
 from station.cell.run.questions import UploadProposal
 from station.cell.session.calibrate import open_cell
-from station.core.table_data import CorrectionTableData, TableAxis
+from station.core.table.values import CorrectionTableData, TableAxis
 from station.errors import Outcome, RunAborted
 
 #: a short run: one cycle of verification, no repeated identification poses

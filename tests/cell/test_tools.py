@@ -1,4 +1,4 @@
-"""Tools after the head ([[tool]], station/cell/correction/tools.py): the schema, the per-tool correction,
+"""Tools after the head ([[tool]], station/cell/correction/robot_tools.py): the schema, the per-tool correction,
 and one simulated calibration that checks a 200 mm gripper against the simulator's true robot."""
 
 from __future__ import annotations
@@ -13,25 +13,26 @@ import pytest
 
 from simulators import start_simulated_cell
 from simulators.reference_cell import cell_config_text
-from station.cell.config.cell_config import TEMPLATE, parse_text
-from station.cell.correction.tool_export import table_from_json, tool_export
-from station.cell.correction.tools import (
+from station.cell.config.cell_config import parse_text
+from station.cell.config.template import TEMPLATE
+from station.cell.correction.robot_tools import (
     check_tools,
     evaluate_tool,
     find_tool,
     result_key,
 )
+from station.cell.correction.tool_export import table_from_json, tool_export
+from station.cell.pipeline.calibration import Options, oracle_params, run_calibration, stored_plan
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import RunSummary
-from station.cell.results.pipeline import Options, oracle_params, run_calibration, stored_plan
 from station.cell.run.events import Notice
 from station.cell.session.calibrate import open_cell
-from station.core.kinematics import forward
-from station.core.model import robot_from_dict
-from station.core.table_data import CorrectionTableData
-from station.core.tool_frame import tool_params
-from station.core.transforms import matrix_to_pose, pose_to_matrix, rot_z
+from station.core.kinematics.forward import forward
+from station.core.kinematics.model import robot_from_dict
+from station.core.kinematics.tool_frame import tool_params
+from station.core.kinematics.transforms import matrix_to_pose, pose_to_matrix, rot_z
+from station.core.table.values import CorrectionTableData
 from station.errors import ConfigError, Outcome
 from station.ui.cli.main import main as station_main
 from station.ui.report.html_page import render_html

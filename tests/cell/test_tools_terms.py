@@ -10,17 +10,18 @@ import dataclasses
 import numpy as np
 import pytest
 
-from station.cell.config.cell_config import TEMPLATE, parse_text
+from station.cell.config.cell_config import parse_text
+from station.cell.config.template import TEMPLATE
 from station.cell.correction.design import region_for
+from station.cell.correction.robot_tools import evaluate_tool, result_key
 from station.cell.correction.tool_export import tool_export
-from station.cell.correction.tools import evaluate_tool, result_key
+from station.cell.pipeline.calibration import oracle_params
+from station.cell.pipeline.results import build_table_for
+from station.cell.pipeline.terms import error_model_record
 from station.cell.records.rundb import RunDB
-from station.cell.results.pipeline import oracle_params
-from station.cell.results.pipeline_results import build_table_for
-from station.cell.results.pipeline_terms import error_model_record
-from station.core.kinematics import forward
-from station.core.tool_frame import tool_params
-from station.core.transforms import pose_to_matrix
+from station.core.kinematics.forward import forward
+from station.core.kinematics.tool_frame import tool_params
+from station.core.kinematics.transforms import pose_to_matrix
 from station.errors import ConfigError
 from tests.cell.scara_terms import scara_terms
 from tests.cell.test_tools import GRIPPER, _six_axis, _steps, _with_tools

@@ -11,9 +11,9 @@ import pytest
 from drivers.correction_table import TableError, TableVerifyError
 from station.cell.correction.upload import verified_upload
 from station.cell.run.events import Event, Notice, PhaseChanged
-from station.core.correction_table import build_correction_table
-from station.core.table_data import CorrectionTableData, TableAxis
-from station.core.table_grid import GridSpec
+from station.core.table.build import build_correction_table
+from station.core.table.grid import GridSpec
+from station.core.table.values import CorrectionTableData, TableAxis
 from station.io.robot_files import load_robot
 
 # --------------------------------------------------------------------------

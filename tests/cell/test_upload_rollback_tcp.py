@@ -16,7 +16,7 @@ from drivers.controller_map import ErrorCode
 from simulators.controller_server import SimulatedController
 from station.cell.correction.upload import verified_upload
 from station.cell.run.events import Notice
-from station.core.table_data import CorrectionTableData, TableAxis
+from station.core.table.values import CorrectionTableData, TableAxis
 
 
 def table(v: float) -> CorrectionTableData:

@@ -20,12 +20,12 @@ import numpy as np
 import pytest
 
 from station.cell.config.cell_config import load_config
+from station.cell.pipeline.results import oracle_params, verification_errors
 from station.cell.plan.measurement_plan import head_targets_world, joints_for
 from station.cell.plan.steps import StepKind
 from station.cell.records.rundb import RunDB
 from station.cell.records.stored_config import stored_plan
 from station.cell.records.summary import ErrorStats, RecentringStats, RunSummary
-from station.cell.results.pipeline_results import oracle_params, verification_errors
 from station.cell.run.recentring import RESULT_KEY, RecentringLog, head_as_commanded, stored_recentring
 from station.cell.run.runner import (
     Checkpoint,
@@ -38,9 +38,9 @@ from station.cell.run.runner import (
     approach_and_read,
     head_of,
 )
-from station.core.kinematics import forward
-from station.core.probe_geometry import readings_from_pose
-from station.core.transforms import invert, matrix_to_pose, pose_to_matrix
+from station.core.kinematics.forward import forward
+from station.core.kinematics.transforms import invert, matrix_to_pose, pose_to_matrix
+from station.core.probe.geometry import readings_from_pose
 from station.errors import Outcome
 from station.ui.cli.main import main
 

@@ -6,9 +6,9 @@ from types import SimpleNamespace
 
 import pytest
 
-from station.cell.config.cell_config import VerificationConfig
+from station.cell.config.sections import VerificationConfig
+from station.cell.pipeline.results import verified_outcome
 from station.cell.records.summary import ErrorStats, RunSummary
-from station.cell.results.pipeline_results import verified_outcome
 from station.errors import Outcome
 
 

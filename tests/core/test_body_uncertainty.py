@@ -13,19 +13,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from station.core.distance_pairs import make_pairs
-from station.core.identification import identify
-from station.core.kinematics import forward
-from station.core.measurements import (
+from station.core.identification.identify import identify
+from station.core.kinematics.forward import forward
+from station.core.kinematics.poses import spread_joints
+from station.core.kinematics.transforms import invert, pose_error, pose_to_matrix, rotation_exp
+from station.core.measurement.distance_pairs import make_pairs
+from station.core.measurement.measurements import (
     MeasurementSet,
     add_body_error,
     add_noise,
     residuals_and_jacobian,
     synthetic_set,
 )
-from station.core.poses import spread_joints
-from station.core.transforms import invert, pose_error, pose_to_matrix, rotation_exp
-from station.core.uncertainty import linear_uncertainty, monte_carlo
+from station.core.measurement.uncertainty import linear_uncertainty, monte_carlo
 from station.core.units import ARCSEC, UM
 from station.errors import ConfigError
 from station.io.robot_files import load_robot
@@ -200,7 +200,7 @@ def test_bad_body_arguments_are_config_errors(kw, msg):
 def test_sandwich_equals_the_dense_formula(kind):
     """body_sandwich (summed point by point) equals (JᵀWJ)⁻¹ Jᵀ W (Σ_meas + B Σ_body Bᵀ) W J (JᵀWJ)⁻¹
     formed with the full (n_rows, n_rows) matrices."""
-    from station.core.uncertainty import body_sandwich, pair_units
+    from station.core.measurement.uncertainty import body_sandwich, pair_units
 
     model, true, _, data, _ = _case("sr800", kind)
     unit = pair_units(model, data, true)

@@ -1,5 +1,5 @@
-"""Correction tables (station.core.correction_table, table_grid) and compensated targets
-(station.core.compensation)."""
+"""Correction tables (station.core.table.build, table_grid) and compensated targets
+(station.core.kinematics.compensation)."""
 
 from __future__ import annotations
 
@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from drivers.correction_table import MAX_TABLE_VALUES
-from station.core.compensation import compensated_targets
-from station.core.correction_table import build_correction_table, interpolation_error
-from station.core.kinematics import forward, scara_ik
-from station.core.model import RobotModel, TransformSpec
-from station.core.table_grid import GridSpec, interpolate_table
-from station.core.transforms import pose_to_matrix, rotation_log
+from station.core.kinematics.compensation import compensated_targets
+from station.core.kinematics.forward import forward, scara_ik
+from station.core.kinematics.model import RobotModel, TransformSpec
+from station.core.kinematics.transforms import pose_to_matrix, rotation_log
+from station.core.table.build import build_correction_table, interpolation_error
+from station.core.table.grid import GridSpec, interpolate_table
 from station.core.units import ARCSEC, wrap_angle
 from station.errors import ConfigError
 from station.io.robot_files import load_robot
@@ -97,10 +97,10 @@ def test_grid_over_capacity_is_refused(robot, identified):
 
 
 def test_the_table_resolution_is_the_wire_resolution():
-    """The core holds a table on the grid the register map carries it on (station.core.table_data's
+    """The core holds a table on the grid the register map carries it on (station.core.table.values's
     docstring): the two statements of the format must agree, or a read back would not compare."""
     from drivers import controller_map as cm
-    from station.core import table_data as td
+    from station.core.table import values as td
 
     assert td.VALUE_RESOLUTION == cm.TABLE_VALUE_SCALE and td.AXIS_RESOLUTION == cm.TABLE_AXIS_SCALE
     assert td.MAX_AXES == cm.MAX_TABLE_AXES
@@ -108,7 +108,7 @@ def test_the_table_resolution_is_the_wire_resolution():
 
 def test_a_table_over_the_controller_capacity_is_refused_before_sending():
     from drivers.correction_table import TableError, check_payload, header_registers
-    from station.core.table_data import CorrectionTableData, TableAxis
+    from station.core.table.values import CorrectionTableData, TableAxis
 
     big = CorrectionTableData((TableAxis(0.0, 1.0, MAX_TABLE_VALUES + 1),), np.zeros((1, MAX_TABLE_VALUES + 1, 1)))
     with pytest.raises(TableError, match="holds at most 32000"):
@@ -336,7 +336,7 @@ def harmonics(amp_arcsec=((20.0, -10.0), (-8.0, 15.0), (0.0, 0.0), (0.0, 0.0))):
 def test_a_node_with_terms_puts_the_robot_with_its_terms_on_target(robot, identified):
     """The fixed point q = IK_identified(T) − δ(q): the robot standing at q + δ(q) reaches every
     target to 1e-9 mm, where the geometric IK's joints miss by the terms' effect."""
-    from station.core.correction_table import node_joints
+    from station.core.table.build import node_joints
 
     delta = harmonics()
     T = targets(random_points(GridSpec(), 300, np.random.default_rng(21)))

@@ -5,7 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from station.core.error_terms import (
+from station.core.accuracy.studies import StudyInputs, perturbed
+from station.core.identification.identify import identify
+from station.core.kinematics.forward import forward
+from station.core.kinematics.poses import spread_joints
+from station.core.measurement.measurements import MeasurementSet, add_noise
+from station.core.terms.error_model import (
     GravityModel,
     TermRows,
     TermSpec,
@@ -14,13 +19,8 @@ from station.core.error_terms import (
     gravity_torques,
     term_basis,
 )
-from station.core.identification import identify
-from station.core.kinematics import forward
-from station.core.measurements import MeasurementSet, add_noise
-from station.core.model_selection import fit_model, nested_cv, select_model
-from station.core.poses import spread_joints
-from station.core.study import StudyInputs, perturbed
-from station.core.term_fit import fit_terms
+from station.core.terms.fit import fit_terms
+from station.core.terms.selection import fit_model, nested_cv, select_model
 from station.errors import ConfigError
 from station.io.robot_files import load_robot
 
@@ -182,7 +182,7 @@ def test_nested_cross_validation_never_worse_and_cuts_the_bent_arm(bent_arm):
 def test_fit_model_without_terms_is_the_geometric_fit(bent_arm):
     data, _ = bent_arm
     geo = identify(ARM, data)
-    from station.core.model_selection import all_terms_basis
+    from station.core.terms.selection import all_terms_basis
 
     fit = fit_model(ARM, data, geo, all_terms_basis(ARM, data, None, TermSpec()), ())
     assert np.array_equal(fit.params, geo.params)
@@ -211,7 +211,7 @@ def test_real_camera_data_of_a_ur10e_keeps_the_geometric_model():
 def test_monte_carlo_covers_the_terms_and_agrees_with_the_linear_sigma():
     """monte_carlo_terms: 300 noisy copies solved at once; its scatter of every geometric and term
     parameter against the fit's linear σ (300 samples: the sample σ scatters by ~4 %)."""
-    from station.core.term_uncertainty import monte_carlo_terms
+    from station.core.terms.uncertainty import monte_carlo_terms
 
     rng = np.random.default_rng(8)
     true = _truth(8)
@@ -230,8 +230,8 @@ def test_pose_design_with_the_terms_determines_them_and_serves_the_working_poses
     """design_jacobians: the terms' columns are the derivative of the pose by the terms (checked by
     differences), and an I-optimal design that knows them predicts the working poses of the bending
     arm better than the geometric design of the same size."""
-    from station.core.design_selection import select_i_optimal
-    from station.core.term_design import design_jacobians, term_columns
+    from station.core.identification.pose_design import select_i_optimal
+    from station.core.terms.design import design_jacobians, term_columns
 
     rng = np.random.default_rng(6)
     true = _truth(6)
@@ -261,7 +261,7 @@ def test_pose_design_with_the_terms_determines_them_and_serves_the_working_poses
 def test_a_term_the_geometry_already_holds_is_left_out_and_said_so():
     """A SCARA's quill carries a constant weight: its compliance is its zero offset (K.z) and is
     dropped, named, with rank 0 of 1; the harmonics of its revolute joints stay."""
-    from station.core.measurements import synthetic_set
+    from station.core.measurement.measurements import synthetic_set
 
     scara = load_robot("sr800")
     rng = np.random.default_rng(1)

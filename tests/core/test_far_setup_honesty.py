@@ -13,10 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from station.core.identification import identify
-from station.core.kinematics import forward
-from station.core.measurements import MeasurementSet, synthetic_set
-from station.core.poses import spread_joints
+from station.core.identification.identify import identify
+from station.core.kinematics.forward import forward
+from station.core.kinematics.poses import spread_joints
+from station.core.measurement.measurements import MeasurementSet, synthetic_set
 from station.core.units import DEG
 from station.errors import IdentificationError
 from station.io.robot_files import load_robot

@@ -10,13 +10,13 @@ import pytest
 from scipy.optimize import least_squares
 
 from station.core import blas_threads
-from station.core.fit_kernel import DataEvaluator, FitProblem, minpack_lm
-from station.core.identifiability import GS_RTOL, _greedy, analyze, structural_params, weighted_jacobian
-from station.core.identification import identify
-from station.core.measurements import Kind, random_pairs, residuals_and_jacobian, synthetic_set
-from station.core.poses import spread_joints
-from station.core.registration import _first_equal_row
-from station.core.study import StudyInputs, perturbed
+from station.core.accuracy.studies import StudyInputs, perturbed
+from station.core.identification.fit_kernel import DataEvaluator, FitProblem, minpack_lm
+from station.core.identification.identifiability import GS_RTOL, _greedy, analyze, structural_params, weighted_jacobian
+from station.core.identification.identify import identify
+from station.core.identification.registration import _first_equal_row
+from station.core.kinematics.poses import spread_joints
+from station.core.measurement.measurements import Kind, random_pairs, residuals_and_jacobian, synthetic_set
 from station.io.robot_files import load_robot
 
 ROBOTS = {"sr800": load_robot("sr800"), "irb2600": load_robot("irb2600")}
@@ -168,7 +168,7 @@ def test_pose_residuals_at_zero_and_half_turn_rotation_errors():
 
 
 def test_median_is_numpys():
-    from station.core.identification import _median
+    from station.core.identification.identify import _median
 
     rng = np.random.default_rng(3)
     for _ in range(500):
@@ -181,9 +181,9 @@ def test_median_is_numpys():
 
 @pytest.mark.parametrize("robot", sorted(ROBOTS))
 def test_chain_tool_is_forward_and_registration_from_it_is_the_same(robot):
-    from station.core.fit_kernel import FixedJointsChain
-    from station.core.kinematics import forward
-    from station.core.registration import register
+    from station.core.identification.fit_kernel import FixedJointsChain
+    from station.core.identification.registration import register
+    from station.core.kinematics.forward import forward
 
     model, true, data = _data(robot, "pose", 30, seed=6)
     chain = FixedJointsChain(model, data.joints, setup=True)
@@ -198,7 +198,7 @@ def test_chain_tool_is_forward_and_registration_from_it_is_the_same(robot):
 
 
 def test_duplicate_rows_are_found_only_where_joints_repeat():
-    from station.core.registration import data_information
+    from station.core.identification.registration import data_information
     from station.errors import ConfigError
 
     model, _, data = _data("sr800", "pose", 20, seed=7)
@@ -226,7 +226,7 @@ def test_analysis_reads_its_dependencies_and_chosen_singular_values_when_asked()
 
 
 def test_registrations_sums_are_numpys():
-    from station.core.registration import _centroid, _rms_norm
+    from station.core.identification.registration import _centroid, _rms_norm
 
     rng = np.random.default_rng(5)
     for _ in range(300):
@@ -240,8 +240,8 @@ def test_registrations_sums_are_numpys():
 def test_the_point_spread_of_pose_data_is_the_spread_of_their_positions():
     # pose data are (n, 4, 4): the spread is that of the translation column (it once read the
     # rotation's first row, about 1 "mm" whatever the robot's reach)
-    from station.core.kinematics import forward
-    from station.core.registration import data_information
+    from station.core.identification.registration import data_information
+    from station.core.kinematics.forward import forward
     from station.io.robot_files import load_robot
 
     model = load_robot("sr800")

@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from station.core.identifiability import analyze
-from station.core.measurements import random_pairs, synthetic_set
-from station.core.poses import spread_joints
+from station.core.identification.identifiability import analyze
+from station.core.kinematics.poses import spread_joints
+from station.core.measurement.measurements import random_pairs, synthetic_set
 from station.io.robot_files import load_robot
 
 SR800 = load_robot("sr800")
@@ -131,7 +131,7 @@ def test_dependencies_pose():
 
 def test_dependency_coefficients_are_true_combinations():
     """J[:, dep] == Σ coef · J[:, chosen] — checked on fresh poses, not the analysed ones."""
-    from station.core.identifiability import weighted_jacobian
+    from station.core.identification.identifiability import weighted_jacobian
 
     a = run("pose")
     J = weighted_jacobian(SR800, data("pose", seed=7))

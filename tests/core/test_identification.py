@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from station.core.identifiability import analyze
-from station.core.identification import identify
-from station.core.measurements import MeasurementSet, random_pairs, residuals_and_jacobian, synthetic_set
-from station.core.poses import spread_joints
-from station.core.transforms import pose_error, pose_to_matrix
+from station.core.identification.identifiability import analyze
+from station.core.identification.identify import identify
+from station.core.kinematics.poses import spread_joints
+from station.core.kinematics.transforms import pose_error, pose_to_matrix
+from station.core.measurement.measurements import MeasurementSet, random_pairs, residuals_and_jacobian, synthetic_set
 from station.errors import ConfigError, IdentificationError
 from station.io.robot_files import load_robot
 
@@ -51,7 +51,7 @@ def test_all_36_perturbed_reproduces_measurements(q25):
     assert np.abs(res.residuals).max() < 1e-9  # mm and rad
     # and the identified model predicts *other* poses like the true robot (complete model)
     q_new = spread_joints(SR800, 50, np.random.default_rng(3))
-    from station.core.kinematics import forward
+    from station.core.kinematics.forward import forward
 
     err = pose_error(forward(SR800, q_new, res.params), forward(SR800, q_new, true))
     assert np.abs(err).max() < 1e-8

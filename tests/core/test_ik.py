@@ -1,4 +1,4 @@
-"""General inverse kinematics (station.core.ik): all branches, limits, configurations, choice."""
+"""General inverse kinematics (station.core.kinematics.ik): all branches, limits, configurations, choice."""
 
 from __future__ import annotations
 
@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from station.core.ik import ALL_ARM_CONFIGS, ArmConfig, IKStatus, configuration, has_closed_form, solve_ik
-from station.core.kinematics import forward, scara_ik
-from station.core.model import RobotModel
-from station.core.poses import spread_joints
-from station.core.transforms import pose_error, pose_to_matrix
+from station.core.kinematics.forward import forward, scara_ik
+from station.core.kinematics.ik import ALL_ARM_CONFIGS, ArmConfig, IKStatus, configuration, has_closed_form, solve_ik
+from station.core.kinematics.model import RobotModel
+from station.core.kinematics.poses import spread_joints
+from station.core.kinematics.transforms import pose_error, pose_to_matrix
 from station.errors import ConfigError, UnreachableError
 from station.io.robot_files import load_robot
 from station.io.robot_import import robot_from_dh

@@ -1,4 +1,4 @@
-"""ISO 9283 figures and verification summaries on hand-computed examples (station.core.iso9283)."""
+"""ISO 9283 figures and verification summaries on hand-computed examples (station.core.accuracy.iso9283)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from station.core.iso9283 import iso9283_pose
+from station.core.accuracy.iso9283 import iso9283_pose
 from station.core.units import ARCSEC
 from station.errors import ConfigError
 

@@ -1,4 +1,4 @@
-"""Joint-zero offsets only (station.core.joint_offsets): exact where they suffice, and honestly
+"""Joint-zero offsets only (station.core.kinematics.joint_offsets): exact where they suffice, and honestly
 worse than the full model where they do not."""
 
 from __future__ import annotations
@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from station.core.joint_offsets import apply_joint_offsets, fit_joint_offsets, offset_accuracy, offset_joints
-from station.core.kinematics import forward
-from station.core.poses import spread_joints
-from station.core.transforms import pose_error
+from station.core.kinematics.forward import forward
+from station.core.kinematics.joint_offsets import apply_joint_offsets, fit_joint_offsets, offset_accuracy, offset_joints
+from station.core.kinematics.poses import spread_joints
+from station.core.kinematics.transforms import pose_error
 from station.io.robot_files import load_robot
 
 ROBOTS = {"irb2600": load_robot("irb2600"), "sr800": load_robot("sr800")}

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from station.core.kinematics import forward, forward_with_jacobian, inverse_kinematics, joint_jacobian, scara_ik
-from station.core.transforms import pose_error, pose_to_matrix
+from station.core.kinematics.forward import forward, forward_with_jacobian, inverse_kinematics, joint_jacobian, scara_ik
+from station.core.kinematics.transforms import pose_error, pose_to_matrix
 from station.errors import UnreachableError
 from station.io.robot_files import load_robot
 from station.io.robot_import import robot_from_dh

@@ -7,7 +7,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from station.core.probe_geometry import (
+from station.core.kinematics.transforms import matrix_to_pose, pose_to_matrix, rotation_log
+from station.core.probe.geometry import (
     PoseSolveError,
     contact_pose_covariance,
     default_probe_head,
@@ -15,7 +16,6 @@ from station.core.probe_geometry import (
     readings_from_poses,
     solve_pose,
 )
-from station.core.transforms import matrix_to_pose, pose_to_matrix, rotation_log
 
 ARCSEC = np.pi / (180 * 3600)
 GEOM = default_probe_head()

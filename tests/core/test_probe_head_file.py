@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from station.core.probe_check import (
+from station.core.kinematics.transforms import matrix_to_pose, pose_to_matrix
+from station.core.probe.check import (
     check_arrangement,
     check_head,
     contact_jacobian,
@@ -21,14 +22,13 @@ from station.core.probe_check import (
     residual_test,
     sensitivity,
 )
-from station.core.probe_geometry import (
+from station.core.probe.geometry import (
     FACE_NORMALS,
     ProbeHeadGeometry,
     default_probe_head,
     readings_from_pose,
     solve_pose,
 )
-from station.core.transforms import matrix_to_pose, pose_to_matrix
 from station.errors import ConfigError
 from station.io.head_file import head_to_toml, load_head, parse_head
 
@@ -310,7 +310,7 @@ def test_contact_jacobian_is_the_reading_derivative():
 # --- [head] in the cell configuration --------------------------------------------------------------
 
 def _config_text(head_line: str = "") -> str:
-    from station.cell.config.cell_config import TEMPLATE
+    from station.cell.config.template import TEMPLATE
 
     return TEMPLATE + head_line
 

@@ -18,11 +18,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from station.core.identifiability import _scaled_rank, analyze, chain_jacobian, gimbal_locked
-from station.core.kinematics import forward
-from station.core.measurements import synthetic_set
-from station.core.poses import spread_joints
-from station.core.transforms import invert, matrix_to_pose, pose_to_matrix, rot_z
+from station.core.identification.identifiability import _scaled_rank, analyze, chain_jacobian, gimbal_locked
+from station.core.kinematics.forward import forward
+from station.core.kinematics.poses import spread_joints
+from station.core.kinematics.transforms import invert, matrix_to_pose, pose_to_matrix, rot_z
+from station.core.measurement.measurements import synthetic_set
 from station.io.robot_files import load_robot
 from station.ui.cli.main import main
 

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from station.core.kinematics import forward
-from station.core.poses import spread_joints
-from station.core.transforms import pose_error
+from station.core.kinematics.forward import forward
+from station.core.kinematics.poses import spread_joints
+from station.core.kinematics.transforms import pose_error
 from station.io.robot_export import FORMATS, export_model
 from station.io.robot_files import builtin_robots, load_robot
 

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from station.core.model import robot_from_dict, robot_to_toml
+from station.core.kinematics.model import robot_from_dict, robot_to_toml
 from station.errors import ConfigError
 from station.io.robot_files import load_robot
 

@@ -1,4 +1,4 @@
-"""The correction table's design (station.core.table_design, issue 27): steps chosen per axis
+"""The correction table's design (station.core.table.design, issue 27): steps chosen per axis
 within the capacity, the bound checked on the sampled robots' own tables, refined for the
 identified robot, and an honest refusal with numbers when no grid fits."""
 
@@ -9,8 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from station.core.correction_table import build_correction_table
-from station.core.table_design import Region, curvature, design_table, prior_robots, refine_for
+from station.core.table.build import build_correction_table
+from station.core.table.design import Region, curvature, design_table, prior_robots, refine_for
 from station.core.units import ARCSEC
 from station.io.robot_files import load_robot
 

@@ -1,12 +1,12 @@
-"""The tool-mount frame after the head comes off (station/core/tool_frame.py, chapter §7.2)."""
+"""The tool-mount frame after the head comes off (station/core/kinematics/tool_frame.py, chapter §7.2)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from station.core.kinematics import forward
-from station.core.tool_frame import (
+from station.core.kinematics.forward import forward
+from station.core.kinematics.tool_frame import (
     derive_tool,
     flange_frame,
     head_K,
@@ -15,7 +15,7 @@ from station.core.tool_frame import (
     tool_params,
     tool_transform,
 )
-from station.core.transforms import invert, matrix_to_pose, pose_to_matrix, rot_z
+from station.core.kinematics.transforms import invert, matrix_to_pose, pose_to_matrix, rot_z
 from station.io.robot_files import load_robot
 
 DEG = np.pi / 180

@@ -13,13 +13,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from station.core.kinematics import forward
-from station.core.measurements import synthetic_set
-from station.core.model import robot_to_toml
-from station.core.poses import spread_joints
-from station.core.registration import rigid_residual_mm
-from station.core.tool_frame import fit_marker_offset
-from station.core.transforms import matrix_to_pose
+from station.core.identification.registration import rigid_residual_mm
+from station.core.kinematics.forward import forward
+from station.core.kinematics.model import robot_to_toml
+from station.core.kinematics.poses import spread_joints
+from station.core.kinematics.tool_frame import fit_marker_offset
+from station.core.kinematics.transforms import matrix_to_pose
+from station.core.measurement.measurements import synthetic_set
 from station.core.units import DEG
 from station.errors import ConfigError
 from station.io.datafile import read_measurement_file, read_table

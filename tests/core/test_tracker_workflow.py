@@ -6,12 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from station.core.identification import identify
-from station.core.kinematics import forward
-from station.core.measurements import MeasurementSet, synthetic_set
-from station.core.poses import spread_joints
-from station.core.registration import register
-from station.core.transforms import pose_to_matrix
+from station.core.identification.identify import identify
+from station.core.identification.registration import register
+from station.core.kinematics.forward import forward
+from station.core.kinematics.poses import spread_joints
+from station.core.kinematics.transforms import pose_to_matrix
+from station.core.measurement.measurements import MeasurementSet, synthetic_set
 from station.core.units import DEG
 from station.errors import ConfigError, IdentificationError
 from station.io.robot_files import load_robot
@@ -137,7 +137,7 @@ def test_report_says_what_was_fitted():
 
 def test_distances_between_equal_nominal_points_are_dropped_not_a_crash():
     """q4 and q4 + 360° give the same point: such a distance has no direction (SVD did not converge)."""
-    from station.core.distance_pairs import distances, make_pairs
+    from station.core.measurement.distance_pairs import distances, make_pairs
 
     _, data = _tracker_data(np.zeros(6), n=30)
     q = np.vstack([data.joints, data.joints[:4] + np.array([0.0, 0.0, 0.0, 2 * np.pi])])

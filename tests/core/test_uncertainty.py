@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from station.core.identification import identify
-from station.core.kinematics import forward
-from station.core.measurements import synthetic_set
-from station.core.poses import spread_joints
-from station.core.study import StudyInputs, perturbed
-from station.core.transforms import pose_error
-from station.core.uncertainty import linear_uncertainty, monte_carlo, pose_accuracy
+from station.core.accuracy.studies import StudyInputs, perturbed
+from station.core.identification.identify import identify
+from station.core.kinematics.forward import forward
+from station.core.kinematics.poses import spread_joints
+from station.core.kinematics.transforms import pose_error
+from station.core.measurement.measurements import synthetic_set
+from station.core.measurement.uncertainty import linear_uncertainty, monte_carlo, pose_accuracy
 from station.io.robot_files import load_robot
 
 SR800 = load_robot("sr800")
@@ -31,7 +31,7 @@ def study():
 
 
 def test_linear_uncertainty_equals_direct_inverse(study):
-    from station.core.measurements import residuals_and_jacobian
+    from station.core.measurement.measurements import residuals_and_jacobian
 
     _, exact, res = study
     _, J = residuals_and_jacobian(SR800, exact, res.params)
@@ -83,7 +83,7 @@ def test_monte_carlo_agrees_with_linear(study):
 def test_monte_carlo_scatter_scales_with_noise(study):
     true, exact, res = study
     base = monte_carlo(SR800, exact, true, res.chosen_index, 150, np.random.default_rng(2))
-    from station.core.measurements import MeasurementSet
+    from station.core.measurement.measurements import MeasurementSet
 
     double = MeasurementSet("pose", exact.joints, exact.measured, 2 * SIG)
     mc2 = monte_carlo(SR800, double, true, res.chosen_index, 150, np.random.default_rng(2))

@@ -13,10 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from station.core.distance_pairs import make_pairs
-from station.core.identification import identify
-from station.core.measurements import synthetic_set
-from station.core.poses import spread_joints
+from station.core.identification.identify import identify
+from station.core.kinematics.poses import spread_joints
+from station.core.measurement.distance_pairs import make_pairs
+from station.core.measurement.measurements import synthetic_set
 from station.io.robot_files import load_robot
 
 ARM6 = Path(__file__).parent / "data" / "arm6_fixture.dh.csv"
@@ -54,7 +54,7 @@ def test_reported_sigma_matches_actual_scatter(robot, kind):
 def test_independent_pair_treatment_would_be_too_optimistic():
     """The check above can fail: σ computed as if the 300 distances were independent is far
     smaller than the scatter (the defect of the issue: 2.9–3.0×)."""
-    from station.core.uncertainty import linear_uncertainty
+    from station.core.measurement.uncertainty import linear_uncertainty
 
     model = load_robot("sr800")
     rng = np.random.default_rng(7)
@@ -62,7 +62,7 @@ def test_independent_pair_treatment_would_be_too_optimistic():
     true = _truth(model, rng)
     pairs = make_pairs(25, "all")
     res = identify(model, synthetic_set(model, "distance", q, true, rng=rng, pairs=pairs))
-    from station.core.measurements import residuals_and_jacobian
+    from station.core.measurement.measurements import residuals_and_jacobian
 
     _, J = residuals_and_jacobian(model, res_data := synthetic_set(model, "distance", q, res.params, pairs=pairs),
                                   res.params)

@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 from pymodbus.client import ModbusTcpClient
 
-from drivers.controller import ControllerClaimed, ModbusController
+from drivers.controller import ModbusController
+from drivers.controller_errors import ControllerClaimed
 from drivers.controller_map import REG, Command, ErrorCode, encode, register_span
 from simulators.controller_server import SimulatedController
 

@@ -7,7 +7,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from drivers.controller import ControllerStatus
 from drivers.controller_map import (
     REG,
     REGISTERS,
@@ -22,8 +21,9 @@ from drivers.controller_map import (
     encode_i32_array,
     register_span,
 )
+from drivers.controller_status import ControllerStatus
 from drivers.correction_table import data_registers, decode_header, header_registers, table_from_registers
-from station.core.table_data import CorrectionTableData, TableAxis
+from station.core.table.values import CorrectionTableData, TableAxis
 
 WORDS = st.integers(min_value=0, max_value=0xFFFF)
 
@@ -164,12 +164,12 @@ def test_interpolation_rule():
     # periodic wrap: between node 3 (value 3) and node 0 (value 0)
     assert t.interpolate([0.0, 3.5 * np.pi / 2])[0] == pytest.approx(1.5e-3, abs=1e-8)  # step on the 1e-6 grid
     assert t.interpolate([0.0, -np.pi / 4])[0] == pytest.approx(1.5e-3, abs=1e-8)
-    from station.core.table_data import TableRangeError
+    from station.core.table.values import TableRangeError
     with pytest.raises(TableRangeError, match="outside"):
         t.interpolate([25.0, 0.0])
 
 
 def test_values_beyond_the_wire_range_are_refused():
-    from station.core.table_data import TableError
+    from station.core.table.values import TableError
     with pytest.raises(TableError, match="21.47"):
         CorrectionTableData((TableAxis(0.0, 1.0, 1),), np.full((1, 1, 1), 30.0))

@@ -5,24 +5,23 @@ import time
 import numpy as np
 import pytest
 
-from drivers.controller import (
+from drivers.controller import ModbusController
+from drivers.controller_errors import (
     ControllerConnectionError,
-    ControllerError,
     ControllerLinkLost,
     DriveFault,
     EmergencyStop,
     HandshakeTimeout,
-    ModbusController,
     ModbusExceptionError,
     MotionAborted,
     MotionRejected,
 )
-from drivers.controller_map import REG, Command, WordOrder
+from drivers.controller_map import REG, Command, ControllerError, WordOrder
 from drivers.correction_table import TableError, TableVerifyError
 from simulators.controller_server import SimulatedController
-from station.core.kinematics import forward, scara_ik
-from station.core.table_data import CorrectionTableData, TableAxis
-from station.core.transforms import matrix_to_pose, pose_to_matrix
+from station.core.kinematics.forward import forward, scara_ik
+from station.core.kinematics.transforms import matrix_to_pose, pose_to_matrix
+from station.core.table.values import CorrectionTableData, TableAxis
 
 
 def wait_for(cond, timeout, what):

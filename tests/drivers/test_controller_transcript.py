@@ -8,12 +8,12 @@ robot-program logic (:func:`simulators.controller_tables.serve_transfer`,
 import numpy as np
 import pytest
 
-from drivers.controller import (
+from drivers.controller import ModbusController
+from drivers.controller_errors import (
     ClaimIdentity,
     ControllerClaimed,
     HandshakeTimeout,
     MapVersionError,
-    ModbusController,
     ModbusExceptionError,
     RegisterWindowError,
     WordOrderError,
@@ -40,7 +40,7 @@ from drivers.correction_table import (
 )
 from simulators.controller_claim import ClaimRules
 from simulators.controller_tables import TableSlots, serve_transfer
-from station.core.table_data import CorrectionTableData, TableAxis
+from station.core.table.values import CorrectionTableData, TableAxis
 
 BASE = 128
 LIMITS = [-2, 2, -2.5, 2.5, -200, 0, -6, 6]

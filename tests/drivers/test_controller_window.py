@@ -9,17 +9,13 @@ import numpy as np
 import pytest
 from pymodbus.client import ModbusTcpClient
 
-from drivers.controller import (
-    MapVersionError,
-    ModbusController,
-    RegisterWindowError,
-    TablePageError,
-    TableVerifyError,
-)
+from drivers.controller import ModbusController
+from drivers.controller_errors import MapVersionError, RegisterWindowError
 from drivers.controller_map import CorrectionState
+from drivers.correction_table import TablePageError, TableVerifyError
 from simulators import start_simulated_cell
 from simulators.controller_server import SimulatedController
-from station.core.table_data import CorrectionTableData, TableAxis
+from station.core.table.values import CorrectionTableData, TableAxis
 
 
 def _table(g: int = 4, n: int = 12) -> CorrectionTableData:

@@ -18,14 +18,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pymodbus.client import ModbusTcpClient
 
-from drivers.controller import (
+from drivers.controller import ModbusController
+from drivers.controller_errors import (
     ClaimIdentity,
     MapVersionError,
-    ModbusController,
     ModbusExceptionError,
     ModbusResponseError,
     MotionRejected,
-    RegisterDecodeError,
     WordOrderError,
 )
 from drivers.controller_map import (
@@ -33,6 +32,7 @@ from drivers.controller_map import (
     WINDOW_SIZE,
     Command,
     ErrorCode,
+    RegisterDecodeError,
     StatusBit,
     WordOrder,
     encode,

@@ -8,13 +8,8 @@ import time
 import numpy as np
 import pytest
 
-from drivers.probe_head import (
-    ChannelStatus,
-    ProbeDialectMismatch,
-    ProbeHead,
-    ProbeLineGarbled,
-    ProbeTimeout,
-)
+from drivers.probe_head import ProbeHead
+from drivers.probe_protocol import ChannelStatus, ProbeDialectMismatch, ProbeLineGarbled, ProbeTimeout
 from simulators.probe_head_sim import FaultKind, ProbeHeadServer
 
 VALUES = np.array([0.1234, -0.0021, 1.5, 2.25, -3.0, 0.5])

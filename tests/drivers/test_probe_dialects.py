@@ -17,17 +17,17 @@ import pytest
 from drivers.probe_dialects import DIALECTS, check_line_settings, get_dialect
 from drivers.probe_dialects import keyence_dl_rs1a as kd
 from drivers.probe_dialects import mitutoyo_ga as md
-from drivers.probe_head import (
+from drivers.probe_head import ProbeHead
+from drivers.probe_protocol import (
     ChannelStatus,
+    ErrorAction,
     ProbeConfigError,
     ProbeDeviceError,
     ProbeDialectMismatch,
     ProbeFrameError,
-    ProbeHead,
     ProbeLineSettingsError,
     ProbeUnsettled,
 )
-from drivers.probe_protocol import ErrorAction
 from tests.drivers.test_probe_driver_transcript import ScriptedPort
 
 DOCS = Path(__file__).resolve().parents[2] / "docs" / "protocols.md"

@@ -8,12 +8,12 @@ import time
 import numpy as np
 import pytest
 
-from drivers.probe_head import (
+from drivers.probe_head import ProbeHead
+from drivers.probe_protocol import (
     ChannelStatus,
     ProbeDeviceError,
     ProbeDisconnected,
     ProbeFrameError,
-    ProbeHead,
     ProbeOutOfRange,
     ProbeSpreadError,
     ProbeTimeout,
@@ -24,8 +24,8 @@ from simulators.probe_head_sim import (
     ProbeHeadServer,
     ProbeHeadTcpServer,
 )
-from station.core.probe_geometry import readings_from_pose, solve_pose
-from station.core.transforms import pose_to_matrix
+from station.core.kinematics.transforms import pose_to_matrix
+from station.core.probe.geometry import readings_from_pose, solve_pose
 
 # Long enough that a loaded CI machine does not time out a healthy 17 ms transaction, short
 # enough that the tests which provoke timeouts stay quick.

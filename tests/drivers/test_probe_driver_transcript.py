@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 import serial
 
-from drivers.probe_head import (
+from drivers.probe_head import ProbeHead
+from drivers.probe_protocol import (
     ChannelStatus,
     ProbeDeviceError,
     ProbeDisconnected,
     ProbeFrameError,
-    ProbeHead,
     ProbeOutOfRange,
     ProbeSpreadError,
     ProbeTimeout,

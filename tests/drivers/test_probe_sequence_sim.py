@@ -14,7 +14,8 @@ import time
 import numpy as np
 import pytest
 
-from drivers.probe_head import ProbeHead, ProbeTimeout
+from drivers.probe_head import ProbeHead
+from drivers.probe_protocol import ProbeTimeout
 from simulators.probe_head_sim import ProbeHeadServer, ProbeHeadTcpServer
 
 TIMEOUT = 0.3

@@ -9,7 +9,8 @@ from datetime import datetime, timedelta, timezone
 from pathlib import Path
 from typing import Any
 
-from station.cell.config.cell_config import CellConfig, CellIdentity, load_config
+from station.cell.config.cell_config import CellConfig, load_config
+from station.cell.config.sections import CellIdentity
 from station.cell.records.rundb import RunDB
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -58,7 +59,7 @@ def finished_run(db_path: Path, cfg: CellConfig, summary_of=calibration_summary,
 def publication(robot: str, kind: str, finished: datetime, *, outcome: str = "SUCCESS", after_um: float = 11.0,
                 drift_um: float | None = None, tolerance_um: float | None = None, cell: str = "cell A",
                 station: str = "cart-1", interval_days: int | None = 30) -> dict[str, Any]:
-    """A publication as :func:`station.cell.records.fleet_payload.build_publication` makes one."""
+    """A publication as :func:`station.cell.publication.payload.build_publication` makes one."""
     return {"run_uuid": str(uuid.uuid4()), "robot_key": robot, "robot_serial": robot, "robot_model": "sr800",
             "cell": cell, "station": station, "station_version": "0.1.0", "local_run_id": 1, "kind": kind,
             "outcome": outcome, "started_utc": (finished - timedelta(hours=1)).isoformat(),

@@ -54,7 +54,7 @@ def test_overdue_exits_zero_when_every_robot_is_ok(fleet_db, capsys):
 def test_sync_sends_the_queue_and_says_what_it_did(fleet_db, tmp_path, capsys):
     cfg = example_config()
     path = tmp_path / "runs.sqlite"
-    from station.cell.records.fleet_outbox import enqueue_run
+    from station.cell.publication.outbox import enqueue_run
 
     enqueue_run(path, finished_run(path, cfg), cfg)
     assert main(["sync", "--db", str(path), "--url", fleet_db.station_url, "--json"]) == 0

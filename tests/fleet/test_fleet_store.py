@@ -11,7 +11,7 @@ import pytest
 from conftest import new_database
 from fleet_runs import example_config, finished_run, recheck_summary
 
-from station.cell.records.fleet_outbox import attach_report, enqueue_run, pending, publish_or_queue, queue_state, sync
+from station.cell.publication.outbox import attach_report, enqueue_run, pending, publish_or_queue, queue_state, sync
 from station.fleet import store
 from station.fleet.migrate import current_version, latest_version, migrate
 

@@ -14,11 +14,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from station.core.joint_map import JointMap
-from station.core.kinematics import forward
-from station.core.measurements import synthetic_set
-from station.core.poses import spread_joints
-from station.core.transforms import matrix_to_pose
+from station.core.kinematics.forward import forward
+from station.core.kinematics.joint_map import JointMap
+from station.core.kinematics.poses import spread_joints
+from station.core.kinematics.transforms import matrix_to_pose
+from station.core.measurement.measurements import synthetic_set
 from station.errors import ConfigError
 from station.io.datafile import write_csv
 from station.io.robot_files import load_mapped_robot, load_robot
@@ -111,7 +111,8 @@ def test_the_cell_refuses_a_mapped_robot_file(tmp_path):
 
 
 def test_a_cell_configuration_with_a_mapped_robot_exits_2_at_config_check(capsys, tmp_path):
-    from station.cell.config.cell_config import TEMPLATE, load_config
+    from station.cell.config.cell_config import load_config
+    from station.cell.config.template import TEMPLATE
 
     _mapped_file(tmp_path)
     cell = tmp_path / "cell.toml"

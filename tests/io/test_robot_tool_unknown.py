@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from station.core.kinematics import forward
-from station.core.measurements import synthetic_set
-from station.core.model import robot_to_toml
-from station.core.poses import spread_joints
+from station.core.kinematics.forward import forward
+from station.core.kinematics.model import robot_to_toml
+from station.core.kinematics.poses import spread_joints
+from station.core.measurement.measurements import synthetic_set
 from station.core.units import DEG
 from station.io.datafile import write_csv
 from station.io.robot_files import load_mapped_robot, load_robot, tool_marked_unknown

@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from station.core.kinematics import forward
-from station.core.transforms import matrix_to_pose
+from station.core.kinematics.forward import forward
+from station.core.kinematics.transforms import matrix_to_pose
 from station.io.datafile import write_csv
 from station.io.robot_files import load_mapped_robot
 from station.ui.cli.main import main
@@ -139,7 +139,7 @@ def test_compensate_takes_the_chain_of_the_urdf_it_is_given(capsys, tmp_path):
     links choose the URDF's chain; without them the branched URDF is refused, naming the tips."""
     import csv
 
-    from station.core.model import robot_to_toml
+    from station.core.kinematics.model import robot_to_toml
 
     p = _urdf(tmp_path)
     nominal, _ = load_mapped_robot(p, tip="flange")

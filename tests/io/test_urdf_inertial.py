@@ -8,7 +8,7 @@ import re
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from station.core.error_terms import gravity_torques
+from station.core.terms.error_model import gravity_torques
 from station.io.robot_import import robot_from_urdf
 from station.io.urdf_inertial import urdf_gravity
 

@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from drivers.controller import ControllerError, ModbusController
-from drivers.controller_map import REG
+from drivers.controller import ModbusController
+from drivers.controller_map import REG, ControllerError
 from simulators.controller_server import SimulatedController
 
 # sr800 (the simulator's default robot): 1.5708 rad = 1 570 800 counts = 0x0017F7F0, a low word

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from simulators.cell import ARCMIN, CalibrationBody, CellTruth, SimulatedCell
-from station.core.kinematics import forward, scara_ik
+from station.core.kinematics.forward import forward, scara_ik
 
 ROOT = Path(__file__).resolve().parents[2]
 

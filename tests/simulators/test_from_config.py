@@ -29,9 +29,9 @@ from simulators.from_config import (
     toml_text,
 )
 from simulators.reference_cell import cell_config_text
-from station.cell.config import cell_config as cfgmod
+from station.cell.config import schema as cfgschema
 from station.cell.config.cell_config import parse_text
-from station.core.transforms import matrix_to_pose
+from station.core.kinematics.transforms import matrix_to_pose
 from station.core.units import ARCSEC, DEG
 from station.io.robot_files import load_robot
 from station.ui.cli.main import main
@@ -74,7 +74,7 @@ probe_timeout_s = 0.5
 
 # ----------------------------------------------------------------- the defaults are the built-in cell
 def test_schema_defaults_are_the_simulators_defaults():
-    schema = cfgmod._Simulation.model_fields
+    schema = cfgschema._Simulation.model_fields
     for f in fields(SimulationPhysics):
         assert schema[f.name].default == f.default, f.name
 
@@ -181,7 +181,7 @@ def test_the_simulated_cell_is_the_one_the_files_describe(tmp_path):
 
 
 def _seven_probe_head_file(path: Path) -> None:
-    from station.core.probe_geometry import ProbeHeadGeometry, default_probe_head
+    from station.core.probe.geometry import ProbeHeadGeometry, default_probe_head
     from station.io.head_file import head_to_toml
 
     g = default_probe_head(cube_edge_mm=40.0)

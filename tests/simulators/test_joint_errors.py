@@ -11,8 +11,8 @@ from simulators.from_config import _joint_errors
 from simulators.joint_errors import NO_JOINT_ERRORS, six_axis_joint_errors
 from simulators.six_axis_cell import six_axis_body, six_axis_truth
 from station.cell.config.cell_config import simulation_settings
-from station.core.error_terms import GravityModel, gravity_torques
-from station.core.poses import spread_joints
+from station.core.kinematics.poses import spread_joints
+from station.core.terms.error_model import GravityModel, gravity_torques
 from station.errors import ConfigError
 from station.io.robot_files import load_robot
 

@@ -1,5 +1,5 @@
 """The simulated head's contact physics (simulators/probe_contact.py) against the station's solver
-(station/core/probe_geometry.py): two derivations of docs/probe-head.md, held to each other on
+(station/core/probe/geometry.py): two derivations of docs/probe-head.md, held to each other on
 random poses of every head in the examples, and to the document's own statements. A slip in one
 (a face normal, the tip radius's side, a frame) fails here instead of cancelling end to end."""
 
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from simulators.probe_contact import touch_readings
-from station.core.probe_geometry import default_probe_head, readings_from_pose, solve_pose
-from station.core.transforms import pose_to_matrix
+from station.core.kinematics.transforms import pose_to_matrix
+from station.core.probe.geometry import default_probe_head, readings_from_pose, solve_pose
 from station.io.head_file import load_head
 
 HEADS = sorted((Path(__file__).resolve().parents[2] / "examples" / "heads").glob("*.toml"))
@@ -30,7 +30,7 @@ def _heads():
 
 def test_the_reference_head_reads_zero_at_its_nominal_touch():
     # default_probe_head: every tip-sphere centre one radius off its face at the nominal pose
-    # (station/core/probe_geometry.py), so every plunger reads 0 there
+    # (station/core/probe/geometry.py), so every plunger reads 0 there
     g = default_probe_head()
     assert np.allclose(_sim(g, g.nominal_contact_pose()), 0.0, atol=1e-12)
     # moving the cube 0.3 mm down (−z of MKKS, the head's z pointing away from the cube's top)

@@ -10,8 +10,8 @@ import pytest
 
 from drivers.probe_head import ProbeHead
 from simulators.probe_head_sim import ProbeHeadPhysics, ProbeHeadServer
-from station.core.probe_geometry import default_probe_head, readings_from_pose
-from station.core.transforms import pose_to_matrix
+from station.core.kinematics.transforms import pose_to_matrix
+from station.core.probe.geometry import default_probe_head, readings_from_pose
 from station.io.head_file import load_head
 
 SEVEN = Path(__file__).resolve().parents[2] / "examples" / "heads" / "seven-probe.toml"

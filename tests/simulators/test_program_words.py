@@ -1,6 +1,6 @@
 """The simulated robot program's own register words (simulators/program_words.py) against the
 driver's codec (drivers/controller_map.py, drivers/correction_table.py) and the station's table
-(station/core/table_data.py): two implementations of docs/protocols.md written apart, held to
+(station/core/table/values.py): two implementations of docs/protocols.md written apart, held to
 each other by round trips and to the document by its worked examples. A slip in one of them (a
 word order, a sign, a CRC byte order, an interpolation corner) fails here, where a simulator
 that imported the driver's codec would agree with it."""
@@ -27,7 +27,7 @@ from simulators.program_words import (
     value_page_words,
     words_from_counts,
 )
-from station.core.table_data import CorrectionTableData, TableAxis, TableRangeError
+from station.core.table.values import CorrectionTableData, TableAxis, TableRangeError
 
 ORDERS = (WordOrder.BIG, WordOrder.LITTLE)
 

@@ -5,7 +5,8 @@ import tomllib
 import numpy as np
 import pytest
 
-from drivers.controller import ModbusController, WordOrderError
+from drivers.controller import ModbusController
+from drivers.controller_errors import WordOrderError
 from drivers.controller_map import WordOrder
 from simulators import start_simulated_cell
 from simulators.cell import DEFAULT_SETUP

@@ -13,7 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from drivers.controller import MapVersionError, ModbusController
+from drivers.controller import ModbusController
+from drivers.controller_errors import MapVersionError
 
 ROOT = Path(__file__).resolve().parents[2]
 

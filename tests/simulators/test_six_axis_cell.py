@@ -15,9 +15,9 @@ from simulators.six_axis_cell import (
     start_six_axis_cell,
 )
 from station.cell.config.cell_config import parse_text
-from station.core.ik import configuration
-from station.core.kinematics import forward
-from station.core.transforms import matrix_to_pose
+from station.core.kinematics.forward import forward
+from station.core.kinematics.ik import configuration
+from station.core.kinematics.transforms import matrix_to_pose
 
 
 def test_true_errors_in_every_parameter_of_the_briefs_magnitude():

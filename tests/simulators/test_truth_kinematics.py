@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from simulators.truth_kinematics import true_forward
-from station.core.kinematics import forward
+from station.core.kinematics.forward import forward
 from station.io.robot_files import load_robot
 
 

@@ -1,5 +1,5 @@
 """The simulator's own pose convention (simulators/truth_kinematics.py: scipy's rotations) against
-the station's (station/core/transforms.py): the simulated body's frames and the CMM report it
+the station's (station/core/kinematics/transforms.py): the simulated body's frames and the CMM report it
 writes come from the simulator's, the station reads the report with its own, so the two must agree
 with each other and with the documented R = Rz(yaw)·Ry(pitch)·Rx(roll) (docs/robot-file.md)."""
 
@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from simulators.truth_kinematics import inverse, matrix_pose, pose_matrix, rotation_angle
-from station.core.transforms import invert, matrix_to_pose, pose_to_matrix, rotation_log
+from station.core.kinematics.transforms import invert, matrix_to_pose, pose_to_matrix, rotation_log
 
 
 def _rz(a):

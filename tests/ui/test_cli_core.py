@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from station.core.kinematics import forward
-from station.core.measurements import synthetic_set
-from station.core.poses import spread_joints
-from station.core.transforms import matrix_to_pose
+from station.core.kinematics.forward import forward
+from station.core.kinematics.poses import spread_joints
+from station.core.kinematics.transforms import matrix_to_pose
+from station.core.measurement.measurements import synthetic_set
 from station.io.datafile import write_csv
 from station.io.robot_files import load_robot
 from station.ui.cli.main import main

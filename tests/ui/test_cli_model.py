@@ -7,10 +7,10 @@ import json
 import numpy as np
 import pytest
 
-from station.core.error_terms import TermSpec, apply_terms, term_basis
-from station.core.measurements import MeasurementSet, add_noise
-from station.core.poses import spread_joints
-from station.core.study import StudyInputs, perturbed
+from station.core.accuracy.studies import StudyInputs, perturbed
+from station.core.kinematics.poses import spread_joints
+from station.core.measurement.measurements import MeasurementSet, add_noise
+from station.core.terms.error_model import TermSpec, apply_terms, term_basis
 from station.io.datafile import write_csv
 from station.io.robot_files import load_robot
 from station.ui.cli.main import main
@@ -72,8 +72,8 @@ def test_identify_unknown_term_is_refused(bent_file, capsys):
 
 def test_identified_terms_travel_in_the_robot_file(bent_file, tmp_path, capsys):
     """identify --output keeps the terms in [error_terms]; predict applies them; MDH says what it loses."""
-    from station.core.error_terms import prediction_basis
-    from station.core.kinematics import forward
+    from station.core.kinematics.forward import forward
+    from station.core.terms.error_model import prediction_basis
     from station.io.robot_files import load_robot
     from station.io.robot_terms import read_error_terms
 
@@ -111,7 +111,7 @@ def test_identified_terms_travel_in_the_robot_file(bent_file, tmp_path, capsys):
 def test_backlash_and_drift_from_the_file_columns(tmp_path, capsys):
     """A file with approach1 … approach6 [sign] and time [min]: auto finds the lost motion of joints 2
     and 3 (arriving from either side) and leaves the drift out, which the data do not show."""
-    from station.core.error_terms import TermRows
+    from station.core.terms.error_model import TermRows
 
     rng = np.random.default_rng(5)
     true = perturbed(ARM, rng, StudyInputs())
@@ -145,11 +145,11 @@ def test_compensate_lands_a_robot_with_error_terms_on_its_targets(tmp_path, caps
     import csv
     import math
 
-    from station.core.error_terms import prediction_basis
-    from station.core.ik import ArmConfig, solve_ik
-    from station.core.kinematics import forward
-    from station.core.model import robot_to_toml
-    from station.core.transforms import matrix_to_pose, pose_error, pose_to_matrix
+    from station.core.kinematics.forward import forward
+    from station.core.kinematics.ik import ArmConfig, solve_ik
+    from station.core.kinematics.model import robot_to_toml
+    from station.core.kinematics.transforms import matrix_to_pose, pose_error, pose_to_matrix
+    from station.core.terms.error_model import prediction_basis
     from station.io.robot_terms import error_terms_toml
 
     rng = np.random.default_rng(9)
@@ -193,8 +193,8 @@ def test_compensate_lands_a_robot_with_error_terms_on_its_targets(tmp_path, caps
 def test_link_masses_from_the_robot_file_give_compliance_in_rad_per_newton_metre(tmp_path, capsys):
     """[gravity] in the robot file: the compliance term's torques come from its masses (N·m), the
     fitted compliances are the true ones, and the identified file keeps the table."""
-    from station.core.error_terms import GravityModel
-    from station.core.model import robot_to_toml
+    from station.core.kinematics.model import robot_to_toml
+    from station.core.terms.error_model import GravityModel
     from station.io.robot_terms import gravity_toml, read_error_terms, read_gravity
 
     gm = GravityModel(masses=(0.0, 90.0, 40.0, 0.0, 0.0, 0.0),
@@ -266,8 +266,8 @@ def test_the_written_model_reproduces_the_fit_with_an_unknown_marker(tmp_path, c
 def test_payload_per_row_loads_the_compliance_term(tmp_path, capsys):
     """A payload [kg] column: rows carrying 0, 25 or 50 kg bend the arm by as much more; the fit takes
     each row's payload into its torques and recovers the compliances (without the column it cannot)."""
-    from station.core.error_terms import GravityModel, TermRows
-    from station.core.model import robot_to_toml
+    from station.core.kinematics.model import robot_to_toml
+    from station.core.terms.error_model import GravityModel, TermRows
     from station.io.robot_terms import gravity_toml
 
     gm = GravityModel(masses=(0.0, 90.0, 40.0, 0.0, 0.0, 0.0), payload_com=(0.0, 0.0, 80.0))
@@ -298,8 +298,8 @@ def test_payload_per_row_loads_the_compliance_term(tmp_path, capsys):
 def test_gear_ratios_make_the_harmonics_cycle_with_the_motor(tmp_path, capsys):
     """[gears] ratios: the error of joint 2 cycles three times per joint turn; the fit finds it there
     (a harmonic of the joint angle would not), and the written model predicts with it."""
-    from station.core.kinematics import forward
-    from station.core.model import robot_to_toml
+    from station.core.kinematics.forward import forward
+    from station.core.kinematics.model import robot_to_toml
     from station.io.robot_terms import gears_toml, read_gear_ratios
 
     ratios = (1.0, 3.0, 1.0, 1.0, 1.0, 1.0)

@@ -20,7 +20,7 @@ from simulators import start_simulated_cell
 from simulators.reference_cell import cell_config_text
 from station.cell.limits.joint_text import joint_values, nearest_limit
 from station.cell.limits.motion_guard import MotionGuard
-from station.cell.results.outcomes import classify
+from station.cell.pipeline.outcomes import classify
 from station.cell.run.device_check import ProbeChannelsInvalid, controller_lines, probe_lines, wired_channels_invalid
 from station.errors import Outcome, UnreachableError
 from station.ui.cli.commands_cell import plan_warnings, report_dir
@@ -89,7 +89,7 @@ def test_export_writes_a_pose_file_that_identify_reads(calibrated, capsys):
 def test_reports_are_named_after_their_database(tmp_path):
     a, b = report_dir(tmp_path / "cell-a.sqlite", 3), report_dir(tmp_path / "cell-b.sqlite", 3)
     assert a == tmp_path / "report-cell-a-run-3" and b == tmp_path / "report-cell-b-run-3" and a != b
-    from station.ui.tui.launch import report_dir as tui_report_dir
+    from station.ui.report.paths import report_dir as tui_report_dir
 
     assert tui_report_dir(tmp_path / "cell-a.sqlite", 3) == a  # one rule for the CLI and the UI
 

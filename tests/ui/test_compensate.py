@@ -11,11 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from station.core.ik import ArmConfig, configuration, solve_ik
-from station.core.kinematics import forward
-from station.core.model import robot_to_toml
-from station.core.poses import spread_joints
-from station.core.transforms import matrix_to_pose, pose_error, pose_to_matrix
+from station.core.kinematics.forward import forward
+from station.core.kinematics.ik import ArmConfig, configuration, solve_ik
+from station.core.kinematics.model import robot_to_toml
+from station.core.kinematics.poses import spread_joints
+from station.core.kinematics.transforms import matrix_to_pose, pose_error, pose_to_matrix
 from station.core.units import ARCSEC
 from station.io.robot_files import load_robot
 from station.ui.cli.main import main

@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from station.core.measurements import synthetic_set
-from station.core.poses import spread_joints
+from station.core.kinematics.poses import spread_joints
+from station.core.measurement.measurements import synthetic_set
 from station.io.datafile import write_csv
 from station.io.robot_files import load_robot
 from station.ui.cli.main import build_parser
@@ -81,7 +81,7 @@ def test_help_loads_no_cell_devices_tui_or_plots(tmp_path):
 def test_identify_loads_the_core_only(tmp_path, position_file):
     rc, out, modules = _loaded(tmp_path, "identify", str(position_file), "--objective", "position")
     assert rc == 0 and "identified" in out
-    assert "station.core.identification" in modules  # it did fit
+    assert "station.core.identification.identify" in modules  # it did fit
     assert _forbidden(modules) == []
     assert not any(m.startswith("station.ui.commands_") and m != "station.ui.cli.commands_core" for m in modules)
 

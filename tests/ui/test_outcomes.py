@@ -9,19 +9,18 @@ from pathlib import Path
 
 import pytest
 
-from drivers.controller import (
+from drivers.controller_errors import (
     ControllerConnectionError,
     DriveFault,
     EmergencyStop,
     HandshakeTimeout,
     MotionRejected,
-    TableError,
-    TableVerifyError,
 )
+from drivers.correction_table import TableError, TableVerifyError
 from drivers.probe_protocol import ProbeDisconnected, ProbeTimeout
-from station.cell.config.cell_config import TEMPLATE
-from station.cell.records.rundb import RunDatabaseError
-from station.cell.results.outcomes import classify, hint_for
+from station.cell.config.template import TEMPLATE
+from station.cell.pipeline.outcomes import classify, hint_for
+from station.cell.records.run_records import RunDatabaseError
 from station.errors import ConfigError, IdentificationError, Outcome, RunAborted, UnreachableError
 from station.ui.cli.main import main
 

@@ -20,9 +20,9 @@ import numpy as np
 import pytest
 
 from station.cell.records.rundb import RunDB
-from station.core.measurements import synthetic_set
-from station.core.poses import spread_joints
-from station.core.transforms import matrix_to_pose
+from station.core.kinematics.poses import spread_joints
+from station.core.kinematics.transforms import matrix_to_pose
+from station.core.measurement.measurements import synthetic_set
 from station.io.datafile import write_csv
 from station.io.robot_files import load_robot
 

@@ -13,13 +13,14 @@ import pytest
 from test_report import make_data
 from test_report_html import Page
 
-from station.cell.config.cell_config import TEMPLATE, parse_text
+from station.cell.config.cell_config import parse_text
 from station.cell.config.schema import _Simulation
+from station.cell.config.template import TEMPLATE
 from station.errors import ConfigError
 from station.io.body_file import read_body_file
 from station.io.head_file import parse_head
 from station.ui.report import signoff as so
-from station.ui.report.data import Acceptance, IsoPose, ReportData, TestConditions, Traceability
+from station.ui.report.contents import Acceptance, IsoPose, ReportData, TestConditions, Traceability
 from station.ui.report.provenance import git_commit, software_rows
 from station.ui.report.run import check_operator
 from station.ui.report.tables import timestamp_text

@@ -8,9 +8,9 @@ from __future__ import annotations
 import numpy as np
 
 from station.cell.correction.design import grid_to_json, region_for
+from station.cell.pipeline.results import build_table_for
+from station.cell.pipeline.terms import error_model_record
 from station.cell.records.rundb import RunDB
-from station.cell.results.pipeline_results import build_table_for
-from station.cell.results.pipeline_terms import error_model_record
 from station.ui.report.run import _rebuilt_table
 from tests.cell.scara_terms import scara_terms
 
@@ -44,7 +44,7 @@ def test_the_report_of_a_run_with_terms_shows_the_uploaded_tables_crc(tmp_path):
     """The whole report of such a run (its identification poses stored as measured): the table it
     shows — CRC-32 and the grid of the accuracy map — is the one built with the terms."""
     from station.cell.plan.steps import StepKind
-    from station.core.transforms import invert
+    from station.core.kinematics.transforms import invert
     from station.ui.report.run import report_data_for_run
 
     s = scara_terms()

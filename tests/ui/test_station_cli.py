@@ -13,7 +13,8 @@ import pytest
 
 from simulators import start_simulated_cell
 from simulators.reference_cell import cell_config_text as simulated_config_text
-from station.cell.config.cell_config import TEMPLATE, parse_text
+from station.cell.config.cell_config import parse_text
+from station.cell.config.template import TEMPLATE
 from station.cell.plan.measurement_plan import build_plan
 from station.errors import ConfigError
 from station.ui.cli.main import main
@@ -109,9 +110,9 @@ def test_d_optimal_selection_keeps_the_most_informative_steps(sim):
     full = build_plan(parse_text(text))
     sel = build_plan(parse_text(text.replace("repeats = 4", "repeats = 1\nselect = 12")))
     assert len(sel.identification) == 12
-    from station.core.identifiability import analyze
-    from station.core.identification import identify  # noqa: F401  (the core is what ranks them)
-    from station.core.measurements import synthetic_set
+    from station.core.identification.identifiability import analyze
+    from station.core.identification.identify import identify  # noqa: F401  (the core is what ranks them)
+    from station.core.measurement.measurements import synthetic_set
 
     cfg = parse_text(text)
     q = np.array([s.q for s in sel.identification])

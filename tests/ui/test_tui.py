@@ -17,6 +17,7 @@ import pytest
 from textual.content import Content
 from textual.widgets import DataTable, ProgressBar, Static
 
+from station.cell.pipeline.outcomes import hint_for
 from station.cell.records.summary import (
     ErrorStats,
     Failure,
@@ -24,7 +25,6 @@ from station.cell.records.summary import (
     RunSummary,
     UploadSummary,
 )
-from station.cell.results.outcomes import hint_for
 from station.cell.run.events import (
     MeasurementRecorded,
     Notice,
@@ -489,7 +489,7 @@ def test_runcontrol_checkpoint_semantics():
 
 
 UI = Path(__file__).resolve().parents[2] / "station" / "ui" / "tui"
-FORBIDDEN = ("drivers", "pymodbus", "serial", "sqlite3", "station.cell.results.pipeline")
+FORBIDDEN = ("drivers", "pymodbus", "serial", "sqlite3", "station.cell.pipeline.calibration")
 
 
 @pytest.mark.parametrize("name", ["app.py", "widgets.py", "launch.py"])

@@ -414,7 +414,7 @@ def test_parameter_rows_units_and_held_parameters():
 
 
 UI = Path(__file__).resolve().parents[2] / "station" / "ui" / "tui"
-FORBIDDEN = ("drivers", "pymodbus", "serial", "sqlite3", "station.cell.results.pipeline")
+FORBIDDEN = ("drivers", "pymodbus", "serial", "sqlite3", "station.cell.pipeline.calibration")
 
 
 @pytest.mark.parametrize("path", sorted(UI.glob("*.py")), ids=lambda p: p.name)

@@ -11,12 +11,12 @@ from test_tui_features import KEEP, PROPOSAL, RUNS, SUMMARY, FakeSession, wait_u
 from test_tui_signoff import CTX, REPORT, app_for, screen_lines, settled
 from textual.content import Content
 
-from drivers.controller import ControllerLinkLost, EmergencyStop
+from drivers.controller_errors import ControllerLinkLost, EmergencyStop
 from drivers.correction_table import TableVerifyError
 from drivers.probe_protocol import ProbeTimeout
+from station.cell.pipeline.outcomes import failure_summary
 from station.cell.records.run_records import RunDatabaseError
 from station.cell.records.summary import Failure, RunSummary, TableSummary, UploadSummary
-from station.cell.results.outcomes import failure_summary
 from station.cell.run.events import Notice, PhaseChanged, RunFailed, RunFinished, RunStarted
 from station.errors import ConfigError, IdentificationError, Outcome, RunAborted, UnreachableError
 from station.ui.tui.app import StationApp
@@ -291,7 +291,7 @@ async def test_a_real_session_that_fails_building_its_table_is_advised_as_a_corr
     """The simulated cell through the session, its correction step made to fail as the issue saw it
     (an IdentificationError, exit code 3, after the identification held): the phase the session
     reported is what tells it from a rank deficiency."""
-    from station.cell.results import pipeline
+    from station.cell.pipeline import pipeline
     from station.cell.session.calibrate import CellRequest
     from station.ui.tui.launch import make_app
 

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from textual.widgets import DataTable
 
-from station.cell.config.cell_config import TEMPLATE
+from station.cell.config.template import TEMPLATE
 from station.cell.session.calibrate import CellRequest, run_calibration_session
 from station.errors import Outcome
 from station.ui.simulated_cell import load_cell

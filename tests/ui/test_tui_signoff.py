@@ -15,10 +15,10 @@ import pytest
 from test_tui_features import HEAD_IDS, RUNS, SUMMARY, FakeSession, frozen, head_snapshot, report_data, wait_until
 from textual.widget import Widget
 
-from drivers.controller import ControllerLinkLost
+from drivers.controller_errors import ControllerLinkLost
 from drivers.probe_protocol import ProbeTimeout
+from station.cell.pipeline.outcomes import failure_summary
 from station.cell.records.summary import Failure, RunSummary
-from station.cell.results.outcomes import failure_summary
 from station.cell.run.events import Notice, RunFinished, RunStarted
 from station.cell.session.calibrate import CellRequest
 from station.errors import Outcome

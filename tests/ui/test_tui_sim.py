@@ -8,7 +8,8 @@ from textual.widgets import DataTable
 
 from station.cell.session.calibrate import CellRequest
 from station.errors import Outcome
-from station.ui.tui.launch import make_app, report_dir
+from station.ui.report.paths import report_dir
+from station.ui.tui.launch import make_app
 from station.ui.tui.screens import QuestionScreen, ResumeScreen
 from station.ui.tui.widgets import ConfirmScreen
 

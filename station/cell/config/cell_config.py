@@ -39,51 +39,13 @@ from pydantic import ValidationError
 # module); the loading below uses only a few of them.
 from drivers.controller_map import MAX_TABLE_VALUES
 from station.cell.config.schema import (
-    _CONTROLLER,
-    _NO_CONTROL,
-    _POSE_WHAT,
-    _PROBLEM,
-    MAX_MM,
-    MAX_TOOLS,
-    Deg,
-    GridAxis,
-    GridStep,
-    Mm,
-    ParamName,
-    PathText,
-    PointId,
-    Pose,
-    Text,
-    ToolMm,
-    ToolName,
-    ToolPose,
-    _absent,
     _Body,
-    _Cell,
-    _CellFile,
     _Conformance,
-    _Correction,
     _describe,
-    _Devices,
-    _field_info,
-    _Head,
-    _Identification,
-    _key,
-    _Limits,
-    _num,
-    _Plan,
-    _Point,
-    _Recheck,
-    _Robot,
-    _Section,
-    _section_of,
     _short,
     _Simulation,
     _Tool,
     _validate_schema,
-    _Verification,
-    _Warmup,
-    bounds_text,
 )
 from station.cell.config.sections import (
     CellIdentity,
@@ -98,10 +60,9 @@ from station.cell.config.sections import (
     VerificationConfig,
     WarmupConfig,
 )
-from station.cell.config.template import TEMPLATE
-from station.core.model import RobotModel
-from station.core.table_grid import GridSpec
-from station.core.transforms import pose_to_matrix
+from station.core.kinematics.model import RobotModel
+from station.core.kinematics.transforms import pose_to_matrix
+from station.core.table.grid import GridSpec
 from station.core.units import ARCSEC, DEG, UM
 from station.errors import ConfigError
 from station.io.certificate import Certificate
@@ -195,7 +156,7 @@ def _head(file: str | None, cube_edge_mm: float, model: RobotModel,
     """``[head] file``: the head's geometry, MKKS in the flange (4,4), the robot model with the
     head frame as its nominal K, and the head's CMM certificate. Without it: the built-in
     reference head on the robot file's K (no certificate)."""
-    from station.core.probe_geometry import default_probe_head
+    from station.core.probe.geometry import default_probe_head
     from station.io.head_file import load_head
 
     if file is None:
@@ -347,7 +308,7 @@ def _check_terms(ident: IdentificationConfig, model: RobotModel, source: str, ro
                           f"both_directions = true (a SCARA: every identification pose is then also measured from "
                           f"the other side), or leave backlash out (model = \"auto\" tries it only then)")
     if ident.terms != ("auto",):
-        from station.core.model_selection import expand_families
+        from station.core.terms.selection import expand_families
 
         try:  # backlash (checked above) takes the session's approach sides (pipeline_results.run_term_rows)
             expand_families(model, tuple(t for t in ident.terms if t != "backlash"))
@@ -438,7 +399,7 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
         head=head,  # ProbeHeadGeometry of the [head] file, or the built-in reference head
         head_in_flange=head_in_flange,  # (4,4) MKKS in the flange frame (the robot model's nominal K)
         body_sigma=body_sigma,  # (n, 2) [mm, rad] from the CMM report or the inline points (0: exact)
-        tools=_tools(f.tool, corr, plan.elbows, model.n_joints, source),  # [[tool]] (station/cell/correction/tools.py)
+        tools=_tools(f.tool, corr, plan.elbows, model.n_joints, source),  # [[tool]] (station/cell/correction/robot_tools.py)
         simulation=f.simulation,  # the validated [simulation] table (simulators/from_config.py reads it)
         source=source,  # where it was read: relative robot, head and body files resolve beside it
         verification=VerificationConfig(**f.verification.model_dump()),  # [verification] (the report's)
@@ -484,13 +445,7 @@ def parse_text(text: str, source: str = "<config>") -> CellConfig:
     return parse_config(data, source, text)
 
 
-__all__ = [  # the loading's names, the template, and the schema's (config_schema) re-exported
-    "MAX_CONFIG_BYTES", "DeviceConfig", "PlanConfig", "IdentificationConfig", "CorrectionConfig", "RecheckConfig",
-    "WarmupConfig", "VerificationConfig", "CellIdentity", "ConformanceConfig", "ToolConfig", "FleetConfig", "CellConfig", "correction_grid", "parse_config",
-    "simulation_settings", "load_config", "parse_text", "TEMPLATE", "MAX_MM", "_NO_CONTROL", "Text", "PathText",
-    "PointId", "ParamName", "Mm", "Deg", "Pose", "GridStep", "GridAxis", "_POSE_WHAT", "_num", "_absent", "_Section",
-    "_Cell", "_Robot", "_Limits", "_Point", "_Body", "_CONTROLLER", "_Devices", "_Plan", "_Identification",
-    "_Correction", "_Simulation", "_Verification", "_Recheck", "_Warmup", "_Conformance", "ToolName", "ToolMm", "ToolPose",
-    "MAX_TOOLS", "_Tool", "_Head", "_CellFile", "_short", "_key", "_section_of", "_field_info", "bounds_text",
-    "_PROBLEM", "_describe", "_validate_schema",
+__all__ = [
+    "MAX_CONFIG_BYTES", "CellConfig", "correction_grid", "parse_config", "simulation_settings", "load_config",
+    "parse_text",
 ]

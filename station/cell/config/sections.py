@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from station.core.error_terms import GravityModel
-from station.core.transforms import pose_to_matrix
+from station.core.kinematics.transforms import pose_to_matrix
+from station.core.terms.error_model import GravityModel
 from station.core.units import ARCSEC
 
 __all__ = ["DeviceConfig", "PlanConfig", "IdentificationConfig", "CorrectionConfig", "RecheckConfig", "FleetConfig",

@@ -16,13 +16,15 @@ from typing import Any
 
 import numpy as np
 
-from drivers.controller import ControllerConnectionError, HandshakeTimeout, ModbusController
+from drivers.controller import ModbusController
+from drivers.controller_errors import ControllerConnectionError, HandshakeTimeout
 from drivers.controller_map import MAX_JOINTS, REG, Command, ErrorCode, WordOrder, encode, registers_crc32
 from drivers.controller_status import ControllerStatus
-from station.cell.config.cell_config import CellConfig, ConformanceConfig
+from station.cell.config.cell_config import CellConfig
+from station.cell.config.sections import ConformanceConfig
 from station.cell.conformance.report import REQUIREMENTS, Requirement
 from station.cell.limits.motion_guard import MotionGuard
-from station.core.table_data import CorrectionTableData
+from station.core.table.values import CorrectionTableData
 
 _CMD_FIRST = REG["cmd_code"].address
 _XFER_FIRST = REG["xfer_seq"].address

@@ -18,10 +18,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from drivers.controller import ControllerConnectionError
+from drivers.controller_errors import ControllerConnectionError
 from drivers.controller_map import Command, ControllerError
 from station.cell.conformance.kit import _KitBase
-from station.core.table_data import CorrectionTableData, TableAxis
+from station.core.table.values import CorrectionTableData, TableAxis
 
 __all__ = ["SLOTS", "fmt_crcs"]
 

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from drivers.controller import ControllerClaimed, ControllerConnectionError
+from drivers.controller_errors import ControllerClaimed, ControllerConnectionError
 from drivers.controller_map import ControllerError, WordOrder
 from station.cell.config.cell_config import CellConfig
 from station.cell.conformance.checks import _HandshakeChecks

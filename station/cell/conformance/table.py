@@ -28,7 +28,7 @@ from drivers.correction_table import (
 from station.cell.conformance.kit import _KitBase
 from station.cell.conformance.report import FAILED, Requirement
 from station.cell.conformance.slots import SLOTS, fmt_crcs
-from station.core.table_data import CorrectionTableData, TableAxis
+from station.core.table.values import CorrectionTableData, TableAxis
 
 _CRC_FIX = ("compute the CRC-32 (zlib / ISO-HDLC, check value CRC('123456789') = 0xCBF43926) over the values as "
             "big-endian i32 (each raw count's four two's-complement bytes, most significant first) in C order, "

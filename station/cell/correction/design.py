@@ -10,7 +10,7 @@ at the same joints (:func:`tool_grid_for`).
 
 * No ``[correction]`` grid keys: the station derives the region (the box around the targets
   with their margins, or ``[correction] region`` where the user names it) and designs the steps
-  (:func:`station.core.table_design.design_table`) for robots with errors of the configured
+  (:func:`station.core.table.design.design_table`) for robots with errors of the configured
   size (``[simulation]``'s σ: the station's prior for an uncalibrated robot of this kind, never a
   simulation's true robot).
 * ``x_mm`` / ``y_mm`` / ``z_mm`` (and ``yaw_step_deg``) given: that grid, checked the same way.
@@ -32,11 +32,11 @@ import numpy as np
 
 from drivers.controller_map import MAX_TABLE_VALUES
 from station.cell.config.cell_config import DEFAULT_YAW_STEP_DEG, CellConfig
-from station.core.correction_table import CorrectionTable
-from station.core.table_design import Region, TableDesign, design_table, prior_robots, refine_for
-from station.core.table_grid import GridSpec
-from station.core.tool_frame import nominal_head_in_flange
-from station.core.transforms import invert, pose_to_matrix
+from station.core.kinematics.tool_frame import nominal_head_in_flange
+from station.core.kinematics.transforms import invert, pose_to_matrix
+from station.core.table.build import CorrectionTable
+from station.core.table.design import Region, TableDesign, design_table, prior_robots, refine_for
+from station.core.table.grid import GridSpec
 from station.core.units import ARCSEC, DEG
 from station.errors import ConfigError
 
@@ -149,8 +149,8 @@ def _prior(cfg: CellConfig, plan: Any = None, n: int = DRAWS) -> list[np.ndarray
     if plan is None:
         return full
     from station.cell.plan.steps import StepKind
-    from station.core.identifiability import analyze
-    from station.core.measurements import residuals_and_jacobian, synthetic_set
+    from station.core.identification.identifiability import analyze
+    from station.core.measurement.measurements import residuals_and_jacobian, synthetic_set
 
     q = np.array([s.q for s in plan.identification if s.kind is StepKind.IDENTIFICATION])
     if not len(q):
@@ -283,7 +283,7 @@ def identified_table(cfg: CellConfig, params: np.ndarray, design: TableDesign,
     """The identified robot's table on ``design``, refined where it misses the bound: the table,
     the design it was built on and its bound over the region's working cells [µm]. ``delta``: the
     identified error terms' joint error ``q ↦ δ(q)`` (issue 30; None: geometric): the nodes, the
-    bound and the refinement carry them (:func:`station.core.table_design.refine_for`)."""
+    bound and the refinement carry them (:func:`station.core.table.design.refine_for`)."""
     return refine_for(cfg.model, params, design, delta=delta)
 
 
@@ -325,8 +325,8 @@ def tool_grid_for(cfg: CellConfig, tool: Any) -> GridSpec:
 
 def _tool_design(cfg: CellConfig, tool: Any) -> TableDesign:
     from station.cell.plan.measurement_plan import build_plan
-    from station.core.kinematics import forward
-    from station.core.tool_frame import tool_model, tool_params
+    from station.core.kinematics.forward import forward
+    from station.core.kinematics.tool_frame import tool_model, tool_params
 
     plan = build_plan(cfg)
     c = tool.correction

@@ -26,7 +26,7 @@ from station.cell.records.rundb import RunDB
 from station.cell.records.summary import RunSummary, TableSummary
 from station.cell.run.devices import TableController
 from station.cell.run.events import Event, Notice
-from station.core.table_data import CorrectionTableData
+from station.core.table.values import CorrectionTableData
 from station.errors import Outcome
 
 __all__ = ["TableAtStart", "table_at_start", "finish_tables", "restore_after_failure"]

@@ -1,5 +1,5 @@
 """``station export --tool NAME``: a tool's correction of a stored run as a file for the controller
-(``[[tool]]``, :mod:`station.cell.correction.tools`; ``docs/correction.md`` "Tools after the head").
+(``[[tool]]``, :mod:`station.cell.correction.robot_tools`; ``docs/correction.md`` "Tools after the head").
 A SCARA's table is rebuilt from the run's configuration snapshot and model and checked against the
 CRC-32 the run stored; an articulated arm's compensated targets are the run's own."""
 
@@ -11,13 +11,13 @@ import numpy as np
 
 from drivers.controller_map import MAX_TABLE_VALUES
 from station.cell.correction.design import head_in_flange
-from station.cell.correction.tools import find_tool, result_key, tool_grid
+from station.cell.correction.robot_tools import find_tool, result_key, tool_grid
 from station.cell.records.rundb import RunDB
 from station.cell.records.stored_config import stored_config
 from station.cell.records.stored_error_model import stored_error_model
-from station.core.correction_table import build_correction_table
-from station.core.table_data import CorrectionTableData
-from station.core.tool_frame import derive_tool
+from station.core.kinematics.tool_frame import derive_tool
+from station.core.table.build import build_correction_table
+from station.core.table.values import CorrectionTableData
 from station.errors import ConfigError, Outcome, StationError
 
 __all__ = ["EXPORT_FORMAT", "table_to_json", "table_from_json", "ToolTableBeyondBound", "tool_export"]
@@ -39,7 +39,7 @@ def table_to_json(data: CorrectionTableData) -> dict[str, Any]:
 
 def table_from_json(obj: dict[str, Any]) -> CorrectionTableData:
     """The table of :func:`table_to_json` (its CRC-32 checked)."""
-    from station.core.table_data import TableAxis
+    from station.core.table.values import TableAxis
 
     axes = tuple(TableAxis(float(a["start"]), float(a["step"]), int(a["count"]), bool(a["periodic"]))
                  for a in obj["axes"])

@@ -10,8 +10,8 @@ the plan visits:
   itself and well inside the probes' capture range (a few degrees: each probe then reads a
   millimetre or two of its ±5 mm stroke at the nominal pose);
 * every **arm configuration** the robot file's limits allow (shoulder front/back, elbow up/down,
-  wrist flipped or not: :func:`station.core.ik.configuration`), each solved by
-  :func:`station.core.ik.solve_ik` on the full nominal model, which chooses deterministically
+  wrist flipped or not: :func:`station.core.kinematics.ik.configuration`), each solved by
+  :func:`station.core.kinematics.ik.solve_ik` on the full nominal model, which chooses deterministically
   and away from the limits and the wrist singularity; a candidate must also stay
   :data:`LIMIT_MARGIN_RAD` inside the cell's soft limits.
 
@@ -27,7 +27,7 @@ every configuration and corner kind, at least :data:`MIN_HELD_OUT` of them (with
 fourth in point order held out before, all fell on the same corner of each cube, and the RMS of
 so few scattered by ±15 % between the after and the oracle passes). The other candidates are
 identification candidates, chosen by the greedy I-optimal
-:func:`station.core.design_selection.select_i_optimal` (the mean predicted position variance over
+:func:`station.core.identification.pose_design.select_i_optimal` (the mean predicted position variance over
 every nominal contact: the working poses the verification samples) until the stopping rule
 (:data:`NOISE_FRACTION`) is met or ``[plan] select`` reached (:class:`IdentificationDesign` says
 which), then ordered to keep robot time short (:func:`order_for_time`: nearest neighbour in joint
@@ -51,11 +51,11 @@ import numpy as np
 
 from station.cell.config.cell_config import CellConfig
 from station.cell.limits.motion_guard import MotionGuard
-from station.cell.plan.common import Plan, Target, assemble_plan, head_targets_world, nominal_contact
+from station.cell.plan.assembly import Plan, Target, assemble_plan, head_targets_world, nominal_contact
 from station.cell.plan.steps import PlannedStep, StepKind
-from station.core.kinematics import forward, joint_jacobian
-from station.core.model import RobotModel
-from station.core.transforms import invert, pose_error, pose_to_matrix, rotation_exp
+from station.core.kinematics.forward import forward, joint_jacobian
+from station.core.kinematics.model import RobotModel
+from station.core.kinematics.transforms import invert, pose_error, pose_to_matrix, rotation_exp
 from station.errors import ConfigError, UnreachableError
 
 __all__ = ["head_orientations", "follow_ik", "configuration_code", "retract_pose", "retract_poses", "retract_from", "recentred",
@@ -111,7 +111,7 @@ def follow_ik(model: RobotModel, T_base: np.ndarray, q0: np.ndarray, params=None
              tol_mm: float = 1e-7, max_iter: int = 60) -> tuple[np.ndarray, np.ndarray]:
     """Follow a small pose change from known joints: damped least squares from ``q0 (n, g)`` to
     ``T_base (n, 4, 4)`` (robot base frame), so the configuration of ``q0`` is kept (the retract
-    and re-centring moves; a target far from ``q0`` needs :func:`station.core.ik.solve_ik`).
+    and re-centring moves; a target far from ``q0`` needs :func:`station.core.kinematics.ik.solve_ik`).
     Returns the joints ``(n, g)`` and a mask ``(n,)`` of the rows that converged (position within
     ``tol_mm``, orientation within 1e-9 rad); limits are not checked."""
     Tt = np.asarray(T_base, dtype=float).reshape(-1, 4, 4)
@@ -163,7 +163,7 @@ def _too_close(cfg: CellConfig, q: np.ndarray) -> str:
 def _configurations(model: RobotModel) -> tuple:
     """The configurations to try: the eight named ones of a six-axis arm (six revolute joints),
     else one (the solver's choice)."""
-    from station.core.ik import ALL_ARM_CONFIGS
+    from station.core.kinematics.ik import ALL_ARM_CONFIGS
 
     six_r = model.n_joints == 6 and all(t == "revolute" for t in model.joint_types)
     return ALL_ARM_CONFIGS if six_r else (None,)
@@ -242,12 +242,12 @@ def motion_poses(cfg: CellConfig, q: np.ndarray, direction: int = 1, retract: np
 # --- the plan ---------------------------------------------------------------------------------
 
 def articulated_candidates(cfg: CellConfig):
-    """(candidates, orientations, rejected): a :class:`station.cell.plan.common.Target` for every point ×
+    """(candidates, orientations, rejected): a :class:`station.cell.plan.assembly.Target` for every point ×
     head orientation × configuration whose every motion pose passes the guard, the orientation
     index of each (0 = nominal), and (point id, configuration code, reason) of those rejected.
-    Inverse kinematics: :func:`station.core.ik.solve_ik` on the nominal model per configuration
+    Inverse kinematics: :func:`station.core.kinematics.ik.solve_ik` on the nominal model per configuration
     (its deterministic choice), the turned heads near the nominal head's solution."""
-    from station.core.ik import solve_ik
+    from station.core.kinematics.ik import solve_ik
 
     model = cfg.model
     guard = MotionGuard(cfg.soft_limits, joint_types=cfg.model.joint_types)
@@ -355,15 +355,15 @@ def order_for_time(targets: list) -> list:
 
 def design_terms(cfg: CellConfig):
     """The error terms the identification poses are designed to determine (``[identification]
-    model``; issue 30), as a :class:`station.core.error_terms.TermSpec`, or None for the geometric
+    model``; issue 30), as a :class:`station.core.terms.error_model.TermSpec`, or None for the geometric
     model. Named families are designed for as named; ``auto`` for the candidates it scores first,
     compliance and the first harmonic of every revolute joint: a design blind to them would leave
     the selection nothing to find. Drift and backlash describe a run, not a pose: no columns."""
     ident = cfg.identification
     if ident.terms == ("geometric",):
         return None
-    from station.core.error_terms import GravityModel, TermSpec
-    from station.core.model_selection import expand_families
+    from station.core.terms.error_model import GravityModel, TermSpec
+    from station.core.terms.selection import expand_families
 
     names = ("compliance", "cyclic") if ident.terms == ("auto",) else ident.terms
     families = tuple(f for f in expand_families(cfg.model, tuple(n for n in names if n not in ("drift", "backlash"))))
@@ -376,8 +376,8 @@ def _design_jacobians(cfg: CellConfig, q_cand: np.ndarray, q_work: np.ndarray) -
     """Noise-weighted pose Jacobians ``(c, 6, p)`` of the candidates and position Jacobians
     ``(m, 3, p)`` [mm per parameter unit] at the working poses, over the minimal parameter set the
     candidates identify (the run's: the same prefer / fix / exclude)."""
-    from station.core.identifiability import analyze
-    from station.core.measurements import residuals_and_jacobian, synthetic_set
+    from station.core.identification.identifiability import analyze
+    from station.core.measurement.measurements import residuals_and_jacobian, synthetic_set
 
     sig = cfg.identification.pose_sigma()
     data = synthetic_set(cfg.model, "pose", q_cand, cfg.model.nominal, sigma=sig)
@@ -386,7 +386,7 @@ def _design_jacobians(cfg: CellConfig, q_cand: np.ndarray, q_work: np.ndarray) -
     idx = a.chosen_indices()
     spec = design_terms(cfg)
     if spec is not None:  # [identification] model: the terms' columns beside the geometry's (issue 30)
-        from station.core.term_design import design_jacobians
+        from station.core.terms.design import design_jacobians
 
         J, G, _names = design_jacobians(cfg.model, cfg.model.nominal, idx, spec, q_cand, q_work, sig)
         return J, G
@@ -404,7 +404,7 @@ def held_out_spread(cfg: CellConfig, nominal: list) -> set[int]:
     of fewer poses is too noisy to judge the correction by) and never more than
     :data:`MAX_HELD_OUT_FRACTION`, spread over the joint space by farthest-point sampling, every
     configuration before any twice."""
-    from station.core.design_selection import spread_indices
+    from station.core.identification.pose_design import spread_indices
 
     n = len(nominal)
     want = max(-(-n // max(cfg.plan.verification_every, 1)), MIN_HELD_OUT)
@@ -449,7 +449,7 @@ class IdentificationDesign:
 
 @dataclass(frozen=True)
 class ArticulatedPlan(Plan):
-    """The plan of an articulated arm: :class:`~station.cell.plan.common.Plan` with the
+    """The plan of an articulated arm: :class:`~station.cell.plan.assembly.Plan` with the
     verification grouped by arm configuration, and the identification design's account."""
 
     design: IdentificationDesign | None = None
@@ -503,7 +503,7 @@ def _select_identification(cfg: CellConfig, ident: list, q_work: np.ndarray, hel
                            ) -> tuple[list, IdentificationDesign]:
     """The I-optimal identification poses under the stopping rule (:data:`NOISE_FRACTION`), at
     most ``[plan] select``, and the design's account."""
-    from station.core.design_selection import select_i_optimal
+    from station.core.identification.pose_design import select_i_optimal
 
     J, G = _design_jacobians(cfg, np.array([t.joints for t in ident]), q_work)
     c, r, p = J.shape

@@ -20,7 +20,7 @@ from station.cell.config.cell_config import CellConfig
 from station.cell.limits.joint_text import joint_value
 from station.cell.limits.motion_guard import MotionGuard
 from station.cell.plan.articulated import build_articulated_plan, preload_offset, retract_from, retract_pose
-from station.cell.plan.common import (
+from station.cell.plan.assembly import (
     Plan,
     Target,
     assemble_plan,
@@ -29,8 +29,8 @@ from station.cell.plan.common import (
     nominal_contact,
     select_d_optimal,
 )
-from station.core.kinematics import scara_ik
-from station.core.transforms import invert
+from station.core.kinematics.forward import scara_ik
+from station.core.kinematics.transforms import invert
 from station.errors import ConfigError, UnreachableError
 
 # The shared pieces live in plan_common (both planners import them); they stay importable from here.
@@ -100,8 +100,8 @@ def point_joints(cfg: CellConfig, elbow: int) -> np.ndarray:
 def reach_reason(cfg: CellConfig, head_world: np.ndarray) -> str:
     """Why a SCARA cannot put the head at ``head_world`` (4, 4): which radius about axis 1 the
     wrist misses, and by how much [mm]."""
-    from station.core.kinematics import scara_closed_form, scara_reach_margin
-    from station.core.transforms import pose_to_matrix
+    from station.core.kinematics.forward import scara_closed_form, scara_reach_margin
+    from station.core.kinematics.transforms import pose_to_matrix
 
     T_base = invert(pose_to_matrix(cfg.model.nominal[:6]))[None] @ np.asarray(head_world).reshape(-1, 4, 4)
     margin = float(scara_reach_margin(cfg.model, T_base)[0])
@@ -143,7 +143,7 @@ def check_joints(cfg: CellConfig, q: np.ndarray, what: str) -> None:
 def joints_for(cfg: CellConfig, head_world: np.ndarray, elbow: int, setup_world_base=None) -> np.ndarray:
     """Nominal-model joints (n, g) that put the head at ``head_world`` (n, 4, 4)."""
     R = cfg.model.nominal[:6] if setup_world_base is None else setup_world_base
-    from station.core.transforms import pose_to_matrix
+    from station.core.kinematics.transforms import pose_to_matrix
 
     T_base = invert(pose_to_matrix(R))[None] @ np.asarray(head_world).reshape(-1, 4, 4)
     return scara_ik(cfg.model, T_base, elbow, setup=False, check_limits=False)
@@ -240,8 +240,8 @@ def build_plan(cfg: CellConfig) -> Plan:
 def check_enough_poses(cfg: CellConfig, ident: list[Target], n_rejected: int) -> None:
     """Refuse (ConfigError) identification targets too few for the identifiable set: fewer
     pose rows than parameters with redundancy, or a rank below the minimal model's."""
-    from station.core.identifiability import analyze
-    from station.core.measurements import synthetic_set
+    from station.core.identification.identifiability import analyze
+    from station.core.measurement.measurements import synthetic_set
 
     p = cfg.model.minimal_param_count  # 4R + 2P + 6 (Everett/Hollerbach): what a well-spread plan identifies
     needed = max(MIN_IDENTIFICATION_TARGETS, -(-2 * p // 6))  # twice as many pose rows as parameters

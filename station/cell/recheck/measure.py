@@ -32,7 +32,8 @@ from station.cell.config.cell_config import CellConfig
 from station.cell.plan.measurement_plan import Target, build_plan, order_by_travel
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.fingerprint import baseline_fingerprint, check_same_cell, fingerprint
-from station.cell.records.rundb import MeasurementRecord, RunDatabaseError, RunDB
+from station.cell.records.run_records import MeasurementRecord, RunDatabaseError
+from station.cell.records.rundb import RunDB
 from station.cell.records.stored_config import stored_config
 from station.cell.records.summary import RunSummary
 from station.cell.run.devices import CellController, ProbeHead
@@ -40,8 +41,8 @@ from station.cell.run.events import Event, Notice, PhaseChanged, RunFinished, Ru
 from station.cell.run.runcontrol import RunControl
 from station.cell.run.runner import Runner, approach_and_read
 from station.cell.run.warmup import run_warmup
-from station.core.kinematics import forward
-from station.core.transforms import invert, rotation_log
+from station.core.kinematics.forward import forward
+from station.core.kinematics.transforms import invert, rotation_log
 from station.core.units import ARCSEC
 from station.errors import ConfigError, Outcome, RunAborted
 
@@ -107,7 +108,7 @@ def load_baseline(db: RunDB, run_id: int, cfg: CellConfig) -> Baseline:
     summary = RunSummary.from_json(stored) if stored else None
     names = list(ident.get("chosen", []))
     sig = dict(zip(names, (float(s) for s in ident.get("sigma", []))))
-    from station.cell.results.pipeline_terms import stored_error_model
+    from station.cell.pipeline.terms import stored_error_model
 
     terms = stored_error_model(cfg, db.load_result(run_id, "error_model", default=None))
     residual = summary.identification.rms_residual_um if summary and summary.identification else None

@@ -13,10 +13,10 @@ from contextlib import ExitStack
 from pathlib import Path
 
 from station.cell.config.cell_config import CellConfig
+from station.cell.pipeline.outcomes import failure_summary
 from station.cell.recheck.measure import RecheckOptions, RecheckSummary, run_recheck
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import RunSummary
-from station.cell.results.outcomes import failure_summary
 from station.cell.run.events import Event, PhaseChanged, RunFailed
 from station.cell.run.runcontrol import RunControl
 from station.cell.session.calibrate import (

@@ -1,7 +1,7 @@
-"""The run database, its records and their checks, the run lock, export, fingerprint,
-stored configuration and the run summary; a finished run's publication for the fleet store
-(fleet_payload, fleet_outbox: store and forward).
+"""The run database, its records and their checks, the run lock (a row of the same database,
+taken in one transaction with the run it guards), export, fingerprint, stored configuration and
+the run summary.
 
-May import config, plan (its step types), station.core, station.fleet (the store it publishes
-to); never the runner, devices or UI.
+May import config, plan (its step types), station.core; never the runner, devices, the fleet store
+or the UI.
 """

@@ -15,7 +15,7 @@ import numpy as np
 
 from station.cell.records.run_records import RunDatabaseError, _num
 from station.cell.records.rundb import RunDB
-from station.core.transforms import matrix_to_pose
+from station.core.kinematics.transforms import matrix_to_pose
 
 #: a cell that starts with one of these is read as a formula by spreadsheet programs
 _FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
@@ -127,7 +127,7 @@ def export_pose_file(db: RunDB, run_id: int, path: str | Path) -> tuple[Path, in
     measured point-in-head pose), ``x [mm] … yaw [deg]``. ``station identify PATH --robot ROBOT``
     reads it as it is. Returns the path, the rows written and the robot (its file or name)."""
     from station.cell.records.stored_config import stored_config
-    from station.core.transforms import invert
+    from station.core.kinematics.transforms import invert
 
     cfg = stored_config(db, run_id)
     index = {pid: i for i, pid in enumerate(cfg.point_ids)}

@@ -39,9 +39,9 @@ from station.cell.plan.steps import MEASUREMENT_KINDS
 from station.cell.records import record_checks as rc
 from station.cell.records import record_fields as rf
 from station.cell.records import run_lock
-from station.cell.records.record_checks import DamagedRecordError, check_against_plan
-from station.cell.records.run_lock import LockHolder, RunLockedError
-from station.cell.records.run_records import (  # re-exported: the database's records and errors
+from station.cell.records.record_checks import check_against_plan
+from station.cell.records.run_lock import LockHolder
+from station.cell.records.run_records import (
     _SCHEMA,
     _TABLES,
     EVENT_LEVELS,
@@ -60,9 +60,9 @@ from station.cell.records.run_records import (  # re-exported: the database's re
     utc_now,
 )
 
-__all__ = ["RunDB", "RunRecord", "MeasurementRecord", "EventRecord", "RunDatabaseError", "SchemaVersionError",
-           "RunNotFoundError", "DuplicateMeasurementError", "DamagedRecordError", "RunLockedError", "RUN_STATUSES", "EVENT_LEVELS", "SCHEMA_VERSION",
-           "utc_now"]
+__all__ = [
+    "RunDB",
+]
 
 _MISSING = object()
 

@@ -1,7 +1,7 @@
 """A run's stored error model beyond geometry (issue 30, docs/error-terms.md), read back.
 
 A calibration that kept error terms stores them as the result ``error_model``
-(:func:`station.cell.results.pipeline_terms.error_model_record`): the geometry fitted together
+(:func:`station.cell.pipeline.terms.error_model_record`): the geometry fitted together
 with the terms, the kept families, the terms' values and what their basis is computed from.
 Everything that rebuilds what such a run built — the recheck's baseline, a tool's export, the
 report's correction table — reads it here; this module sits below all of them (the records
@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from station.cell.config.cell_config import CellConfig
-from station.core.term_compensation import JointDelta
+from station.core.terms.compensation import JointDelta
 
 __all__ = ["StoredErrorModel", "stored_error_model"]
 
@@ -32,14 +32,14 @@ class StoredErrorModel:
     families: tuple[str, ...]
     names: tuple[str, ...]
     values: np.ndarray
-    gravity: Any  # station.core.error_terms.GravityModel | None
+    gravity: Any  # station.core.terms.error_model.GravityModel | None
     gear_ratios: tuple[float, ...] | None
     rms_residual_um: float | None
 
     def joint_delta(self, cfg: CellConfig) -> JointDelta:
         """``Δq(q)`` of the kept terms: drift and backlash at zero, as for any new joints (a session
         folds kept backlash into the joint zeros of ``params``, the side its own moves arrive from)."""
-        from station.core.error_terms import prediction_basis
+        from station.core.terms.error_model import prediction_basis
 
         def delta(q: np.ndarray) -> np.ndarray:
             basis, _ = prediction_basis(cfg.model, q, self.families, self.names, self.gravity, self.gear_ratios)
@@ -55,7 +55,7 @@ def stored_error_model(cfg: CellConfig, record: Mapping[str, Any] | None) -> Sto
     stations without ``gravity`` / ``gear_ratios`` takes the cell's."""
     if not record or not record.get("chosen") or not record.get("terms"):
         return None
-    from station.core.error_terms import GravityModel
+    from station.core.terms.error_model import GravityModel
 
     g = record.get("gravity")
     if g is None:

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from station.core.iso9283 import iso9283_pose
+from station.core.accuracy.iso9283 import iso9283_pose
 from station.errors import Outcome
 
 
@@ -130,7 +130,7 @@ class ReversalSummary:
 
 @dataclass(frozen=True)
 class ToolSummary:
-    """A configured tool's own correction (``[[tool]]``, :mod:`station.cell.correction.tools`).
+    """A configured tool's own correction (``[[tool]]``, :mod:`station.cell.correction.robot_tools`).
 
     ``tcp_mm_deg``: x, y, z [mm], roll, pitch, yaw [deg] in the flange frame; ``kind``: "table"
     (SCARA) or "targets" (compensated targets); ``flange_shift_um`` / ``flange_rotation_arcsec``:
@@ -176,7 +176,7 @@ class ToolSummary:
 
 @dataclass(frozen=True)
 class CompensationSummary:
-    """An articulated arm's correction: compensated targets, no table (``station/cell/results/pipeline.py``).
+    """An articulated arm's correction: compensated targets, no table (``station/cell/pipeline/calibration.py``).
 
     ``orientation_*_arcsec``: RMS orientation error of the verification before, after and with
     the oracle (simulation) [″]. ``joint_offsets_*``: what joint-zero offsets alone reach on the
@@ -245,7 +245,7 @@ class Failure:
     message: str
     hint: str = ""
     log_file: str | None = None  # traceback of an internal error
-    device: str = ""  # whose error: "controller", "probe" or "" (station/cell/results/outcomes.py, by type)
+    device: str = ""  # whose error: "controller", "probe" or "" (station/cell/pipeline/outcomes.py, by type)
     link: bool = False  # the fault is that device's link: no answer, connection lost
 
 

@@ -1,6 +1,6 @@
 """Typed station errors for a device that could not be used (outcome DEVICE_FAULT, exit 7).
 
-The drivers raise their own errors; :mod:`station.cell.results.outcomes` classifies them for a run.
+The drivers raise their own errors; :mod:`station.cell.pipeline.outcomes` classifies them for a run.
 A command that talks to a device outside a run (``station reset``) wraps them in
 :class:`DeviceUnavailable`, whose message says which device, what was and was not sent, and
 what to check, so the operator never sees a driver's internals or an "internal error".

@@ -24,7 +24,7 @@ import numpy as np
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import RecentringStats
-from station.core.transforms import invert, matrix_to_pose, pose_to_matrix
+from station.core.kinematics.transforms import invert, matrix_to_pose, pose_to_matrix
 
 __all__ = ["RESULT_KEY", "displacement", "head_as_commanded", "stored_recentring", "RecentringLog",
            "recentring_stats"]

@@ -31,9 +31,9 @@ from station.cell.run.events import DeviceSnapshot, Event, MeasurementRecorded, 
 from station.cell.run.recentring import RecentringLog, displacement
 from station.cell.run.runcontrol import RunControl
 from station.cell.run.stuck_probes import StuckLog, still_stuck, usable_head
-from station.core.kinematics import scara_ik
-from station.core.probe_geometry import ProbeHeadGeometry, default_probe_head
-from station.core.transforms import invert, matrix_to_pose, pose_to_matrix
+from station.core.kinematics.forward import scara_ik
+from station.core.kinematics.transforms import invert, matrix_to_pose, pose_to_matrix
+from station.core.probe.geometry import ProbeHeadGeometry, default_probe_head
 from station.errors import ConfigError, MeasurementFault
 
 # --- messages -------------------------------------------------------------------------------
@@ -152,7 +152,7 @@ def approach_and_read(cfg: CellConfig, q_target: np.ndarray, direction: int = 1,
     the controller's active table), as verification does. ``cycle`` (ISO 9283 repetitions)
     varies the approach a little from cycle to cycle, from the same side, as a real path would.
 
-    A head with more than six probes tests every touch (:mod:`station.core.probe_check`): when
+    A head with more than six probes tests every touch (:mod:`station.core.probe.check`): when
     the probes disagree the touch is measured again (``[plan] remeasure_attempts``); when the
     same probe still disagrees and the others fix the pose and agree, the pose is solved without
     it and the reading says so (``excluded``); otherwise the reading is invalid with the reason.
@@ -165,8 +165,8 @@ def approach_and_read(cfg: CellConfig, q_target: np.ndarray, direction: int = 1,
     it to later readings (:class:`StuckProbes`), which solve without it from the start while it
     keeps its frozen value (:mod:`station.cell.run.stuck_probes`).
     """
-    from station.core.probe_check import diagnose, residual_test
-    from station.core.probe_geometry import PoseSolveError, readings_from_pose, solve_pose
+    from station.core.probe.check import diagnose, residual_test
+    from station.core.probe.geometry import PoseSolveError, readings_from_pose, solve_pose
 
     full = head_of(cfg)
     M_nom = full.nominal_contact_pose()
@@ -351,8 +351,8 @@ def _recentre(cfg: CellConfig, q: np.ndarray, pose_cmd: np.ndarray | None, M: np
 def _pose_from_finite(geom: ProbeHeadGeometry, values: np.ndarray) -> tuple[Any, Any] | None:
     """The pose solution and its residual test from the probes that read, when they still fix
     the pose (else None)."""
-    from station.core.probe_check import fixes_pose, residual_test
-    from station.core.probe_geometry import PoseSolveError, solve_pose
+    from station.core.probe.check import fixes_pose, residual_test
+    from station.core.probe.geometry import PoseSolveError, solve_pose
 
     ok = np.isfinite(values)
     if ok.sum() < 6 or ok.all():
@@ -376,7 +376,7 @@ def _reading(q: np.ndarray, q_read: Any, raw: bytes, values: np.ndarray, status:
 
 
 def _fk_base(cfg: CellConfig, q) -> np.ndarray:
-    from station.core.kinematics import forward
+    from station.core.kinematics.forward import forward
 
     return forward(cfg.model, np.asarray(q)[None], setup=False)[0]
 

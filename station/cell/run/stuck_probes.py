@@ -1,7 +1,7 @@
 """Probes known to be stuck during a run (a redundant head only).
 
 A probe whose reading stays frozen while the other probes show the head moving is stuck
-(:func:`station.core.probe_check.frozen_probes`). Once a reading has shown that, the runner
+(:func:`station.core.probe.check.frozen_probes`). Once a reading has shown that, the runner
 keeps it here: later touches solve the pose without it from the start, so a stuck probe no
 longer fails every touch's residual test and gets every touch measured twice. A known-stuck
 probe that reads something else again moves again and is used again.
@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from station.cell.run.events import Event, Notice
-from station.core.probe_geometry import ProbeHeadGeometry
+from station.core.probe.geometry import ProbeHeadGeometry
 
 #: a known-stuck probe whose reading moves by more than this many reading σ moves again
 FREED_SIGMA = 4.0
@@ -37,7 +37,7 @@ def usable_head(geom: ProbeHeadGeometry, stuck: Mapping[int, float]) -> tuple[Pr
     """The head without its stuck probes and the mask of the probes kept; the whole head when
     none is stuck or when the rest would not fix the pose (then the stuck probe stays in and the
     residual test goes on catching it)."""
-    from station.core.probe_check import fixes_pose
+    from station.core.probe.check import fixes_pose
 
     keep = np.ones(geom.n_probes, dtype=bool)
     keep[list(stuck)] = False

@@ -26,7 +26,7 @@ from station.cell.records.rundb import RunDB
 from station.cell.run.events import Event, Notice, PhaseChanged
 from station.cell.run.recentring import head_as_commanded
 from station.cell.run.runner import Checkpoint, MoveJoints, Procedure, Runner, approach_and_read
-from station.core.transforms import invert
+from station.core.kinematics.transforms import invert
 
 
 def remaining_drift_um(positions_mm: Sequence[np.ndarray]) -> float:

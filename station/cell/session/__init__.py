@@ -1,4 +1,6 @@
-"""The calibrate session: one run from loading the cell to its summary, resumable.
+"""A cell's sessions: opening a cell and running a calibration on it from loading to its summary
+(``calibrate``, resumable), and a new cell's configuration derived from its own files
+(``new_cell``: ``station init``).
 
-May import results and everything below it in the cell; never the UI.
+May import pipeline, publication and everything below them in the cell; never the UI.
 """

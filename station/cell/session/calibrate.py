@@ -21,14 +21,15 @@ from typing import Any
 
 import numpy as np
 
-from drivers.controller import ControllerClaimed, ModbusController
+from drivers.controller import ModbusController
+from drivers.controller_errors import ControllerClaimed
 from drivers.controller_map import WordOrder
 from drivers.probe_head import ProbeHead as SerialProbeHead
 from station.cell.config.cell_config import CellConfig, load_config
+from station.cell.pipeline.calibration import Options, run_calibration
+from station.cell.pipeline.outcomes import classify, failure_summary, hint_for
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import RunSummary
-from station.cell.results.outcomes import classify, failure_summary, hint_for
-from station.cell.results.pipeline import Options, run_calibration
 from station.cell.run.device_check import controller_lines, probe_lines, wired_channels_invalid
 from station.cell.run.device_errors import ControllerHeld
 from station.cell.run.devices import CellController, ProbeHead
@@ -218,7 +219,7 @@ def run_calibration_session(request: CellRequest, emit: Callable[[Event], None],
     ``station.ui.simulated_cell.load_cell``), open its devices and run (or resume) a calibration.
 
     Returns the run's summary whatever happened; a failure is classified by type
-    (:func:`station.cell.results.outcomes.classify`), emitted as ``RunFailed`` and returned with its
+    (:func:`station.cell.pipeline.outcomes.classify`), emitted as ``RunFailed`` and returned with its
     hint. An internal error (a bug) writes its traceback to a log file the message names.
     """
     tracker = RunTracker(emit)
@@ -264,7 +265,7 @@ def publish_finished(db_path: str, run_id: int | None, cfg: CellConfig, emit: Ca
     """Queue a finished run for the fleet store and try to send it ([fleet] url or
     STATION_FLEET_URL; nothing when neither is set). Never raises: a run never depends on the network."""
     try:
-        from station.cell.records.fleet_outbox import publish_or_queue  # the fleet's code only where a run ends
+        from station.cell.publication.outbox import publish_or_queue  # the fleet's code only where a run ends
 
         line = publish_or_queue(db_path, run_id, cfg)
         if line is not None:

@@ -20,15 +20,16 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TextIO
 
-from station.cell.config.cell_config import TEMPLATE, load_config
+from station.cell.config.cell_config import load_config
+from station.cell.config.template import TEMPLATE
+from station.cell.pipeline.outcomes import failure_summary, write_traceback
 from station.cell.records.run_list import list_runs
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import RunSummary
-from station.cell.results.outcomes import failure_summary, write_traceback
 from station.cell.run import events as ev
 from station.cell.run.runcontrol import RunControl
 from station.cell.session.calibrate import CellRequest, check_cell, reset_controller, run_calibration_session
-from station.core.probe_check import check_head
+from station.core.probe.check import check_head
 from station.errors import ConfigError, Outcome, RunAborted, StationError
 from station.ui.cli.output import DISK_ERRNOS
 from station.ui.cli.progress_clock import ProgressClock, plan_seconds
@@ -146,7 +147,7 @@ def print_summary(s: RunSummary, stream: TextIO) -> None:
 
 def print_error_table(s: RunSummary, stream: TextIO) -> None:
     """Before / after / oracle as a table. AP and RP are ISO 9283's pose accuracy and
-    repeatability of one pose (station/core/iso9283.py); the summary holds the largest over
+    repeatability of one pose (station/core/accuracy/iso9283.py); the summary holds the largest over
     the held-out poses, so the columns say "worst pose" rather than a bound sign."""
     rows = [(key, v) for key in ("before", "after", "oracle") if (v := getattr(s, key)) is not None and v.n]
     if not rows:
@@ -171,7 +172,7 @@ def cmd_init(args: argparse.Namespace) -> int:
         p.write_text(TEMPLATE, encoding="utf-8")
         print(f"wrote a commented template to {p}; edit [body], [devices] and [robot].setup")
         return 0
-    from station.cell.results.new_cell import new_cell_text
+    from station.cell.session.new_cell import new_cell_text
 
     cell = new_cell_text(p, robot, head, body)
     p.write_text(cell.text, encoding="utf-8")
@@ -321,8 +322,8 @@ def _check_report_dir(path: Path) -> None:
 def cmd_plan(args: argparse.Namespace) -> int:
     """The plan preview: nothing moves."""
     from station.cell.correction.design import GRID_POINT
-    from station.cell.results.premotion import premotion_check
-    from station.cell.results.preview import describe, preview
+    from station.cell.pipeline.premotion import premotion_check
+    from station.cell.pipeline.preview import describe, preview
 
     cfg = load_config(args.config)
     design = premotion_check(cfg).design  # what 'calibrate' refuses before moving, refused here the same way (exit 2)

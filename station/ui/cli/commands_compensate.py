@@ -136,7 +136,7 @@ def _out_header(model) -> list[str]:
 
 def _out_rows(model, res, n: int, jmap) -> list[list[str]]:
     """The output rows, the joints as the controller counts them (the robot file's joint map inverted)."""
-    from station.core.transforms import matrix_to_pose
+    from station.core.kinematics.transforms import matrix_to_pose
 
     rows = []
     ok = res.ok
@@ -157,8 +157,8 @@ def _out_rows(model, res, n: int, jmap) -> list[list[str]]:
 
 
 def cmd_compensate(args) -> int:
-    from station.core.compensation import compensated_targets
-    from station.core.transforms import pose_to_matrix
+    from station.core.kinematics.compensation import compensated_targets
+    from station.core.kinematics.transforms import pose_to_matrix
     from station.io.robot_files import load_mapped_robot
 
     model_chain, robot_chain = _chains(args)
@@ -174,7 +174,7 @@ def cmd_compensate(args) -> int:
 
     terms = stored_terms(args.model)  # [error_terms] (issue 30): the joints stand at q + Δq(q)
     if terms is not None and terms.names:
-        from station.core.term_compensation import compensated_targets_with_terms
+        from station.core.terms.compensation import compensated_targets_with_terms
 
         res = compensated_targets_with_terms(nominal, model.nominal,
                                              joint_delta_of(model, terms, gravity_of(args.model, model),
@@ -229,9 +229,9 @@ def _joint_offsets(nominal, identified, res, jmap) -> dict:
     identified model is the robot)."""
     import dataclasses
 
-    from station.core.joint_offsets import fit_joint_offsets, offset_accuracy
-    from station.core.kinematics import forward
-    from station.core.poses import spread_joints
+    from station.core.kinematics.forward import forward
+    from station.core.kinematics.joint_offsets import fit_joint_offsets, offset_accuracy
+    from station.core.kinematics.poses import spread_joints
 
     q = spread_joints(nominal, 500, np.random.default_rng(0))
     fit = fit_joint_offsets(nominal, identified, q)

@@ -12,7 +12,7 @@ import sys
 
 from station.cell.config.cell_config import load_config
 from station.cell.conformance.suite import run_conformance
-from station.cell.results.outcomes import failure_summary, hint_for
+from station.cell.pipeline.outcomes import failure_summary, hint_for
 from station.errors import StationError
 
 

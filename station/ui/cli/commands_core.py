@@ -73,10 +73,10 @@ def _check_analyze_args(args) -> None:
 
 
 def cmd_analyze(args) -> int:
-    from station.core.distance_pairs import make_pairs
-    from station.core.identifiability import analyze
-    from station.core.measurements import synthetic_set
-    from station.core.poses import spread_joints
+    from station.core.identification.identifiability import analyze
+    from station.core.kinematics.poses import spread_joints
+    from station.core.measurement.distance_pairs import make_pairs
+    from station.core.measurement.measurements import synthetic_set
     from station.io.datafile import joints_from_table, read_table
 
     _check_analyze_args(args)
@@ -133,8 +133,8 @@ def _param_json(name: str, value: float, sigma: float | None = None) -> dict:
 
 def _measurement_set(args, model, kind, q, measured):
     """The MeasurementSet of the chosen objective from a data file's rows."""
-    from station.core.distance_pairs import distances, make_pairs
-    from station.core.measurements import MeasurementSet
+    from station.core.measurement.distance_pairs import distances, make_pairs
+    from station.core.measurement.measurements import MeasurementSet
 
     objective = args.objective or kind
     sp, sa = args.sigma_position * 1e-3, args.sigma_angle * ARCSEC
@@ -218,8 +218,8 @@ def _tool_unknown(args) -> tuple[bool, list[str]]:
 
 
 def cmd_identify(args) -> int:
-    from station.core.identification import MAX_EVALUATIONS, identify, require_converged
-    from station.core.model import robot_to_toml
+    from station.core.identification.identify import MAX_EVALUATIONS, identify, require_converged
+    from station.core.kinematics.model import robot_to_toml
     from station.io.datafile import read_measurement_file
     from station.io.robot_files import joint_map_toml
 
@@ -230,7 +230,7 @@ def cmd_identify(args) -> int:
     tool_unknown, tool_note = _tool_unknown(args)
     start = None
     if tool_unknown and objective == "distance":  # distances have no frame: the tool point from the points
-        from station.core.tool_frame import fit_marker_offset
+        from station.core.kinematics.tool_frame import fit_marker_offset
 
         start = np.array(model.nominal)
         start[-6:-3] = fit_marker_offset(model, q, measured[:, :3, 3] if kind == "pose" else measured).offset_mm
@@ -300,8 +300,8 @@ def cmd_identify(args) -> int:
 def _errors(model, q, kind, measured, setup_pose=None, delta_q=None):
     """Per-row position errors [mm] (n,) and orientation errors [rad] (n,) or None; ``delta_q``: the
     model file's error terms, ``q ↦ Δq(q)`` (the joints stand at q + Δq; issue 30)."""
-    from station.core.kinematics import forward
-    from station.core.transforms import pose_error
+    from station.core.kinematics.forward import forward
+    from station.core.kinematics.transforms import pose_error
 
     params = None
     if setup_pose is not None:
@@ -327,7 +327,7 @@ def _summary(e_pos, e_ang) -> dict:
 
 def _iso_repeats(q, e_pos, measured_pos) -> list[dict]:
     """ISO 9283 AP and RP for poses measured more than once (rows with equal joints)."""
-    from station.core.iso9283 import iso9283_pose
+    from station.core.accuracy.iso9283 import iso9283_pose
 
     _, inv, counts = np.unique(np.round(q, 9), axis=0, return_inverse=True, return_counts=True)
     inv = np.asarray(inv).reshape(-1)
@@ -366,7 +366,7 @@ def _calibration_frame(args, model):
 
 def _check_own_setup(model, q, pos, e_pos, kind: str) -> None:
     """Refuse a model whose set-up does not place it in the data's frame (see SETUP_UNKNOWN_FACTOR)."""
-    from station.core.registration import rigid_residual_mm
+    from station.core.identification.registration import rigid_residual_mm
 
     own = float(np.sqrt(np.mean(np.sum(e_pos**2, axis=1))))
     rigid = rigid_residual_mm(model, q, pos)
@@ -379,7 +379,7 @@ def _check_own_setup(model, q, pos, e_pos, kind: str) -> None:
 
 
 def cmd_validate(args) -> int:
-    from station.core.registration import register
+    from station.core.identification.registration import register
     from station.io.datafile import read_measurement_file
 
     model, jmap = _robot(args, args.model)
@@ -437,9 +437,9 @@ def cmd_validate(args) -> int:
             # spread there would place it. Not the model's R: the identified set-up is split between
             # R and what merges with it (A1.x, A1.y, A2.yaw), so R alone can miss by metres; not the
             # held-out rows, nor these joints: a fit to them would hide part of the nominal's error.
-            from station.core.kinematics import forward
-            from station.core.poses import spread_joints
-            from station.core.registration import rigid_setup
+            from station.core.identification.registration import rigid_setup
+            from station.core.kinematics.forward import forward
+            from station.core.kinematics.poses import spread_joints
 
             q_spread = spread_joints(model, NOMINAL_PLACEMENT_POSES, np.random.default_rng(0))
             nominal_setup = rigid_setup(nominal, nominal_map.to_model(jmap.to_controller(q_spread)),
@@ -532,7 +532,7 @@ def cmd_export_model(args) -> int:
 # --- predict --------------------------------------------------------------------------------
 
 def cmd_predict(args) -> int:
-    from station.core.transforms import matrix_to_pose
+    from station.core.kinematics.transforms import matrix_to_pose
     from station.io.datafile import joints_from_table, read_table
     from station.ui.cli.commands_model import forward_with_terms
 

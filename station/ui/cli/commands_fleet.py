@@ -41,14 +41,14 @@ def _url(args: argparse.Namespace) -> str:
 
 
 def cmd_sync(args: argparse.Namespace) -> int:
-    from station.cell.records.fleet_outbox import pending, sync
+    from station.cell.publication.outbox import pending, sync
 
     if not Path(args.db).is_file():
         raise ConfigError(f"{args.db}: no such run database")
     url = _url(args)
     backfilled, problems = 0, list[str]()
     if args.all:
-        from station.cell.records.fleet_outbox import enqueue_finished
+        from station.cell.publication.outbox import enqueue_finished
 
         backfilled, problems = enqueue_finished(args.db)
         for line in problems:
@@ -150,7 +150,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
 def fleet_report_written(db: str, run_id: int, report: str) -> str | None:
     """After ``calibrate --report``: attach the report to the run's publication and send it now
     (queued when the store is unreachable); None when the run is not queued for a fleet store."""
-    from station.cell.records.fleet_outbox import attach_report, sync
+    from station.cell.publication.outbox import attach_report, sync
     from station.fleet.settings import fleet_url
 
     try:

@@ -23,7 +23,7 @@ def model_names(text: str | None) -> tuple[str, ...]:
 
 
 def identify_terms(args, model, data, res, mf=None, jmap=None):
-    """The :class:`~station.core.model_selection.Selection` that ``--model`` asks for, or None for the
+    """The :class:`~station.core.terms.selection.Selection` that ``--model`` asks for, or None for the
     geometric model (nothing more is computed). ``mf``: the measurement file, whose ``time`` and
     ``approach`` columns (where given) time the drift and give the backlash its sides (the approach
     signs turned by the joint map's signs)."""
@@ -35,8 +35,8 @@ def identify_terms(args, model, data, res, mf=None, jmap=None):
 
         raise ConfigError(f"--model {'+'.join(names)} fits the error terms by least squares; with --loss "
                           f"{args.loss} give --model geometric (the robust fit has no error terms yet)")
-    from station.core.error_terms import GravityModel, TermRows, TermSpec
-    from station.core.model_selection import select_model
+    from station.core.terms.error_model import GravityModel, TermRows, TermSpec
+    from station.core.terms.selection import select_model
 
     rows = None
     if mf is not None and (mf.time is not None or mf.approach is not None or mf.payload_kg is not None):
@@ -105,8 +105,8 @@ def terms_toml(sel, robot=None, model=None, base=None, tip=None, data=None, geom
     if data is not None and model is not None and geo is not None:
         # what a format without the terms loses where they were fitted: the full model against the
         # geometric fit of the same data (the terms' raw effect is mostly absorbed by the geometry)
-        from station.core.error_terms import apply_terms
-        from station.core.kinematics import forward
+        from station.core.kinematics.forward import forward
+        from station.core.terms.error_model import apply_terms
 
         full = apply_terms(model, data.joints, fit.params, fit.basis, fit.values)[:, :3, 3]
         d = full - forward(model, data.joints, geo)[:, :3, 3]
@@ -125,7 +125,7 @@ def gear_ratios_of(path, model) -> tuple[float, ...] | None:
 
 
 def gravity_of(path, model, base=None, tip=None):
-    """The robot file's link masses (:class:`~station.core.error_terms.GravityModel`): a TOML file's
+    """The robot file's link masses (:class:`~station.core.terms.error_model.GravityModel`): a TOML file's
     ``[gravity]``, a URDF's ``<inertial>`` of the chain ``base`` … ``tip``; None without them."""
     if path is None:
         return None
@@ -148,8 +148,8 @@ def stored_terms(path) -> StoredTerms | None:
 def forward_with_terms(model, path, q, setup: bool) -> tuple[np.ndarray, list[str], StoredTerms | None]:
     """World←tool ``(n, 4, 4)`` of the robot file ``path``'s model at joints ``q`` with its stored
     error terms applied, the notes on what was left out, and the terms (None: the file has none)."""
-    from station.core.error_terms import apply_terms, prediction_basis
-    from station.core.kinematics import forward
+    from station.core.kinematics.forward import forward
+    from station.core.terms.error_model import apply_terms, prediction_basis
 
     terms = stored_terms(path)
     if terms is None or not terms.names:
@@ -170,9 +170,9 @@ def lost_in_format(model, terms: StoredTerms | None, fmt: str, n_poses: int = 20
     position at ``n_poses`` poses spread over the workspace (seeded), or None when nothing is lost."""
     if terms is None or not terms.names or fmt == "toml":
         return None
-    from station.core.error_terms import apply_terms, prediction_basis
-    from station.core.kinematics import forward
-    from station.core.poses import spread_joints
+    from station.core.kinematics.forward import forward
+    from station.core.kinematics.poses import spread_joints
+    from station.core.terms.error_model import apply_terms, prediction_basis
 
     q = spread_joints(model, n_poses, np.random.default_rng(30))
     basis, _ = prediction_basis(model, q, terms.families, terms.names, gravity, ratios)
@@ -189,7 +189,7 @@ def lost_in_format(model, terms: StoredTerms | None, fmt: str, n_poses: int = 20
 
 def joint_delta_of(model, terms: StoredTerms, gravity=None, ratios=None):
     """``q ↦ Δq(q)`` ``(n, g)`` [rad, mm] of the stored terms (drift and backlash at zero)."""
-    from station.core.error_terms import prediction_basis
+    from station.core.terms.error_model import prediction_basis
 
     values = np.asarray(terms.values, dtype=float)
 

@@ -1,4 +1,4 @@
-"""``station study``: the chapter's §7.5 simulation studies (``station.core.study``), or with
+"""``station study``: the chapter's §7.5 simulation studies (``station.core.accuracy.studies``), or with
 ``--model`` the error terms' σ-versus-scatter study (issue 30; ``docs/studies.md``)."""
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ def _terms_study(args, model, n_sets: int) -> list | None:
     names = model_names(getattr(args, "error_model", None))
     if names == ("geometric",):
         return None
-    from station.core.model_selection import expand_families
-    from station.core.study import terms_study
+    from station.core.accuracy.studies import terms_study
+    from station.core.terms.selection import expand_families
 
     if any(n in ("drift", "backlash") for n in names):
         raise ConfigError("--model: drift and backlash describe a measurement run, not the robot; the study takes "
@@ -28,7 +28,7 @@ def _terms_study(args, model, n_sets: int) -> list | None:
 
 
 def cmd_study(args) -> int:
-    from station.core.study import chapter_studies
+    from station.core.accuracy.studies import chapter_studies
 
     model = _robot(args, args.robot)[0]  # random joints of the model: a joint map does not change them
     n_sets = min(args.sets, 200) if getattr(args, "quick", False) else args.sets

@@ -403,7 +403,7 @@ def _main(words: list[str]) -> int:
         print(f"station: error: {exc}", file=sys.stderr)
         if getattr(args, "json", False):  # a script still gets one JSON object with the reason
             # the mapping knows the drivers' errors: imported only when there is an error to map
-            from station.cell.results.outcomes import failure_summary
+            from station.cell.pipeline.outcomes import failure_summary
 
             print(json.dumps(failure_summary(exc, run_id=None, log_dir=".", db=getattr(args, "db", None)).to_json()))
         return exc.exit_code
@@ -429,7 +429,7 @@ def _main(words: list[str]) -> int:
 def _config_error_json(message: str, args: argparse.Namespace) -> int:
     """CONFIG_ERROR's exit code, and with ``--json`` its one JSON object (a file the user named)."""
     if getattr(args, "json", False):
-        from station.cell.results.outcomes import failure_summary
+        from station.cell.pipeline.outcomes import failure_summary
 
         print(json.dumps(failure_summary(ConfigError(message), run_id=None, log_dir=".",
                                          db=getattr(args, "db", None)).to_json()))
@@ -439,7 +439,7 @@ def _config_error_json(message: str, args: argparse.Namespace) -> int:
 def _usage_json(message: str, words: Sequence[str] = ()) -> dict:
     """The one JSON object of a command line argparse refused; ``db``: the ``--db`` given, as in
     every other object (None when none was)."""
-    from station.cell.results.outcomes import failure_summary
+    from station.cell.pipeline.outcomes import failure_summary
 
     db = next((w.split("=", 1)[1] for w in words if w.startswith("--db=")), None)
     if db is None and "--db" in words[:-1]:
@@ -450,7 +450,7 @@ def _usage_json(message: str, words: Sequence[str] = ()) -> dict:
 
 
 def _internal_error(exc: Exception, args: argparse.Namespace) -> int:
-    from station.cell.results.outcomes import failure_summary
+    from station.cell.pipeline.outcomes import failure_summary
 
     summary = failure_summary(exc, run_id=None, log_dir=".")
     failure = summary.failure

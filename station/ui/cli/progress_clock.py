@@ -27,8 +27,8 @@ def plan_seconds(db_path: str | Path, run_id: int, time_scale: float | None) -> 
     if time_scale is not None and time_scale <= 0:
         return None
     try:
+        from station.cell.pipeline.preview import motion_seconds
         from station.cell.records.stored_config import stored_config, stored_plan
-        from station.cell.results.preview import motion_seconds
 
         with RunDB(db_path) as db:
             cfg, steps = stored_config(db, run_id), stored_plan(db, run_id)

@@ -29,11 +29,11 @@ from typing import Any
 import numpy as np
 from asyncua import Server, ua
 
+from station.cell.pipeline.outcomes import failure_summary
 from station.cell.recheck.measure import RecheckOptions
 from station.cell.recheck.session import run_recheck_session
 from station.cell.records.run_list import RunInfo, list_runs
 from station.cell.records.rundb import RunDB
-from station.cell.results.outcomes import failure_summary
 from station.cell.run.events import (
     Event,
     Notice,

@@ -8,7 +8,7 @@ from collections.abc import Sequence
 from station.ui.report import signoff as so
 from station.ui.report import tables as t
 from station.ui.report.before_basis import before_basis
-from station.ui.report.data import HTML_NAME, ReportData
+from station.ui.report.contents import HTML_NAME, ReportData
 
 
 def _cell(v: object) -> str:

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from station.core.units import ARCSEC, UM
-from station.ui.report.data import ReportData
+from station.ui.report.contents import ReportData
 from station.ui.report.tables import (
     ACCURACY_SCOPE,
     elbow_text,

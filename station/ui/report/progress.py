@@ -83,7 +83,7 @@ def run_progress(db: RunDB, run_id: int, steps: Sequence[PlannedStep], summary: 
 
 
 def partial_report_data(*, robot_name: str, run_id: int, reason: str, **fields: Any) -> dict[str, Any]:
-    """The :class:`~station.ui.report.data.ReportData` fields of a run with nothing identified:
+    """The :class:`~station.ui.report.contents.ReportData` fields of a run with nothing identified:
     no parameters, residuals or predicted accuracy; ``reason`` (why) goes into its notes."""
     empty = np.zeros(0)
     notes = (*fields.pop("notes", ()), f"nothing identified: {reason}")
@@ -97,7 +97,7 @@ def bare_report_for_run(db_path: str, run_id: int, out_dir: Any, why: str) -> An
     stored outcome and configuration, and how far it got. Returns the HTML path."""
     from pathlib import Path
 
-    from station.ui.report.data import ReportData
+    from station.ui.report.contents import ReportData
     from station.ui.report.writer import write_report
 
     with RunDB(db_path) as db:

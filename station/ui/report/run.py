@@ -18,7 +18,9 @@ import numpy as np
 
 from station.cell.config.cell_config import CellConfig
 from station.cell.correction.design import grid_from_json
-from station.cell.plan.common import head_targets_world
+from station.cell.pipeline.calibration import Options
+from station.cell.pipeline.results import build_table_for, identify_run, verification_errors
+from station.cell.plan.assembly import head_targets_world
 from station.cell.plan.measurement_plan import build_plan
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.run_list import RunInfo, list_runs
@@ -27,17 +29,15 @@ from station.cell.records.rundb import RunDB
 from station.cell.records.stored_config import stored_config, stored_plan
 from station.cell.records.stored_error_model import stored_error_model
 from station.cell.records.summary import RunSummary
-from station.cell.results.pipeline import Options
-from station.cell.results.pipeline_results import build_table_for, identify_run, verification_errors
 from station.cell.run.recentring import stored_recentring
-from station.core.identification import IdentificationResult
-from station.core.iso9283 import iso9283_pose
-from station.core.kinematics import forward, scara_ik
-from station.core.transforms import pose_to_matrix
-from station.core.uncertainty import pose_accuracy
+from station.core.accuracy.iso9283 import iso9283_pose
+from station.core.identification.identify import IdentificationResult
+from station.core.kinematics.forward import forward, scara_ik
+from station.core.kinematics.transforms import pose_to_matrix
+from station.core.measurement.uncertainty import pose_accuracy
 from station.core.units import ARCSEC, UM
 from station.errors import ConfigError, IdentificationError, StationError
-from station.ui.report.data import Acceptance, IsoPose, ReportData, TestConditions, Traceability, TrendRun
+from station.ui.report.contents import Acceptance, IsoPose, ReportData, TestConditions, Traceability, TrendRun
 from station.ui.report.progress import document_id, partial_report_data, run_progress
 from station.ui.report.provenance import software_rows
 from station.ui.report.writer import write_report

@@ -12,7 +12,7 @@ import math
 import re
 from collections.abc import Iterable
 
-from station.ui.report.data import IsoPose, ReportData
+from station.ui.report.contents import IsoPose, ReportData
 from station.ui.report.tables import elbow_text, fmt
 
 PASS, FAIL, NOT_JUDGED = "PASS", "FAIL", "not judged"

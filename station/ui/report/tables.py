@@ -13,7 +13,7 @@ import numpy as np
 
 from station.core.units import ARCSEC, DEG, UM
 from station.ui.report.before_basis import before_basis_line
-from station.ui.report.data import ReportData
+from station.ui.report.contents import ReportData
 
 #: |r| above this marks a strong correlation
 STRONG_CORRELATION = 0.9
@@ -476,7 +476,7 @@ def trend_line(d: ReportData) -> str:
             "calibration, beside the tolerance it was judged by.")
 
 
-# -- tools after the head ([[tool]], station/cell/correction/tools.py) ----------------------------------------
+# -- tools after the head ([[tool]], station/cell/correction/robot_tools.py) ----------------------------------------
 
 TOOL_HEAD = ("tool", "TCP x, y, z mm", "correction", "bound µm", "flange shift µm", "flange rotation ″",
              "head's correction, predicted RMS µm", "max µm")

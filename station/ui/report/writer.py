@@ -2,11 +2,11 @@
 data URIs, printable) and ``report.md`` beside it (the same tables as text, for diffs).
 
 The caller (:mod:`station.ui.report.run` for a stored run) fills a :class:`ReportData`
-(:mod:`~station.ui.report.data`); the other ``report_*`` modules only format it, in a tree with
+(:mod:`~station.ui.report.contents`); the other ``report_*`` modules only format it, in a tree with
 this module at its top: :mod:`~station.ui.report.tables` (rows shared by both files) and
 :mod:`~station.ui.report.plots` read the data, :mod:`~station.ui.report.html_page` and
 :mod:`~station.ui.report.markdown_page` read those, and this module writes the files. Inputs use the
-station's internal units (mm and rad, see :mod:`station.core.model`) except the verification
+station's internal units (mm and rad, see :mod:`station.core.kinematics.model`) except the verification
 errors, which are µm already; the report shows µm and arc seconds.
 
 Plots are drawn with matplotlib's Agg canvas on explicit ``Figure`` objects (no pyplot, no
@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from station.ui.report.data import HTML_NAME, MARKDOWN_NAME, ReportData, TrendRun
+from station.ui.report.contents import HTML_NAME, MARKDOWN_NAME, ReportData, TrendRun
 from station.ui.report.html_page import render_html
 from station.ui.report.markdown_page import render_markdown
 

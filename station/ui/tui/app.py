@@ -17,7 +17,7 @@ lets one) is classified by type like the session does; an internal error writes 
 to a log file the UI names.  A run that stopped before its end is continued with one key (c) where
 continuing it as it is can succeed; every end has one "Next: …" line, chosen by the kind of failure
 and told for the cell's kind of devices (:mod:`station.ui.tui.result_panel`); the end is shown by
-:class:`~station.ui.tui.ending.RunEnd`.
+:class:`~station.ui.tui.run_end.RunEnd`.
 
     app = StationApp(start_run, title="SR 800 calibration")
     app.run()
@@ -41,9 +41,9 @@ from textual.content import Content
 from textual.widgets import Button, DataTable, Footer, Header, ProgressBar, Static
 from textual.worker import Worker, WorkerState
 
+from station.cell.pipeline.outcomes import classify, failure_summary
 from station.cell.records.run_list import RunInfo
 from station.cell.records.summary import Failure, RunSummary
-from station.cell.results.outcomes import classify, failure_summary
 from station.cell.run.events import (
     DeviceSnapshot,
     Event,
@@ -59,9 +59,9 @@ from station.cell.run.events import (
 )
 from station.cell.run.runcontrol import RunControl
 from station.ui.report.writer import ReportData
-from station.ui.tui.ending import RunEnd
+from station.ui.tui.actions import EventMessage, QuestionMessage
 from station.ui.tui.result_panel import CONTINUE_KEY, CellContext, can_continue, summary_markup
-from station.ui.tui.side import EventMessage, QuestionMessage
+from station.ui.tui.run_end import RunEnd
 from station.ui.tui.widgets import (
     ABORTED,
     ABORTING,
@@ -531,7 +531,7 @@ class StationApp(RunEnd):
         if key in table.rows:
             table.move_cursor(row=table.get_row_index(key), animate=False)
 
-    # ------------------------------------------------------------------ end of run (and station.ui.tui.ending)
+    # ------------------------------------------------------------------ end of run (and station.ui.tui.run_end)
     def on_worker_state_changed(self, event: Worker.StateChanged) -> None:
         if event.worker is not self.worker:
             return

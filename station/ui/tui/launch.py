@@ -31,7 +31,7 @@ from station.ui.simulated_cell import load_cell
 from station.ui.tui.app import StationApp
 from station.ui.tui.result_panel import CellContext, device_kind
 
-__all__ = ["launch", "make_app", "recheck_run_summary", "report_dir", "cell_context"]  # report_dir: re-exported
+__all__ = ["launch", "make_app", "recheck_run_summary", "cell_context"]
 
 
 def recheck_run_summary(s: RecheckSummary) -> RunSummary:

@@ -8,7 +8,7 @@ The resume the hint asks for is one key (``c``); where a command line is shown i
 one, with ``--simulated``, ``--db`` and the configuration as this UI was started with.
 
 Knows the drivers' errors only as the cell layer classified them, by type (``Failure.device`` and
-``Failure.link``, :mod:`station.cell.results.outcomes`): the UI imports no driver.
+``Failure.link``, :mod:`station.cell.pipeline.outcomes`): the UI imports no driver.
 
 Every outcome gets one "Next: …" line (:func:`next_step`), SUCCESS included. Its advice is chosen by
 the kind of failure (:func:`failure_kind`: the failure's type and the phase the run stopped in), not

@@ -1,0 +1,392 @@
+"""Calibrate → correct → upload → verify, end to end, for a nightly script or an operator.
+
+:func:`run_calibration` is the one pipeline; ``station calibrate`` and the terminal UI both reach
+it through :func:`station.cell.session.calibrate.run_calibration_session`. It is resumable: the plan and
+every measurement live in the run database, so a run that was interrupted (crash, kill, power
+cut) continues at the next missing step, and the results (identification, table) are recomputed
+from what is on disk.
+
+Verification measures held-out poses with Cartesian moves: before correction (no table active),
+after (the station's table active) and — in simulation — with a table computed from the
+simulator's true parameters (the oracle), each over several cycles for ISO 9283 AP and RP. An
+articulated arm takes compensated targets instead of a table (:mod:`station.cell.pipeline.articulated`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from station.cell.config.cell_config import CellConfig
+from station.cell.correction.design import grid_to_json, identified_table, worst_cell
+from station.cell.correction.robot_tools import run_tools
+from station.cell.correction.table_keeping import finish_tables, restore_after_failure, table_at_start
+from station.cell.correction.upload import verified_upload
+from station.cell.pipeline.articulated import articulated_correction, articulated_targets
+from station.cell.pipeline.premotion import Premotion, premotion_check
+from station.cell.pipeline.results import (
+    build_table_for,
+    grid_for,
+    identify_run,
+    oracle_params,
+    reversal_error,
+    verification_errors,
+    verified_outcome,
+)
+from station.cell.plan.measurement_plan import head_targets_world, joints_for
+from station.cell.plan.steps import PlannedStep, StepKind
+from station.cell.records.fingerprint import check_same_cell, fingerprint, resume_note
+from station.cell.records.rundb import RunDB
+from station.cell.records.stored_config import POSTPROCESSED_CONFIG, config_source, stored_config, stored_plan
+from station.cell.records.summary import (
+    CorrectionSummary,
+    ErrorStats,
+    IdentificationSummary,
+    ParameterEstimate,
+    RunSummary,
+    UploadSummary,
+)
+from station.cell.run.devices import CellController, ProbeHead
+from station.cell.run.events import Event, Notice, PhaseChanged, RunFinished, RunStarted
+from station.cell.run.questions import Confirm, KeepCorrection, UploadProposal
+from station.cell.run.recentring import recentring_stats, stored_recentring
+from station.cell.run.runcontrol import RunControl
+from station.cell.run.runner import Procedure, Runner, approach_and_read
+from station.core.identification.identify import BODY_NOTE_PREFIX, IdentificationResult
+from station.core.kinematics.transforms import invert, matrix_to_pose, pose_to_matrix
+from station.errors import ConfigError, IdentificationError, Outcome, RunAborted
+
+# The figures of a stored run (pipeline_results), its configuration and plan (stored_config) and
+# the articulated arm's step (pipeline_articulated) live apart; their names stay importable here.
+__all__ = ["Options", "run_calibration", "MIN_VALID_FRACTION", "MAX_RMS_NORMALIZED", "MAX_OUTLIER_FRACTION",
+           "min_valid_identification", "check_identification", "identify_run", "reversal_error",
+           "verification_errors", "oracle_params", "grid_for", "build_table_for", "articulated_targets",
+           "config_source", "stored_config", "stored_plan"]
+
+#: share of the planned identification poses that must be valid before anything is identified
+MIN_VALID_FRACTION = 0.8
+#: a fit whose normalised residual RMS exceeds this does not describe the data (σ settings, a
+#: bad touch, a wrong robot file): it is refused, never turned into a correction
+MAX_RMS_NORMALIZED = 3.0
+#: share of residual rows flagged as outliers above which the data is not trusted
+MAX_OUTLIER_FRACTION = 0.1
+
+
+def min_valid_identification(n_planned: int) -> int:
+    """Valid identification poses a run needs (the plan preview states it)."""
+    return max(5, math.ceil(MIN_VALID_FRACTION * n_planned))
+
+
+def check_identification(res: IdentificationResult) -> None:
+    """Refuse an identification that must not become a correction (a model that fits garbage)."""
+    if not res.converged:
+        raise IdentificationError(f"the identification did not converge ({res.message}); no correction "
+                                  f"was made. Check the robot file and the measurements' warnings")
+    if not np.isfinite(res.rms_normalized) or res.rms_normalized > MAX_RMS_NORMALIZED:
+        raise IdentificationError(
+            f"the identified model leaves residuals {res.rms_normalized:.1f}× the expected measurement "
+            f"noise (at most {MAX_RMS_NORMALIZED:g}× is accepted); the model does not describe the data. "
+            f"Check [identification] sigma_*, the robot file, and the probes, then resume or re-run")
+    n_rows = max(int(res.residuals.shape[0]), 1)
+    if len(res.outliers) > MAX_OUTLIER_FRACTION * n_rows:
+        raise IdentificationError(
+            f"{len(res.outliers)} of {n_rows} measurements are outliers (more than {MAX_OUTLIER_FRACTION:.0%}); "
+            f"the data is not trusted. Check the probe head and the body for debris, then re-run")
+
+
+@dataclass(frozen=True)
+class Options:
+    upload: bool = True
+    oracle_truth: Any = None  # simulators.cell.CellTruth in simulation
+    confirm: Confirm | None = None  # the operator's yes/no before the upload and to keep it
+    min_gain: float = 20.0  # required RMS improvement (before / after)
+
+
+def _proc_for(cfg: CellConfig, R_world_base: np.ndarray | None) -> Callable[[PlannedStep], Procedure]:
+    heads = head_targets_world(cfg)
+
+    def make(st: PlannedStep) -> Procedure:
+        if not st.kind.is_verification:
+            return approach_and_read(cfg, st.q, st.direction, cycle=st.cycle)
+        # Verification: a Cartesian target in the base frame, as a user of the robot gives it.
+        assert R_world_base is not None, "verification needs the identified set-up"
+        T_base = invert(pose_to_matrix(R_world_base)) @ heads[st.point]
+        q_nom = joints_for(cfg, heads[st.point], st.elbow, R_world_base)[0]
+        return approach_and_read(cfg, q_nom, 1, cartesian=(matrix_to_pose(T_base), st.elbow), cycle=st.cycle)
+
+    return make
+
+
+def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellController, db: RunDB,
+                    emit: Callable[[Event], None], control: RunControl | None = None,
+                    options: Options = Options(), resume_run: int | None = None,
+                    seed: int | None = None, devices_info: dict[str, str] | None = None) -> RunSummary:
+    """Measure → identify → correct → upload → verify. Returns the run's summary; raises the
+    typed error of whatever stopped it (everything measured so far is on disk)."""
+    control = control or RunControl()
+    pre = premotion_check(cfg)  # tools, plan, correction: what 'station plan' checks, before anything moves
+    runner = Runner(cfg, probe, controller, emit, control)
+    with_oracle = options.oracle_truth is not None and options.upload
+    reused: tuple[str, ...] = ()  # a resume: the post-processing sections changed since
+    if resume_run is None:
+        emit(PhaseChanged("plan"))
+        steps = pre.plan.run_steps(cfg.plan.verification_cycles, with_oracle, options.upload)
+        run_id = db.create_run(cfg.source_text, [st.to_record() for st in steps], seed=seed)
+        db.save_result(run_id, "config_source", config_source(cfg))
+        db.save_result(run_id, "fingerprint", fingerprint(cfg))
+        resumed = 0
+    else:
+        run_id = resume_run
+        stored_fp = db.load_result(run_id, "fingerprint", default=None)
+        if stored_fp is None:  # a run from before fingerprints: compare with its snapshot
+            stored_fp = fingerprint(stored_config(db, run_id))
+        steps = stored_plan(db, run_id)  # the plan first: a damaged plan is named as such (exit 5)
+        reused = check_same_cell(stored_fp, fingerprint(cfg), run_id, db.measurements(run_id))
+        if reused:  # the measurements are kept; the table, the figures and the report follow this text
+            db.save_result(run_id, POSTPROCESSED_CONFIG, cfg.source_text)
+            db.save_result(run_id, "fingerprint", fingerprint(cfg))
+        db.measurements(run_id)  # what is on disk must belong to that plan (record_checks.py), else exit 5
+        planned_upload = any(st.kind is StepKind.VERIFY_AFTER for st in steps)
+        if planned_upload != options.upload:
+            raise ConfigError(f"run {run_id} was planned {'with' if planned_upload else 'without'} the upload; "
+                              f"resume it {'without' if planned_upload else 'with'} --no-upload as it started, "
+                              f"or start a new run")
+        resumed = len(db.completed_steps(run_id, ok_only=True))
+    if devices_info:  # the devices of the latest attempt, for the report
+        db.save_result(run_id, "devices", devices_info)
+    emit(RunStarted(run_id, len(steps), resumed))
+    design = None if pre.design is None else f"correction table designed: {pre.design.describe()}"
+    for note in (resume_note(reused), design):
+        if note:
+            emit(Notice("info", note))
+    db.log(run_id, "info", f"run {'resumed' if resume_run else 'started'}: {len(steps)} steps, {resumed} on disk")
+    summary = RunSummary(outcome=Outcome.SUCCESS, run_id=run_id, cell=cfg.name, robot=cfg.model.name)
+    start = table_at_start(controller, db, run_id, emit)  # before anything changes the controller's tables
+    try:
+        summary = _pipeline(cfg, runner, db, run_id, steps, emit, options, with_oracle, summary, pre)
+        summary = summary.replace(recentring=recentring_stats(
+            steps, {k: db.measurements(run_id, kind=k.value) for k in StepKind if k is not StepKind.RECHECK},
+            stored_recentring(db, run_id)))
+        summary = summary.replace(notes=(*summary.notes, *runner.stuck.notes()))  # a stuck probe, by name
+        rp = summary.rp_text()  # RP after > before is no sign of a bad correction unless beyond its spread
+        if rp is not None:
+            summary = summary.replace(notes=(*summary.notes, rp))
+        summary = finish_tables(controller, start, summary, emit)
+    except Exception as exc:  # station and driver errors alike: log, mark the run, re-raise
+        note = restore_after_failure(controller, start, emit)
+        exc.add_note(note)
+        db.log(run_id, "error", f"{type(exc).__name__}: {exc}")
+        db.log(run_id, "info", note)
+        db.set_status(run_id, "aborted" if isinstance(exc, RunAborted) else "failed")
+        raise
+    db.save_result(run_id, "summary", summary.to_json())
+    emit(RunFinished(summary))
+    return summary
+
+
+def _not_uploaded(cfg: CellConfig, summary: RunSummary, run_id: int, table: Any, used: Any, bound: float,
+                  emit: Callable[[Event], None]) -> RunSummary:
+    """No table within the capacity meets the bound for the identified robot: nothing is uploaded
+    (NOT_UPLOADED, reason ``correction_bound``); the measurements and the identification stay."""
+    limit = float(cfg.correction.max_interpolation_um)
+    note = (f"no correction table within the controller's {used.capacity} values meets correction.max_interpolation_um "
+            f"= {limit:g} for the identified robot: on the grid {'×'.join(map(str, used.counts))} (the design, refined for "
+            f"this robot as far as the capacity allows) "
+            f"its table interpolates with up to {bound:.1f} µm {worst_cell(table, used.region)}, where "
+            f"{used.predicted_bound_um:.1f} µm was predicted before motion. Nothing was uploaded. Every measurement "
+            f"and the identified parameters of run {run_id} are stored: set correction.max_interpolation_um = "
+            f"{math.ceil(bound * 1.05)} or a smaller correction.region, then 'station calibrate CONFIG --resume "
+            f"{run_id}' builds the table again without measuring ('station export --run {run_id} --format identify' "
+            f"and 'station identify' give the identified model for compensated targets)")
+    emit(Notice("warning", note))
+    return summary.replace(outcome=Outcome.NOT_UPLOADED, upload_skipped=True, not_uploaded_reason="correction_bound",
+                           notes=(*summary.notes, note))
+
+
+def _scara_terms(cfg: CellConfig, db: RunDB, run_id: int, terms: Any, summary: RunSummary, res: IdentificationResult,
+                 emit: Callable[[Event], None]) -> tuple[RunSummary, np.ndarray, Any]:
+    """A SCARA's ``[identification] model`` (issue 30): the selection stored (result ``error_model``),
+    its note and the summary's ``error_model``; returns the summary, the parameters the table is
+    built from (the geometry fitted with the kept terms, else ``res``'s) and the terms' joint error
+    ``δ(q)`` (None: nothing beyond geometry kept, or ``model = "geometric"``)."""
+    if terms is None:
+        return summary, res.params, None
+    from station.cell.pipeline.terms import error_model_record, error_model_summary, terms_delta, terms_note
+
+    es = error_model_summary(cfg, terms)
+    db.save_result(run_id, "error_model", error_model_record(cfg, terms))
+    note = terms_note(es)
+    delta = terms_delta(cfg, terms)
+    if delta is not None:
+        note += "; the correction table's nodes carry the terms (drift left out)"
+    emit(Notice("info", note))
+    summary = summary.replace(error_model=es, notes=(*summary.notes, note))
+    # the geometry fitted with what was kept (backlash folded into its zeros, drift alone included), as
+    # the recheck and the report read it back
+    return summary, (np.asarray(terms.fit.params, dtype=float) if terms.chosen else res.params), delta
+
+
+def _identification_summary(res: IdentificationResult) -> IdentificationSummary:
+    return IdentificationSummary(
+        objective=res.kind, n_measurements=int(res.residuals.shape[0]), n_parameters=len(res.chosen),
+        rms_normalized=float(res.rms_normalized), rms_residual_um=float(res.rms_position_mm() * 1e3),
+        outliers=tuple(int(i) for i in res.outliers),
+        parameters=tuple(ParameterEstimate(n, float(v), float(s))
+                         for n, v, s in zip(res.chosen, res.estimates, res.uncertainty.sigma)))
+
+
+def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tuple[PlannedStep, ...],
+              emit: Callable[[Event], None], options: Options, with_oracle: bool,
+              summary: RunSummary, pre: Premotion) -> RunSummary:
+    total = len(steps)
+
+    def measure(kinds: set[StepKind], R: np.ndarray | None) -> None:
+        runner.measure_steps(db, run_id, steps, kinds, total, _proc_for(cfg, R))
+
+    def stats(kind: StepKind) -> ErrorStats | None:
+        recs = db.measurements(run_id, kind=kind.value)
+        moved = stored_recentring(db, run_id)
+        (rc,) = recentring_stats(steps, {kind: recs}, moved) or (None,)
+        if rc is not None and rc.n_recentred:
+            emit(Notice("info", f"{kind.caption}: {rc.n_recentred} of {rc.n_readings} readings re-centred to bring "
+                                f"the probes into their stroke (up to {rc.max_um:.0f} µm); the re-centring's move "
+                                f"is counted in the measured error"))
+        return ErrorStats.from_errors(verification_errors(cfg, steps, recs, moved))
+
+    if cfg.warmup is not None and len(db.completed_steps(run_id, ok_only=True)) < total:  # [warmup] (issue 13)
+        from station.cell.run.warmup import run_warmup
+
+        run_warmup(cfg, runner, db, run_id, steps[0], emit)
+    emit(PhaseChanged("measure", "identification poses"))
+    db.set_status(run_id, "measuring")
+    measure({StepKind.IDENTIFICATION, StepKind.REVERSAL}, None)
+    db.set_status(run_id, "measured")
+
+    records = db.measurements(run_id, kind=StepKind.IDENTIFICATION.value)
+    reversal_records = db.measurements(run_id, kind=StepKind.REVERSAL.value)  # the terms' backlash uses them too
+    reversal = reversal_error(cfg, records, reversal_records, stored_recentring(db, run_id))
+    if reversal is not None:
+        summary = summary.replace(reversal=reversal)
+        emit(Notice("info", f"reversal error (both approach directions): RMS {reversal.rms_um:.1f} µm, "
+                            f"max {reversal.max_um:.1f} µm over {reversal.n} poses"))
+    emit(PhaseChanged("identify"))
+    n_planned = sum(1 for st in steps if st.kind is StepKind.IDENTIFICATION)
+    n_valid = sum(1 for r in records if r.ok and r.pose is not None)
+    needed = min_valid_identification(n_planned)
+    if n_valid < needed:
+        raise IdentificationError(
+            f"only {n_valid} of {n_planned} identification poses are valid, {needed} are needed "
+            f"({MIN_VALID_FRACTION:.0%}); no correction was identified. Fix what the warnings name, then resume: "
+            f"the invalid poses are measured again")
+    res = identify_run(cfg, records)
+    check_identification(res)
+    db.save_result(run_id, "identification", {
+        "params": res.params, "chosen": list(res.chosen), "sigma": res.uncertainty.sigma,
+        "covariance": res.uncertainty.covariance,  # of the chosen parameters, [mm, rad]² (the fleet store's)
+        "rms_normalized": res.rms_normalized, "outliers": list(res.outliers),
+        "residuals": res.residuals})
+    db.set_status(run_id, "identified")
+    summary = summary.replace(identification=_identification_summary(res))
+    for note in (n for n in res.notes if n.startswith(BODY_NOTE_PREFIX)):  # the body's CMM σ is in the fit
+        summary = summary.replace(notes=(*summary.notes, note))
+        emit(Notice("info", note))
+    if res.outliers:
+        emit(Notice("warning", f"suspected outliers among identification measurements: {list(res.outliers)}"))
+    R_id = res.params[:6]
+    from station.cell.pipeline.terms import select_terms, truth_delta  # [identification] model (issue 30)
+
+    terms = select_terms(cfg, records, res, reversal_records)
+    if not cfg.model.is_scara:  # an articulated arm: compensated targets, no table (issue 9)
+        return articulated_correction(cfg, runner, db, run_id, steps, emit, with_oracle, summary, res,
+                                      upload=options.upload, min_gain=options.min_gain,
+                                      oracle_truth=options.oracle_truth, terms=terms)
+
+    # a SCARA with error terms: the table's nodes carry them, on the geometry fitted with them, and the
+    # targets after correction are commanded in that fit's base frame (before: the geometric fit's)
+    summary, params, delta = _scara_terms(cfg, db, run_id, terms, summary, res, emit)
+    R_after = params[:6]
+    emit(PhaseChanged("correct"))
+    assert pre.design is not None  # a SCARA's pre-motion check designs its table
+    table, used, bound = (identified_table(cfg, params, pre.design) if delta is None
+                          else identified_table(cfg, params, pre.design, delta))
+    limit = float(cfg.correction.max_interpolation_um)
+    summary = summary.replace(correction=CorrectionSummary(
+        n_values=int(table.data.n_values), interpolation_bound_um=bound, crc32=f"{table.data.crc32():08x}",
+        predicted_bound_um=pre.design.predicted_bound_um, grid_shape=tuple(int(n) for n in used.counts),
+        refined=used.counts != pre.design.counts, limit_um=limit))
+    db.save_result(run_id, "correction_grid", {**grid_to_json(used.grid), "bound_um": bound,
+                                               "predicted_bound_um": pre.design.predicted_bound_um,
+                                               "sampled_bounds_um": list(pre.design.bounds_um),
+                                               "error_terms": table.with_terms})  # its nodes carry the terms
+    if used.counts != pre.design.counts:
+        emit(Notice("info", f"the correction grid was refined for the identified robot: {used.describe()}"))
+    if not bound <= limit:
+        return _not_uploaded(cfg, summary, run_id, table, used, bound, emit)
+    if cfg.tools:  # [[tool]]: each tool's own correction, stored as tool:<name>; the head's table is uploaded
+        truth = options.oracle_truth
+        summary = summary.replace(tools=run_tools(cfg, db, run_id, steps, params, table,  # with the terms, as the head's
+                                                  None if truth is None else oracle_params(cfg, truth), truth, emit,
+                                                  delta=delta))
+
+    emit(PhaseChanged("verify", "before correction"))
+    controller = runner.controller
+    if controller.status().table_active:  # the operator's table: kept aside (table_keeping.py)
+        controller.deactivate_table()
+    runner.guard.table = None
+    measure({StepKind.VERIFY_BEFORE}, R_id)
+    summary = summary.replace(before=stats(StepKind.VERIFY_BEFORE))
+
+    if not options.upload:
+        return summary.replace(upload_skipped=True, outcome=Outcome.NOT_UPLOADED)
+    proposal = UploadProposal(
+        n_values=int(table.data.n_values), grid_shape=tuple(int(n) for n in table.data.grid_shape),
+        interpolation_bound_um=float(table.interpolation_bound_um), crc32=f"{table.data.crc32():08x}",
+        max_correction=tuple(float(v) for v in table.max_correction), joint_types=tuple(cfg.model.joint_types))
+    if options.confirm is not None and not options.confirm(proposal):
+        if runner.control.aborted:  # the abort answered the open question "no": an abort, not a decline,
+            # so the run stays resumable at this question (its measurements are all stored)
+            raise RunAborted("run aborted by the operator at the upload question; nothing was uploaded")
+        emit(Notice("info", "upload declined by the operator: the controller's table of the run's start is kept"))
+        return summary.replace(upload_skipped=True, outcome=Outcome.NOT_UPLOADED,
+                               notes=(*summary.notes, "upload declined by the operator"))
+
+    upload = verified_upload(controller, table.data, emit)
+    runner.guard.table = table.data  # Cartesian moves are now corrected by this table
+    db.set_status(run_id, "uploaded")
+    summary = summary.replace(upload=UploadSummary(crc32=f"{upload.crc32:08x}", seconds=upload.total_s))
+    emit(PhaseChanged("verify", "after correction"))
+    measure({StepKind.VERIFY_AFTER}, R_after)
+    summary = summary.replace(after=stats(StepKind.VERIFY_AFTER))
+    if with_oracle:
+        emit(PhaseChanged("verify", "oracle (true parameters)"))
+        p_true = oracle_params(cfg, options.oracle_truth)
+        # a simulated arm whose joints err (truth.joint_delta): the oracle's table carries them too
+        oracle_table = build_table_for(cfg, p_true, used.grid, truth_delta(options.oracle_truth)).data
+        verified_upload(controller, oracle_table, emit)
+        runner.guard.table = oracle_table
+        emit(PhaseChanged("verify", "oracle (true parameters)"))  # back from the upload's phase
+        measure({StepKind.ORACLE}, p_true[:6])
+        summary = summary.replace(oracle=stats(StepKind.ORACLE))
+        controller.rollback_table()  # the station's own table is the one left active
+        # the oracle's table must never be what a later roll back revives: the roll-back slot is
+        # emptied (the table of the run's start stays recoverable from the run database)
+        controller.discard_previous_table()
+        runner.guard.table = table.data
+        emit(Notice("info", "rolled back to the station's table after the oracle check"))
+    gain = summary.gain
+    outcome, missed = verified_outcome(cfg, summary, options.min_gain)
+    summary = summary.replace(notes=(*summary.notes, *missed))
+    db.set_status(run_id, "verified")
+    if options.confirm is not None and summary.before is not None and summary.after is not None:
+        keep = KeepCorrection(summary.before.rms_um, summary.after.rms_um, float(gain or 0.0),
+                              f"{table.data.crc32():08x}")
+        if not options.confirm(keep):  # run_calibration puts the table of the run's start back
+            runner.guard.table = None
+            emit(Notice("warning", "declined by the operator: the table of the run's start is restored"))
+            return summary.replace(outcome=Outcome.NOT_UPLOADED,
+                                   notes=(*summary.notes, "the new table was rolled back by the operator"))
+    return summary.replace(outcome=outcome)

@@ -1,0 +1,306 @@
+"""Uncertainty of identified parameters and of the poses they predict (brief §6, chapter 7.4).
+
+* :func:`linear_uncertainty` — linear propagation by SVD of the σ-normalised Jacobian
+  (eq. 7.9–7.13): C' = U S Vᵀ, Σ_p = V S⁻² Vᵀ. Covers measurement noise only. Exact for
+  independent residual rows (pose and position data).
+* :func:`distance_sandwich` — the same for distances, which are *not* independent: d_ij and
+  d_ik share the noise of point i (brief §10). Their covariance is C = D Σ_points Dᵀ, with D the
+  derivative of the distances by the measured points (rows u_ijᵀ, −u_ijᵀ). The fit is the
+  plain (unweighted) least squares of eq. 7.6, so its covariance is the sandwich
+  (JᵀJ)⁻¹ Jᵀ C J (JᵀJ)⁻¹; Jᵀ C J = (DᵀJ)ᵀ Σ_points (DᵀJ) is formed point by point, never as a
+  (k, k) matrix, so it costs O(k·p) for k pairs.
+* :func:`body_sandwich` — the same when rows share the error of a calibration-body point
+  (every measurement at that point: repeats, both elbows, all cycles): the fit weights rows with
+  σ_meas² + σ_body², and the covariance is the sandwich (JᵀWJ)⁻¹ Jᵀ W (Σ_meas + B Σ_body Bᵀ) W J
+  (JᵀWJ)⁻¹, B the derivative of the measured values by the points' errors.
+* :func:`monte_carlo` — many synthetic data sets drawn from the input distributions of what is
+  actually measured (the measured points or poses, the joints through the robot's
+  repeatability, the calibration-body geometry per measuring point; distances are then computed
+  from the perturbed points, never perturbed themselves), each identified by Gauss–Newton; all
+  data sets are solved together as one batched computation.
+* :func:`pose_accuracy` — Σ_pose = J_pose Σ_p J_poseᵀ at any joint configurations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from station.core.kinematics.forward import forward, forward_with_jacobian
+from station.core.kinematics.model import RobotModel
+from station.core.kinematics.transforms import rotation_exp
+from station.core.measurement.measurements import (
+    MeasurementSet,
+    add_body_error,
+    add_noise,
+    model_outputs,
+    residuals_and_jacobian,
+)
+
+
+def _ro(a):
+    a = np.array(a, dtype=float)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True)
+class LinearUncertainty:
+    """``covariance``: ``(p, p)`` in [mm, rad]²; ``sigma``: ``(p,)``; ``correlation``: ``(p, p)``."""
+
+    names: tuple[str, ...]
+    sigma: np.ndarray
+    covariance: np.ndarray
+    correlation: np.ndarray
+    singular_values: np.ndarray
+    rank: int
+
+    def max_abs_correlation(self) -> float:
+        c = np.abs(self.correlation - np.eye(len(self.names)))
+        return float(c.max()) if c.size else 0.0
+
+
+def linear_uncertainty(Jw: np.ndarray, names: tuple[str, ...], rtol: float = 1e-12) -> LinearUncertainty:
+    """Parameter covariance from the σ-normalised Jacobian ``Jw`` ``(n_rows, p)``."""
+    if Jw.shape[0] > 2 * Jw.shape[1]:
+        # Same singular values and V from the (p, p) triangular factor; U is never needed.
+        Jw = np.linalg.qr(Jw, mode="r")  # type: ignore[assignment]  # mode="r" returns R alone
+    _, s, Vt = np.linalg.svd(Jw, full_matrices=False)
+    rank = int(np.sum(s > rtol * s[0])) if s.size and s[0] > 0 else 0
+    with np.errstate(divide="ignore"):
+        inv_s2 = np.where(s > rtol * (s[0] if s.size else 1.0), 1.0 / s**2, np.inf)
+    cov = (Vt.T * inv_s2) @ Vt if rank == len(s) else np.full((len(s), len(s)), np.inf)
+    sig = np.sqrt(np.diag(cov))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(sig, sig)
+    return LinearUncertainty(tuple(names), _ro(sig), _ro(cov), _ro(corr), _ro(s), rank)
+
+
+def distance_sandwich(Jw: np.ndarray, names: tuple[str, ...], pairs: np.ndarray, unit: np.ndarray,
+                      row_sigma: np.ndarray, point_sigma: np.ndarray, n_points: int) -> LinearUncertainty:
+    """Parameter covariance of a distance fit whose distances share measured points.
+
+    ``Jw``: ``(k, p)`` Jacobian of the distances divided by ``row_sigma`` ``(k,)`` (the fit's
+    weights); ``unit``: ``(k, 3)`` unit vectors p_i − p_j of every pair; ``point_sigma``:
+    ``(n, 3)`` σ [mm] of the measured points' coordinates.
+    """
+    base = linear_uncertainty(Jw, names)
+    if base.rank < Jw.shape[1]:
+        return base
+    return _sandwich(base, _distance_point_meat(Jw / row_sigma[:, None], pairs, unit, point_sigma, n_points))
+
+
+def _distance_point_meat(JW: np.ndarray, pairs: np.ndarray, unit: np.ndarray, point_sigma: np.ndarray,
+                         n_points: int) -> np.ndarray:
+    """Jᵀ W C W J of distances from measured points: ``JW`` ``(k, p)`` is W J (rows of J divided
+    by σ²); C = D Σ_points Dᵀ is never formed."""
+    pr = np.asarray(pairs, dtype=int)
+    # G = Dᵀ W J: for every point and coordinate, the sum over its pairs of ±u·(weighted row).
+    contrib = unit[:, :, None] * JW[:, None, :]  # (k, 3, p)
+    G = np.zeros((n_points, 3, JW.shape[1]))
+    np.add.at(G, pr[:, 0], contrib)
+    np.add.at(G, pr[:, 1], -contrib)
+    Gs = (G * np.asarray(point_sigma)[:, :, None]).reshape(-1, JW.shape[1])
+    return Gs.T @ Gs
+
+
+def _sandwich(base: LinearUncertainty, meat: np.ndarray) -> LinearUncertainty:
+    """bread · meat · bread with the bread (JᵀWJ)⁻¹ of ``base``."""
+    bread = base.covariance
+    cov = bread @ meat @ bread
+    cov = 0.5 * (cov + cov.T)
+    sig = np.sqrt(np.diag(cov))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(sig, sig)
+    return LinearUncertainty(base.names, _ro(sig), _ro(cov), _ro(corr), base.singular_values, base.rank)
+
+
+def _add_by_group(G: np.ndarray, groups: np.ndarray, values: np.ndarray) -> None:
+    """``G[g] += Σ values[i]`` over the ``i`` with ``groups[i] == g`` (sorted sums: far faster
+    than ``np.add.at`` for many rows)."""
+    order = np.argsort(groups, kind="stable")
+    g = groups[order]
+    starts = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
+    G[g[starts]] += np.add.reduceat(values[order], starts, axis=0)
+
+
+def body_sandwich(Jw: np.ndarray, names: tuple[str, ...], data: MeasurementSet, fit_sigma: np.ndarray,
+                  unit: np.ndarray | None = None) -> LinearUncertainty:
+    """Parameter covariance of a fit whose rows share the errors of the calibration body's points.
+
+    ``Jw``: ``(n_rows, p)`` Jacobian of the residuals divided by ``fit_sigma`` ``(n_rows,)``, the
+    σ the fit weighted every row with (W = diag(fit_sigma⁻²), σ_meas² + σ_body² per row:
+    :meth:`MeasurementSet.fit_sigma`). ``unit``: ``(k, 3)`` pair unit vectors (distance data).
+
+    Cov = (JᵀWJ)⁻¹ Jᵀ W (Σ_meas + B Σ_body Bᵀ) W J (JᵀWJ)⁻¹. Σ_meas is diag(σ_meas²) for pose and
+    position rows and the points' covariance for distances (as :func:`distance_sandwich`). B
+    (:meth:`MeasurementSet.body_sensitivity`) maps each body point's error (δ, ε) [mm, rad] to the
+    rows of every measurement at that point, so rows that share a point are correlated; Jᵀ W B
+    is summed point by point, never formed as an (n_rows, n_rows) matrix: O(n_rows · p).
+    """
+    base = linear_uncertainty(Jw, names)
+    p = Jw.shape[1]
+    if base.rank < p:
+        return base
+    JW = Jw / np.asarray(fit_sigma)[:, None]  # W J
+    if data.kind == "distance":
+        if unit is None:
+            raise ValueError("distance data need the pairs' unit vectors")
+        meat = _distance_point_meat(JW, data.distance_pairs(), unit, data.points_sigma(), data.joints.shape[0])
+    else:
+        A = JW * data.sigma[:, None]
+        meat = A.T @ A
+    if not data.has_body_sigma:
+        return _sandwich(base, meat)
+    assert data.body_point is not None
+    B = data.body_sensitivity()  # (n, r, 6)
+    sig6 = data.body_sigma6()
+    G = np.zeros((sig6.shape[0], 6, p))  # Bᵀ W J, per body point
+    if data.kind == "distance":
+        assert unit is not None
+        pr = data.distance_pairs()
+        for col, sign in ((0, 1.0), (1, -1.0)):
+            a = (unit[:, None, :] @ B[pr[:, col]])[:, 0, :]  # (k, 6): uᵀ B of the pair's point
+            _add_by_group(G, data.body_point[pr[:, col]], sign * a[:, :, None] * JW[:, None, :])
+    else:
+        contrib = np.swapaxes(B, 1, 2) @ JW.reshape(B.shape[0], B.shape[1], p)  # (n, 6, p)
+        _add_by_group(G, data.body_point, contrib)
+    Gs = (G * sig6[:, :, None]).reshape(-1, p)
+    return _sandwich(base, meat + Gs.T @ Gs)
+
+
+@dataclass(frozen=True)
+class PoseAccuracy:
+    """Predicted σ of the tool pose: ``sigma`` ``(n, 6)`` [mm, rad] per axis x, y, z, rx, ry, rz,
+    ``covariance`` ``(n, 6, 6)`` with the correlations."""
+
+    joints: np.ndarray
+    sigma: np.ndarray
+    covariance: np.ndarray
+
+
+def pose_accuracy(model: RobotModel, params, chosen_index, covariance, joints, setup: bool = False) -> PoseAccuracy:
+    """Propagate the parameter covariance to the tool pose at ``joints`` ``(n, g)``.
+
+    ``setup=False`` (default) leaves out the set-up transform R: what a later user of the robot
+    gets in the robot base frame.
+    """
+    q = model.check_joints(joints)
+    res = forward_with_jacobian(model, q, params, setup=setup)
+    Jp = res.J[..., np.asarray(chosen_index)]
+    cov = Jp @ np.asarray(covariance) @ np.swapaxes(Jp, -1, -2)
+    return PoseAccuracy(_ro(q), _ro(np.sqrt(np.einsum("nii->ni", cov))), _ro(cov))
+
+
+@dataclass(frozen=True)
+class MonteCarloResult:
+    """``estimates``: ``(n_sets, p)`` identified values of the chosen parameters;
+    ``sigma``: ``(p,)`` their sample standard deviation; ``bias``: mean − truth."""
+
+    names: tuple[str, ...]
+    estimates: np.ndarray
+    sigma: np.ndarray
+    bias: np.ndarray
+    correlation: np.ndarray
+    iterations: int
+    n_failed: int
+
+
+def monte_carlo(model: RobotModel, data: MeasurementSet, true_params, chosen_index, n_sets: int,
+                rng: np.random.Generator, start=None, sigma_joints=None, point_ids=None,
+                sigma_point=None, max_iter: int = 12, tol: float = 1e-11) -> MonteCarloResult:
+    """Identify ``n_sets`` synthetic data sets like ``data`` drawn around ``true_params``.
+
+    Inputs drawn per data set: measurement noise of ``data.sigma`` (distance data: of the
+    measured points, ``data.point_sigma``, with the distances computed from them); robot repeatability as
+    Gaussian joint noise ``sigma_joints`` ``(g,)`` (the robot reports the commanded joints but
+    stands slightly elsewhere); calibration-body geometry as one pose error of σ
+    ``sigma_point`` ``(6,)`` per measuring point ``point_ids`` ``(n,)`` shared by all
+    measurements at that point (pose and position data), and, when ``data`` carries the body's
+    uncertainty (``body_point``, ``body_sigma``, ``body_lever``), one error per body point and
+    data set turning the point about its origin (:func:`station.core.measurement.measurements.add_body_error`),
+    with the fit weighted as :func:`station.core.identification.identify` weights it. Every set is solved by Gauss–Newton
+    from ``start`` (default nominal), all sets at once.
+    """
+    idx = np.asarray(chosen_index, dtype=int)
+    p_true = np.asarray(true_params, dtype=float)
+    q_act = (np.broadcast_to(data.joints, (n_sets,) + data.joints.shape) if sigma_joints is None else
+             data.joints + rng.standard_normal((n_sets,) + data.joints.shape) * np.asarray(sigma_joints))
+    if data.kind == "distance":
+        # What is measured are points: perturb them (instrument, body geometry), then form the distances.
+        pts = add_body_error(data, forward(model, q_act, p_true, setup=False)[..., :3, 3], rng)
+        pts = pts + rng.standard_normal(pts.shape) * data.points_sigma()
+        if point_ids is not None and sigma_point is not None:
+            pts = _perturb_points("position", pts, np.asarray(point_ids), np.asarray(sigma_point), rng)
+        pr = data.distance_pairs()
+        measured = np.linalg.norm(pts[..., pr[:, 0], :] - pts[..., pr[:, 1], :], axis=-1)
+    else:
+        exact = (np.broadcast_to(model_outputs(model, data, p_true), (n_sets,) + data.measured.shape)
+                 if sigma_joints is None else _outputs_at(model, data, p_true, q_act))
+        measured = add_noise(data, add_body_error(data, exact, rng), rng)
+        if point_ids is not None and sigma_point is not None:
+            measured = _perturb_points(data.kind, measured, np.asarray(point_ids), np.asarray(sigma_point), rng)
+    p0 = np.array(model.nominal if start is None else start, dtype=float)
+    P = np.broadcast_to(p0, (n_sets, p0.size)).copy()
+    w = 1.0 / data.fit_sigma(pair_units(model, data, p_true) if data.has_body_sigma else None)
+    it = 0
+    for it in range(1, max_iter + 1):  # noqa: B007 - the count is reported after the loop
+        r, J = residuals_and_jacobian(model, data, P, joints=data.joints, measured=measured)
+        J = J[..., idx] * w[:, None]
+        r = r * w
+        scale = np.linalg.norm(J, axis=-2, keepdims=True)
+        Js = J / scale
+        JT = np.swapaxes(Js, -1, -2)
+        dx = -np.linalg.solve(JT @ Js, (JT @ r[..., None]))[..., 0] / scale[..., 0, :]
+        P[:, idx] += dx
+        if np.max(np.abs(dx)) < tol:
+            break
+    est = P[:, idx]
+    ok = np.all(np.isfinite(est), axis=1)
+    est_ok = est[ok]
+    sig = est_ok.std(axis=0, ddof=1)
+    corr = np.corrcoef(est_ok, rowvar=False) if est_ok.shape[0] > 2 else np.eye(len(idx))
+    return MonteCarloResult(
+        names=tuple(model.param_names[i] for i in idx), estimates=_ro(est), sigma=_ro(sig),
+        bias=_ro(est_ok.mean(axis=0) - p_true[idx]), correlation=_ro(np.atleast_2d(corr)),
+        iterations=it, n_failed=int((~ok).sum()),
+    )
+
+
+def pair_units(model: RobotModel, data: MeasurementSet, params) -> np.ndarray | None:
+    """``(k, 3)`` unit vectors p_i − p_j of a distance set's pairs at ``params`` (None for
+    other kinds): what the body variance of a distance needs."""
+    if data.kind != "distance":
+        return None
+    pts = forward(model, data.joints, params, setup=False)[:, :3, 3]
+    pr = data.distance_pairs()
+    diff = pts[pr[:, 0]] - pts[pr[:, 1]]
+    return diff / np.linalg.norm(diff, axis=1)[:, None]
+
+
+def _outputs_at(model: RobotModel, data: MeasurementSet, p_true: np.ndarray, q_act: np.ndarray) -> np.ndarray:
+    """Exact outputs of the robot ``p_true`` ``(P,)`` at the actual joints ``(n_sets, n, g)``:
+    poses ``(n_sets, n, 4, 4)``, positions ``(n_sets, n, 3)`` or distances ``(n_sets, k)``."""
+    T = forward(model, q_act, p_true, setup=data.uses_setup)
+    if data.kind == "pose":
+        return T
+    p = T[..., :3, 3]
+    if data.kind == "position":
+        return p
+    pairs = data.distance_pairs()
+    return np.linalg.norm(p[..., pairs[:, 0], :] - p[..., pairs[:, 1], :], axis=-1)
+
+
+def _perturb_points(kind, measured, point_ids, sigma_point, rng):
+    n_sets = measured.shape[0]
+    ids, inv = np.unique(point_ids, return_inverse=True)
+    e = rng.standard_normal((n_sets, len(ids), 6)) * sigma_point
+    e = e[:, inv]
+    out = np.array(measured)
+    if kind == "pose":
+        out[..., :3, 3] += e[..., :3]
+        out[..., :3, :3] = rotation_exp(e[..., 3:]) @ out[..., :3, :3]
+    else:
+        out += e[..., :3]
+    return out

@@ -1,0 +1,358 @@
+"""The model chosen by the data (issue 30, ``--model auto``): which error terms beyond geometry earn
+their place, by cross-validation and a paired test.
+
+Scoring. Every candidate model (the geometry plus some families of
+:mod:`station.core.terms.error_model`) is fitted to all data (:func:`station.core.terms.fit.fit_terms`)
+and scored by cross-validation over the measurements: leave-one-out up to :data:`LOO_MAX` poses,
+else :data:`K_FOLDS`-fold with one seeded assignment shared by every candidate (so that the errors
+are paired pose by pose). A fold's refit is one Gauss–Newton step from the all-data solution on
+the remaining poses (exact for the model linearised there; the terms are linear in their
+parameters and the geometry barely curves over a fold's change), and its held-out error is the
+position error [mm] of each left-out pose. The CV RMS is the RMS over all poses of those held-out
+errors.
+
+Selection (forward, family by family). From the geometric model, each step tries every family not
+yet in the model (a joint's second harmonic once its first is in). A candidate passes when a
+one-sided Wilcoxon signed-rank test on the per-pose held-out errors, paired against the current
+model, gives p < :data:`ALPHA` divided by the number of candidates of that step (Bonferroni: picking
+among many would otherwise keep a term by luck) on the σ-normalised squared held-out residuals of
+all the pose's rows (with pose data they hold the orientation, where wrist errors show first), their
+mean is lower than the current model's, and the CV position RMS (what the table reports) is below
+the geometric model's. The step keeps the passing candidate with the lowest normalised CV error;
+none passing ends the selection. Nothing kept: the geometric model, and it says so. The chosen model
+is never worse than the geometric one on the CV position error.
+
+Assessment. The CV RMS of the chosen model is the one that chose it, and so is optimistic;
+:func:`nested_cv` repeats the whole selection inside each outer training set and scores the chosen
+model on the held-out poses (nested cross-validation), against the geometric fit of the same
+training set.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.stats import wilcoxon
+
+from station.core.identification.identify import IdentificationResult, identify
+from station.core.kinematics.model import RobotModel
+from station.core.measurement.measurements import MeasurementSet
+from station.core.terms.error_model import TermBasis, TermRows, TermSpec, available_families, term_basis
+from station.core.terms.fit import TermFit, fit_terms
+from station.core.units import UM
+from station.errors import ConfigError, IdentificationError
+
+__all__ = ["ALPHA", "CandidateScore", "Selection", "select_model", "fit_model", "cv_errors", "nested_cv",
+           "NestedCV", "columns_of", "all_terms_basis", "expand_families"]
+
+#: the paired test's level (before the Bonferroni division by a step's candidates)
+ALPHA = 0.01
+LOO_MAX = 40
+K_FOLDS = 10
+
+
+@dataclass(frozen=True)
+class CandidateScore:
+    """One row of the selection table: the model (``families`` added to the geometry), its number of
+    fitted parameters, CV RMS [mm], change against the geometric model [%], the paired test's p
+    against ``base`` (the model it extends; None for the geometric model), and whether it was kept."""
+
+    families: tuple[str, ...]
+    n_parameters: int
+    cv_rms_mm: float
+    change_pct: float
+    p_value: float | None
+    base: tuple[str, ...]
+    kept: bool
+
+    @property
+    def label(self) -> str:
+        return "geometric" if not self.families else "geometric + " + " + ".join(self.families)
+
+    def to_dict(self) -> dict:
+        return {"model": self.label, "terms": list(self.families), "parameters": self.n_parameters,
+                "cv_rms_um": self.cv_rms_mm / UM, "change_pct": self.change_pct, "p_value": self.p_value,
+                "against": "geometric" if not self.base else " + ".join(self.base), "kept": self.kept}
+
+
+@dataclass(frozen=True)
+class Selection:
+    """The outcome of :func:`select_model`: the ``chosen`` families (empty: geometric), the final
+    fit on all data (``fit``), the geometric fit it started from, the ``table`` of every candidate
+    scored, and how it was scored (``cv``: e.g. "leave-one-out", ``alpha``)."""
+
+    chosen: tuple[str, ...]
+    fit: TermFit
+    geometric: IdentificationResult
+    table: tuple[CandidateScore, ...]
+    cv: str
+    alpha: float
+    forced: bool = False
+
+    @property
+    def summary(self) -> str:
+        if self.forced:
+            return ("model forced: geometric" if not self.chosen else
+                    f"model forced: geometric + {' + '.join(self.chosen)}")
+        if not self.chosen:
+            return "no term beyond geometry earned its place: the result is the geometric fit"
+        geo = self.table[0].cv_rms_mm
+        best = next(r for r in self.table if r.families == self.chosen and r.kept).cv_rms_mm
+        return (f"kept {' + '.join(self.chosen)}: {self.cv} RMS {best / UM:.1f} µm against the geometric "
+                f"{geo / UM:.1f} µm ({100 * (best - geo) / geo:+.0f} %)")
+
+    def to_dict(self) -> dict:
+        return {"chosen": list(self.chosen), "summary": self.summary, "cv": self.cv, "alpha": self.alpha,
+                "test": "one-sided Wilcoxon signed-rank on the per-pose sums of σ-normalised squared held-out "
+                        "residuals, paired against the model extended; kept: p < alpha / candidates of the step, "
+                        "their mean lower, and the CV position RMS below the geometric model's",
+                "table": [r.to_dict() for r in self.table], "terms": self.fit.terms_dict(),
+                "dropped_terms": list(self.fit.dropped),
+                "identifiability": [t.to_dict() for t in self.fit.identifiability],
+                "units": {"cv_rms_um": "µm", "change_pct": "%", "value": "as each term's unit",
+                          "sigma": "as each term's unit"}}
+
+
+def columns_of(names: tuple[str, ...], families: tuple[str, ...]) -> np.ndarray:
+    """Indices of the term names that belong to ``families``: ``cyclic.qj`` holds the first harmonic
+    of joint j, ``cyclic2.qj`` the first and second."""
+    out = []
+    for i, n in enumerate(names):
+        head, _, rest = n.partition(".")
+        for fam in families:
+            fh, _, fj = fam.partition(".")
+            if head == "cyclic":
+                joint, _, h = rest.partition(".")
+                if (fh == "cyclic" and fj == joint and h.endswith("1")) or (fh == "cyclic2" and fj == joint):
+                    out.append(i)
+                    break
+            elif fh == head:
+                out.append(i)
+                break
+    return np.array(out, dtype=int)
+
+
+def all_terms_basis(model: RobotModel, data: MeasurementSet, rows: TermRows | None, spec: TermSpec,
+                    params=None) -> TermBasis:
+    """Every candidate family's terms at the data's rows (first and second harmonics of every revolute
+    joint, compliance, drift, backlash where the data say the approach); the gravity torques at the
+    geometry ``params`` (the geometric fit's: the identified model that will carry the terms, whose
+    tool may lie far from the robot file's; default the nominal)."""
+    fams = [f.replace("cyclic.", "cyclic2.") for f in available_families(model, rows)]
+    return term_basis(model, data.joints, TermSpec(tuple(fams), spec.gravity, spec.ratios), rows, params=params)
+
+
+def _folds(n: int, seed: int = 0) -> tuple[list[np.ndarray], str]:
+    if n <= LOO_MAX:
+        return [np.array([i]) for i in range(n)], "leave-one-out"
+    perm = np.random.default_rng(seed).permutation(n)
+    return [np.sort(f) for f in np.array_split(perm, K_FOLDS)], f"{K_FOLDS}-fold"
+
+
+def cv_errors(fit: TermFit, folds: list[np.ndarray], weighted: bool = False) -> np.ndarray:
+    """``(n_items,)`` held-out squared position error [mm²] of every pose (``weighted``: the sum of
+    the squared σ-normalised held-out residuals of all the pose's rows, orientation included): each
+    fold refitted by one Gauss–Newton step from the all-data solution without it (normal equations,
+    σ-scaled columns)."""
+    Jw, rw, w = fit.jacobian_w, fit.residuals_w, fit.weights
+    rpi = fit.residuals.shape[1]
+    scale = np.maximum(np.linalg.norm(Jw, axis=0), 1e-300)
+    Js = Jw / scale
+    A = Js.T @ Js
+    b = Js.T @ rw
+    out = np.empty(fit.residuals.shape[0])
+    for f in folds:
+        rows = (f[:, None] * rpi + np.arange(rpi)).ravel()
+        Jf, rf = Js[rows], rw[rows]
+        step = np.linalg.lstsq(A - Jf.T @ Jf, -(b - Jf.T @ rf), rcond=1e-12)[0]
+        held_w = rf + Jf @ step  # σ-normalised held-out residuals
+        if weighted:
+            out[f] = np.sum(held_w.reshape(len(f), rpi) ** 2, axis=1)
+        else:
+            held = (held_w / w[rows]).reshape(len(f), rpi)[:, :3]  # [mm]
+            out[f] = np.sum(held**2, axis=1)
+    return out
+
+
+def _rms(e2: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(e2)))
+
+
+def _paired_p(cand: np.ndarray, base: np.ndarray) -> float:
+    d = cand - base
+    if not np.any(d != 0):
+        return 1.0
+    return float(wilcoxon(cand, base, alternative="less").pvalue)
+
+
+def _extend(current: tuple[str, ...], fam: str) -> tuple[str, ...]:
+    if fam.startswith("cyclic2."):
+        return tuple(f for f in current if f != "cyclic." + fam.split(".", 1)[1]) + (fam,)
+    return current + (fam,)
+
+
+def fit_model(model: RobotModel, data: MeasurementSet, geometric: IdentificationResult, basis_all: TermBasis,
+              families: tuple[str, ...], start: TermFit | None = None) -> TermFit:
+    """The geometric fit extended by ``families`` (columns of ``basis_all``), from ``start`` if given
+    (a fit of fewer terms)."""
+    return fit_terms(model, data, geometric, basis_all.select(columns_of(basis_all.names, families)), start=start)
+
+
+def _both_sides(approach: np.ndarray) -> bool:
+    """Whether some joint's approach sign changes between the rows ``(n, g)`` (backlash identifiable
+    for it; :func:`~station.core.terms.error_model.term_basis` drops the joints whose sign does not)."""
+    s = np.sign(np.asarray(approach, dtype=float))
+    return bool(s.ndim == 2 and s.shape[0] > 1 and np.any(s.max(axis=0) != s.min(axis=0)))
+
+
+def expand_families(model: RobotModel, names: tuple[str, ...], rows: TermRows | None = None) -> tuple[str, ...]:
+    """``--model`` names to families: ``cyclic`` is the first harmonic of every revolute joint,
+    ``cyclic2`` the first and second; ``compliance``, ``drift``, ``backlash`` and ``cyclic.q<j>`` as
+    they are; ``geometric`` none."""
+    out: list[str] = []
+    revolute = [j + 1 for j, t in enumerate(model.joint_types) if t == "revolute"]
+    for n in names:
+        if n == "geometric":
+            continue
+        if n in ("cyclic", "cyclic2"):
+            out.extend(f"{n}.q{j}" for j in revolute)
+        elif n == "backlash" and (rows is None or rows.approach is None):
+            raise ConfigError("--model backlash needs the approach direction of each joint in the data "
+                              "(columns approach_1 … approach_g, ±1)")
+        elif n == "backlash" and rows is not None and rows.approach is not None and not _both_sides(rows.approach):
+            raise ConfigError("backlash: no joint arrived from both sides in these data (every approach sign is the "
+                              "same in every row), so the lost motion merges with the joint zeros and cannot be "
+                              "fitted; measure the poses from both sides, or leave backlash out")
+        else:
+            known = set(available_families(model, rows)) | {"backlash"}
+            known |= {f.replace("cyclic.", "cyclic2.") for f in known if f.startswith("cyclic.")}
+            if n not in known:
+                raise ConfigError(f"unknown error term {n!r}; terms are geometric, auto, compliance, cyclic, cyclic2, "
+                                  f"cyclic.q<j> / cyclic2.q<j> of a revolute joint, drift, backlash")
+            out.append(n)
+    return tuple(dict.fromkeys(out))
+
+
+def select_model(model: RobotModel, data: MeasurementSet, rows: TermRows | None = None, spec: TermSpec | None = None,
+                 geometric: IdentificationResult | None = None, alpha: float = ALPHA,
+                 force: tuple[str, ...] | None = None, basis_all: TermBasis | None = None,
+                 max_steps: int = 12) -> Selection:
+    """Choose (or, with ``force``, take) the error terms for ``data`` (see the module). ``geometric``:
+    the geometric fit of the same data (default: :func:`identify` with its defaults); ``rows``: per
+    row time and approach signs; ``spec``: gravity and gear ratios."""
+    spec = TermSpec() if spec is None else spec
+    if data.kind == "distance":
+        raise ConfigError("model selection needs pose or position data; distances are fitted geometric only")
+    geo = identify(model, data) if geometric is None else geometric
+    basis_all = all_terms_basis(model, data, rows, spec, geo.params) if basis_all is None else basis_all
+    folds, cv_name = _folds(data.n_items)
+    base_fit = fit_model(model, data, geo, basis_all, ())
+    base_e, base_w = cv_errors(base_fit, folds), cv_errors(base_fit, folds, weighted=True)
+    geo_rms = _rms(base_e)
+    table = [CandidateScore((), base_fit.n_parameters, geo_rms, 0.0, None, (), True)]
+    if force is not None:
+        fams = expand_families(model, force, rows)
+        fit = fit_model(model, data, geo, basis_all, fams) if fams else base_fit
+        e = cv_errors(fit, folds)
+        if fams:
+            table.append(CandidateScore(fams, fit.n_parameters, _rms(e), 100 * (_rms(e) - geo_rms) / geo_rms,
+                                        _paired_p(cv_errors(fit, folds, weighted=True), base_w), (), True))
+        return Selection(fams, fit, geo, tuple(table), cv_name, alpha, forced=True)
+    avail = list(available_families(model, rows))
+    current: tuple[str, ...] = ()
+    cur_fit, cur_w = base_fit, base_w
+    for _ in range(max_steps):
+        cands = [f for f in avail if f not in current]
+        cands += [f"cyclic2.{f.split('.', 1)[1]}" for f in current if f.startswith("cyclic.")]
+        if not cands:
+            break
+        scored = []
+        for fam in cands:
+            fams = _extend(current, fam)
+            try:
+                fit = fit_model(model, data, geo, basis_all, fams, start=cur_fit)
+            except IdentificationError:
+                continue
+            if fit.basis.size == cur_fit.basis.size:
+                continue  # the family added nothing the data can tell from what is there
+            e, ew = cv_errors(fit, folds), cv_errors(fit, folds, weighted=True)
+            scored.append((fams, fit, e, ew, _paired_p(ew, cur_w)))
+        if not scored:
+            break
+        level = alpha / len(scored)
+        passing = [sc for sc in scored
+                   if sc[4] < level and np.mean(sc[3]) < np.mean(cur_w) and _rms(sc[2]) < geo_rms]
+        for fams, fit, e, _, p in scored:
+            table.append(CandidateScore(fams, fit.n_parameters, _rms(e), 100 * (_rms(e) - geo_rms) / geo_rms, p,
+                                        current, False))
+        if not passing:
+            break
+        fams, fit, _, ew, _ = min(passing, key=lambda sc: float(np.mean(sc[3])))
+        table = [CandidateScore(r.families, r.n_parameters, r.cv_rms_mm, r.change_pct, r.p_value, r.base,
+                                r.kept or r.families == fams) for r in table]
+        current, cur_fit, cur_w = fams, fit, ew
+    return Selection(current, cur_fit, geo, tuple(table), cv_name, alpha)
+
+
+@dataclass(frozen=True)
+class NestedCV:
+    """Nested cross-validation: per pose the held-out squared position error [mm²] of the geometric
+    fit and of the auto-selected model of its outer training set, and the families each outer fold
+    chose."""
+
+    geometric_e2: np.ndarray
+    auto_e2: np.ndarray
+    chosen: tuple[tuple[str, ...], ...]
+    cv: str
+
+    @property
+    def geometric_rms_mm(self) -> float:
+        return _rms(self.geometric_e2)
+
+    @property
+    def auto_rms_mm(self) -> float:
+        return _rms(self.auto_e2)
+
+
+def _held_out_e2(model: RobotModel, data: MeasurementSet, fit: TermFit, basis_test: TermBasis) -> np.ndarray:
+    from station.core.terms.error_model import apply_terms
+
+    cols = [basis_test.names.index(n) for n in fit.basis.names]
+    T = apply_terms(model, data.joints, fit.params, basis_test.select(np.array(cols, dtype=int)), fit.values)
+    meas = data.measured[:, :3, 3] if data.kind == "pose" else data.measured
+    return np.sum((T[:, :3, 3] - meas) ** 2, axis=1)
+
+
+def nested_cv(model: RobotModel, data: MeasurementSet, rows: TermRows | None = None, spec: TermSpec | None = None,
+              alpha: float = ALPHA, outer_folds: int | None = None, seed: int = 1,
+              geometric_fit: Callable[[MeasurementSet], IdentificationResult] | None = None) -> NestedCV:
+    """Nested cross-validation of ``--model auto`` against the geometric model: in every outer fold
+    both are fitted (auto: selected by its own inner CV) on the training poses alone and scored on
+    the held-out poses by the nonlinear model. ``outer_folds``: None → leave-one-out up to
+    :data:`LOO_MAX` poses, else that many folds. ``geometric_fit``: how a training set's geometric
+    fit is made (default :func:`identify` with its defaults; e.g. with ``tool_unknown=True``)."""
+    fit_geo = (lambda d: identify(model, d)) if geometric_fit is None else geometric_fit
+    spec = TermSpec() if spec is None else spec
+    n = data.n_items
+    if outer_folds is None and n <= LOO_MAX:
+        folds, name = [np.array([i]) for i in range(n)], "leave-one-out"
+    else:
+        k = outer_folds or K_FOLDS
+        perm = np.random.default_rng(seed).permutation(n)
+        folds, name = [np.sort(f) for f in np.array_split(perm, k)], f"{k}-fold"
+    geo_e2, auto_e2 = np.empty(n), np.empty(n)
+    chosen = []
+    for f in folds:
+        train = np.setdiff1d(np.arange(n), f)
+        d_train, d_test = data.subset(train), data.subset(f)
+        geo = fit_geo(d_train)
+        basis_all = all_terms_basis(model, data, rows, spec, geo.params)  # the training fit's geometry
+        b_train, b_test = basis_all.subset(train), basis_all.subset(f)
+        sel = select_model(model, d_train, rows, spec, geometric=geo, alpha=alpha, basis_all=b_train)
+        geo_fit = fit_model(model, d_train, geo, b_train, ())
+        geo_e2[f] = _held_out_e2(model, d_test, geo_fit, b_test)
+        auto_e2[f] = _held_out_e2(model, d_test, sel.fit, b_test)
+        chosen.append(sel.chosen)
+    return NestedCV(geo_e2, auto_e2, tuple(chosen), name)
