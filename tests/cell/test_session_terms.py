@@ -240,7 +240,7 @@ def test_a_scara_table_with_the_terms_auto_keeps_beats_the_geometric_table_on_th
     from station.core.kinematics.forward import scara_ik
     from station.core.kinematics.transforms import invert, pose_to_matrix
     from station.core.measurement.measurements import MeasurementSet
-    from station.core.table.grid import interpolate_table
+    from station.core.table.values import interpolate_table
     from station.core.terms.error_model import TermSpec
     from station.core.terms.selection import select_model
 

@@ -14,7 +14,8 @@ from station.core.kinematics.forward import forward, scara_ik
 from station.core.kinematics.model import RobotModel, TransformSpec
 from station.core.kinematics.transforms import pose_to_matrix, rotation_log
 from station.core.table.build import build_correction_table, interpolation_error
-from station.core.table.grid import GridSpec, interpolate_table
+from station.core.table.grid import GridSpec
+from station.core.table.values import TableRangeError, interpolate_table
 from station.core.units import ARCSEC, wrap_angle
 from station.errors import ConfigError
 from station.io.robot_files import load_robot
@@ -161,17 +162,34 @@ def test_revolute_corrections_are_wrapped(table):
     assert np.all(table.max_correction[[0, 1, 3]] < 0.02)
 
 
-def test_vectorised_interpolation_matches_the_controller_rule(table):
+def test_the_stations_interpolation_is_the_programs_rule(table):
+    """The station's one implementation of the rule against the simulated robot program's own,
+    written again from docs/protocols.md (simulators.program_words), on a built table: random
+    points, yaw wrapped by whole turns, the exact corner nodes, and one node step outside."""
+    from simulators.program_words import OutsideTable, ProgramAxis, ProgramTable
+
     rng = np.random.default_rng(5)
     g = GridSpec()
     pts = random_points(g, 50, rng)
     pts[:5, 3] += 2 * math.pi * rng.integers(-2, 3, 5)  # yaw outside (−π, π] wraps
     pts[5] = [350.0, -250.0, 250.0, -math.pi]  # exact corner nodes
     pts[6] = [650.0, 250.0, 450.0, math.pi]
+    program = ProgramTable(tuple(ProgramAxis(round(a.start / 1e-6), round(a.step / 1e-6), a.count, a.periodic)
+                                 for a in table.data.axes),
+                           np.round(table.data.values.astype(np.float64) / 1e-8).astype(np.int64))
     for c in (0, 1):
         got = interpolate_table(table.data, pts, c)
-        want = np.array([table.data.interpolate(p, c) for p in pts])
-        np.testing.assert_allclose(got, want, atol=1e-12)
+        want = np.array([program.correction(p, c) for p in pts])
+        # the program weighs counts × 1e-8 in float64, the station the float32 it holds: they
+        # differ by float32's rounding of the value (≤ 6e-8 relative), far below a nanoradian
+        np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-12)
+        np.testing.assert_allclose(table.data.interpolate(pts[3], c), got[3], rtol=0, atol=0)
+    x = table.data.axes[0]
+    outside = np.array([[x.start + x.step * x.count, 0.0, 350.0, 0.0]])  # one node past the last
+    with pytest.raises(OutsideTable):
+        program.correction(outside[0], 0)
+    with pytest.raises(TableRangeError):
+        interpolate_table(table.data, outside, 0)
 
 
 # --- interpolation error and its bound --------------------------------------------------------

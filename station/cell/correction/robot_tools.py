@@ -68,8 +68,8 @@ from station.core.kinematics.tool_frame import (
 )
 from station.core.kinematics.transforms import invert, matrix_to_pose, pose_to_matrix
 from station.core.table.build import CorrectionTable, build_correction_table
-from station.core.table.grid import GridSpec, interpolate_table
-from station.core.table.values import CorrectionTableData, TableRangeError
+from station.core.table.grid import GridSpec
+from station.core.table.values import CorrectionTableData, TableRangeError, interpolate_table
 from station.core.terms.compensation import JointDelta, commanded_joints, compensated_targets_with_terms
 from station.errors import ConfigError, StationError, UnreachableError
 

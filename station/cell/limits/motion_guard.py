@@ -6,7 +6,7 @@ Invariants (property-tested in ``tests/cell/test_safety.py``):
 * no joint target is commanded unless every joint is finite and inside the soft limits;
 * a Cartesian target is checked on the joints the controller will actually command: its nominal
   inverse kinematics **plus the correction of the table that is active** (the controller's own
-  rule, :func:`station.core.table.grid.interpolate_table`), so a correction cannot push a joint
+  rule, :func:`station.core.table.values.interpolate_table`), so a correction cannot push a joint
   over a limit unnoticed.
 
 The plan checks every planned motion with the same guard before the first motion; the runner
@@ -20,8 +20,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from station.cell.limits.joint_text import joint_value
-from station.core.table.grid import interpolate_table
-from station.core.table.values import CorrectionTableData, TableRangeError
+from station.core.table.values import CorrectionTableData, TableRangeError, interpolate_table
 from station.errors import ConfigError, UnreachableError
 
 

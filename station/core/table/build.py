@@ -36,8 +36,8 @@ import numpy as np
 from station.core.kinematics.forward import forward, scara_ik
 from station.core.kinematics.model import RobotModel
 from station.core.kinematics.transforms import pose_to_matrix, rotation_log
-from station.core.table.grid import GridSpec, _cell_coords, interpolate_table
-from station.core.table.values import CorrectionTableData, TableAxis
+from station.core.table.grid import GridSpec
+from station.core.table.values import CorrectionTableData, TableAxis, cell_coords, interpolate_table
 from station.core.terms.compensation import JointDelta, commanded_joints
 from station.core.units import ARCSEC, wrap_angle
 from station.errors import ConfigError, UnreachableError
@@ -215,7 +215,7 @@ class CorrectionTable:
             raise ValueError("this table carries no per-cell bound")
         p = np.atleast_2d(np.asarray(points, dtype=float))
         c = self.elbows.index(int(elbow)) if int(elbow) in self.elbows else 0
-        cc = _cell_coords(self.data.axes, p)
+        cc = cell_coords(self.data.axes, p)
         return self.cell_bound_um[c][tuple(i0 for i0, _, _ in cc)]
 
     def summary(self) -> dict:
@@ -394,7 +394,7 @@ def build_correction_table(nominal: RobotModel, identified_params, grid: GridSpe
 
 def _cell_points_ok(table: CorrectionTable, points: np.ndarray, config: int) -> np.ndarray:
     """(m,) bool: every corner of the point's cell is reachable."""
-    cc = _cell_coords(table.data.axes, points)
+    cc = cell_coords(table.data.axes, points)
     ok = np.ones(points.shape[0], dtype=bool)
     n = len(cc)
     R = table.reachable[config]

@@ -1,10 +1,8 @@
-"""The grid of a correction table and the controller's interpolation rule, vectorised.
+"""The grid of a correction table: its axes from a range and a step, and what it costs in values.
 
-The table's data (axes, values, their resolution) is :mod:`station.core.table.values`; its register
-encoding is the driver's. :func:`interpolate_table` is the controller's rule
-(:meth:`station.core.table.values.CorrectionTableData.interpolate`) vectorised in float64, and is
-checked against it in the tests. How many values a controller holds is the controller's: the
-caller passes that capacity in.
+The table's data (axes, values, their resolution) and the controller's interpolation rule are
+:mod:`station.core.table.values`; its register encoding is the driver's. How many values a
+controller holds is the controller's: the caller passes that capacity in.
 """
 
 from __future__ import annotations
@@ -15,11 +13,11 @@ from typing import Any
 
 import numpy as np
 
-from station.core.table.values import CorrectionTableData, TableAxis, TableError, TableRangeError
+from station.core.table.values import TableAxis
 from station.core.units import TWO_PI
 from station.errors import ConfigError
 
-__all__ = ["GridSpec", "interpolate_table"]
+__all__ = ["GridSpec"]
 
 #: relative tolerance for "range is a whole number of steps"
 _STEP_TOL = 1e-9
@@ -162,61 +160,3 @@ class GridSpec:
                 f"correction grid {'×'.join(map(str, self.shape))} × {len(self.elbows)} elbows × "
                 f"{n_joints} joints = {n} values exceeds the controller's {capacity}: use "
                 f"larger steps or a smaller range")
-
-
-# --------------------------------------------------------------------------------------------
-# interpolation (the controller's rule, vectorised)
-# --------------------------------------------------------------------------------------------
-
-def _cell_coords(axes: tuple[TableAxis, ...], points: np.ndarray):
-    """Per axis: lower node index i0 ``(m,)``, upper node index i1 and weight t, exactly as
-    :meth:`CorrectionTableData.interpolate`. Raises :class:`TableRangeError` outside."""
-    out = []
-    for k, a in enumerate(axes):
-        u = (points[:, k] - a.start) / a.step
-        if a.periodic:
-            u = np.mod(u, a.count)
-            i0 = np.minimum(np.floor(u).astype(np.int64), a.count - 1)
-            t = u - i0
-            i1 = (i0 + 1) % a.count
-        elif a.count == 1:
-            i0 = np.zeros(len(u), dtype=np.int64)
-            i1 = i0
-            t = np.zeros(len(u))
-        else:
-            bad = (u < -1e-6) | (u > a.count - 1 + 1e-6)
-            if np.any(bad):
-                j = int(np.argmax(bad))
-                raise TableRangeError(
-                    f"coordinate {k} = {points[j, k]:.6g} outside the table axis "
-                    f"[{a.start:.6g}, {a.start + a.step * (a.count - 1):.6g}]")
-            u = np.clip(u, 0.0, a.count - 1.0)
-            i0 = np.minimum(np.floor(u).astype(np.int64), a.count - 2)
-            t = u - i0
-            i1 = i0 + 1
-        out.append((i0, i1, t))
-    return out
-
-
-def interpolate_table(data: CorrectionTableData, points, config: int = 0) -> np.ndarray:
-    """Joint corrections ``(m, n_joints)`` at ``points`` ``(m, n_axes)`` (x, y, z, yaw of the
-    targets in the base frame): the controller's multilinear rule, vectorised, in float64."""
-    p = np.atleast_2d(np.asarray(points, dtype=float))
-    n = len(data.axes)
-    if p.shape[1] < n:
-        raise TableError(f"interpolation needs {n} coordinates per point, got {p.shape[1]}")
-    if not 0 <= config < data.n_configs:
-        raise TableError(f"configuration {config} not in table (n_configs={data.n_configs})")
-    cc = _cell_coords(data.axes, p)
-    vals = data.values[config].astype(float)
-    out = np.zeros((p.shape[0], data.n_joints))
-    for corner in range(1 << n):
-        w = np.ones(p.shape[0])
-        idx = []
-        for k in range(n):
-            i0, i1, t = cc[k]
-            hi = (corner >> k) & 1
-            w = w * (t if hi else 1.0 - t)
-            idx.append(i1 if hi else i0)
-        out += w[:, None] * vals[tuple(idx)]
-    return out

@@ -26,7 +26,7 @@ from typing import Protocol, Sequence
 import numpy as np
 
 __all__ = ["VALUE_RESOLUTION", "AXIS_RESOLUTION", "MAX_AXES", "TableError", "TableRangeError", "TableAxis",
-           "CorrectionTableData", "AxisLike", "TableLike"]
+           "CorrectionTableData", "AxisLike", "TableLike", "cell_coords", "interpolate_table"]
 
 #: the value grid [rad or mm] and the axis grid [mm or rad] of the table format
 VALUE_RESOLUTION = 1e-8
@@ -214,54 +214,71 @@ class CorrectionTableData:
 
     # -- the interpolation rule (docs/protocols.md) ----------------------------------------
     def interpolate(self, point: Sequence[float] | np.ndarray, config: int = 0) -> np.ndarray:
-        """Multilinear interpolation of the joint corrections at ``point`` (one coordinate per
-        axis: x, y, z, yaw of the target in the base frame, first ``n_axes`` of them).
+        """The joint corrections ``(n_joints,)`` at one ``point`` (x, y, z, yaw of the target in
+        the base frame, first ``n_axes`` of them): :func:`interpolate_table` at one point."""
+        return interpolate_table(self, np.asarray(point, dtype=float).ravel()[None], config)[0]
 
-        Per axis: ``u = (v - start) / step``. Periodic axes: ``u`` is taken modulo ``count`` and
-        node ``count-1`` interpolates towards node 0. Non-periodic axes with ``count == 1`` are
-        constant (any coordinate); otherwise ``0 <= u <= count-1`` is required (tolerance
-        ``1e-6`` node) or :class:`TableRangeError` is raised. ``i0 = min(floor(u), count-2)``,
-        ``t = u - i0``; the result is the sum over the 2^n corners of the product of weights
-        ``(1-t)`` / ``t`` times the node values, computed in float64.
-        """
-        p = np.asarray(point, dtype=float).ravel()
-        if p.size < len(self.axes):
-            raise TableError(f"interpolation needs {len(self.axes)} coordinates, got {p.size}")
-        if not 0 <= config < self.n_configs:
-            raise TableError(f"configuration {config} not in table (n_configs={self.n_configs})")
-        idx: list[tuple[int, int]] = []
-        ts: list[float] = []
-        for k, a in enumerate(self.axes):
-            u = (p[k] - a.start) / a.step
-            if a.periodic:
-                u = u % a.count
-                i0 = int(np.floor(u))
-                i0 = min(i0, a.count - 1)
-                t = u - i0
-                idx.append((i0, (i0 + 1) % a.count))
-            elif a.count == 1:
-                idx.append((0, 0))
-                t = 0.0
-            else:
-                if not -1e-6 <= u <= a.count - 1 + 1e-6:
-                    raise TableRangeError(
-                        f"coordinate {k} = {p[k]:.6g} outside the table axis "
-                        f"[{a.start:.6g}, {a.start + a.step * (a.count - 1):.6g}]")
-                u = min(max(u, 0.0), a.count - 1.0)
-                i0 = min(int(np.floor(u)), a.count - 2)
-                t = u - i0
-                idx.append((i0, i0 + 1))
-            ts.append(float(t))
-        out = np.zeros(self.n_joints)
-        vals = self.values[config]
-        n = len(self.axes)
-        for corner in range(1 << n):
-            w = 1.0
-            node = []
-            for k in range(n):
-                hi = (corner >> k) & 1
-                w *= ts[k] if hi else 1.0 - ts[k]
-                node.append(idx[k][hi])
-            if w != 0.0:
-                out += w * vals[tuple(node)].astype(float)
-        return out
+
+# --------------------------------------------------------------------------------------------
+# interpolation (the controller's rule, vectorised)
+# --------------------------------------------------------------------------------------------
+
+def cell_coords(axes: tuple[TableAxis, ...], points: np.ndarray):
+    """Per axis: lower node index i0 ``(m,)``, upper node index i1 and weight t of the controller's
+    rule (docs/protocols.md) at ``points`` ``(m, n_axes)``. Periodic axes: ``u`` is taken modulo
+    ``count`` and node ``count-1`` interpolates towards node 0. Non-periodic axes with
+    ``count == 1`` are constant (any coordinate); otherwise ``0 <= u <= count-1`` is required
+    (tolerance ``1e-6`` node) or :class:`TableRangeError` is raised. ``i0 = min(floor(u),
+    count-2)``, ``t = u - i0``."""
+    out = []
+    for k, a in enumerate(axes):
+        u = (points[:, k] - a.start) / a.step
+        if a.periodic:
+            u = np.mod(u, a.count)
+            i0 = np.minimum(np.floor(u).astype(np.int64), a.count - 1)
+            t = u - i0
+            i1 = (i0 + 1) % a.count
+        elif a.count == 1:
+            i0 = np.zeros(len(u), dtype=np.int64)
+            i1 = i0
+            t = np.zeros(len(u))
+        else:
+            bad = (u < -1e-6) | (u > a.count - 1 + 1e-6)
+            if np.any(bad):
+                j = int(np.argmax(bad))
+                raise TableRangeError(
+                    f"coordinate {k} = {points[j, k]:.6g} outside the table axis "
+                    f"[{a.start:.6g}, {a.start + a.step * (a.count - 1):.6g}]")
+            u = np.clip(u, 0.0, a.count - 1.0)
+            i0 = np.minimum(np.floor(u).astype(np.int64), a.count - 2)
+            t = u - i0
+            i1 = i0 + 1
+        out.append((i0, i1, t))
+    return out
+
+
+def interpolate_table(data: CorrectionTableData, points, config: int = 0) -> np.ndarray:
+    """Joint corrections ``(m, n_joints)`` at ``points`` ``(m, n_axes)`` (x, y, z, yaw of the
+    targets in the base frame, first ``n_axes`` of them): the controller's multilinear rule, the
+    sum over the 2^n corners of the product of weights ``(1-t)`` / ``t`` times the node values,
+    in float64. The only implementation of the rule in the station; the simulated controller
+    has its own, written from docs/protocols.md (simulators/program_words.py)."""
+    p = np.atleast_2d(np.asarray(points, dtype=float))
+    n = len(data.axes)
+    if p.shape[1] < n:
+        raise TableError(f"interpolation needs {n} coordinates per point, got {p.shape[1]}")
+    if not 0 <= config < data.n_configs:
+        raise TableError(f"configuration {config} not in table (n_configs={data.n_configs})")
+    cc = cell_coords(data.axes, p)
+    vals = data.values[config].astype(float)
+    out = np.zeros((p.shape[0], data.n_joints))
+    for corner in range(1 << n):
+        w = np.ones(p.shape[0])
+        idx = []
+        for k in range(n):
+            i0, i1, t = cc[k]
+            hi = (corner >> k) & 1
+            w = w * (t if hi else 1.0 - t)
+            idx.append(i1 if hi else i0)
+        out += w[:, None] * vals[tuple(idx)]
+    return out
