@@ -9,6 +9,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from station.cell.config.cell_config import load_config
 from station.ui.cli.main import main
@@ -41,28 +42,26 @@ def test_plan_of_the_example_cell(capsys):
     assert p["n_identification"] >= 100 and p["motion_s_estimate"] > 0
 
 
-def test_rehearsal_of_the_example_cell(tmp_path, capsys):
-    """Three seeds. One seed's after/oracle is a random variable, not a property of the code: the
-    simulated noise is keyed to the commanded joints to 1e-9 rad (a resumed run repeats its
-    physics), so a last-digit difference of the BLAS kernel (OpenBLAS's Haswell kernels against its
-    Zen ones on the same AMD machine) draws another realisation, and seed 3 then gives 1.23 where
-    it gave 1.10. So each seed is bounded on both sides with room for that scatter (0.7 … 1.3) and
-    "after" in µm, and the mean of the three at 1.2."""
-    ratios = []
-    for seed in (1, 2, 3):
-        code = main(["calibrate", "--simulated", str(CELL), "--json", "--seed", str(seed),
-                     "--db", str(tmp_path / f"runs-{seed}.sqlite")])
-        out = json.loads(capsys.readouterr().out)
-        assert code == 0, (seed, out.get("failure"))
-        assert out["robot"] == "scara600"
-        assert out["gain"] >= 20.0, seed
-        assert 0.7 <= out["after_vs_oracle"] <= 1.3, (seed, out["after_vs_oracle"])
-        assert out["after"]["rms_um"] <= 15.0, (seed, out["after"]["rms_um"])
-        ratios.append(out["after_vs_oracle"])
-        # the gripper that replaces the head: its own correction is as good as its oracle's, and
-        # the head's table would leave it far worse (issue 8, point 8)
-        (tool,) = out["tools"]
-        assert tool["name"] == "gripper"
-        assert 0.7 <= tool["after_vs_oracle"] <= 1.2, (seed, tool["after_vs_oracle"])
-        assert tool["head_rms_um"] > 4 * tool["after_rms_um"]
-    assert np.mean(ratios) <= 1.2, ratios
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_rehearsal_of_the_example_cell(seed, tmp_path, capsys):
+    """One seed per test, so that the three share the workers. One seed's after/oracle is a random
+    variable, not a property of the code: the simulated noise is keyed to the commanded joints to
+    1e-9 rad (a resumed run repeats its physics), so a last-digit difference of the BLAS kernel
+    (OpenBLAS's Haswell kernels against its Zen ones on the same AMD machine) draws another
+    realisation, and seed 3 then gives 1.23 where it gave 1.10. So each seed is bounded on both
+    sides with room for that scatter (0.7 … 1.3) and "after" in µm; the mean over seeds is the
+    benchmark's (benchmarks/bench_table_design.py)."""
+    code = main(["calibrate", "--simulated", str(CELL), "--json", "--seed", str(seed),
+                 "--db", str(tmp_path / f"runs-{seed}.sqlite")])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0, (seed, out.get("failure"))
+    assert out["robot"] == "scara600"
+    assert out["gain"] >= 20.0, seed
+    assert 0.7 <= out["after_vs_oracle"] <= 1.3, (seed, out["after_vs_oracle"])
+    assert out["after"]["rms_um"] <= 15.0, (seed, out["after"]["rms_um"])
+    # the gripper that replaces the head: its own correction is as good as its oracle's, and
+    # the head's table would leave it far worse (issue 8, point 8)
+    (tool,) = out["tools"]
+    assert tool["name"] == "gripper"
+    assert 0.7 <= tool["after_vs_oracle"] <= 1.2, (seed, tool["after_vs_oracle"])
+    assert tool["head_rms_um"] > 4 * tool["after_rms_um"]
