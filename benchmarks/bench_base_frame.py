@@ -10,8 +10,8 @@ reference (the truth with what a body calibration cannot see handed to the set-u
 identification's own choice; what it leaves is the truth's unobservable part), and with-table /
 reference. The set-up's z error is the simulator's draw; where a seed draws less than 1.2 mm,
 ``[simulation] setup_sigma_mm`` is raised for that seed until it draws 1.2 mm (same draws,
-scaled; a configured grid is then left to the station, whose margins follow σ), and the line
-says so. Median over the seeds. Asserts nothing about time.
+scaled), and the line says so. Every seed's configured grid in ``[correction]`` is left to the
+station (its margins follow σ), so that raised and unraised seeds are judged alike. Median over the seeds. Asserts nothing about time.
 
     .venv/bin/python benchmarks/bench_base_frame.py [--config examples/scara600/cell.toml] [--seeds 1 2 3]
 """
@@ -41,8 +41,8 @@ N_TARGETS = 400
 
 
 def _with_setup_sigma(text: str, sigma: float) -> str:
-    """The configuration text with ``[simulation] setup_sigma_mm = sigma`` and, for a larger σ, no
-    configured grid in ``[correction]`` (its margins grow with σ: the station derives the region)."""
+    """The configuration text with ``[simulation] setup_sigma_mm = sigma`` and no configured grid in
+    ``[correction]`` (its margins grow with σ: the station derives the region)."""
     text = re.sub(r"(?m)^setup_sigma_mm\s*=.*$", "", text)
     head, sep, rest = text.partition("\n[correction]\n")
     if sep:
