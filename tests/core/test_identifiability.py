@@ -83,13 +83,31 @@ def test_prefer_is_honoured():
     d = data("pose")
     default = analyze(SR800, d, prefer=SR800.prefer)
     assert "R.x" in default.chosen and "A1.x" not in default.chosen
-    a = analyze(SR800, d, prefer=("A1.x", "A1.yaw", *SR800.prefer))
+    a = analyze(SR800, d, prefer=("A2.y", *SR800.prefer))
     assert a.rank == 20
-    assert "A1.x" in a.chosen and "R.x" not in a.chosen  # A1.x ≡ R.x for pose data
-    assert "A1.yaw" in a.chosen
+    assert "A2.y" in a.chosen and "A2.yaw" not in a.chosen  # A2.y ≡ 325·A2.yaw + a turn about axis 1
     # every identifiable preferred parameter of the robot file's list is chosen unless it is a
-    # combination of those before it; K is first in the list and fully identifiable from poses
-    assert {"K.x", "K.y", "K.z", "K.roll", "K.pitch", "K.yaw", "A2.x", "A3.x"} <= set(default.chosen)
+    # combination of the set-up's and those before it: K.z ≡ R.z on a SCARA, so the set-up keeps it
+    assert {"K.x", "K.y", "K.roll", "K.pitch", "K.yaw", "A2.x", "A3.x"} <= set(default.chosen)
+    assert "K.z" not in default.chosen
+
+
+@pytest.mark.parametrize("kind,planar", [("pose", False), ("pose", True), ("position", False)])
+def test_setup_keeps_what_the_body_cannot_tell_from_it(kind, planar):
+    """The set-up R is chosen in full before any preference (issue 36): the robot's base-frame
+    parameters (axis 1's height, origin, tilt and zero) merge into R, never R into the robot's,
+    with the robot file's list, none, or one that asks for the robot's base parameters."""
+    d = data(kind, planar)
+    for prefer in (SR800.prefer, (), ("A1.x", "A1.z", "A1.yaw", "K.z")):
+        a = analyze(SR800, d, prefer=prefer)
+        assert set(SR800.param_names[:6]) <= set(a.chosen)
+        assert not {n for n in a.chosen if n.startswith("A1.")}
+        deps = {dep.name: dict(dep.merges_with) for dep in a.dependencies}
+        assert deps["A1.z"] == pytest.approx({"R.z": 1.0}, abs=1e-6)
+        assert deps["A1.yaw"]["R.yaw"] == pytest.approx(1.0, abs=1e-6)
+    # holding R (a set-up measured otherwise) hands those directions to the robot
+    held = analyze(SR800, d, prefer=SR800.prefer, fix=SR800.param_names[:6])
+    assert held.rank == a.rank and {"A1.x", "A1.y"} <= set(held.chosen)
 
 
 def test_preferred_but_unidentifiable_is_not_chosen():
@@ -121,7 +139,7 @@ def test_dependencies_pose():
     assert not set(deps) & set(a.chosen)
     assert deps["A1.x"] == pytest.approx({"R.x": 1.0}, abs=1e-6)
     assert deps["A1.y"] == pytest.approx({"R.y": 1.0}, abs=1e-6)
-    assert deps["A1.z"] == pytest.approx({"K.z": 1.0}, abs=1e-6)
+    assert deps["A1.z"] == pytest.approx({"R.z": 1.0}, abs=1e-6)
     # A1.pitch tilts the whole robot about the base 800 mm below axis 1's origin
     assert deps["A1.pitch"] == pytest.approx({"R.x": -800.0, "R.pitch": 1.0}, abs=1e-6)
     desc = [d.describe() for d in a.dependencies]

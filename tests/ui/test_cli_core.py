@@ -135,7 +135,7 @@ def test_identify_text_and_objectives(capsys, pose_file):
     assert "identified 20 of 36 parameters of sr800 from 30 pose measurements" in out and "converged" in out
     # it says what was fitted: registration, unit check, condition, left-out parameters, outliers
     for text in ("registration:", "unit check: consistent", "condition of the fitted set",
-                 "left out (16)", "A4.z ≡ +1·K.z", "suspected outliers: none"):
+                 "left out (16)", "A4.z ≡ +1·R.z", "suspected outliers: none"):
         assert text in out, text
     rc, out, _ = run(capsys, "identify", f, "--objective", "position", "--json")
     assert rc == 0 and len(json.loads(out)["parameters"]) == 17

@@ -21,6 +21,7 @@ from station.cell.pipeline.calibration import MIN_VALID_FRACTION, min_valid_iden
 from station.cell.plan.articulated import IdentificationDesign
 from station.cell.plan.measurement_plan import Plan, all_motion_poses, build_plan, retracted, travel_joints
 from station.cell.plan.steps import PlannedStep, StepKind
+from station.core.identification.base_frame import base_frame_note
 from station.core.identification.identifiability import analyze
 from station.core.kinematics.forward import forward, scara_reach_margin
 from station.core.measurement.measurements import residuals_and_jacobian, synthetic_set
@@ -57,6 +58,8 @@ class PlanPreview:
     design: IdentificationDesign | None = None
     #: [identification] model: "geometric", or the error terms beyond geometry chosen after the measurement
     error_model: str = "geometric"
+    #: which directions are the set-up's and what the base frame is tied to, in words (issue 36)
+    base_frame: str | None = None
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -70,7 +73,7 @@ class PlanPreview:
             "n_identification": self.n_identification, "n_verification_targets": self.n_verification_targets,
             "min_valid_identification": self.min_valid_identification,
             "travel_clearance_mm": self.travel_clearance_mm,
-            "identifiable": list(self.identifiable), "condition": self.condition,
+            "identifiable": list(self.identifiable), "condition": self.condition, "base_frame": self.base_frame,
             "predicted_sigma_position_um": dict(zip(("min", "mean", "max"), self.sigma_position_um)),
             "predicted_sigma_orientation_arcsec": dict(zip(("min", "mean", "max"), self.sigma_orientation_arcsec)),
             "predicted_accuracy_includes": "parameter uncertainty from the measurement noise only",
@@ -125,7 +128,7 @@ def preview(cfg: CellConfig, with_upload: bool = True) -> PlanPreview:
     sig = cfg.identification.pose_sigma()
     data = synthetic_set(cfg.model, "pose", ident_q, cfg.model.nominal, sigma=sig)
     a = analyze(cfg.model, data, prefer=cfg.identification.prefer, fix=cfg.identification.fix,
-                exclude=cfg.identification.exclude, describe=False)
+                exclude=cfg.identification.exclude)  # dependencies read once: the base frame's words
     _, J = residuals_and_jacobian(cfg.model, data, cfg.model.nominal)
     idx = a.chosen_indices()
     if cfg.body_sigma is not None and np.any(cfg.body_sigma > 0):
@@ -159,7 +162,7 @@ def preview(cfg: CellConfig, with_upload: bool = True) -> PlanPreview:
         sigma_orientation_arcsec=(float(ori.min()), float(ori.mean()), float(ori.max())),
         settle_s_total=float(len(steps) * cfg.plan.settle_s), joint_types=tuple(cfg.model.joint_types),
         motion_s_estimate=motion_seconds(cfg, steps), design=getattr(plan, "design", None),
-        error_model=cfg.identification.model)
+        error_model=cfg.identification.model, base_frame=base_frame_note(cfg.model, a))
 
 
 def describe(p: PlanPreview) -> list[str]:
@@ -169,6 +172,8 @@ def describe(p: PlanPreview) -> list[str]:
     lines.append(f"  a run needs at least {p.min_valid_identification} valid identification poses "
                  f"({MIN_VALID_FRACTION:.0%} of those planned)")
     lines.append(f"  identifiable: {len(p.identifiable)} parameters, condition {p.condition:.1f}")
+    if p.base_frame is not None:
+        lines.append(f"  {p.base_frame}")
     lines.append(f"  predicted accuracy after correction (parameter uncertainty only): position σ "
                  f"{p.sigma_position_um[0]:.1f}–{p.sigma_position_um[2]:.1f} µm, orientation σ "
                  f"{p.sigma_orientation_arcsec[0]:.1f}–{p.sigma_orientation_arcsec[2]:.1f}″")

@@ -7,9 +7,14 @@ Procedure (chapter §2.4/§3.3):
    first would blow round-off up into fake rank.
 3. Scale the remaining columns to unit norm (mm and rad become comparable) and take the SVD:
    the rank, singular values and condition number follow.
-4. Choose a minimal set greedily in preference order (the user's ``prefer`` list, then the
-   order of a column-pivoted QR), adding a parameter only if it raises the rank. ``fix`` and
-   ``exclude`` keep parameters out (held at their current values).
+4. Choose a minimal set greedily in preference order (the set-up R first, then the user's
+   ``prefer`` list, then the order of a column-pivoted QR), adding a parameter only if it raises
+   the rank. ``fix`` and ``exclude`` keep parameters out (held at their current values).
+   R first: every direction the measurements cannot tell from where the body stands (for a
+   SCARA the height along axis 1, the rotation about it, the base origin) goes to the set-up,
+   and the robot's own parameters stay at the robot file's there, so the robot's base frame is
+   the robot's, never where the body happened to stand (issue 36). Holding R (``fix``) hands
+   those directions to the robot: the way to measure them with a known set-up.
 5. Every parameter left out is named with the chosen parameters it merges with.
 """
 
@@ -296,11 +301,16 @@ def analyze(model: RobotModel, data: MeasurementSet, params=None, prefer=(), fix
     cand = [i for i in range(len(names)) if not is_zero[i] and names[i] not in held]
     Js = J[:, cand] / norms[cand]
     rank, s = _rank(Js)
-    # Preference order: user's list first, then column-pivoted QR order (strongest first).
+    # Preference order: the set-up R, then the user's list, then column-pivoted QR order (strongest
+    # first). R before ``prefer``: a list that puts the head first (K.z ≡ R.z on a SCARA) would
+    # otherwise let the robot take the set-up's error into its base frame (issue 36).
     piv = _pivot_order(Js)
     index = {n: i for i, n in enumerate(names)}
     in_cand = set(cand)
-    pref = [index[n] for n in prefer if index[n] in in_cand]
+    setup = set(names[:6])  # the first transform is the set-up (RobotModel)
+    ordered = [n for n in prefer if n in setup] + [n for n in names[:6] if n not in prefer]
+    ordered += [n for n in prefer if n not in setup]
+    pref = [index[n] for n in ordered if index[n] in in_cand]
     taken = set(pref)
     order = pref + [cand[k] for k in piv if cand[k] not in taken]
     chosen = sorted(_greedy(J, norms, order, rank))

@@ -41,6 +41,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from station.core.blas_threads import single_blas_thread
+from station.core.identification.base_frame import base_frame_note
 from station.core.identification.fit_kernel import DataEvaluator, FitProblem, LMSolution, minpack_lm
 from station.core.identification.identifiability import Identifiability, analyze, structural_params
 from station.core.identification.registration import (
@@ -280,6 +281,9 @@ def _identify(model: RobotModel, data: MeasurementSet, start, prefer, fix, exclu
     gimbal = ident.gimbal_note()  # a transform at pitch ±90° that costs this parametrisation rank
     if gimbal is not None:
         notes.append(gimbal)
+    base = base_frame_note(model, ident) if chosen is None else None  # what the base frame is tied to (36)
+    if base is not None:
+        notes.append(base)
     if chosen is not None:
         idx = np.array(model.param_indices(chosen), dtype=int)
         J = evaluator.residuals_and_jacobian(p0)[1][:, idx] / data.sigma[:, None]

@@ -31,6 +31,7 @@ from station.cell.records.stored_error_model import stored_error_model
 from station.cell.records.summary import RunSummary
 from station.cell.run.recentring import stored_recentring
 from station.core.accuracy.iso9283 import iso9283_pose
+from station.core.identification.base_frame import BASE_FRAME_NOTE_PREFIX
 from station.core.identification.identify import IdentificationResult
 from station.core.kinematics.forward import forward, scara_ik
 from station.core.kinematics.transforms import pose_to_matrix
@@ -356,7 +357,8 @@ def report_data_for_run(db: RunDB, run_id: int, *, operator: str | None = None) 
         res = _identify(cfg, db, run_id, run.status, summary)
     except IdentificationError as exc:  # a report all the same: how far the run got (issue 29)
         return _partial_report(db, run_id, cfg, steps, summary, str(exc), operator)
-    notes: list[str] = []
+    # which directions are the set-up's and what the base frame is tied to (issue 36)
+    notes: list[str] = [n for n in res.notes if n.startswith(BASE_FRAME_NOTE_PREFIX)]
     table = None
     if cfg.model.is_scara:  # an articulated arm gets compensated targets, no table
         try:
