@@ -28,7 +28,7 @@ from station.cell.correction.tools import run_tools
 from station.cell.correction.upload import verified_upload
 from station.cell.plan.measurement_plan import head_targets_world, joints_for
 from station.cell.plan.steps import PlannedStep, StepKind
-from station.cell.records.fingerprint import check_same_cell, fingerprint, resume_note
+from station.cell.records.fingerprint import check_same_cell, current_like, fingerprint, resume_note
 from station.cell.records.rundb import RunDB
 from station.cell.records.stored_config import POSTPROCESSED_CONFIG, config_source, stored_config, stored_plan
 from station.cell.records.summary import (
@@ -145,9 +145,12 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
         if stored_fp is None:  # a run from before fingerprints: compare with its snapshot
             stored_fp = fingerprint(stored_config(db, run_id))
         steps = stored_plan(db, run_id)  # the plan first: a damaged plan is named as such (exit 5)
-        reused = check_same_cell(stored_fp, fingerprint(cfg), run_id, db.measurements(run_id))
-        if reused:  # the measurements are kept; the table, the figures and the report follow this text
+        reused = check_same_cell(stored_fp, current_like(stored_fp, cfg), run_id, db.measurements(run_id))
+        moved = config_source(cfg) != db.load_result(run_id, "config_source", default=None)
+        if reused or moved:  # the measurements are kept; the table, the figures and the report follow this
+            # text, and its files are read where they lie now (a cell folder moved or copied: issue 37)
             db.save_result(run_id, POSTPROCESSED_CONFIG, cfg.source_text)
+            db.save_result(run_id, "config_source", config_source(cfg))
             db.save_result(run_id, "fingerprint", fingerprint(cfg))
         db.measurements(run_id)  # what is on disk must belong to that plan (record_checks.py), else exit 5
         planned_upload = any(st.kind is StepKind.VERIFY_AFTER for st in steps)
