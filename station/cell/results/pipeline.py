@@ -14,6 +14,7 @@ articulated arm takes compensated targets instead of a table (:mod:`station.cell
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -52,6 +53,7 @@ from station.cell.results.pipeline_results import (
 from station.cell.results.premotion import Premotion, premotion_check
 from station.cell.run.devices import CellController, ProbeHead
 from station.cell.run.events import Event, Notice, PhaseChanged, RunFinished, RunStarted
+from station.cell.run.locate import locate_body, located_joints
 from station.cell.run.questions import Confirm, KeepCorrection, UploadProposal
 from station.cell.run.recentring import recentring_stats, stored_recentring
 from station.cell.run.runcontrol import RunControl
@@ -106,12 +108,16 @@ class Options:
     min_gain: float = 20.0  # required RMS improvement (before / after)
 
 
-def _proc_for(cfg: CellConfig, R_world_base: np.ndarray | None) -> Callable[[PlannedStep], Procedure]:
+def _proc_for(cfg: CellConfig, R_world_base: np.ndarray | None,
+              located: np.ndarray | None = None) -> Callable[[PlannedStep], Procedure]:
+    """``located``: the set-up the body was located at (issue 37), where the identification poses
+    are commanded on it instead of the plan's joints (None: the plan's joints)."""
     heads = head_targets_world(cfg)
 
     def make(st: PlannedStep) -> Procedure:
         if not st.kind.is_verification:
-            return approach_and_read(cfg, st.q, st.direction, cycle=st.cycle)
+            q = st.q if located is None else located_joints(cfg, st, located)
+            return approach_and_read(cfg, q, st.direction, cycle=st.cycle)
         # Verification: a Cartesian target in the base frame, as a user of the robot gives it.
         assert R_world_base is not None, "verification needs the identified set-up"
         T_base = invert(pose_to_matrix(R_world_base)) @ heads[st.point]
@@ -247,8 +253,8 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
               summary: RunSummary, pre: Premotion) -> RunSummary:
     total = len(steps)
 
-    def measure(kinds: set[StepKind], R: np.ndarray | None) -> None:
-        runner.measure_steps(db, run_id, steps, kinds, total, _proc_for(cfg, R))
+    def measure(kinds: set[StepKind], R: np.ndarray | None, located: np.ndarray | None = None) -> None:
+        runner.measure_steps(db, run_id, steps, kinds, total, _proc_for(cfg, R, located))
 
     def stats(kind: StepKind) -> ErrorStats | None:
         recs = db.measurements(run_id, kind=kind.value)
@@ -264,10 +270,14 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
         from station.cell.run.warmup import run_warmup
 
         run_warmup(cfg, runner, db, run_id, steps[0], emit)
-    emit(PhaseChanged("measure", "identification poses"))
     db.set_status(run_id, "measuring")
-    measure({StepKind.IDENTIFICATION, StepKind.REVERSAL}, None)
+    located = locate_body(cfg, runner, db, run_id, steps, emit)  # the body is found, not assumed (issue 37)
+    emit(PhaseChanged("measure", "identification poses"))
+    measure({StepKind.IDENTIFICATION, StepKind.REVERSAL}, None, located)
     db.set_status(run_id, "measured")
+    if located is not None:  # the identification starts from the located set-up, and the set-up parameters
+        # it cannot tell from the arm's (its minimal set) stay there: the verification's base frame is the body's
+        cfg = dataclasses.replace(cfg, model=cfg.model.with_setup(located))
 
     records = db.measurements(run_id, kind=StepKind.IDENTIFICATION.value)
     reversal_records = db.measurements(run_id, kind=StepKind.REVERSAL.value)  # the terms' backlash uses them too
