@@ -356,7 +356,8 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
         verification_every=p.verification_every, verification_cycles=p.verification_cycles,
         select=p.select, repeats=p.repeats, recenter_attempts=p.recenter_attempts,
         recenter_margin_mm=p.recenter_margin_mm, max_residual_um=p.max_residual_um,
-        remeasure_attempts=p.remeasure_attempts)
+        remeasure_attempts=p.remeasure_attempts, setup_uncertainty_mm=f.robot.setup_uncertainty_mm,
+        locate_steps=p.locate_steps)
 
     i = f.identification
     ident = IdentificationConfig(

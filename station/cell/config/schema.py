@@ -69,6 +69,9 @@ class _Cell(_Section):
 class _Robot(_Section):
     model: PathText = Field(description='a built-in robot ("sr800") or a robot file (docs/robot-file.md)')
     setup: Pose = Field((0.0,) * 6, description=f"nominal pose of the robot base in the body frame: {_POSE_WHAT}")
+    # how far a measuring point may lie from where setup puts it: the body is located within it (issue 37)
+    setup_uncertainty_mm: float = _num(5.0, gt=0.0, le=100.0, what="how far [mm] a measuring point may lie from "
+                                       "where setup puts it (the station locates the body within this)")
 
 
 class _Limits(_Section):
@@ -179,6 +182,8 @@ class _Plan(_Section):
     recenter_margin_mm: float = _num(1.5, ge=0.0, le=4.0, what="distance from the stroke end that triggers a re-centring [mm]")
     max_residual_um: float = _num(10.0, gt=0.0, le=1000.0, what="plane residual above which a reading is not valid [µm]")
     remeasure_attempts: int = _num(1, ge=0, le=5, what="re-touches when the probes of a redundant head disagree")
+    locate_steps: int = _num(3, ge=0, le=20, what="search steps per face normal when locating the body "
+                             "beyond the probes' stroke")
 
     @field_validator("elbows")
     @classmethod

@@ -57,6 +57,9 @@ class PlanConfig:
     recenter_margin_mm: float
     max_residual_um: float
     remeasure_attempts: int = 1  # re-touches when a redundant head's probes disagree
+    #: how far a measuring point may lie from where [robot].setup puts it [mm] ([robot] setup_uncertainty_mm)
+    setup_uncertainty_mm: float = 5.0
+    locate_steps: int = 3  # search steps per face normal when locating the body (station/cell/plan/locating.py)
 
 
 @dataclass(frozen=True)

@@ -106,6 +106,8 @@ model = "sr800"                  # built-in robot or a robot file (docs/robot-fi
 # (positions within ±10000 mm, angles within ±360 deg).
 # It only has to be right to a few mm / a few tenths of a degree; the calibration identifies it.
 setup = [-450.0, 0.0, -170.0, 0.0, 0.0, 0.0]
+setup_uncertainty_mm = 5.0       # how far a measuring point may lie from where setup puts it [mm], > 0 … 100:
+                                 # the station locates the body within it (docs/station.md, "Locating the body")
 
 [limits]
 # Soft limits the station never commands a motion beyond: [lower, upper] per joint (deg | mm),
@@ -172,6 +174,7 @@ recenter_margin_mm = 1.5         # 0 … 4, less than half the probes' stroke (t
 #                                # a [head] file states its own)
 max_residual_um = 10.0           # plane residual above which a reading is not valid, > 0 … 1000
 remeasure_attempts = 1           # re-touches when a redundant head's probes disagree, 0 … 5
+locate_steps = 3                 # search steps per face normal when locating the body, 0 … 20
 
 # [head]
 # file = "head.toml"             # the probe-head file (docs/probe-head.md), relative to this file;

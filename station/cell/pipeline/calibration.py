@@ -14,6 +14,7 @@ articulated arm takes compensated targets instead of a table (:mod:`station.cell
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -39,7 +40,7 @@ from station.cell.pipeline.results import (
 )
 from station.cell.plan.measurement_plan import head_targets_world, joints_for
 from station.cell.plan.steps import PlannedStep, StepKind
-from station.cell.records.fingerprint import check_same_cell, fingerprint, resume_note
+from station.cell.records.fingerprint import check_same_cell, current_like, fingerprint, resume_note
 from station.cell.records.rundb import RunDB
 from station.cell.records.stored_config import POSTPROCESSED_CONFIG, config_source, stored_config, stored_plan
 from station.cell.records.summary import (
@@ -52,6 +53,7 @@ from station.cell.records.summary import (
 )
 from station.cell.run.devices import CellController, ProbeHead
 from station.cell.run.events import Event, Notice, PhaseChanged, RunFinished, RunStarted
+from station.cell.run.locate import locate_body, located_joints
 from station.cell.run.questions import Confirm, KeepCorrection, UploadProposal
 from station.cell.run.recentring import recentring_stats, stored_recentring
 from station.cell.run.runcontrol import RunControl
@@ -106,12 +108,16 @@ class Options:
     min_gain: float = 20.0  # required RMS improvement (before / after)
 
 
-def _proc_for(cfg: CellConfig, R_world_base: np.ndarray | None) -> Callable[[PlannedStep], Procedure]:
+def _proc_for(cfg: CellConfig, R_world_base: np.ndarray | None,
+              located: np.ndarray | None = None) -> Callable[[PlannedStep], Procedure]:
+    """``located``: the set-up the body was located at (issue 37), where the identification poses
+    are commanded on it instead of the plan's joints (None: the plan's joints)."""
     heads = head_targets_world(cfg)
 
     def make(st: PlannedStep) -> Procedure:
         if not st.kind.is_verification:
-            return approach_and_read(cfg, st.q, st.direction, cycle=st.cycle)
+            q = st.q if located is None else located_joints(cfg, st, located)
+            return approach_and_read(cfg, q, st.direction, cycle=st.cycle)
         # Verification: a Cartesian target in the base frame, as a user of the robot gives it.
         assert R_world_base is not None, "verification needs the identified set-up"
         T_base = invert(pose_to_matrix(R_world_base)) @ heads[st.point]
@@ -145,9 +151,12 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
         if stored_fp is None:  # a run from before fingerprints: compare with its snapshot
             stored_fp = fingerprint(stored_config(db, run_id))
         steps = stored_plan(db, run_id)  # the plan first: a damaged plan is named as such (exit 5)
-        reused = check_same_cell(stored_fp, fingerprint(cfg), run_id, db.measurements(run_id))
-        if reused:  # the measurements are kept; the table, the figures and the report follow this text
+        reused = check_same_cell(stored_fp, current_like(stored_fp, cfg), run_id, db.measurements(run_id))
+        moved = config_source(cfg) != db.load_result(run_id, "config_source", default=None)
+        if reused or moved:  # the measurements are kept; the table, the figures and the report follow this
+            # text, and its files are read where they lie now (a cell folder moved or copied: issue 37)
             db.save_result(run_id, POSTPROCESSED_CONFIG, cfg.source_text)
+            db.save_result(run_id, "config_source", config_source(cfg))
             db.save_result(run_id, "fingerprint", fingerprint(cfg))
         db.measurements(run_id)  # what is on disk must belong to that plan (record_checks.py), else exit 5
         planned_upload = any(st.kind is StepKind.VERIFY_AFTER for st in steps)
@@ -244,8 +253,8 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
               summary: RunSummary, pre: Premotion) -> RunSummary:
     total = len(steps)
 
-    def measure(kinds: set[StepKind], R: np.ndarray | None) -> None:
-        runner.measure_steps(db, run_id, steps, kinds, total, _proc_for(cfg, R))
+    def measure(kinds: set[StepKind], R: np.ndarray | None, located: np.ndarray | None = None) -> None:
+        runner.measure_steps(db, run_id, steps, kinds, total, _proc_for(cfg, R, located))
 
     def stats(kind: StepKind) -> ErrorStats | None:
         recs = db.measurements(run_id, kind=kind.value)
@@ -261,10 +270,14 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
         from station.cell.run.warmup import run_warmup
 
         run_warmup(cfg, runner, db, run_id, steps[0], emit)
-    emit(PhaseChanged("measure", "identification poses"))
     db.set_status(run_id, "measuring")
-    measure({StepKind.IDENTIFICATION, StepKind.REVERSAL}, None)
+    located = locate_body(cfg, runner, db, run_id, steps, emit)  # the body is found, not assumed (issue 37)
+    emit(PhaseChanged("measure", "identification poses"))
+    measure({StepKind.IDENTIFICATION, StepKind.REVERSAL}, None, located)
     db.set_status(run_id, "measured")
+    if located is not None:  # the identification starts from the located set-up, and the set-up parameters
+        # it cannot tell from the arm's (its minimal set) stay there: the verification's base frame is the body's
+        cfg = dataclasses.replace(cfg, model=cfg.model.with_setup(located))
 
     records = db.measurements(run_id, kind=StepKind.IDENTIFICATION.value)
     reversal_records = db.measurements(run_id, kind=StepKind.REVERSAL.value)  # the terms' backlash uses them too

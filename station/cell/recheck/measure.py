@@ -31,7 +31,7 @@ import numpy as np
 from station.cell.config.cell_config import CellConfig
 from station.cell.plan.measurement_plan import Target, build_plan, order_by_travel
 from station.cell.plan.steps import PlannedStep, StepKind
-from station.cell.records.fingerprint import baseline_fingerprint, check_same_cell, fingerprint
+from station.cell.records.fingerprint import baseline_fingerprint, check_same_cell, current_like, fingerprint
 from station.cell.records.run_records import MeasurementRecord, RunDatabaseError
 from station.cell.records.rundb import RunDB
 from station.cell.records.stored_config import stored_config
@@ -126,9 +126,10 @@ def check_baseline_cell(db: RunDB, run_id: int, cfg: CellConfig) -> None:
     """Refuse a baseline measured on another cell (ConfigError naming what changed); the
     recheck's own settings, the warm-up and a simulated drift may differ."""
     run = db.run(run_id)
-    stored = baseline_fingerprint(run.config_toml)
-    current = baseline_fingerprint(cfg.source_text)
     fp = db.load_result(run_id, "fingerprint", default=None)
+    # with the files' contents stored, their paths do not count (a moved or copied cell folder)
+    stored = baseline_fingerprint(run.config_toml, by_content=fp is not None)
+    current = baseline_fingerprint(cfg.source_text, by_content=fp is not None)
     if fp is not None:  # what the files the configuration names held (robot, body report, head)
         now = fingerprint(cfg)
         for key in ("robot model", "body points", "probe head"):
@@ -513,8 +514,8 @@ def run_recheck(cfg: CellConfig, probe: ProbeHead, controller: CellController, d
         run_id = resume_run
         if not _is_recheck(db, run_id):
             raise ConfigError(f"run {run_id} is a calibration; resume it with 'station calibrate CONFIG --resume {run_id}'")
-        check_same_cell(db.load_result(run_id, "fingerprint", default=None)
-                        or fingerprint(stored_config(db, run_id)), fingerprint(cfg), run_id)
+        stored_fp = db.load_result(run_id, "fingerprint", default=None) or fingerprint(stored_config(db, run_id))
+        check_same_cell(stored_fp, current_like(stored_fp, cfg), run_id)
         try:
             steps = tuple(PlannedStep.from_record(rec) for rec in db.run(run_id).plan)
         except (KeyError, ValueError, TypeError) as exc:

@@ -7,6 +7,12 @@ measurement and says so (:func:`resume_note`).
 The fingerprint hashes every section of the configuration except ``[devices]`` (a port may be
 renamed between two attempts without changing the cell) plus the robot model as loaded (so an
 edited robot file counts even though the configuration names the same path).
+
+Files count by what they hold, never by where they lie (issue 37): the keys that name a file
+(``[robot] model``, ``[body] file``, ``[head] file``) leave the sections' digests, and the loaded
+robot, body points and head stand for them. A cell folder moved or copied with unchanged files
+(a rehearsal writes their paths absolute) is the same cell. Fingerprints stored before carry no
+:data:`BY_CONTENT` entry and are compared as they were made (paths included).
 """
 
 from __future__ import annotations
@@ -31,13 +37,33 @@ def _digest(obj: Any) -> str:
     return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
-def fingerprint(cfg: CellConfig) -> dict[str, str]:
-    """Section name → digest, plus ``robot model`` for the loaded robot."""
+#: the keys that name a file (section, key): their content is fingerprinted, not their path
+FILE_KEYS = (("robot", "model"), ("body", "file"), ("head", "file"))
+#: the entry a content fingerprint carries (one stored before compares paths too)
+BY_CONTENT = ("files", "by content")
+
+
+def without_file_paths(data: dict[str, Any]) -> dict[str, Any]:
+    """The parsed configuration without the keys that name a file (:data:`FILE_KEYS`)."""
+    out = dict(data)
+    for section, key in FILE_KEYS:
+        if isinstance(out.get(section), dict) and key in out[section]:
+            out[section] = {k: v for k, v in out[section].items() if k != key}
+    return out
+
+
+def fingerprint(cfg: CellConfig, by_content: bool = True) -> dict[str, str]:
+    """Section name → digest, plus ``robot model`` for the loaded robot (and ``body points``,
+    ``probe head`` for a body or head file). ``by_content=False``: the fingerprint as made before
+    issue 37, with the files' paths in their sections' digests (to compare with a stored one)."""
     try:
         data = tomllib.loads(cfg.source_text) if cfg.source_text else {}
     except tomllib.TOMLDecodeError:  # pragma: no cover - a CellConfig was parsed from this text
         data = {}
-    out = {f"[{k}]": _digest(v) for k, v in data.items() if k not in _IGNORED}
+    hashed = without_file_paths(data) if by_content else data
+    out = {f"[{k}]": _digest(v) for k, v in hashed.items() if k not in _IGNORED}
+    if by_content:
+        out[BY_CONTENT[0]] = BY_CONTENT[1]
     m = cfg.model
     out["robot model"] = _digest({"name": m.name, "types": list(m.joint_types),
                                   "nominal": np.round(np.asarray(m.nominal), 12).tolist(),
@@ -63,14 +89,17 @@ _SIMULATED_DRIFT_KEYS = ("thermal_length_um", "thermal_offset_arcsec", "thermal_
                          "step_joint", "step_offset_deg", "step_tool_um")
 
 
-def baseline_fingerprint(config_toml: str) -> dict[str, str]:
+def baseline_fingerprint(config_toml: str, by_content: bool = False) -> dict[str, str]:
     """Section name → digest of a configuration text as a recheck compares it with its baseline:
     ``[devices]``, ``[recheck]`` and ``[warmup]`` left out, and the simulated drift keys of
-    ``[simulation]`` (the robot moved; that is what a recheck is for)."""
+    ``[simulation]`` (the robot moved; that is what a recheck is for). ``by_content``: the keys
+    that name a file left out too (the caller compares the files' contents instead)."""
     try:
         data = tomllib.loads(config_toml) if config_toml else {}
     except tomllib.TOMLDecodeError:
         data = {}
+    if by_content:
+        data = without_file_paths(data)
     out = {}
     for k, v in data.items():
         if k in _BASELINE_IGNORED:
@@ -89,6 +118,11 @@ POST_PROCESSING = ("[identification]", "[correction]", "[recheck]", "[tool]", "[
 def post_processing_only(changed: Collection[str]) -> bool:
     """True when every changed key of a fingerprint only post-processes the measurements."""
     return all(k in POST_PROCESSING for k in changed)
+
+
+def current_like(stored: dict[str, str], cfg: CellConfig) -> dict[str, str]:
+    """``cfg``'s fingerprint made the way ``stored`` was (by content, or with paths before issue 37)."""
+    return fingerprint(cfg, by_content=stored.get(BY_CONTENT[0]) == BY_CONTENT[1])
 
 
 def check_same_cell(stored: dict[str, str], current: dict[str, str], run_id: int,
