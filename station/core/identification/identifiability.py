@@ -277,6 +277,41 @@ def _greedy(J: np.ndarray, norms: np.ndarray, order: list[int], rank: int) -> li
     return chosen
 
 
+def _setup_first(J: np.ndarray, norms: np.ndarray, chosen: list[int], setup: list[int],
+                 preferred: list[int]) -> list[int]:
+    """``chosen`` (a basis of the candidates' span) with every set-up column in it: each set-up
+    column left out lies in the span, so it can replace one robot column of the basis and the rank
+    holds (the exchange lemma). Then what the measurements cannot tell from where the body stands
+    is the set-up's, and the robot's own parameters stay at the robot file's in those directions
+    (issue 36).
+
+    Which robot column goes: among those whose exchange leaves a set conditioned within 10 × the
+    best exchange's, one the user did not prefer, else the one latest in the user's ``prefer``
+    list. Why an exchange rather than the set-up first in the greedy order: taken first, the
+    set-up's columns make the greedy take whatever robot columns raise the rank next in pivot
+    order, and on a SCARA whose body sits to one side that gave a set conditioned 1 755 where the
+    exchange's is 20: the identified lengths then scatter by millimetres."""
+    rank_of = {c: k for k, c in enumerate(preferred)}
+    basis = list(chosen)
+    for r in setup:
+        if r in basis:
+            continue
+        trials: list[tuple[float, int]] = []
+        for k, c in enumerate(basis):
+            if c < 6:
+                continue
+            trial = basis[:k] + [r] + basis[k + 1:]
+            sv = np.linalg.svd(J[:, trial] / norms[trial], compute_uv=False)
+            if sv[-1] > GS_RTOL * sv[0]:  # else r does not replace c: the rank would drop
+                trials.append((float(sv[0] / sv[-1]), k))
+        if not trials:
+            continue
+        best = min(cond for cond, _ in trials)
+        fair = [(basis[k] in rank_of, -rank_of.get(basis[k], 0), cond, k) for cond, k in trials if cond <= 10 * best]
+        basis[min(fair)[3]] = r
+    return sorted(basis)
+
+
 def analyze(model: RobotModel, data: MeasurementSet, params=None, prefer=(), fix=(), exclude=(),
             describe: bool = True, jacobian: np.ndarray | None = None) -> Identifiability:
     """Identifiability of ``model``'s parameters from ``data`` at ``params`` (default nominal).
@@ -301,19 +336,18 @@ def analyze(model: RobotModel, data: MeasurementSet, params=None, prefer=(), fix
     cand = [i for i in range(len(names)) if not is_zero[i] and names[i] not in held]
     Js = J[:, cand] / norms[cand]
     rank, s = _rank(Js)
-    # Preference order: the set-up R, then the user's list, then column-pivoted QR order (strongest
-    # first). R before ``prefer``: a list that puts the head first (K.z ≡ R.z on a SCARA) would
-    # otherwise let the robot take the set-up's error into its base frame (issue 36).
+    # Preference order: the user's list, then column-pivoted QR order (strongest first); then every
+    # set-up parameter left out is exchanged into the set (issue 36): a list that puts the head
+    # first (K.z ≡ R.z on a SCARA) would otherwise let the robot take the set-up's error into its
+    # base frame.
     piv = _pivot_order(Js)
     index = {n: i for i, n in enumerate(names)}
     in_cand = set(cand)
-    setup = set(names[:6])  # the first transform is the set-up (RobotModel)
-    ordered = [n for n in prefer if n in setup] + [n for n in names[:6] if n not in prefer]
-    ordered += [n for n in prefer if n not in setup]
-    pref = [index[n] for n in ordered if index[n] in in_cand]
+    pref = [index[n] for n in prefer if index[n] in in_cand]
     taken = set(pref)
     order = pref + [cand[k] for k in piv if cand[k] not in taken]
-    chosen = sorted(_greedy(J, norms, order, rank))
+    chosen = _setup_first(J, norms, _greedy(J, norms, order, rank), [i for i in range(6) if i in in_cand],
+                          pref)
     nc = norms[chosen]
     Jc = J[:, chosen] / nc
     cond = float(s[0] / s[rank - 1]) if rank else float("inf")
