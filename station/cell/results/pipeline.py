@@ -15,7 +15,7 @@ articulated arm takes compensated targets instead of a table (:mod:`station.cell
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -29,6 +29,7 @@ from station.cell.correction.upload import verified_upload
 from station.cell.plan.measurement_plan import head_targets_world, joints_for
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.fingerprint import check_same_cell, fingerprint, resume_note
+from station.cell.records.run_records import MeasurementRecord
 from station.cell.records.rundb import RunDB
 from station.cell.records.stored_config import POSTPROCESSED_CONFIG, config_source, stored_config, stored_plan
 from station.cell.records.summary import (
@@ -46,6 +47,7 @@ from station.cell.results.pipeline_results import (
     identify_run,
     oracle_params,
     reversal_error,
+    run_measurements,
     verification_errors,
     verified_outcome,
 )
@@ -63,7 +65,7 @@ from station.errors import ConfigError, IdentificationError, Outcome, RunAborted
 # The figures of a stored run (pipeline_results), its configuration and plan (stored_config) and
 # the articulated arm's step (pipeline_articulated) live apart; their names stay importable here.
 __all__ = ["Options", "run_calibration", "MIN_VALID_FRACTION", "MAX_RMS_NORMALIZED", "MAX_OUTLIER_FRACTION",
-           "min_valid_identification", "check_identification", "identify_run", "reversal_error",
+           "min_valid_identification", "check_identification", "check_plausible", "identify_run", "reversal_error",
            "verification_errors", "oracle_params", "grid_for", "build_table_for", "articulated_targets",
            "config_source", "stored_config", "stored_plan"]
 
@@ -96,6 +98,20 @@ def check_identification(res: IdentificationResult) -> None:
         raise IdentificationError(
             f"{len(res.outliers)} of {n_rows} measurements are outliers (more than {MAX_OUTLIER_FRACTION:.0%}); "
             f"the data is not trusted. Check the probe head and the body for debris, then re-run")
+
+
+def check_plausible(cfg: CellConfig, records: Sequence[MeasurementRecord], res: IdentificationResult) -> None:
+    """Refuse a converged fit far from the robot file's geometry (issue 36): exit 3 naming the
+    parameter, its value, its σ and the likely cause. The limits widen with a rehearsal's
+    ``[simulation]`` error sizes (PRIOR_FACTOR times their σ), never below the defaults."""
+    from station.core.plausibility import PLAUSIBLE_ANGLE_RAD, PLAUSIBLE_LENGTH_MM, PRIOR_FACTOR, require_plausible
+    from station.core.units import ARCSEC
+
+    sim = cfg.simulation
+    length = max(PLAUSIBLE_LENGTH_MM, PRIOR_FACTOR * (getattr(sim, "length_sigma_um", 0.0) or 0.0) / 1000.0)
+    angle = max(PLAUSIBLE_ANGLE_RAD, PRIOR_FACTOR * (getattr(sim, "angle_sigma_arcsec", 0.0) or 0.0) * ARCSEC)
+    require_plausible(cfg.model, run_measurements(cfg, records), res.params, res.chosen, res.uncertainty.sigma,
+                      length, angle)
 
 
 @dataclass(frozen=True)
@@ -284,6 +300,7 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
             f"the invalid poses are measured again")
     res = identify_run(cfg, records)
     check_identification(res)
+    check_plausible(cfg, records, res)
     db.save_result(run_id, "identification", {
         "params": res.params, "chosen": list(res.chosen), "sigma": res.uncertainty.sigma,
         "covariance": res.uncertainty.covariance,  # of the chosen parameters, [mm, rad]² (the fleet store's)
