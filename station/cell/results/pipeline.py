@@ -361,7 +361,9 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
         return summary.replace(upload_skipped=True, outcome=Outcome.NOT_UPLOADED)
     proposal = UploadProposal(
         n_values=int(table.data.n_values), grid_shape=tuple(int(n) for n in table.data.grid_shape),
-        interpolation_bound_um=float(table.interpolation_bound_um), crc32=f"{table.data.crc32():08x}",
+        # the one stored bound (over the working cells, judged against the limit), which the report,
+        # the JSON and the fleet read; the whole table's (every reachable cell) read 5.6 µm where they said 4.7
+        interpolation_bound_um=float(bound), crc32=f"{table.data.crc32():08x}",
         max_correction=tuple(float(v) for v in table.max_correction), joint_types=tuple(cfg.model.joint_types))
     if options.confirm is not None and not options.confirm(proposal):
         if runner.control.aborted:  # the abort answered the open question "no": an abort, not a decline,
