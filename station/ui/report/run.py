@@ -217,11 +217,12 @@ def _identify(cfg: CellConfig, db: RunDB, run_id: int, status: str, summary: Run
 def _reached(db: RunDB, run_id: int, summary: RunSummary | None, step: str) -> bool:
     """Whether the run reached ``step`` ("identification" or "correction"), as the report's progress
     line says (:func:`~station.ui.report.progress.run_progress`): by the stored summary, or without
-    one (a run still going, or killed) by the step's stored result."""
+    one (a run still going, or killed) by the step's stored result or a later step's."""
     if summary is not None:
         return (summary.identification if step == "identification" else summary.correction) is not None
-    key = "identification" if step == "identification" else "correction_grid"
-    return db.load_result(run_id, key, default=None) is not None
+    # a later step's stored result says the identification ran too (a table is built from it)
+    keys = ("identification", "error_model", "correction_grid") if step == "identification" else ("correction_grid",)
+    return any(db.load_result(run_id, k, default=None) is not None for k in keys)
 
 
 def _not_reached_reason(run_id: int, summary: RunSummary | None, status: str) -> str:
