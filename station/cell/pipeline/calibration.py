@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -35,12 +35,14 @@ from station.cell.pipeline.results import (
     identify_run,
     oracle_params,
     reversal_error,
+    run_measurements,
     verification_errors,
     verified_outcome,
 )
 from station.cell.plan.measurement_plan import head_targets_world, joints_for
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.fingerprint import check_same_cell, current_like, fingerprint, resume_note
+from station.cell.records.run_records import MeasurementRecord
 from station.cell.records.rundb import RunDB
 from station.cell.records.stored_config import POSTPROCESSED_CONFIG, config_source, stored_config, stored_plan
 from station.cell.records.summary import (
@@ -65,7 +67,7 @@ from station.errors import ConfigError, IdentificationError, Outcome, RunAborted
 # The figures of a stored run (pipeline_results), its configuration and plan (stored_config) and
 # the articulated arm's step (pipeline_articulated) live apart; their names stay importable here.
 __all__ = ["Options", "run_calibration", "MIN_VALID_FRACTION", "MAX_RMS_NORMALIZED", "MAX_OUTLIER_FRACTION",
-           "min_valid_identification", "check_identification", "identify_run", "reversal_error",
+           "min_valid_identification", "check_identification", "check_plausible", "identify_run", "reversal_error",
            "verification_errors", "oracle_params", "grid_for", "build_table_for", "articulated_targets",
            "config_source", "stored_config", "stored_plan"]
 
@@ -98,6 +100,25 @@ def check_identification(res: IdentificationResult) -> None:
         raise IdentificationError(
             f"{len(res.outliers)} of {n_rows} measurements are outliers (more than {MAX_OUTLIER_FRACTION:.0%}); "
             f"the data is not trusted. Check the probe head and the body for debris, then re-run")
+
+
+def check_plausible(cfg: CellConfig, records: Sequence[MeasurementRecord], res: IdentificationResult) -> None:
+    """Refuse a converged fit far from the robot file's geometry (issue 36): exit 3 naming the
+    parameter, its value, its σ and the likely cause. The limits widen with a rehearsal's
+    ``[simulation]`` error sizes (PRIOR_FACTOR times their σ), never below the defaults."""
+    from station.core.identification.plausibility import (
+        PLAUSIBLE_ANGLE_RAD,
+        PLAUSIBLE_LENGTH_MM,
+        PRIOR_FACTOR,
+        require_plausible,
+    )
+    from station.core.units import ARCSEC
+
+    sim = cfg.simulation
+    length = max(PLAUSIBLE_LENGTH_MM, PRIOR_FACTOR * (getattr(sim, "length_sigma_um", 0.0) or 0.0) / 1000.0)
+    angle = max(PLAUSIBLE_ANGLE_RAD, PRIOR_FACTOR * (getattr(sim, "angle_sigma_arcsec", 0.0) or 0.0) * ARCSEC)
+    require_plausible(cfg.model, run_measurements(cfg, records), res.params, res.chosen, res.uncertainty.sigma,
+                      length, angle)
 
 
 @dataclass(frozen=True)
@@ -297,6 +318,7 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
             f"the invalid poses are measured again")
     res = identify_run(cfg, records)
     check_identification(res)
+    check_plausible(cfg, records, res)
     db.save_result(run_id, "identification", {
         "params": res.params, "chosen": list(res.chosen), "sigma": res.uncertainty.sigma,
         "covariance": res.uncertainty.covariance,  # of the chosen parameters, [mm, rad]² (the fleet store's)
@@ -357,7 +379,9 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
         return summary.replace(upload_skipped=True, outcome=Outcome.NOT_UPLOADED)
     proposal = UploadProposal(
         n_values=int(table.data.n_values), grid_shape=tuple(int(n) for n in table.data.grid_shape),
-        interpolation_bound_um=float(table.interpolation_bound_um), crc32=f"{table.data.crc32():08x}",
+        # the one stored bound (over the working cells, judged against the limit), which the report,
+        # the JSON and the fleet read; the whole table's (every reachable cell) read 5.6 µm where they said 4.7
+        interpolation_bound_um=float(bound), crc32=f"{table.data.crc32():08x}",
         max_correction=tuple(float(v) for v in table.max_correction), joint_types=tuple(cfg.model.joint_types))
     if options.confirm is not None and not options.confirm(proposal):
         if runner.control.aborted:  # the abort answered the open question "no": an abort, not a decline,

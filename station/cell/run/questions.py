@@ -17,6 +17,7 @@ class UploadProposal:
 
     n_values: int
     grid_shape: tuple[int, ...]
+    #: the run's stored bound (``RunSummary.correction``): the same figure the report and JSON give
     interpolation_bound_um: float
     crc32: str
     max_correction: tuple[float, ...]  # per joint [rad | mm]

@@ -238,10 +238,16 @@ def cmd_identify(args) -> int:
                    exclude=_names(args.exclude), tool_unknown=tool_unknown,
                    loss=getattr(args, "loss", "linear"), max_nfev=getattr(args, "max_evaluations", MAX_EVALUATIONS))
     require_converged(res)
+    from station.core.identification.plausibility import few_angles_text, joint_angle_counts, require_plausible
     from station.ui.cli.commands_model import identify_terms, output_params, print_terms, terms_toml
 
+    # a converged fit is not yet a robot (issue 36): far from its file's geometry it exits 3, named
+    plaus = require_plausible(model, data, res.params, res.chosen, res.uncertainty.sigma)
     terms = identify_terms(args, model, data, res, mf, jmap)  # --model (issue 30); None: the geometric fit alone
     file_notes = [f"{args.data}: {n}" for n in mf.notes] + tool_note
+    few = few_angles_text(model, data.joints)
+    if few is not None:  # flagged even where the result stays plausible: such a model holds near these angles only
+        file_notes.append(f"{few}; the model is fitted where that joint stood and holds there only")
     if args.output:
         write_file(args.output, robot_to_toml(model, output_params(res, terms), angle_unit="rad")
                    + joint_map_toml(jmap, model, angle_unit="rad")
@@ -251,6 +257,8 @@ def cmd_identify(args) -> int:
         rep["output"] = args.output
         rep["joint_map"] = jmap.describe()
         rep["notes"] = file_notes + rep["notes"]
+        rep["distinct_joint_values"] = list(joint_angle_counts(model, data.joints))
+        rep["plausibility"] = plaus.to_dict()
         if terms is not None:
             rep["error_model"] = terms.to_dict()
         _print_json(_succeeded(rep))
@@ -269,6 +277,10 @@ def cmd_identify(args) -> int:
           f"fitted set {ident.chosen_condition:.1f}; largest |correlation| {res.uncertainty.max_abs_correlation():.2f}")
     print(f"normalised RMS residual {res.rms_normalized:.3f}; RMS position residual "
           f"{res.rms_position_mm() * 1e3:.1f} µm")
+    print("distinct values per joint (modulo a turn): "
+          + ", ".join(f"J{j + 1} {n}" for j, n in enumerate(joint_angle_counts(model, data.joints)))
+          + f"; the identified robot stands {plaus.workspace_mm:.3g} mm RMS from its file's geometry over the joint "
+          f"ranges (same tool, best rigid placement)")
     print(f"{'parameter':12s} {'nominal':>16s} {'identified':>16s} {'σ':>12s}")
     for n, i, v, s in zip(res.chosen, res.chosen_index, res.estimates, res.uncertainty.sigma):
         print(f"{n:12s} {_fmt_param(n, model.nominal[i]):>16s} {_fmt_param(n, v):>16s} {_fmt_sigma(n, s):>12s}")
@@ -400,7 +412,10 @@ def cmd_validate(args) -> int:
         dq = joint_delta_of(model, terms, gravity_of(args.model, model), gear_ratios_of(args.model, model))
         notes.append(f"error terms of the model applied: {', '.join(terms.names)} (drift and backlash at zero)")
     if calib is not None:  # the model registered on its calibration data, never on the held-out rows
-        reg_m = register(model, jmap.to_model(calib[0]), calib[1], sigma, params=model.nominal)
+        # with the model it is scored with: its joints at q + Δq(q) there too (issue 36: registered
+        # without the terms, an auto model missed the FANUC's held-out poses by 2.1 mm, not 0.53 mm)
+        q_cal = jmap.to_model(calib[0])
+        reg_m = register(model, q_cal if dq is None else q_cal + dq(q_cal), calib[1], sigma, params=model.nominal)
         e_pos, e_ang = _errors(model, q, kind, measured, setup_pose=reg_m.setup_pose, delta_q=dq)
         setup = f"registered on {args.calibration}"
     else:

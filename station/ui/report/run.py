@@ -215,6 +215,27 @@ def _identify(cfg: CellConfig, db: RunDB, run_id: int, status: str, summary: Run
                                   f"fails: {exc}") from None
 
 
+def _reached(db: RunDB, run_id: int, summary: RunSummary | None, step: str) -> bool:
+    """Whether the run reached ``step`` ("identification" or "correction"), as the report's progress
+    line says (:func:`~station.ui.report.progress.run_progress`): by the stored summary, or without
+    one (a run still going, or killed) by the step's stored result or a later step's."""
+    if summary is not None:
+        return (summary.identification if step == "identification" else summary.correction) is not None
+    # a later step's stored result says the identification ran too (a table is built from it)
+    keys = ("identification", "error_model", "correction_grid") if step == "identification" else ("correction_grid",)
+    return any(db.load_result(run_id, k, default=None) is not None for k in keys)
+
+
+def _not_reached_reason(run_id: int, summary: RunSummary | None, status: str) -> str:
+    ended = (f"ended {summary.outcome.name} (exit code {summary.exit_code})" if summary is not None
+             else f"has no stored outcome (status '{status}')")
+    if summary is not None and summary.failure is not None:
+        ended += f": {summary.failure.message}"
+    return (f"the run {ended} before its identification; no parameters, residuals, predicted accuracy or "
+            f"correction table are shown, and none are recomputed from the measurements it took. Finish it with "
+            f"'station calibrate CONFIG --resume {run_id}', then 'station report {run_id}'")
+
+
 def _trend_run(r: RunInfo) -> TrendRun:
     return TrendRun(run_id=r.id, created=r.created_utc, kind=r.kind, outcome=r.outcome or "", status=r.status,
                     rms_after_um=r.rms_after_um, drift_rms_um=r.drift_rms_um,
@@ -353,6 +374,10 @@ def report_data_for_run(db: RunDB, run_id: int, *, operator: str | None = None) 
         raise ConfigError(f"no report for run {run_id}: its stored configuration does not read with this "
                           f"station version ({exc})") from None
     steps = stored_plan(db, run_id)
+    if not _reached(db, run_id, summary, "identification"):
+        # a run stopped before its identification shows none of its figures (issue 36): recomputed
+        # from the measurements it had, they would read as the run's own under "Not reached"
+        return _partial_report(db, run_id, cfg, steps, summary, _not_reached_reason(run_id, summary, run.status), operator)
     try:
         res = _identify(cfg, db, run_id, run.status, summary)
     except IdentificationError as exc:  # a report all the same: how far the run got (issue 29)
@@ -360,7 +385,10 @@ def report_data_for_run(db: RunDB, run_id: int, *, operator: str | None = None) 
     # which directions are the set-up's and what the base frame is tied to (issue 36)
     notes: list[str] = [n for n in res.notes if n.startswith(BASE_FRAME_NOTE_PREFIX)]
     table = None
-    if cfg.model.is_scara:  # an articulated arm gets compensated targets, no table
+    if cfg.model.is_scara and not _reached(db, run_id, summary, "correction"):
+        notes.append("the run did not reach its correction table: none is shown (none is rebuilt from its "
+                     "identification)")
+    elif cfg.model.is_scara:  # an articulated arm gets compensated targets, no table
         try:
             table = _rebuilt_table(cfg, db, run_id, res, notes)
         except StationError as exc:
