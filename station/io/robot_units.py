@@ -70,7 +70,7 @@ def check_raw_units(values: Sequence[RawValue], source: str, fix_angle: str, fix
                           "and no twist or joint offset is a degree and a half", fix_angle.format(unit="rad"))
     lim = [v for v in values if v.kind == "limit-angle" and v.unit == "deg"]
     if len(lim) >= 2:
-        ranges = {}
+        ranges: dict[str, list[float]] = {}
         for v in lim:
             ranges.setdefault(v.where, []).append(v.value)
         spans = [max(x) - min(x) for x in ranges.values() if len(x) == 2]

@@ -16,14 +16,14 @@ import pytest
 from station.errors import ConfigError
 from station.io.robot_files import load_robot
 
-HEAD = "type,theta [{a}],d [{l}],a [{l}],alpha [{a}],lower [{a}|{l}],upper [{a}|{l}]\n"
+HEAD = "type,theta [{a}],d [{u}],a [{u}],alpha [{a}],lower [{a}|{u}],upper [{a}|{u}]\n"
 #: a six-axis arm of 25 / 400 / 455 / 35 / 420 / 80 mm (a KR 6 R900-like data sheet, written here)
 ROWS_DEG_MM = [(0, 400, 25, -90, -170, 170), (-90, 0, 455, 0, -190, 45), (0, 0, 35, -90, -120, 156),
                (0, 420, 0, 90, -185, 185), (0, 0, 0, -90, -120, 120), (0, 80, 0, 0, -350, 350)]
 
 
-def _dh(tmp_path, a="deg", l="mm", angle=lambda v: v, length=lambda v: v, limit=lambda v: v, head=None):
-    text = (head or HEAD).format(a=a, l=l) + "".join(
+def _dh(tmp_path, a="deg", u="mm", angle=lambda v: v, length=lambda v: v, limit=lambda v: v, head=None):
+    text = (head or HEAD).format(a=a, u=u) + "".join(
         f"revolute,{angle(t):.12g},{length(d):.12g},{length(ln):.12g},{angle(al):.12g},{limit(lo):.12g},{limit(hi):.12g}\n"
         for t, d, ln, al, lo, hi in ROWS_DEG_MM)
     p = tmp_path / "arm.dh.csv"
@@ -36,7 +36,7 @@ def test_the_file_in_its_own_units_loads_and_the_same_robot_in_rad_and_m(tmp_pat
     d = tmp_path / "si"
     d.mkdir()
     m2 = load_robot(_dh(d, "rad", "m", angle=math.radians, length=lambda v: v / 1000.0, limit=math.radians,
-                        head="type,theta [{a}],d [{l}],a [{l}],alpha [{a}],lower [{a}|mm],upper [{a}|mm]\n"))
+                        head="type,theta [{a}],d [{u}],a [{u}],alpha [{a}],lower [{a}|mm],upper [{a}|mm]\n"))
     assert np.max(np.abs(m.nominal - m2.nominal)) < 1e-6, np.max(np.abs(m.nominal - m2.nominal))
 
 
@@ -87,7 +87,7 @@ def test_limits_in_radians_under_deg_are_named(tmp_path):
 TOML = """[robot]
 name = "unit-test scara"
 angle_unit = "{a}"
-length_unit = "{l}"
+length_unit = "{u}"
 
 [[transform]]
 name = "R"
@@ -112,9 +112,9 @@ z = {zk}
 """
 
 
-def _toml(tmp_path, a="deg", l="mm", z1=420.0, x2=330.0, yaw=30.0, lo=-140.0, hi=140.0, zk=-90.0):
+def _toml(tmp_path, a="deg", u="mm", z1=420.0, x2=330.0, yaw=30.0, lo=-140.0, hi=140.0, zk=-90.0):
     p = tmp_path / "robot.toml"
-    p.write_text(TOML.format(a=a, l=l, z1=z1, x2=x2, yaw=yaw, lo=lo, hi=hi, zk=zk), encoding="utf-8")
+    p.write_text(TOML.format(a=a, u=u, z1=z1, x2=x2, yaw=yaw, lo=lo, hi=hi, zk=zk), encoding="utf-8")
     return p
 
 
