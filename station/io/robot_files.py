@@ -32,6 +32,7 @@ from station.core.kinematics.joint_map import JointMap, joint_map_from_file_unit
 from station.core.kinematics.model import RobotModel, robot_from_dict
 from station.errors import ConfigError
 from station.io.robot_bounds import check_map_plausible, check_plausible
+from station.io.robot_units import check_toml_units
 
 #: a robot file larger than this is refused before it is read (a URDF with inline meshes is
 #: rarely above a few MB; the DH and TOML files are a few kB)
@@ -149,7 +150,9 @@ def load_mapped_robot(name_or_path: str | Path, base: str | None = None,
     from station.io.robot_schema import validate_robot_toml  # pydantic: only for a TOML file
 
     validate_robot_toml(data, str(path))  # unknown tables and keys: the nearest known name
-    model = check_model(robot_from_dict(data, source=str(path)), str(path))
+    model = robot_from_dict(data, source=str(path))
+    check_toml_units(data, str(path))  # on the numbers as written: a slip of unit is named where it was made
+    model = check_model(model, str(path))
     _toml_tool_unknown(data, str(path))  # a typo in [tool] is refused by every command, not only identify
     return model, _plausible_map(_toml_joint_map(data, model, str(path)), model, str(path))
 

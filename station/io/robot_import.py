@@ -36,6 +36,7 @@ from station.core.kinematics.model import RobotModel, TransformSpec
 from station.core.kinematics.transforms import invert, matrix_to_pose, pose_to_matrix, rot_x, rot_z, rotation_exp
 from station.errors import ConfigError
 from station.io.robot_bounds import nearest
+from station.io.robot_units import RawValue, check_raw_units
 
 #: cos(pitch) below which a frame in front of a joint is turned off the gimbal lock: sin 5°, the
 #: reach of the structural snap (station.core.identification.identifiability.structural_params), which would put
@@ -155,6 +156,7 @@ def read_dh_file(path: Path) -> tuple[RobotModel, JointMap]:
     units = {n: (_unit(h) if n not in _UNITLESS else "") for n, h in zip(names, head)}
     scale = {"deg": math.pi / 180, "rad": 1.0, "mm": 1.0, "m": 1000.0}
     out = []
+    raw: list[RawValue] = []  # every number as written, for the unit plausibility before conversion
     map_rows: list[tuple[int, dict[str, str]]] = []  # (line, the map cells) of each joint row
     for k, r in enumerate(rows[1:], start=2):
         rec = dict(zip(names, (c.strip() for c in r)))
@@ -180,7 +182,12 @@ def read_dh_file(path: Path) -> tuple[RobotModel, JointMap]:
                 raise ConfigError(f"{path}, line {k}: {n} must be a number, got {rec.get(n)!r}") from None
             if not math.isfinite(vals[n]):
                 raise ConfigError(f"{path}, line {k}: {n} must be a finite number, got {rec[n]!r}") from None
+            role = ("angle" if n in ("theta", "alpha") else "length" if n in ("d", "a") else
+                    "limit-angle" if kind == "revolute" else "limit-length")
+            raw.append(RawValue(f"line {k}", f"{n} [{units[n]}]", role, u, float(rec[n])))
         out.append((kind, vals["theta"], vals["d"], vals["a"], vals["alpha"], vals["lower"], vals["upper"]))
+    check_raw_units(raw, str(path), "if so, write [{unit}] for the angles in that column's header",
+                    "if so, write [{unit}] for the lengths in the d and a columns' headers")
     model = robot_from_dh(out, conv, name=path.name.split(".")[0])
     return model, _dh_joint_map(path, model, map_rows, units.get("offset") or "deg|mm", scale)
 

@@ -49,8 +49,11 @@ def test_points_out_of_reach_are_left_out_with_their_reason_and_the_plan_goes_on
     measured = {st.point_id for st in plan.identification} | {t.point_id for t in plan.verification}
     assert measured == set(cfg.point_ids) - {"FAR1", "FAR2"}
     assert main(["plan", str(tmp_path / "cell.toml")]) == 0
-    lines = [line for line in capsys.readouterr().out.splitlines() if "NOT measured" in line]
+    printed = capsys.readouterr().out.splitlines()
+    lines = [line for line in printed if "NOT measured" in line and "warning:" not in line]
     assert len(lines) == 4 and all("out of the arm's reach by" in line for line in lines)
+    # and the points left out altogether are named once, up front
+    assert any("warning: 2 of 22 measuring points are measured in no pose: FAR1, FAR2" in line for line in printed)
 
 
 def test_an_approach_outside_the_soft_limits_names_the_joint_the_side_and_the_amount(tmp_path):
@@ -115,8 +118,8 @@ def test_a_grid_too_coarse_is_refused_before_anything_moves_with_what_to_change(
     msg = str(exc.value)
     assert main(["plan", str(path)]) == int(Outcome.CONFIG_ERROR) and msg in capsys.readouterr().err
     assert "before the first motion" in msg and "above correction.max_interpolation_um = 15" in msg
-    assert re.search(r"correction\.max_interpolation_um = \d+", msg)  # a looser bound, in numbers
-    assert "remove correction.x_mm, y_mm, z_mm and yaw_step_deg" in msg  # or the station's own design
+    # the station's own design, checked before it is printed, with the figure it gives (issue 37)
+    assert re.search(r"1\) remove \[correction\] x_mm, y_mm, z_mm, yaw_step_deg \(checked: \d+×\d+×\d+×\d+ nodes", msg)
     assert check_correction(load_config(_cell(tmp_path, ()))) is not None  # the example's own grid passes
 
 
@@ -124,12 +127,13 @@ def test_a_verification_target_outside_the_table_is_named_by_target_axis_and_key
     path = _cell(tmp_path, (), lambda t: t.replace("z_mm = [180.0, 280.0, 100.0]", "z_mm = [190.0, 290.0, 100.0]"))
     msg = _refused_alike(path, capsys, tmp_path / "runs.sqlite")
     m = re.search(r"verification target (P\w+ elbow [+-]): z = ([0-9.]+) mm, with its ([0-9.]+) mm margin "
-                  r"([0-9.]+) mm, lies ([0-9.]+) mm below the table's z range \[190, 290\] mm \(correction\.z_mm: "
-                  r"widen it to (\d+) mm\)", msg)
+                  r"([0-9.]+) mm, lies ([0-9.]+) mm below the table's z range \[190, 290\] mm \(correction\.z_mm\)", msg)
     assert m, msg
     z, margin, need, by = (float(m.group(k)) for k in (2, 3, 4, 5))
     assert need == pytest.approx(z - margin) and by == pytest.approx(190.0 - need, abs=0.06)
     assert "head frame's origin" in msg  # which point the grid describes
+    # the way out is checked before it is printed (issue 37): the station's own region passes
+    assert "1) remove [correction] x_mm, y_mm, z_mm, yaw_step_deg, region (checked: " in msg, msg
 
 
 def test_no_table_within_the_capacity_is_refused_with_numbers(tmp_path, capsys):
@@ -138,8 +142,10 @@ def test_no_table_within_the_capacity_is_refused_with_numbers(tmp_path, capsys):
     assert main(["plan", str(path)]) == int(Outcome.CONFIG_ERROR)
     msg = capsys.readouterr().err
     assert "no correction grid within the controller's 32000 values meets it" in msg
-    assert re.search(r"a looser bound, correction\.max_interpolation_um = \d+", msg)
-    assert re.search(r"a smaller region, x and y extent × 0\.\d+: correction\.region = \{ x_mm = \[", msg)
+    # only advice that passes the same checks, with its figure (issue 37): a bound above the refused one
+    m = re.search(r"1\) \[correction\] max_interpolation_um = (\d+) \(checked: .* against (\d+) µm\)", msg)
+    assert m and int(m.group(1)) == int(m.group(2)) > 2, msg
+    assert "correction.region = {" not in msg  # a smaller region would leave verification targets outside
 
 
 def test_a_cell_with_points_out_of_reach_calibrates(tmp_path, capsys):

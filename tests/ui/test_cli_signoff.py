@@ -161,10 +161,11 @@ def test_station_check_exits_7_when_a_wired_probe_reads_invalid(tmp_path, capsys
 
 def test_the_plan_warns_of_an_implausible_predicted_accuracy():
     cfg = SimpleNamespace(identification=SimpleNamespace(sigma_position_um=15.0), point_ids=("C1.a", "C1.b", "C1.c"))
-    bad = SimpleNamespace(sigma_position_um=(386130.6, 386130.6, 386130.6), condition=298233.2)
+    every = tuple(SimpleNamespace(step=SimpleNamespace(point_id=pid)) for pid in cfg.point_ids)  # each point measured
+    bad = SimpleNamespace(sigma_position_um=(386130.6, 386130.6, 386130.6), condition=298233.2, steps=every)
     (w,) = plan_warnings(bad, cfg)
     assert "386130.6 µm" in w and "sigma_position_um = 15 µm" in w and "[body]" in w and "3 measuring points" in w
-    fine = SimpleNamespace(sigma_position_um=(9.0, 10.0, 12.0), condition=30.0)
+    fine = SimpleNamespace(sigma_position_um=(9.0, 10.0, 12.0), condition=30.0, steps=every)
     assert plan_warnings(fine, cfg) == []
 
 

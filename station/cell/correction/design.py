@@ -206,13 +206,16 @@ def design_for(cfg: CellConfig, plan: Any = None, capacity: int | None = None) -
 _AXIS_KEY = {"x": "x_mm", "y": "y_mm", "z": "z_mm"}
 
 
-def _coverage(cfg: CellConfig, targets: tuple[WorkingTarget, ...], region: Region) -> None:
+def _coverage(cfg: CellConfig, targets: tuple[WorkingTarget, ...], region: Region, plan: Any = None,
+              advise: bool = True) -> None:
     """Refuse a verification target that (with its margin) leaves the table, named by target,
-    axis, amount and key."""
+    axis, amount and key; ``advise``: with the ways out that pass the same checks
+    (:func:`station.cell.correction.advice.coverage_advice`)."""
     margin = target_margin_mm(cfg, targets)
     c = cfg.correction
     key = ("correction.x_mm / y_mm / z_mm" if c.explicit else "correction.region")
     problems = []
+    lows, highs = [list(r) for r in zip(region.x_mm, region.y_mm, region.z_mm)]
     for t in targets:
         p = np.array(t.xyz)
         for k, axis in enumerate("xyz"):
@@ -220,20 +223,29 @@ def _coverage(cfg: CellConfig, targets: tuple[WorkingTarget, ...], region: Regio
             m = margin[k]
             if p[k] - m < lo - 0.05 or p[k] + m > hi + 0.05:  # 0.05 mm: the margin's own rounding
                 side, edge, need = (("below", lo, p[k] - m) if p[k] - m < lo else ("above", hi, p[k] + m))
+                lows[k], highs[k] = min(lows[k], need), max(highs[k], need)
                 which = f"correction.{_AXIS_KEY[axis]}" if c.explicit else f"correction.region {axis}_mm"
                 problems.append(f"verification target {t.label}: {axis} = {p[k]:.1f} mm, with its {m:g} mm "
                                 f"margin {need:.1f} mm, lies {abs(need - edge):.1f} mm {side} the table's {axis} "
-                                f"range [{lo:g}, {hi:g}] mm ({which}: widen it to {math.floor(need) if side == 'below' else math.ceil(need)} mm)")
+                                f"range [{lo:g}, {hi:g}] mm ({which})")
     if problems:
+        if advise:
+            from station.cell.correction.advice import coverage_advice
+
+            way = coverage_advice(cfg, plan, tuple(zip(lows, highs)))
+        else:
+            way = f"Change {key}, or remove it so that the station derives the region"
         raise CorrectionRefused(
             f"before the first motion: {len(problems)} verification target{'s' if len(problems) > 1 else ''} "
             f"would leave the correction table ({GRID_POINT}; the margin covers the set-up guess's error, "
             f"[simulation] setup_sigma_*, and a re-centred touch): " + "; ".join(problems[:6])
-            + ("; …" if len(problems) > 6 else "")
-            + f". Change {key}, or remove it so that the station derives the region. Nothing was measured")
+            + ("; …" if len(problems) > 6 else "") + f". {way}. Nothing was measured")
 
 
-def _infeasible_text(cfg: CellConfig, d: TableDesign) -> str:
+def _infeasible_text(cfg: CellConfig, d: TableDesign, plan: Any = None, advise: bool = True) -> str:
+    """The refusal of a design that misses the bound; ``advise``: with the changes that pass the
+    same checks (:func:`station.cell.correction.advice.advice_text`), else the bare finding (the
+    advice's own checks)."""
     r = d.region
     limit = cfg.correction.max_interpolation_um
     what = ("the configured grid (correction.x_mm, y_mm, z_mm, yaw_step_deg) interpolates with "
@@ -241,27 +253,23 @@ def _infeasible_text(cfg: CellConfig, d: TableDesign) -> str:
             f"size [simulation] states" if _counts(cfg) is not None and d.n_values <= d.capacity else
             f"no correction grid within the controller's {d.capacity} values meets it for every one of "
             f"{len(d.bounds_um) or DRAWS} robots with errors of the size [simulation] states")
-    options = []
-    best = d.best_bound_um if math.isfinite(d.best_bound_um) else d.worst_bound_um
-    if math.isfinite(best):
-        options.append(f"a looser bound, correction.max_interpolation_um = {math.ceil(best * 1.1)}")
-    if d.region_scale is not None:
-        s = r.scaled(d.region_scale)
-        options.append(f"a smaller region, x and y extent × {d.region_scale:.2f}: correction.region = "
-                       f"{{ x_mm = [{s.x_mm[0]:.0f}, {s.x_mm[1]:.0f}], y_mm = [{s.y_mm[0]:.0f}, {s.y_mm[1]:.0f}], "
-                       f"z_mm = [{s.z_mm[0]:.0f}, {s.z_mm[1]:.0f}] }} (fewer verification targets: [plan] "
-                       f"verification_every, or the body's points nearer the robot)")
-    if _counts(cfg) is not None:
-        options.append("let the station design the grid: remove correction.x_mm, y_mm, z_mm and yaw_step_deg")
+    if advise:
+        from station.cell.correction.advice import advice_text
+
+        options = advice_text(cfg, d, plan)
+    else:
+        options = "Change the bound, the region or the grid"
     return (f"before the first motion: {what}, above correction.max_interpolation_um = {limit:g} over the region "
             f"x {r.x_mm[0]:g} … {r.x_mm[1]:g}, y {r.y_mm[0]:g} … {r.y_mm[1]:g}, z {r.z_mm[0]:g} … {r.z_mm[1]:g} mm "
-            f"({GRID_POINT}). Change one of: " + "; ".join(options) + ". Nothing was measured")
+            f"({GRID_POINT}). " + options + ". Nothing was measured")
 
 
-def check_correction(cfg: CellConfig, plan: Any = None) -> TableDesign | None:
+def check_correction(cfg: CellConfig, plan: Any = None, advise: bool = True) -> TableDesign | None:
     """The correction's pre-motion check (``station plan`` and ``station calibrate``): the design,
     or None for a robot without a table. Raises :class:`CorrectionRefused` when a verification
-    target leaves the table or no table meets the bound within the capacity."""
+    target leaves the table or no table meets the bound within the capacity, with the changes
+    that pass this same check (``advise``; False: the bare finding, as the advice's own checks
+    run it)."""
     if not cfg.model.is_scara:
         return None
     if plan is None:
@@ -271,10 +279,10 @@ def check_correction(cfg: CellConfig, plan: Any = None) -> TableDesign | None:
     targets = working_targets(cfg, plan.verification)
     region = region_for(cfg, targets)
     if cfg.correction.explicit or cfg.correction.region is not None:
-        _coverage(cfg, targets, region)
+        _coverage(cfg, targets, region, plan, advise)
     d = design_for(cfg, plan)
     if not d.feasible:
-        raise CorrectionRefused(_infeasible_text(cfg, d))
+        raise CorrectionRefused(_infeasible_text(cfg, d, plan, advise))
     return d
 
 

@@ -208,7 +208,8 @@ def describe(p: PlanPreview) -> list[str]:
                          f"{r.step.index + 1} ({r.step.point_id} elbow {r.step.elbow:+d})")
     for pid, elbow, why in p.rejected:
         why = why.split(": ", 1)[1] if why.startswith(pid) else why
-        lines.append(f"  NOT measured: {pid} elbow {elbow:+d}: {why}")
+        pose = "elbow" if "prismatic" in p.joint_types else "configuration"  # a six-axis arm has no elbow sign
+        lines.append(f"  NOT measured: {pid} {pose} {elbow:+d}: {why}")
     lines.append(f"  {'order':>5}  {'kind':22}  {'point':10}  {'elbow':>5}  {'limit':>7}  {'reach':>7}  joints")
     for i, s in enumerate(p.steps):
         st = s.step

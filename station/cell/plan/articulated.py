@@ -261,7 +261,11 @@ def articulated_candidates(cfg: CellConfig):
     for conf in _configurations(model):
         r0 = solve_ik(model, T0, configuration=conf)
         code = 1 if conf is None else configuration_code(conf.as_array())
-        pts = [j for j in range(len(T0)) if r0.ok[j] and _within(cfg, r0.joints[j][None])[0]]
+        inside0 = _within(cfg, np.nan_to_num(r0.joints))
+        pts = [j for j in range(len(T0)) if r0.ok[j] and inside0[j]]
+        for j in sorted(set(range(len(T0))) - set(pts)):  # named as a SCARA's plan names them, never dropped unseen
+            why = r0.reason[j] or _too_close(cfg, r0.joints[j])
+            rejected.append((cfg.point_ids[j], code, f"{cfg.point_ids[j]} configuration {code:+d}: {why}"))
         if not pts:
             continue
         heads = cfg.body_points[pts][:, None] @ invert(Ms)[None]  # (p, m, 4, 4) KKS←MKKS

@@ -356,17 +356,31 @@ IMPLAUSIBLE_SIGMA_RATIO = 10.0
 
 def plan_warnings(p, cfg) -> list[str]:
     """What in a plan preview is implausible, and which value to check (exit stays 0)."""
+    out = _unmeasured_points(p, cfg)
     sig = cfg.identification.sigma_position_um
     worst = p.sigma_position_um[2]
     if not (math.isfinite(worst) and worst <= IMPLAUSIBLE_SIGMA_RATIO * sig):
         n_points = len(cfg.point_ids)
-        return [f"the predicted position σ of up to {worst:.1f} µm is implausible for [identification]."
+        return out + [f"the predicted position σ of up to {worst:.1f} µm is implausible for [identification]."
                 f"sigma_position_um = {sig:g} µm (over {IMPLAUSIBLE_SIGMA_RATIO:g}×): the planned poses do not "
                 f"determine the parameters (condition {p.condition:.3g}). Check [body]: {n_points} measuring "
                 f"point{'s' if n_points != 1 else ''} (give every corner of the body, from its CMM report), then "
                 f"[plan] elbows and [correction]'s workspace; also check that sigma_position_um is the probe "
                 f"head's σ in µm"]
-    return []
+    return out
+
+
+def _unmeasured_points(p, cfg) -> list[str]:
+    """The body's points that no step measures (out of reach or the soft limits in every pose),
+    named: a plan that leaves a third of the body out is no plan to run unseen (issue 37)."""
+    used = {s.step.point_id for s in p.steps}
+    left = [pid for pid in cfg.point_ids if pid not in used]
+    if not left:
+        return []
+    return [f"{len(left)} of {len(cfg.point_ids)} measuring points are measured in no pose: "
+            f"{', '.join(left[:12])}{', …' if len(left) > 12 else ''} (the 'NOT measured' lines say why: out "
+            f"of reach or the soft limits in every {'elbow' if cfg.model.is_scara else 'configuration'}); check "
+            f"[robot].setup and the body's points"]
 
 
 def existing_db(path: str) -> str:
