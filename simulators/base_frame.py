@@ -25,8 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from simulators.truth_kinematics import true_forward
 from station.core.identification.identify import identify
-from station.core.kinematics.forward import forward
 from station.core.kinematics.model import RobotModel
 from station.core.measurement.measurements import synthetic_set
 
@@ -58,7 +58,7 @@ def targets_in_box(model: RobotModel, lo, hi, n: int, rng: np.random.Generator,
     found: list[np.ndarray] = []
     for _ in range(max_rounds):
         q = lim[:, 0] + rng.random((_DRAW, model.n_joints)) * (lim[:, 1] - lim[:, 0])
-        p = forward(model, q, model.nominal, setup=False)[:, :3, 3]
+        p = _head(model, q, model.nominal)
         found.append(q[np.all((p >= lo) & (p <= hi), axis=1)])
         if sum(len(f) for f in found) >= n:
             break
@@ -68,9 +68,15 @@ def targets_in_box(model: RobotModel, lo, hi, n: int, rng: np.random.Generator,
     return q
 
 
+def _head(model: RobotModel, q: np.ndarray, params: np.ndarray) -> np.ndarray:
+    """The head frame's origin in the base frame, ``(n, 3)`` [mm], with the simulator's own
+    kinematics (the robot file's documented convention), never the station's."""
+    return true_forward([t.joint for t in model.transforms], params, q, setup=False)[:, :3, 3]
+
+
 def _rms_um(model: RobotModel, q: np.ndarray, p_true: np.ndarray, p_used: np.ndarray) -> float:
-    a = forward(model, q, p_true, setup=False)[:, :3, 3]
-    b = forward(model, q, p_used, setup=False)[:, :3, 3]
+    a = _head(model, q, p_true)
+    b = _head(model, q, p_used)
     return float(np.sqrt(np.mean(np.sum((a - b) ** 2, axis=1)))) * 1e3
 
 

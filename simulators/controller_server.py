@@ -10,8 +10,9 @@ writes of the command block on its program loop: it acknowledges,
 validates (soft limits, reachability, correction-table range), moves with a simple max-speed
 motion-time model scaled by ``time_scale`` (0 = instant), and reports done or error with the
 same sequence number. Cartesian moves use the controller's NOMINAL kinematics in the robot base
-frame (``station.core.kinematics.forward.scara_ik``; for an articulated arm general inverse kinematics
-from the joints the robot stands at, which keeps its configuration) plus the multilinear table correction
+frame, its own and not the station's (:class:`simulators.arm_kinematics.ArmKinematics`: a SCARA's
+closed form refined by Newton; for an articulated arm general inverse kinematics from the joints
+the robot stands at, which keeps its configuration), plus the multilinear table correction
 (:meth:`simulators.program_words.ProgramTable.correction`, the rule of ``docs/protocols.md`` written again,
 not the station's) when a table is active; registers are read and written with the program's own
 words (:mod:`simulators.program_words`), not the driver's codec; the
@@ -58,14 +59,13 @@ from drivers.controller_map import (
     WordOrder,
     register_span,
 )
+from simulators.arm_kinematics import ArmKinematics, Unreachable
 from simulators.controller_claim import ClaimRules
 from simulators.controller_faults import QUIRKS, FaultInjection, ModbusFault
 from simulators.controller_tables import TableSlots, serve_transfer
 from simulators.program_words import OutsideTable, ProgramTable, get_value, put_value
-from station.core.kinematics.forward import forward, inverse_kinematics, scara_ik
+from simulators.truth_kinematics import matrix_pose, pose_matrix
 from station.core.kinematics.model import RobotModel
-from station.core.kinematics.transforms import matrix_to_pose, pose_to_matrix
-from station.errors import UnreachableError
 from station.io.robot_files import load_robot
 
 if TYPE_CHECKING:
@@ -102,6 +102,9 @@ class SimulatedController(FaultInjection):
         if model is None:
             model = cell.truth.model if cell is not None else load_robot("sr800")
         self.model = model
+        #: the controller's nominal kinematics, its own code (a slip shared with the station's
+        #: would cancel end to end)
+        self.kinematics = ArmKinematics([t.joint for t in model.transforms], model.nominal)
         self.cell = cell
         self.g = model.n_joints
         if self.g > MAX_JOINTS:
@@ -226,8 +229,8 @@ class SimulatedController(FaultInjection):
             lim[:2 * self.g] = self.soft_limits.ravel()
             return self._page_words(INFO_PAGES["soft_limits"][1], lim)
         if number == INFO_PAGES["act_pose"][0]:
-            T = forward(self.model, self._q[None], setup=False)[0]
-            return self._page_words(INFO_PAGES["act_pose"][1], matrix_to_pose(T))
+            T = self.kinematics.forward(self._q)
+            return self._page_words(INFO_PAGES["act_pose"][1], matrix_pose(T))
         return None
 
     def _page_words(self, entry, values) -> list[int]:
@@ -477,16 +480,19 @@ class SimulatedController(FaultInjection):
 
     def cartesian_target(self, pose: np.ndarray, elbow: int) -> np.ndarray:
         """Joints the controller commands for a Cartesian target (nominal IK + table)."""
-        T = pose_to_matrix(np.asarray(pose, dtype=float))
+        T = pose_matrix(np.asarray(pose, dtype=float))
         try:
-            if self.model.is_scara:
-                q = scara_ik(self.model, T[None], elbow=elbow, setup=False, check_limits=False)[0]
+            if self.kinematics.is_scara:
+                q = self.kinematics.scara_inverse(T, elbow)
             else:
                 # An articulated arm keeps the configuration it stands in: general IK on the
                 # nominal model from the current joints (the register map has no configuration
-                # word; the elbow flag is only checked to be +1 or -1).
-                q = inverse_kinematics(self.model, T[None], self._q[None], setup=False)[0]
-        except UnreachableError as exc:
+                # word; the elbow flag is only checked to be +1 or -1). Joints beyond the robot's
+                # own limits are no solution: the arm cannot take them.
+                q = self.kinematics.inverse(T, self._q)
+                if not np.all((self.model.joint_limits[:, 0] <= q) & (q <= self.model.joint_limits[:, 1])):
+                    raise Unreachable("the solution leaves the robot's joint limits")
+        except Unreachable as exc:
             raise _Abort(ErrorCode.UNREACHABLE) from exc
         if not np.all(np.isfinite(q)):
             raise _Abort(ErrorCode.UNREACHABLE)

@@ -5,9 +5,11 @@ Motion follows the Script Directory's §14.22 ``movej``: "linear in joint-space"
 speed profile whose ``a`` (joint acceleration) and ``v`` (joint speed) are those "of leading
 axis"; every joint arrives at the same time. §14.44 ``stopj(a)`` decelerates the joint speeds to
 zero at ``a`` (rad/s², of the leading axis). Kinematics (§15.11 ``get_forward_kin``, §15.13
-``get_inverse_kin``) are the station's nominal model of a configured robot (default the built-in
-six-axis ``irb2600``), in metres and rotation vectors as URScript poses are: a stand-in for the
-UR's own calibrated kinematics, which the station does not know.
+``get_inverse_kin``) are the nominal model of a configured robot (default the built-in six-axis
+``irb2600``), in metres and rotation vectors as URScript poses are: a stand-in for the UR's own
+calibrated kinematics, which the station does not know. They are the simulator's own
+(:class:`simulators.arm_kinematics.ArmKinematics`), never the station's: a slip in the station's
+kinematics must not be made by the arm too, where the two would cancel.
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ class Arm:
         self.qd = np.zeros(6)
         self._model_name = model_name
         self._model: Any = None
+        self._kinematics: Any = None
         self._move: tuple[np.ndarray, np.ndarray, float, float, float, float] | None = None
         self._stop: tuple[np.ndarray, np.ndarray, float] | None = None
         self._t = 0.0
@@ -122,6 +125,14 @@ class Arm:
             self._model = load_robot(self._model_name)
         return self._model
 
+    @property
+    def kinematics(self):
+        if self._kinematics is None:
+            from simulators.arm_kinematics import ArmKinematics
+
+            self._kinematics = ArmKinematics([t.joint for t in self.model.transforms], self.model.nominal)
+        return self._kinematics
+
     @staticmethod
     def _pose_matrix(pose) -> np.ndarray:
         from scipy.spatial.transform import Rotation
@@ -139,21 +150,22 @@ class Arm:
         return [*(T[:3, 3] / 1000.0).tolist(), *rv.tolist()]
 
     def forward(self, q, tcp) -> list[float]:
-        from station.core.kinematics.forward import forward
-
-        T = forward(self.model, np.asarray(q, dtype=float)[None], setup=False)[0]
+        T = self.kinematics.forward(np.asarray(q, dtype=float))
         return self._matrix_pose(T @ self._pose_matrix(tcp))
 
     def inverse(self, pose, qnear, tcp, max_pos_m: float, max_rot: float) -> np.ndarray | None:
-        from station.core.kinematics.forward import forward, inverse_kinematics
-        from station.core.kinematics.transforms import invert
+        from simulators.arm_kinematics import Unreachable
+        from simulators.truth_kinematics import inverse
 
-        target = self._pose_matrix(pose) @ invert(self._pose_matrix(tcp))
+        target = self._pose_matrix(pose) @ inverse(self._pose_matrix(tcp))
         try:
-            q = inverse_kinematics(self.model, target[None], np.asarray(qnear, dtype=float)[None], setup=False)[0]
-        except Exception:  # noqa: BLE001 - any failure of the numerical IK: no solution
+            q = self.kinematics.inverse(target, np.asarray(qnear, dtype=float))
+        except (Unreachable, np.linalg.LinAlgError):
             return None
-        T = forward(self.model, q[None], setup=False)[0]
+        lo, hi = self.model.joint_limits.T
+        if not np.all((lo <= q) & (q <= hi)):  # the arm cannot take joints beyond its limits
+            return None
+        T = self.kinematics.forward(q)
         err_pos = float(np.linalg.norm(T[:3, 3] - target[:3, 3])) / 1000.0
         err_rot = float(np.linalg.norm((T[:3, :3].T @ target[:3, :3]) - np.eye(3)))
         tol_pos = max(max_pos_m, 1e-7)  # a numerical IK: 0.1 µm at best

@@ -125,7 +125,11 @@ def load_mapped_robot(name_or_path: str | Path, base: str | None = None,
     if s in builtin_robots():
         _refuse_chain_choice(s, base, tip)
         text = resources.files("station.io.robots").joinpath(f"{s}.toml").read_text()
-        model = robot_from_dict(tomllib.loads(text), source=f"built-in robot {s}")
+        source = f"built-in robot {s}"
+        # the same finiteness and plausibility checks as a user's file: a unit slip in a built-in
+        # robot (revolute limits left in degrees, 57× too wide) is refused, not carried into every
+        # built-in cell (42); its schema is checked by the tests (pydantic's import is not free)
+        model = check_model(robot_from_dict(tomllib.loads(text), source=source), source)
         return model, JointMap.identity(_joint_names(model))
     path = Path(s)
     check_user_file(path, MAX_ROBOT_FILE_BYTES, "robot file",

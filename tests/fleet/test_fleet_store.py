@@ -3,6 +3,7 @@ idempotency, store and forward through an outage, two stations syncing at once."
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 
@@ -188,6 +189,20 @@ def test_a_station_joining_the_fleet_sends_its_history_once(fleet_db, tmp_path, 
     assert key.endswith("/" + cfg.name)  # no serial: station/cell
 
 
+def _until_the_clock_passes_the_summary(path, run_id: int, timeout_s: float = 5.0) -> None:
+    """Wait until the run database's clock (``utc_now``, µs) reads later than the stored summary's
+    time stamp, so that the next summary is another ending: the condition itself, not a pause."""
+    import sqlite3
+
+    from station.cell.records.run_records import utc_now
+
+    with contextlib.closing(sqlite3.connect(path)) as conn:
+        (stamp,) = conn.execute("SELECT t_utc FROM results WHERE run_id = ? AND key = 'summary'", (run_id,)).fetchone()
+    deadline = time.monotonic() + timeout_s
+    while utc_now() <= stamp:  # the same ISO format: the strings order as the times
+        assert time.monotonic() < deadline, f"the clock did not pass {stamp} within {timeout_s} s"
+
+
 def test_a_run_that_ends_again_after_a_resume_is_a_new_publication(fleet_db, tmp_path):
     """A stopped run is published with its outcome; resumed and finished, its new ending is
     published beside it (its history), and neither is ever sent twice."""
@@ -200,7 +215,7 @@ def test_a_run_that_ends_again_after_a_resume_is_a_new_publication(fleet_db, tmp
     assert first is not None and "published" in first
     assert "published" in (publish_or_queue(path, run_id, cfg, url=fleet_db.station_url) or "")  # the same ending
     assert fleet_db.count() == 1
-    time.sleep(0.01)  # the summary's time stamp tells the endings apart
+    _until_the_clock_passes_the_summary(path, run_id)  # the summary's time stamp tells the endings apart
     with RunDB(path) as db:
         db.save_result(run_id, "summary", {"outcome": "SUCCESS", "run_id": run_id, "cell": cfg.name,
                                            "after": {"rms_um": 11.0, "ap_max_um": 14.0}, "gain": 60.0})

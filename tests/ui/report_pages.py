@@ -21,10 +21,12 @@ by name.
 ``STATION_UPDATE_REPORT_PAGES=1`` rewrites the references from the run being tested
 (docs/report.md, "Layout regression").
 
-The references belong to the renderer that printed them: Chromium's version and the installed
-fonts (:func:`renderer`), kept beside them. Another renderer lays text out otherwise, so on a
-machine whose renderer differs the comparison is left out with a warning that says so (the print
-test's own checks, page X of Y and no orphaned heading, still run there).
+The page images belong to the renderer that printed them: Chromium's version and the installed
+fonts (:func:`renderer`), kept beside them. Another renderer lays text out otherwise (a line
+wraps, a table is carried to the next page), so under another one :func:`structure_problems`
+compares what does not depend on it: the report's headings in their order, each one found in the
+printed text, and the page count within one page. Under the references' own renderer it compares
+page by page (the headings on each page, the ink maps). Nothing is left uncompared with a warning.
 """
 
 from __future__ import annotations
@@ -166,3 +168,31 @@ def headings_per_page(pages: list[str], headings: list[str]) -> list[list[str]]:
             if match:
                 found[-1].append(match)
     return found
+
+
+def structure_problems(name: str, pages: Pages, kept: Pages, same_renderer: bool) -> list[str]:
+    """What differs between a report as printed now and its reference: under any renderer its
+    headings in order (every one printed, none lost or reordered) and its page count within one;
+    under the references' own renderer its pages one by one (headings on each, ink maps)."""
+    problems = []
+    now_order = [h for page in pages.headings for h in page]
+    kept_order = [h for page in kept.headings for h in page]
+    if now_order != kept_order:
+        lost = [h for h in kept_order if h not in now_order]
+        new = [h for h in now_order if h not in kept_order]
+        problems.append(f"{name}: the printed headings differ from the reference's (missing {lost}, new {new}"
+                        f"{', reordered' if not lost and not new else ''})")
+    slack = 0 if same_renderer else 1
+    if abs(len(pages.maps) - len(kept.maps)) > slack:
+        problems.append(f"{name}: {len(pages.maps)} pages, the reference has {len(kept.maps)}"
+                        f"{'' if same_renderer else ' (one more or fewer is another renderer’s)'}")
+    if not same_renderer:
+        return problems
+    for i, (now, then) in enumerate(zip(pages.headings, kept.headings), 1):
+        if now != then:
+            problems.append(f"{name} page {i}: headings {now}, the reference has {then}")
+    for i, (now_map, then_map) in enumerate(zip(pages.maps, kept.maps), 1):
+        share = changed_share(now_map, then_map)
+        if share > MAX_CHANGED:
+            problems.append(f"{name} page {i}: {share:.0%} of the page's blocks moved (at most {MAX_CHANGED:.0%})")
+    return problems
