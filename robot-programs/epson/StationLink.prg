@@ -166,11 +166,13 @@
 ' =============================================================================================
 
 ' ---------------- configuration (the integrator sets these) ---------------------------------
-#define BASE 0
+#define REG_BASE 0
 #define WORD_ORDER_BIG 1
 #define WATCHDOG_MS 1000
 #define N_JOINTS 4
 #define NET_PORT 201
+' a Modbus frame whose rest does not arrive within this time drops the connection
+#define NET_TIMEOUT_MS 2000
 #define TOOL_NO 1
 #define CORRECTION_STATE 2
 #define STOP_BIT 0
@@ -294,52 +296,61 @@
 #define SLOT_PREVIOUS 2
 
 ' ---------------- global state ----------------------------------------------------------
+' Every Global is Static: starting main from the Run / Operator window (after every emergency
+' stop) clears the Globals not declared Preserve or Static [REF-GLOBAL], which would drop the
+' active correction table and the claim while the background side keeps serving. (Preserve
+' keeps values over a power cycle and holds only 4,000 bytes [REF-GLOBAL]; the tables do not
+' fit.) Epson's own library code names the qualifier pair: Global NonStatic [EPSON-MODBUS].
 ' Every Global is zero after a start from the Run / Operator window [REF-GLOBAL]; zero is a
 ' valid state for all of them (no table, no latch, CRC table rebuilt by the heartbeat).
 ' the window image (offsets 0..127)
-Global Long Regs(127)
+Global Static Long Regs(127)
 ' the command block as it arrived (offsets 8..25), and that a write covered cmd_seq
-Global Long CmdSnap(17)
-Global Boolean CmdWritten
+Global Static Long CmdSnap(17)
+Global Static Boolean CmdWritten
 ' the transfer store: header page and value pages as the PC wrote them (0 = no such page)
-Global Long StoreHdr(29)
-Global Integer StoreHdrLen
-Global Long StoreReg(1103, 57)
-Global Integer StoreLen(1103)
+Global Static Long StoreHdr(29)
+Global Static Integer StoreHdrLen
+Global Static Long StoreReg(1103, 57)
+Global Static Integer StoreLen(1103)
 ' three table buffers (raw i32 values, canonical header page); SlotRef(slot) = buffer + 1,
 ' 0 = no table in that slot
-Global Long TBuf(2, 31999)
-Global Long THdr(2, 29)
-Global Integer SlotRef(2)
+Global Static Long TBuf(2, 31999)
+Global Static Long THdr(2, 29)
+Global Static Integer SlotRef(2)
 ' CRC-32 table in two 16-bit halves, and the running CRC
-Global Long CrcTabHi(255), CrcTabLo(255)
-Global Long CrcHi, CrcLo
+Global Static Long CrcTabHi(255), CrcTabLo(255)
+Global Static Long CrcHi, CrcLo
 ' robot state
-Global Double SoftLo(3), SoftHi(3)
-Global Long Status
-Global Boolean Latched, Moving, InPosition, WdFired, MainUp
-Global Long LastSeq, MotionSeq, HbRobot, LastXfer, HbIdle
+Global Static Double SoftLo(3), SoftHi(3)
+Global Static Long Status
+Global Static Boolean Latched, Moving, InPosition, WdFired, MainUp
+Global Static Long LastSeq, MotionSeq, HbRobot, LastXfer, HbIdle
 ' the token of the station that holds the controller, as its high and low word (0, 0: free)
-Global Long OwnHi, OwnLo
-Global Double Tq(3), Dq(3)
+Global Static Long OwnHi, OwnLo
+' errors the background tasks handled (a client gone mid-frame), for the integrator
+Global Static Long NetErrors, HbErrors
+Global Static Double Tq(3), Dq(3)
 ' the controller's pose of the tool (x, y, z mm, u deg), kept by main for READ_INFO
-Global Double ActPose(3)
-Global Integer MoveSpeedPct
+Global Static Double ActPose(3)
+Global Static Integer MoveSpeedPct
 ' 0 running, 1 arrived, 2 stopped by STOP (Till), 3 error
-Global Integer MoveResult
-' Modbus frame buffers (bytes as 0..255 in Long; ReadBin / WriteBin use the Byte arrays)
-Global Byte RxB(299), TxB(299)
-Global Long Rx(299), Tx(299)
+Global Static Integer MoveResult
+' the controller's error number and axis of a failed move (ErrAxis: 0 when no axis)
+Global Static Long MoveErrNo, MoveErrAxis
+' Modbus frame buffers: UByte (0..255) for ReadBin / WriteBin, as Epson's Modbus client declares
+' them [EPSON-MODBUS] (Byte is -128..127 [UG-TYPES])
+Global Static UByte Rx(299), Tx(299)
 
 ' ---------------- the communication side: background tasks [UG-BG] -----------------------
 ' BgMain starts as task 65 when the controller loads the project; the Modbus server task
 ' Xqt'd from it is a background task too. Neither executes a manipulator command.
 Function BgMain
-    CrcInit
-    PublishIdent
+    CrcInit()
+    PublishIdent()
     LastXfer = Regs(R_XFER_SEQ)
     Xqt ModbusServer
-    Heartbeat
+    Heartbeat()
 Fend
 
 ' the identification registers (re-written every heartbeat)
@@ -348,21 +359,31 @@ Function PublishIdent
     Regs(R_N_JOINTS) = N_JOINTS
     Regs(R_WATCHDOG_MS) = WATCHDOG_MS
     Regs(R_CORRECTION_STATE) = CORRECTION_STATE
-    PutI32 R_ORDER_CHECK, ORDER_CHECK_VALUE
+    PutI32(R_ORDER_CHECK, ORDER_CHECK_VALUE)
 Fend
 
 ' every 0.1 s, also while moving: hb_robot, identification, the watchdog on hb_pc (counted in
 ' heartbeat cycles), and whether main (the motion side) still runs [REF-TASKINFO]
 Function Heartbeat
-    Long hbPcLast
+    Do
+        Call HeartbeatLoop()
+        ' an error (none is expected) must not end the heartbeat: counted, then served on
+        HbErrors = HbErrors + 1
+        If HbErrors > 65535 Then HbErrors = 0
+    Loop
+Fend
+
+Function HeartbeatLoop
+    Long hbPcLast, st
+    OnErr GoTo HbErr
     hbPcLast = Regs(R_HB_PC)
     HbIdle = 0
     Do
         HbRobot = HbRobot + 1
         If HbRobot > 65535 Then HbRobot = 0
         Regs(R_HB_ROBOT) = HbRobot
-        If CrcTabLo(1) = 0 Then CrcInit
-        PublishIdent
+        If CrcTabLo(1) = 0 Then CrcInit()
+        PublishIdent()
         If Regs(R_HB_PC) <> hbPcLast Then
             hbPcLast = Regs(R_HB_PC)
             HbIdle = 0
@@ -370,19 +391,24 @@ Function Heartbeat
             HbIdle = HbIdle + 1
         EndIf
         If Moving And HbIdle * 100 > WATCHDOG_MS Then WdFired = True
-        ServeClaim
-        If TaskInfo(MAIN_TASK, 3) = -1 Then
-            MainUp = False
-        Else
+        ServeClaim()
+        ' main is up only while it runs (1) or waits (2) [REF-TASKINFO]: halted (3), paused or
+        ' ended by an error (5) does not answer commands
+        st = TaskInfo(MAIN_TASK, 3)
+        If st = 1 Or st = 2 Then
             MainUp = True
+        Else
+            MainUp = False
         EndIf
         ' main no longer runs (an emergency stop or an abort ended it): the motion it ran is over
         If Moving And Not MainUp And Not Latched Then
             Moving = False
-            Refuse MotionSeq, E_ESTOP, 0, 0
+            Refuse(MotionSeq, E_ESTOP, 0, 0)
         EndIf
+        PublishStatus()
         Wait 0.1
     Loop
+HbErr:
 Fend
 
 ' ---------------- the claim block: one station per controller ---------------------------
@@ -396,16 +422,16 @@ Function ServeClaim
     held = False
     If OwnHi <> 0 Or OwnLo <> 0 Then held = True
     If held And HbIdle * 100 > WATCHDOG_MS Then
-        FreeClaim
+        FreeClaim()
     ElseIf held And rqHi = 65535 - OwnHi And rqLo = 65535 - OwnLo Then
-        FreeClaim
+        FreeClaim()
     ElseIf Not held And HbIdle * 100 <= WATCHDOG_MS Then
         If rqHi <> 0 Or rqLo <> 0 Then
             OwnHi = rqHi
             OwnLo = rqLo
         EndIf
     EndIf
-    PutWords R_CLAIM_OWNER, OwnHi, OwnLo
+    PutWords(R_CLAIM_OWNER, OwnHi, OwnLo)
 Fend
 
 ' freeing clears the request and the holder's host, PID and since: no stale request is granted
@@ -413,10 +439,10 @@ Fend
 Function FreeClaim
     OwnHi = 0
     OwnLo = 0
-    PutWords R_CLAIM_REQUEST, 0, 0
-    PutWords R_CLAIM_HOST, 0, 0
-    PutWords R_CLAIM_PID, 0, 0
-    PutWords R_CLAIM_SINCE, 0, 0
+    PutWords(R_CLAIM_REQUEST, 0, 0)
+    PutWords(R_CLAIM_HOST, 0, 0)
+    PutWords(R_CLAIM_PID, 0, 0)
+    PutWords(R_CLAIM_SINCE, 0, 0)
 Fend
 
 ' whether the command block's cmd_token (at snapshot offset a) is the holder's token
@@ -435,19 +461,19 @@ Function TokenIsOwner(a As Integer) As Boolean
 Fend
 
 ' ---------------- words and scaled integers --------------------------------------------
-Function U32Hi(off As Integer) As Long
+Function U32Hi(ofs As Integer) As Long
     If WORD_ORDER_BIG = 1 Then
-        U32Hi = Regs(off)
+        U32Hi = Regs(ofs)
     Else
-        U32Hi = Regs(off + 1)
+        U32Hi = Regs(ofs + 1)
     EndIf
 Fend
 
-Function U32Lo(off As Integer) As Long
+Function U32Lo(ofs As Integer) As Long
     If WORD_ORDER_BIG = 1 Then
-        U32Lo = Regs(off + 1)
+        U32Lo = Regs(ofs + 1)
     Else
-        U32Lo = Regs(off)
+        U32Lo = Regs(ofs)
     EndIf
 Fend
 
@@ -468,25 +494,25 @@ Function LoWord(v As Long) As Long
     LoWord = v And &HFFFF
 Fend
 
-Function PutWords(off As Integer, hi As Long, lo As Long)
+Function PutWords(ofs As Integer, hi As Long, lo As Long)
     If WORD_ORDER_BIG = 1 Then
-        Regs(off) = hi
-        Regs(off + 1) = lo
+        Regs(ofs) = hi
+        Regs(ofs + 1) = lo
     Else
-        Regs(off) = lo
-        Regs(off + 1) = hi
+        Regs(ofs) = lo
+        Regs(ofs + 1) = hi
     EndIf
 Fend
 
-Function PutI32(off As Integer, v As Long)
-    PutWords off, HiWord(v), LoWord(v)
+Function PutI32(ofs As Integer, v As Long)
+    PutWords(ofs, HiWord(v), LoWord(v))
 Fend
 
-Function PutI16(off As Integer, v As Long)
+Function PutI16(ofs As Integer, v As Long)
     If v < 0 Then
-        Regs(off) = v + 65536
+        Regs(ofs) = v + 65536
     Else
-        Regs(off) = v
+        Regs(ofs) = v
     EndIf
 Fend
 
@@ -541,8 +567,8 @@ Fend
 
 ' one register, high byte first
 Function CrcWord(w As Long)
-    CrcByte RShift(w, 8) And &HFF
-    CrcByte w And &HFF
+    CrcByte(RShift(w, 8) And &HFF)
+    CrcByte(w And &HFF)
 Fend
 
 Function CrcEnd
@@ -569,33 +595,33 @@ Function PublishStatus
     If SlotRef(SLOT_PREVIOUS) <> 0 Then s = s + S_TABLE_PREVIOUS
     Status = s
     Regs(R_STATUS) = s
-    PublishCrc SLOT_STAGED, R_TABLE_STAGED_CRC
-    PublishCrc SLOT_ACTIVE, R_TABLE_ACTIVE_CRC
-    PublishCrc SLOT_PREVIOUS, R_TABLE_PREVIOUS_CRC
+    PublishCrc(SLOT_STAGED, R_TABLE_STAGED_CRC)
+    PublishCrc(SLOT_ACTIVE, R_TABLE_ACTIVE_CRC)
+    PublishCrc(SLOT_PREVIOUS, R_TABLE_PREVIOUS_CRC)
 Fend
 
 ' the slot's whole-table CRC (its header's, checked at TABLE_STAGE), 0 for an empty slot
-Function PublishCrc(slot As Integer, off As Integer)
+Function PublishCrc(slot As Integer, ofs As Integer)
     Integer b
     b = SlotOf(slot)
     If b < 0 Then
-        PutWords off, 0, 0
+        PutWords(ofs, 0, 0)
     ElseIf WORD_ORDER_BIG = 1 Then
-        PutWords off, THdr(b, H_TABLE_CRC), THdr(b, H_TABLE_CRC + 1)
+        PutWords(ofs, THdr(b, H_TABLE_CRC), THdr(b, H_TABLE_CRC + 1))
     Else
-        PutWords off, THdr(b, H_TABLE_CRC + 1), THdr(b, H_TABLE_CRC)
+        PutWords(ofs, THdr(b, H_TABLE_CRC + 1), THdr(b, H_TABLE_CRC))
     EndIf
 Fend
 
 ' details first, the sequence number last; latching codes latch
 Function Refuse(seq As Long, code As Integer, joint As Integer, bound As Integer)
     Regs(R_ERROR_CODE) = code
-    PutI16 R_ERROR_JOINT, joint
-    PutI16 R_ERROR_BOUND, bound
+    PutI16(R_ERROR_JOINT, joint)
+    PutI16(R_ERROR_BOUND, bound)
     If code = E_ESTOP Or code = E_DRIVE_FAULT Or code = E_WATCHDOG_TIMEOUT Then
         Latched = True
         If code = E_ESTOP Then Status = Status Or S_ESTOP
-        PublishStatus
+        PublishStatus()
     EndIf
     Regs(R_ERROR_SEQ) = seq
 Fend
@@ -606,16 +632,19 @@ Fend
 
 ' ---------------- the motion side: main, a normal task ----------------------------------
 Function main
-    InitConfig
+    InitConfig()
+    ' the motion side switches the motors on as Epson's examples do before the first motion
+    Motor On
+    Power High
     Tool TOOL_NO
     MoveResult = 1
     Moving = False
     InPosition = True
     CmdWritten = False
     LastSeq = Regs(R_CMD_SEQ)
-    WriteActJoints
-    PublishStatus
-    CommandLoop
+    WriteActJoints()
+    PublishStatus()
+    CommandLoop()
 Fend
 
 ' soft limits in station units (rad, rad, mm, rad): set them for your robot
@@ -640,7 +669,7 @@ Function WriteActJoints
             v = Agl(j + 1)
             If j <> 2 Then v = DegToRad(v)
         EndIf
-        PutI32 R_ACT_JOINTS + 2 * j, Counts(v, 1000000)
+        PutI32(R_ACT_JOINTS + 2 * j, Counts(v, 1000000))
     Next
     ActPose(0) = CX(Here)
     ActPose(1) = CY(Here)
@@ -649,25 +678,25 @@ Function WriteActJoints
 Fend
 
 ' one move, started by Xqt from Dispatch; STOP sets memory bit STOP_BIT, which the Till
-' condition watches [REF-TILL]. The error handler only flags: EResume Next continues after Go.
+' condition watches [REF-TILL]. A controller error in the move (the robot's own joint range, a
+' servo error) continues at MoveErr, as Epson's own code handles errors ([EPSON-MODBUS]: OnErr
+' GoTo, the handler at the end of the function): the error number and the axis ErrAxis names
+' go to main, which reports them; no EResume.
 Function MoveTask
-    Boolean failed
-    failed = False
     OnErr GoTo MoveErr
     Speed MoveSpeedPct
     Accel MoveSpeedPct, MoveSpeedPct
     Go JA(RadToDeg(Tq(0)), RadToDeg(Tq(1)), Tq(2), RadToDeg(Tq(3))) Till MemSw(STOP_BIT) = On
-    If failed Then
-        MoveResult = 3
-    ElseIf TillOn Then
+    If TillOn Then
         MoveResult = 2
     Else
         MoveResult = 1
     EndIf
     Exit Function
 MoveErr:
-    failed = True
-    EResume Next
+    MoveErrNo = Err
+    MoveErrAxis = ErrAxis
+    MoveResult = 3
 Fend
 
 ' stop the running motion and wait until the motion task has ended
@@ -677,8 +706,8 @@ Function StopMotion
         Wait 0.01
     Loop
     Moving = False
-    WriteActJoints
-    PublishStatus
+    WriteActJoints()
+    PublishStatus()
 Fend
 
 ' the command loop: motion results, then a new command block, every 2 ms; act_joints about
@@ -690,50 +719,51 @@ Function CommandLoop
     Do
         If Moving And EStopOn And Not Latched Then
             Moving = False
-            WriteActJoints
-            Refuse MotionSeq, E_ESTOP, 0, 0
+            WriteActJoints()
+            Refuse(MotionSeq, E_ESTOP, 0, 0)
         ElseIf Moving And WdFired Then
-            StopMotion
-            Refuse MotionSeq, E_WATCHDOG_TIMEOUT, 0, 0
+            StopMotion()
+            Refuse(MotionSeq, E_WATCHDOG_TIMEOUT, 0, 0)
         ElseIf Moving And MoveResult = 1 Then
             Moving = False
             InPosition = True
-            WriteActJoints
-            PublishStatus
-            ReportDone MotionSeq
+            WriteActJoints()
+            PublishStatus()
+            ReportDone(MotionSeq)
         ElseIf Moving And MoveResult = 3 Then
-            ' the axis is not reported: ErrAxis is not confirmed (error_joint 0 = none, map)
+            ' the controller's error with the axis it names (ErrAxis, 0 = none, as the map's
+            ' error_joint); the motors off mid-move count as a drive fault too
             Moving = False
-            WriteActJoints
-            Refuse MotionSeq, E_DRIVE_FAULT, 0, 0
+            WriteActJoints()
+            Refuse(MotionSeq, E_DRIVE_FAULT, MoveErrAxis, 0)
         EndIf
         If CmdWritten Then
             CmdWritten = False
             seq = CmdSnap(R_CMD_SEQ - R_CMD_CODE)
             If seq <> LastSeq Then
-                expected = LastSeq Mod 65535 + 1
+                expected = (LastSeq Mod 65535) + 1
                 LastSeq = seq
                 code = CmdSnap(0)
                 Regs(R_ACK_SEQ) = seq
                 If seq <> expected Then
-                    Refuse seq, E_SEQUENCE_ERROR, 0, 0
+                    Refuse(seq, E_SEQUENCE_ERROR, 0, 0)
                 Else
-                    Dispatch seq, code
+                    Dispatch(seq, code)
                 EndIf
             EndIf
         EndIf
         tick = tick + 1
         If tick >= 50 Then
             tick = 0
-            WriteActJoints
+            WriteActJoints()
         EndIf
         Wait 0.002
     Loop
 Fend
 
-Function SnapI32(off As Integer) As Long
+Function SnapI32(ofs As Integer) As Long
     Integer a
-    a = off - R_CMD_CODE
+    a = ofs - R_CMD_CODE
     If WORD_ORDER_BIG = 1 Then
         SnapI32 = JoinI32(CmdSnap(a), CmdSnap(a + 1))
     Else
@@ -743,45 +773,45 @@ Fend
 
 ' one command (If / ElseIf: no Select ... Send, whose page was not found)
 Function Dispatch(seq As Long, code As Long)
-    Long elbow, speed
-    Integer j, err, bound
+    Long elbow, spd
+    Integer j, ec, bound
     Double pose(5)
     If code = C_STOP Then
         If Moving Then
-            StopMotion
-            Refuse MotionSeq, E_MOTION_ABORTED, 0, 0
+            StopMotion()
+            Refuse(MotionSeq, E_MOTION_ABORTED, 0, 0)
         EndIf
-        ReportDone seq
+        ReportDone(seq)
         Exit Function
     EndIf
     ' STOP is obeyed from anyone; every other command only from the holder of the controller
     If Not TokenIsOwner(R_CMD_TOKEN - R_CMD_CODE) Then
-        Refuse seq, E_NOT_CLAIMED, 0, 0
+        Refuse(seq, E_NOT_CLAIMED, 0, 0)
         Exit Function
     EndIf
     ' only STOP while a motion runs
     If Moving Then
-        Refuse seq, E_BAD_COMMAND, 0, 0
+        Refuse(seq, E_BAD_COMMAND, 0, 0)
         Exit Function
     EndIf
     elbow = CmdSnap(R_CMD_ELBOW - R_CMD_CODE)
     If elbow >= 32768 Then elbow = elbow - 65536
-    speed = CmdSnap(R_CMD_SPEED - R_CMD_CODE)
+    spd = CmdSnap(R_CMD_SPEED - R_CMD_CODE)
     If code = C_RESET Then
         Latched = False
         Status = Status And Not S_ESTOP
         Regs(R_ERROR_CODE) = E_NONE
-        PutI16 R_ERROR_JOINT, 0
-        PutI16 R_ERROR_BOUND, 0
-        PublishStatus
-        ReportDone seq
+        PutI16(R_ERROR_JOINT, 0)
+        PutI16(R_ERROR_BOUND, 0)
+        PublishStatus()
+        ReportDone(seq)
     ElseIf code = C_MOVE_JOINTS Or code = C_MOVE_CARTESIAN Then
         If Latched Then
-            Refuse seq, E_NOT_READY, 0, 0
+            Refuse(seq, E_NOT_READY, 0, 0)
             Exit Function
         EndIf
-        If speed < 1 Or speed > 1000 Then
-            Refuse seq, E_BAD_COMMAND, 0, 0
+        If spd < 1 Or spd > 1000 Then
+            Refuse(seq, E_BAD_COMMAND, 0, 0)
             Exit Function
         EndIf
         If code = C_MOVE_JOINTS Then
@@ -790,20 +820,25 @@ Function Dispatch(seq As Long, code As Long)
             Next
         Else
             If elbow <> 1 And elbow <> -1 Then
-                Refuse seq, E_BAD_COMMAND, 0, 0
+                Refuse(seq, E_BAD_COMMAND, 0, 0)
                 Exit Function
             EndIf
             For j = 0 To 5
                 pose(j) = SnapI32(R_CMD_TARGET + 2 * j) * 0.000001
             Next
+            ' a SCARA cannot set roll or pitch: refused, not ignored
+            If Abs(pose(3)) > 0.000001 Or Abs(pose(4)) > 0.000001 Then
+                Refuse(seq, E_UNREACHABLE, 0, 0)
+                Exit Function
+            EndIf
             If Not NominalIK(pose(0), pose(1), pose(2), pose(5), elbow) Then
-                Refuse seq, E_UNREACHABLE, 0, 0
+                Refuse(seq, E_UNREACHABLE, 0, 0)
                 Exit Function
             EndIf
             If SlotRef(SLOT_ACTIVE) <> 0 Then
-                err = Interpolate(SlotOf(SLOT_ACTIVE), pose(0), pose(1), pose(2), pose(5), elbow)
-                If err <> E_NONE Then
-                    Refuse seq, err, 0, 0
+                ec = Interpolate(SlotOf(SLOT_ACTIVE), pose(0), pose(1), pose(2), pose(5), elbow)
+                If ec <> E_NONE Then
+                    Refuse(seq, ec, 0, 0)
                     Exit Function
                 EndIf
                 For j = 0 To N_JOINTS - 1
@@ -816,94 +851,104 @@ Function Dispatch(seq As Long, code As Long)
             If Not (SoftLo(j) <= Tq(j) And Tq(j) <= SoftHi(j)) Then
                 bound = 1
                 If Tq(j) < SoftLo(j) Then bound = -1
-                Refuse seq, E_SOFT_LIMIT, j + 1, bound
+                Refuse(seq, E_SOFT_LIMIT, j + 1, bound)
                 Exit Function
             EndIf
         Next
-        ' cmd_speed is 0.1 % steps: Speed and Accel take whole percents 1..100
-        MoveSpeedPct = Int(speed / 10 + 0.5)
-        If MoveSpeedPct < 1 Then MoveSpeedPct = 1
+        ' cmd_speed is 0.1 % steps: Speed and Accel take whole percents 1..100, so a command
+        ' slower than 1 % is refused rather than run up to 10 times faster; others round down
+        ' (never faster than asked)
+        If spd < 10 Then
+            Refuse(seq, E_BAD_COMMAND, 0, 0)
+            Exit Function
+        EndIf
+        ' the motors are off (after an emergency stop, or switched off): not ready, not latched;
+        ' the operator switches them on (Motor On in main's start)
+        If Motor = Off Then
+            Refuse(seq, E_NOT_READY, 0, 0)
+            Exit Function
+        EndIf
+        MoveSpeedPct = Int(spd / 10)
         If MoveSpeedPct > 100 Then MoveSpeedPct = 100
         MoveResult = 0
         WdFired = False
         MotionSeq = seq
         Moving = True
         InPosition = False
-        PublishStatus
+        PublishStatus()
         MemOff STOP_BIT
         Xqt MoveTask
     ElseIf code = C_TABLE_STAGE Then
-        err = StageTable
-        PublishStatus
-        If err <> E_NONE Then
-            Refuse seq, err, 0, 0
+        ec = StageTable()
+        PublishStatus()
+        If ec <> E_NONE Then
+            Refuse(seq, ec, 0, 0)
         Else
-            ReportDone seq
+            ReportDone(seq)
         EndIf
     ElseIf code = C_TABLE_ACTIVATE Or code = C_TABLE_DEACTIVATE Or code = C_TABLE_ROLLBACK Or code = C_TABLE_DISCARD_PREVIOUS Then
-        err = SwitchTables(code)
-        PublishStatus
-        If err <> E_NONE Then
-            Refuse seq, err, 0, 0
+        ec = SwitchTables(code)
+        PublishStatus()
+        If ec <> E_NONE Then
+            Refuse(seq, ec, 0, 0)
         Else
-            ReportDone seq
+            ReportDone(seq)
         EndIf
     Else
         ' also NONE (0) and unknown codes
-        Refuse seq, E_BAD_COMMAND, 0, 0
+        Refuse(seq, E_BAD_COMMAND, 0, 0)
     EndIf
 Fend
 
 ' the controller's own inverse kinematics of (x, y, z mm, yaw rad) in the configuration whose J2
-' has the sign of elbow; the joints in Tq (station units). False: not reachable. The error
-' handler only flags (EResume Next continues after the statement that failed).
+' has the sign of elbow; the joints in Tq (station units). False: not reachable. Each hand is
+' tried in HandIK, whose error handler answers False (no EResume).
 Function NominalIK(x As Double, y As Double, z As Double, yaw As Double, elbow As Long) As Boolean
-    Integer j, tries
-    Double j2
-    Boolean failed
-    OnErr GoTo IkErr
+    NominalIK = True
+    If HandIK(x, y, z, yaw, elbow, 1) Then Exit Function
+    If HandIK(x, y, z, yaw, elbow, 2) Then Exit Function
     NominalIK = False
-    For tries = 1 To 2
-        failed = False
-        If tries = 1 Then
-            P900 = XY(x, y, z, RadToDeg(yaw)) /L
-        Else
-            P900 = XY(x, y, z, RadToDeg(yaw)) /R
-        EndIf
-        If Not failed Then
-            j2 = PAgl(P900, 2)
-            If Not failed And ((elbow = 1 And j2 > 0) Or (elbow = -1 And j2 < 0)) Then
-                For j = 0 To N_JOINTS - 1
-                    Tq(j) = PAgl(P900, j + 1)
-                    If j <> 2 Then Tq(j) = DegToRad(Tq(j))
-                Next
-                If Not failed Then
-                    NominalIK = True
-                    Exit Function
-                EndIf
-            EndIf
-        EndIf
-    Next
+Fend
+
+' hand 1: /L, 2: /R; True when the point is reachable in that hand and its J2 has elbow's sign
+Function HandIK(x As Double, y As Double, z As Double, yaw As Double, elbow As Long, hand As Integer) As Boolean
+    Integer j
+    Double j2
+    OnErr GoTo IkErr
+    HandIK = False
+    If hand = 1 Then
+        P900 = XY(x, y, z, RadToDeg(yaw)) /L
+    Else
+        P900 = XY(x, y, z, RadToDeg(yaw)) /R
+    EndIf
+    ' PAgl fails (to IkErr) when the point cannot be reached
+    j2 = PAgl(P900, 2)
+    If (elbow = 1 And j2 > 0) Or (elbow = -1 And j2 < 0) Then
+        For j = 0 To N_JOINTS - 1
+            Tq(j) = PAgl(P900, j + 1)
+            If j <> 2 Then Tq(j) = DegToRad(Tq(j))
+        Next
+        HandIK = True
+    EndIf
     Exit Function
 IkErr:
-    failed = True
-    EResume Next
+    HandIK = False
 Fend
 
 ' ---------------- the correction table ------------------------------------------------------
-Function HdrU32(b As Integer, off As Integer) As Long
+Function HdrU32(b As Integer, ofs As Integer) As Long
     If WORD_ORDER_BIG = 1 Then
-        HdrU32 = JoinI32(THdr(b, off), THdr(b, off + 1))
+        HdrU32 = JoinI32(THdr(b, ofs), THdr(b, ofs + 1))
     Else
-        HdrU32 = JoinI32(THdr(b, off + 1), THdr(b, off))
+        HdrU32 = JoinI32(THdr(b, ofs + 1), THdr(b, ofs))
     EndIf
 Fend
 
-Function StoreI32(off As Integer) As Long
+Function StoreI32(ofs As Integer) As Long
     If WORD_ORDER_BIG = 1 Then
-        StoreI32 = JoinI32(StoreHdr(off), StoreHdr(off + 1))
+        StoreI32 = JoinI32(StoreHdr(ofs), StoreHdr(ofs + 1))
     Else
-        StoreI32 = JoinI32(StoreHdr(off + 1), StoreHdr(off))
+        StoreI32 = JoinI32(StoreHdr(ofs + 1), StoreHdr(ofs))
     EndIf
 Fend
 
@@ -912,7 +957,7 @@ Fend
 ' over the values as big-endian bytes; then the table goes into a free buffer as the staged one
 Function StageTable As Integer
     Integer nAxes, i, k, b, nPages, used
-    Long nValues, nJoints, nConfigs, prodShape, total, crcHi, crcLo, st, sp, hi, lo, v
+    Long nValues, nJoints, nConfigs, prodShape, total, wantHi, wantLo, st, sp, hi, lo, v
     StageTable = E_TABLE_SHAPE_INVALID
     If StoreHdrLen <> TABLE_HEADER_REGISTERS Then Exit Function
     If StoreHdr(H_TABLE_FORMAT) <> TABLE_FORMAT_VERSION Then Exit Function
@@ -943,27 +988,27 @@ Function StageTable As Integer
     Next
     If total <> 2 * nValues Then Exit Function
     ' first pass: the CRC over the values as big-endian two's-complement bytes
-    CrcStart
+    CrcStart()
     For k = 0 To nPages - 1
         For i = 0 To StoreLen(k) - 1 Step 2
             If WORD_ORDER_BIG = 1 Then
-                CrcWord StoreReg(k, i)
-                CrcWord StoreReg(k, i + 1)
+                CrcWord(StoreReg(k, i))
+                CrcWord(StoreReg(k, i + 1))
             Else
-                CrcWord StoreReg(k, i + 1)
-                CrcWord StoreReg(k, i)
+                CrcWord(StoreReg(k, i + 1))
+                CrcWord(StoreReg(k, i))
             EndIf
         Next
     Next
-    CrcEnd
+    CrcEnd()
     If WORD_ORDER_BIG = 1 Then
-        crcHi = StoreHdr(H_TABLE_CRC)
-        crcLo = StoreHdr(H_TABLE_CRC + 1)
+        wantHi = StoreHdr(H_TABLE_CRC)
+        wantLo = StoreHdr(H_TABLE_CRC + 1)
     Else
-        crcHi = StoreHdr(H_TABLE_CRC + 1)
-        crcLo = StoreHdr(H_TABLE_CRC)
+        wantHi = StoreHdr(H_TABLE_CRC + 1)
+        wantLo = StoreHdr(H_TABLE_CRC)
     EndIf
-    If CrcHi <> crcHi Or CrcLo <> crcLo Then
+    If CrcHi <> wantHi Or CrcLo <> wantLo Then
         StageTable = E_TABLE_CRC_MISMATCH
         Exit Function
     EndIf
@@ -1045,11 +1090,11 @@ Fend
 Function Interpolate(b As Integer, x As Double, y As Double, z As Double, yaw As Double, elbow As Long) As Integer
     Integer nAxes, nJoints, nConfigs, cfg, k, j, corner, hiBit, periodic
     Long cnt(3), i0(3), i1(3), idx
-    Double u, t(3), w, p(3), start, stp
-    p(0) = x
-    p(1) = y
-    p(2) = z
-    p(3) = yaw
+    Double u, t(3), w, pt(3), start, stp
+    pt(0) = x
+    pt(1) = y
+    pt(2) = z
+    pt(3) = yaw
     nAxes = THdr(b, H_TABLE_N_AXES)
     nJoints = THdr(b, H_TABLE_N_JOINTS)
     nConfigs = THdr(b, H_TABLE_N_CONFIGS)
@@ -1060,7 +1105,7 @@ Function Interpolate(b As Integer, x As Double, y As Double, z As Double, yaw As
         cnt(k) = THdr(b, H_TABLE_SHAPE + k)
         start = HdrU32(b, H_TABLE_START + 2 * k) * 0.000001
         stp = HdrU32(b, H_TABLE_STEP + 2 * k) * 0.000001
-        u = (p(k) - start) / stp
+        u = (pt(k) - start) / stp
         If (RShift(periodic, k) And 1) = 1 Then
             ' u mod count in [0, count), node count-1 interpolates towards node 0
             u = u - cnt(k) * FloorD(u / cnt(k))
@@ -1112,42 +1157,42 @@ Function Interpolate(b As Integer, x As Double, y As Double, z As Double, yaw As
 Fend
 
 ' ---------------- the transfer block (called by ModbusServer inside the request) -------------
-Function PageOut(n As Integer)
-    Integer i
-    CrcStart
+Function PageOut(n As Long)
+    Long i
+    CrcStart()
     For i = 0 To n - 1
-        CrcWord Regs(R_PAGE_DATA + i)
+        CrcWord(Regs(R_PAGE_DATA + i))
     Next
-    CrcEnd
+    CrcEnd()
     For i = n To PAGE_DATA_REGISTERS - 1
         Regs(R_PAGE_DATA + i) = 0
     Next
     Regs(R_PAGE_LEN) = n
-    PutWords R_PAGE_CRC, CrcHi, CrcLo
+    PutWords(R_PAGE_CRC, CrcHi, CrcLo)
 Fend
 
 Function ServeTransfer
-    Integer op, k, n, i, j, b, slot, nValues, first, count
-    Integer err
+    Long op, k, n, i, j, b, slot, nValues, first, count
+    Long ec
     Double v
     op = Regs(R_XFER_OP)
     k = Regs(R_PAGE_INDEX)
     n = Regs(R_PAGE_LEN)
-    err = E_NONE
+    ec = E_NONE
     If op = X_WRITE_HEADER Or op = X_WRITE_PAGE Then
         If n > PAGE_DATA_REGISTERS Then
-            err = E_PAGE_INVALID
+            ec = E_PAGE_INVALID
         Else
-            CrcStart
+            CrcStart()
             For i = 0 To n - 1
-                CrcWord Regs(R_PAGE_DATA + i)
+                CrcWord(Regs(R_PAGE_DATA + i))
             Next
-            CrcEnd
+            CrcEnd()
             If CrcHi <> U32Hi(R_PAGE_CRC) Or CrcLo <> U32Lo(R_PAGE_CRC) Then
-                err = E_PAGE_CRC_MISMATCH
+                ec = E_PAGE_CRC_MISMATCH
             ElseIf op = X_WRITE_HEADER Then
                 If k <> 0 Or n <> TABLE_HEADER_REGISTERS Then
-                    err = E_PAGE_INVALID
+                    ec = E_PAGE_INVALID
                 Else
                     ' a header page starts a new table: the stored value pages are dropped
                     For i = 0 To n - 1
@@ -1159,7 +1204,7 @@ Function ServeTransfer
                     Next
                 EndIf
             ElseIf k >= MAX_PAGES Or n = 0 Or (n Mod 2) <> 0 Then
-                err = E_PAGE_INVALID
+                ec = E_PAGE_INVALID
             Else
                 For i = 0 To n - 1
                     StoreReg(k, i) = Regs(R_PAGE_DATA + i)
@@ -1169,79 +1214,79 @@ Function ServeTransfer
         EndIf
     ElseIf op = X_READ_HEADER Then
         If k <> 0 Or StoreHdrLen = 0 Then
-            err = E_PAGE_INVALID
+            ec = E_PAGE_INVALID
         Else
             For i = 0 To StoreHdrLen - 1
                 Regs(R_PAGE_DATA + i) = StoreHdr(i)
             Next
-            PageOut StoreHdrLen
+            PageOut(StoreHdrLen)
         EndIf
     ElseIf op = X_READ_PAGE Then
         If k >= MAX_PAGES Then
-            err = E_PAGE_INVALID
+            ec = E_PAGE_INVALID
         ElseIf StoreLen(k) = 0 Then
-            err = E_PAGE_INVALID
+            ec = E_PAGE_INVALID
         Else
             For i = 0 To StoreLen(k) - 1
                 Regs(R_PAGE_DATA + i) = StoreReg(k, i)
             Next
-            PageOut StoreLen(k)
+            PageOut(StoreLen(k))
         EndIf
     ElseIf op = X_READ_INFO And k = INFO_SOFT_LIMITS Then
         For j = 0 To 5
             If j < N_JOINTS Then
-                PutI32 R_PAGE_DATA + 4 * j, Counts(SoftLo(j), 1000000)
-                PutI32 R_PAGE_DATA + 4 * j + 2, Counts(SoftHi(j), 1000000)
+                PutI32(R_PAGE_DATA + 4 * j, Counts(SoftLo(j), 1000000))
+                PutI32(R_PAGE_DATA + 4 * j + 2, Counts(SoftHi(j), 1000000))
             Else
-                PutI32 R_PAGE_DATA + 4 * j, 0
-                PutI32 R_PAGE_DATA + 4 * j + 2, 0
+                PutI32(R_PAGE_DATA + 4 * j, 0)
+                PutI32(R_PAGE_DATA + 4 * j + 2, 0)
             EndIf
         Next
-        PageOut 24
+        PageOut(24)
     ElseIf op = X_READ_INFO And k = INFO_ACT_POSE Then
         ' the controller's pose of tool TOOL_NO as main last read it (this runs in a background
         ' task, which executes no manipulator command); a SCARA's roll and pitch are 0
-        PutI32 R_PAGE_DATA, Counts(ActPose(0), 1000000)
-        PutI32 R_PAGE_DATA + 2, Counts(ActPose(1), 1000000)
-        PutI32 R_PAGE_DATA + 4, Counts(ActPose(2), 1000000)
-        PutI32 R_PAGE_DATA + 6, 0
-        PutI32 R_PAGE_DATA + 8, 0
-        PutI32 R_PAGE_DATA + 10, Counts(DegToRad(ActPose(3)), 1000000)
-        PageOut 12
+        PutI32(R_PAGE_DATA, Counts(ActPose(0), 1000000))
+        PutI32(R_PAGE_DATA + 2, Counts(ActPose(1), 1000000))
+        PutI32(R_PAGE_DATA + 4, Counts(ActPose(2), 1000000))
+        PutI32(R_PAGE_DATA + 6, 0)
+        PutI32(R_PAGE_DATA + 8, 0)
+        PutI32(R_PAGE_DATA + 10, Counts(DegToRad(ActPose(3)), 1000000))
+        PageOut(12)
     ElseIf op >= X_READ_STAGED_HEADER And op <= X_READ_PREVIOUS_PAGE Then
         ' the table in a slot, regenerated as the PC sent it: staged 6/7, active 8/9, previous 10/11
         slot = Int((op - X_READ_STAGED_HEADER) / 2)
         b = SlotOf(slot)
         If b < 0 Then
-            err = E_PAGE_INVALID
+            ec = E_PAGE_INVALID
         ElseIf ((op - X_READ_STAGED_HEADER) Mod 2) = 0 Then
             If k <> 0 Then
-                err = E_PAGE_INVALID
+                ec = E_PAGE_INVALID
             Else
                 For i = 0 To TABLE_HEADER_REGISTERS - 1
                     Regs(R_PAGE_DATA + i) = THdr(b, i)
                 Next
-                PageOut TABLE_HEADER_REGISTERS
+                PageOut(TABLE_HEADER_REGISTERS)
             EndIf
         Else
             nValues = HdrU32(b, H_TABLE_N_VALUES)
             first = k * PAGE_VALUES
             If first >= nValues Then
-                err = E_PAGE_INVALID
+                ec = E_PAGE_INVALID
             Else
                 count = nValues - first
                 If count > PAGE_VALUES Then count = PAGE_VALUES
                 For i = 0 To count - 1
-                    PutI32 R_PAGE_DATA + 2 * i, TBuf(b, first + i)
+                    PutI32(R_PAGE_DATA + 2 * i, TBuf(b, first + i))
                 Next
-                PageOut 2 * count
+                PageOut(2 * count)
             EndIf
         EndIf
     Else
-        err = E_PAGE_INVALID
+        ec = E_PAGE_INVALID
     EndIf
     ' the answer, the number last
-    Regs(R_XFER_ERROR) = err
+    Regs(R_XFER_ERROR) = ec
     Regs(R_XFER_ACK) = Regs(R_XFER_SEQ)
 Fend
 
@@ -1250,37 +1295,27 @@ Fend
 ' ChkNet(port) without "#", as in [TCP-14.3]: the bytes waiting, or < 0 when the connection is
 ' gone (-1 open but not connected, -2 another task uses the port, -3 not open).
 Function RecvBytes(n As Integer) As Boolean
-    Integer i
-    Long v
+    Integer tmo
     RecvBytes = False
+    ' a half-sent frame must not hold the only connection: give up after NET_TIMEOUT_MS, as
+    ' Epson's Modbus client bounds its waits with Wait 0.05 steps [EPSON-MODBUS]
+    tmo = 0
     Do While ChkNet(NET_PORT) < n
         If ChkNet(NET_PORT) < 0 Then Exit Function
-        Wait 0.001
+        If tmo * 10 >= NET_TIMEOUT_MS Then Exit Function
+        tmo = tmo + 1
+        Wait 0.01
     Loop
-    ReadBin #NET_PORT, RxB(), n
-    For i = 0 To n - 1
-        ' Byte is -128..127 [UG-TYPES]
-        v = RxB(i)
-        If v < 0 Then v = v + 256
-        Rx(i) = v
-    Next
+    ReadBin #NET_PORT, Rx(), n
     RecvBytes = True
 Fend
 
 Function SendBytes(n As Integer)
-    Integer i
-    For i = 0 To n - 1
-        If Tx(i) > 127 Then
-            TxB(i) = Tx(i) - 256
-        Else
-            TxB(i) = Tx(i)
-        EndIf
-    Next
-    WriteBin #NET_PORT, TxB(), n
+    WriteBin #NET_PORT, Tx(), n
 Fend
 
 ' MBAP header (transaction id, protocol 0, length, unit id) + the PDU already in Tx(7..)
-Function Reply(tid As Long, unit As Long, pduLen As Integer)
+Function Reply(tid As Long, unit As Long, pduLen As Long)
     Tx(0) = RShift(tid, 8) And &HFF
     Tx(1) = tid And &HFF
     Tx(2) = 0
@@ -1288,32 +1323,41 @@ Function Reply(tid As Long, unit As Long, pduLen As Integer)
     Tx(4) = RShift(pduLen + 1, 8) And &HFF
     Tx(5) = (pduLen + 1) And &HFF
     Tx(6) = unit
-    SendBytes 7 + pduLen
+    SendBytes(7 + pduLen)
 Fend
 
 ' a Modbus exception response (function code + 0x80, exception code)
-Function MbException(tid As Long, unit As Long, fc As Long, code As Integer)
+Function MbException(tid As Long, unit As Long, fc As Long, code As Long)
     Tx(7) = fc Or &H80
     Tx(8) = code
-    Reply tid, unit, 2
+    Reply(tid, unit, 2)
 Fend
 
 ' offsets the PC may write: all but hb_robot .. order_check, claim_owner and ack_seq ..
 ' table_previous_crc
-Function PcMayWrite(off As Integer) As Boolean
+Function PcMayWrite(ofs As Long) As Boolean
     PcMayWrite = True
-    If off >= R_HB_ROBOT And off <= R_ORDER_CHECK + 1 Then PcMayWrite = False
-    If off >= R_CLAIM_OWNER And off <= R_CLAIM_OWNER + 1 Then PcMayWrite = False
-    If off >= R_ACK_SEQ And off <= R_TABLE_PREVIOUS_CRC + 1 Then PcMayWrite = False
+    If ofs >= R_HB_ROBOT And ofs <= R_ORDER_CHECK + 1 Then PcMayWrite = False
+    If ofs >= R_CLAIM_OWNER And ofs <= R_CLAIM_OWNER + 1 Then PcMayWrite = False
+    If ofs >= R_ACK_SEQ And ofs <= R_TABLE_PREVIOUS_CRC + 1 Then PcMayWrite = False
 Fend
 
+' Epson's guide: an error in a background task cannot be recovered in AUTO mode, so every
+' communication error (a client gone mid-reply: WriteBin fails) goes to NetErr, which closes the
+' port and serves the next connection [UG-BG], [EPSON-MODBUS] (OnErr GoTo in every function)
 Function ModbusServer
-    Long tid, unit, fc, addr, cnt, lenField, off, val
-    Integer i
-    Boolean bad
     Do
-        OpenNet #NET_PORT As Server
-        WaitNet #NET_PORT
+        Call ServeConnection()
+    Loop
+Fend
+
+Function ServeConnection
+    Long tid, unit, fc, addr, cnt, lenField, ofs, wval, i
+    Boolean bad
+    OnErr GoTo NetErr
+    If ChkNet(NET_PORT) > -3 Then CloseNet #NET_PORT
+    OpenNet #NET_PORT As Server
+    WaitNet #NET_PORT
         Do
             If Not RecvBytes(7) Then Exit Do
             tid = Rx(0) * 256 + Rx(1)
@@ -1324,86 +1368,90 @@ Function ModbusServer
             fc = Rx(0)
             addr = Rx(1) * 256 + Rx(2)
             cnt = Rx(3) * 256 + Rx(4)
-            off = addr - BASE
+            ofs = addr - REG_BASE
             If fc = 3 Or fc = 4 Then
                 If cnt < 1 Or cnt > 125 Then
-                    MbException tid, unit, fc, 3
-                ElseIf off < 0 Or off + cnt > WINDOW_SIZE Then
-                    MbException tid, unit, fc, 2
+                    MbException(tid, unit, fc, 3)
+                ElseIf ofs < 0 Or ofs + cnt > WINDOW_SIZE Then
+                    MbException(tid, unit, fc, 2)
                 Else
                     Tx(7) = fc
                     Tx(8) = 2 * cnt
                     For i = 0 To cnt - 1
-                        Tx(9 + 2 * i) = RShift(Regs(off + i), 8) And &HFF
-                        Tx(10 + 2 * i) = Regs(off + i) And &HFF
+                        Tx(9 + 2 * i) = RShift(Regs(ofs + i), 8) And &HFF
+                        Tx(10 + 2 * i) = Regs(ofs + i) And &HFF
                     Next
-                    Reply tid, unit, 2 + 2 * cnt
+                    Reply(tid, unit, 2 + 2 * cnt)
                 EndIf
             ElseIf fc = 6 Then
                 ' the register's value is in the count field's bytes
-                val = cnt
-                If off < 0 Or off >= WINDOW_SIZE Then
-                    MbException tid, unit, fc, 2
-                ElseIf Not PcMayWrite(off) Then
-                    MbException tid, unit, fc, 2
+                wval = cnt
+                If ofs < 0 Or ofs >= WINDOW_SIZE Then
+                    MbException(tid, unit, fc, 2)
+                ElseIf Not PcMayWrite(ofs) Then
+                    MbException(tid, unit, fc, 2)
                 Else
-                    Regs(off) = val
-                    AfterWrite off, 1
+                    Regs(ofs) = wval
+                    AfterWrite(ofs, 1)
                     For i = 0 To 4
                         Tx(7 + i) = Rx(i)
                     Next
-                    Reply tid, unit, 5
+                    Reply(tid, unit, 5)
                 EndIf
             ElseIf fc = 16 Then
                 If cnt < 1 Or cnt > 123 Or Rx(5) <> 2 * cnt Then
-                    MbException tid, unit, fc, 3
-                ElseIf off < 0 Or off + cnt > WINDOW_SIZE Then
-                    MbException tid, unit, fc, 2
+                    MbException(tid, unit, fc, 3)
+                ElseIf ofs < 0 Or ofs + cnt > WINDOW_SIZE Then
+                    MbException(tid, unit, fc, 2)
                 Else
                     bad = False
                     For i = 0 To cnt - 1
-                        If Not PcMayWrite(off + i) Then bad = True
+                        If Not PcMayWrite(ofs + i) Then bad = True
                     Next
                     If bad Then
-                        MbException tid, unit, fc, 2
+                        MbException(tid, unit, fc, 2)
                     Else
                         For i = 0 To cnt - 1
-                            Regs(off + i) = Rx(6 + 2 * i) * 256 + Rx(7 + 2 * i)
+                            Regs(ofs + i) = Rx(6 + 2 * i) * 256 + Rx(7 + 2 * i)
                         Next
-                        AfterWrite off, cnt
+                        AfterWrite(ofs, cnt)
                         For i = 0 To 4
                             Tx(7 + i) = Rx(i)
                         Next
-                        Reply tid, unit, 5
+                        Reply(tid, unit, 5)
                     EndIf
                 EndIf
             Else
-                MbException tid, unit, fc, 1
+                MbException(tid, unit, fc, 1)
             EndIf
         Loop
-        CloseNet #NET_PORT
-    Loop
+    CloseNet #NET_PORT
+    Exit Function
+NetErr:
+    NetErrors = NetErrors + 1
+    If NetErrors > 65535 Then NetErrors = 0
+    Wait 0.01
 Fend
 
 ' what a PC write starts: the transfer request (xfer_seq changed) at once, and the command block
 ' handed to main when the write covered cmd_seq (the block is written in one request). While
 ' main does not run, the command is acknowledged and refused here.
-Function AfterWrite(off As Integer, cnt As Integer)
-    Integer i
-    If off <= R_XFER_SEQ And R_XFER_SEQ < off + cnt Then
+Function AfterWrite(ofs As Long, cnt As Long)
+    Long i
+    If ofs <= R_XFER_SEQ And R_XFER_SEQ < ofs + cnt Then
         If Regs(R_XFER_SEQ) <> LastXfer Then
             LastXfer = Regs(R_XFER_SEQ)
-            ServeTransfer
+            ServeTransfer()
         EndIf
     EndIf
-    If off <= R_CMD_SEQ And R_CMD_SEQ < off + cnt Then
+    If ofs <= R_CMD_SEQ And R_CMD_SEQ < ofs + cnt Then
         For i = 0 To R_CMD_TOKEN + 1 - R_CMD_CODE
             CmdSnap(i) = Regs(R_CMD_CODE + i)
         Next
         If MainUp Then
             CmdWritten = True
         Else
-            RefuseWhileDown
+            RefuseWhileDown()
         EndIf
     EndIf
 Fend
@@ -1413,12 +1461,12 @@ Function RefuseWhileDown
     Long seq, expected
     seq = CmdSnap(R_CMD_SEQ - R_CMD_CODE)
     If seq = LastSeq Then Exit Function
-    expected = LastSeq Mod 65535 + 1
+    expected = (LastSeq Mod 65535) + 1
     LastSeq = seq
     Regs(R_ACK_SEQ) = seq
     If seq <> expected Then
-        Refuse seq, E_SEQUENCE_ERROR, 0, 0
+        Refuse(seq, E_SEQUENCE_ERROR, 0, 0)
     Else
-        Refuse seq, E_NOT_READY, 0, 0
+        Refuse(seq, E_NOT_READY, 0, 0)
     EndIf
 Fend
