@@ -263,7 +263,8 @@ class Devices:
         if p.kind == "joint":
             v = np.array(p.values, dtype=float)
             return np.array([math.radians(v[0]), math.radians(v[1]), v[2], math.radians(v[3])])
-        q = self.ctl.arm.inverse(*p.values, hand=p.hand or "r")
+        x, y, z, u = p.values
+        q = self.ctl.arm.inverse(x, y, z, u, hand=p.hand or "r")
         if q is None:
             raise SpelRuntimeError(I.ERR_IK, "the point cannot be reached", line)
         return q

@@ -146,7 +146,7 @@ class _Expr:
         self.line = lineno
         self.p = parser
 
-    def peek(self, off: int = 0) -> Tok | None:
+    def peek(self, off: int = 0) -> Any:  # Tok or None
         return self.t[self.k + off] if self.k + off < len(self.t) else None
 
     def take(self, text: str | None = None) -> Tok:
