@@ -120,6 +120,22 @@ class SimulationPhysics:
                                       else np.asarray(self.joint_backlash_um, dtype=float) / 1000.0),
                 "setup_error": None if self.setup_error is None else setup_error_vector(self.setup_error)}
 
+    def prior_sigma(self, model: Any) -> np.ndarray:
+        """σ (n_params,) [mm, rad] of every parameter's true error as :meth:`CellTruth.generate`
+        draws it with these magnitudes: the size a robot's error is expected to have."""
+        k = self.truth_kwargs()
+        sig = np.empty((model.n_params // 6, 6))
+        sig[:, :3] = k["length_sigma_mm"]
+        sig[:, 3:] = k["angle_sigma_rad"]
+        if k["tilt_sigma_rad"] is not None:
+            sig[:, 3:5] = k["tilt_sigma_rad"]
+        if k["offset_sigma_rad"] is not None:
+            for t, kind in zip(model.joint_transforms, model.joint_types):
+                if kind == "revolute":
+                    sig[t, 5] = k["offset_sigma_rad"]
+        sig[0] = [k["setup_sigma_mm"]] * 3 + [k["setup_tilt_sigma_rad"]] * 2 + [k["setup_yaw_sigma_rad"]]
+        return sig.ravel()
+
     def body_sigma(self) -> tuple[float, float]:
         """σ of a body point's true deviation: position [mm], angle [rad]."""
         return self.body_position_sigma_um / 1000.0, self.body_angle_sigma_arcsec * ARCSEC
