@@ -97,7 +97,8 @@ class CellTruth:
                  prismatic_backlash_mm: float = 0.02, lever_mm: float = 450.0,
                  encoder_resolution: float = 1e-6, offset_sigma_rad: float | None = None,
                  tilt_sigma_rad: float | None = None,
-                 joint_backlash_mm: np.ndarray | None = None) -> "CellTruth":
+                 joint_backlash_mm: np.ndarray | None = None,
+                 setup_error: np.ndarray | None = None) -> "CellTruth":
         """Seeded true robot: lengths of A1..Ag and K with σ ``length_sigma_mm``, angles with
         σ ``angle_sigma_rad``; set-up R = ``setup_nominal`` + σ ``setup_sigma_mm`` in x, y, z,
         ``setup_yaw_sigma_rad`` in yaw and ``setup_tilt_sigma_rad`` in roll, pitch.
@@ -106,7 +107,9 @@ class CellTruth:
         ``offset_sigma_rad`` (the revolute joints' encoder offsets: the yaw of their transforms)
         and ``tilt_sigma_rad`` (roll and pitch of every transform) replace ``angle_sigma_rad``
         where given; ``joint_backlash_mm`` (g,) gives each joint its own backlash (revolute at
-        ``lever_mm``). The same seed draws the same numbers whatever the σ."""
+        ``lever_mm``). ``setup_error`` (6,) [mm, rad]: the set-up's error planted exactly instead
+        of the draw (which is still made, so that a seed's robot is the same either way). The same
+        seed draws the same numbers whatever the σ."""
         model = load_robot("sr800") if model is None else model
         model = model.with_setup(np.asarray(setup_nominal, dtype=float))
         rng = np.random.default_rng(seed)
@@ -124,6 +127,8 @@ class CellTruth:
         err[0, :3] = rng.normal(0.0, setup_sigma_mm, 3)
         err[0, 3:5] = rng.normal(0.0, setup_tilt_sigma_rad, 2)
         err[0, 5] = rng.normal(0.0, setup_yaw_sigma_rad)
+        if setup_error is not None:
+            err[0] = np.asarray(setup_error, dtype=float).reshape(6)
         rev = np.array([t == "revolute" for t in model.joint_types])
         rep = np.where(rev, repeatability_mm / lever_mm, repeatability_mm)
         bl = np.where(rev, backlash_mm / lever_mm, prismatic_backlash_mm)

@@ -40,7 +40,7 @@ from simulators import SimulatedCellServers, start_simulated_cell
 from simulators.cell import CalibrationBody, CellTruth, SimulatedCell
 from station.core.units import ARCSEC
 
-__all__ = ["SimulationPhysics", "DRIFT_KEYS", "Rehearsal", "simulated_cell_for", "simulate_config",
+__all__ = ["SimulationPhysics", "DRIFT_KEYS", "SETUP_ERROR_KEYS", "setup_error_vector", "Rehearsal", "simulated_cell_for", "simulate_config",
            "station_config_text", "effective_seed", "toml_text", "DEFAULT_SEED", "SIMULATOR_PROBE_TIMEOUT_S"]
 
 #: the ``[simulation]`` keys of the drift models (``simulators/thermal.py``)
@@ -82,6 +82,9 @@ class SimulationPhysics:
     offset_sigma_arcsec: float | None = None  # the revolute joints' encoder offsets; None: angle_sigma_arcsec
     tilt_sigma_arcsec: float | None = None  # the axis tilts (roll, pitch); None: angle_sigma_arcsec
     joint_backlash_um: tuple[float, ...] | None = None  # per joint (revolute at lever_mm); None: the two above
+    # the set-up's error planted exactly ({x_mm, y_mm, z_mm, roll_deg, pitch_deg, yaw_deg}, a key left
+    # out 0); None: drawn with the three setup σ above
+    setup_error: Mapping[str, float] | None = None
 
     @classmethod
     def from_settings(cls, settings: Mapping[str, Any] | None) -> "SimulationPhysics":
@@ -92,7 +95,12 @@ class SimulationPhysics:
         for k, v in (settings or {}).items():
             if k not in names or v is None:
                 continue
-            kw[k] = tuple(float(x) for x in v) if k == "joint_backlash_um" else float(v)
+            if k == "joint_backlash_um":
+                kw[k] = tuple(float(x) for x in v)
+            elif k == "setup_error":
+                kw[k] = _setup_error_table(v)
+            else:
+                kw[k] = float(v)
         return cls(**kw)
 
     def truth_kwargs(self) -> dict[str, Any]:
@@ -109,7 +117,24 @@ class SimulationPhysics:
                 "offset_sigma_rad": None if self.offset_sigma_arcsec is None else self.offset_sigma_arcsec * ARCSEC,
                 "tilt_sigma_rad": None if self.tilt_sigma_arcsec is None else self.tilt_sigma_arcsec * ARCSEC,
                 "joint_backlash_mm": (None if self.joint_backlash_um is None
-                                      else np.asarray(self.joint_backlash_um, dtype=float) / 1000.0)}
+                                      else np.asarray(self.joint_backlash_um, dtype=float) / 1000.0),
+                "setup_error": None if self.setup_error is None else setup_error_vector(self.setup_error)}
+
+    def prior_sigma(self, model: Any) -> np.ndarray:
+        """σ (n_params,) [mm, rad] of every parameter's true error as :meth:`CellTruth.generate`
+        draws it with these magnitudes: the size a robot's error is expected to have."""
+        k = self.truth_kwargs()
+        sig = np.empty((model.n_params // 6, 6))
+        sig[:, :3] = k["length_sigma_mm"]
+        sig[:, 3:] = k["angle_sigma_rad"]
+        if k["tilt_sigma_rad"] is not None:
+            sig[:, 3:5] = k["tilt_sigma_rad"]
+        if k["offset_sigma_rad"] is not None:
+            for t, kind in zip(model.joint_transforms, model.joint_types):
+                if kind == "revolute":
+                    sig[t, 5] = k["offset_sigma_rad"]
+        sig[0] = [k["setup_sigma_mm"]] * 3 + [k["setup_tilt_sigma_rad"]] * 2 + [k["setup_yaw_sigma_rad"]]
+        return sig.ravel()
 
     def body_sigma(self) -> tuple[float, float]:
         """σ of a body point's true deviation: position [mm], angle [rad]."""
@@ -119,6 +144,25 @@ class SimulationPhysics:
         """Keyword arguments of :class:`SimulatedCell` (mm, rad)."""
         return {"capture_mm": self.capture_mm, "capture_angle_rad": float(np.deg2rad(self.capture_angle_deg)),
                 "probe_noise_mm": self.probe_noise_um / 1000.0}
+
+
+#: the components of ``[simulation] setup_error`` in the order of a pose (x, y, z, roll, pitch, yaw)
+SETUP_ERROR_KEYS = ("x_mm", "y_mm", "z_mm", "roll_deg", "pitch_deg", "yaw_deg")
+
+
+def _setup_error_table(value: Mapping[str, Any]) -> dict[str, float]:
+    """``[simulation] setup_error`` as given (file units), only its known keys."""
+    unknown = set(value) - set(SETUP_ERROR_KEYS)
+    if unknown:
+        raise ValueError(f"setup_error: unknown keys {sorted(unknown)}; its keys are {', '.join(SETUP_ERROR_KEYS)}")
+    return {k: float(value[k]) for k in SETUP_ERROR_KEYS if value.get(k) is not None}
+
+
+def setup_error_vector(table: Mapping[str, float]) -> np.ndarray:
+    """``[simulation] setup_error`` (file units, a key left out 0) as the set-up's error (6,) in mm and rad."""
+    v = np.array([float(table.get(k) or 0.0) for k in SETUP_ERROR_KEYS])
+    v[3:] = np.deg2rad(v[3:])
+    return v
 
 
 def _settings(cfg: Any) -> dict[str, Any]:

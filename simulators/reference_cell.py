@@ -7,6 +7,7 @@ reads the text like any other cell configuration (``docs/station.md``, "Cell con
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any, Protocol
 
 import numpy as np
@@ -23,6 +24,8 @@ def _toml(key: str, v: Any) -> str:
         return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
     if isinstance(v, (list, tuple)):
         return "[" + ", ".join(repr(float(x)) for x in v) + "]"
+    if isinstance(v, Mapping):  # an inline table ([simulation] setup_error)
+        return "{ " + ", ".join(f"{k} = {repr(float(x))}" for k, x in v.items()) + " }"
     return repr(int(v)) if key == "step_joint" else repr(float(v))
 
 

@@ -262,6 +262,19 @@ class _Correction(_Section):
         return self
 
 
+class _SetupError(_Section):
+    """``[simulation] setup_error``: the true set-up's error against ``[robot].setup``, planted
+    exactly instead of drawn (a rehearsal with a set-up off by a chosen amount, e.g. ≥ 1 mm in z
+    for issue 36's base-frame check). A component left out is 0."""
+
+    x_mm: float = _num(0.0, ge=-100.0, le=100.0, what="the true set-up's error along x [mm]")
+    y_mm: float = _num(0.0, ge=-100.0, le=100.0, what="the true set-up's error along y [mm]")
+    z_mm: float = _num(0.0, ge=-100.0, le=100.0, what="the true set-up's error along z [mm]")
+    roll_deg: float = _num(0.0, ge=-5.0, le=5.0, what="the true set-up's error in roll [deg]")
+    pitch_deg: float = _num(0.0, ge=-5.0, le=5.0, what="the true set-up's error in pitch [deg]")
+    yaw_deg: float = _num(0.0, ge=-10.0, le=10.0, what="the true set-up's error in yaw [deg]")
+
+
 class _Simulation(_Section):
     """``[simulation]``: what ``--simulated CONFIG`` and ``python -m simulators --config`` simulate.
     The defaults are the built-in cell's (``simulators/from_config.py``, :class:`SimulationPhysics`
@@ -288,6 +301,11 @@ class _Simulation(_Section):
                                  what="σ of the true set-up against the nominal [robot].setup, x, y, z [mm]")
     setup_yaw_sigma_deg: float = _num(0.2, ge=0.0, le=10.0, what="σ of the true set-up's yaw [deg]")
     setup_tilt_sigma_deg: float = _num(0.03, ge=0.0, le=5.0, what="σ of the true set-up's roll and pitch [deg]")
+    # planted, not drawn: the robot's errors are the seed's draws either way (the set-up is drawn last)
+    setup_error: _SetupError | None = _absent(description="the true set-up's error against [robot].setup, exact: "
+                                              "{ x_mm, y_mm, z_mm within ±100, roll_deg, pitch_deg within ±5, "
+                                              "yaw_deg within ±10 }, a component left out 0; not given: drawn "
+                                              "with setup_sigma_mm, setup_yaw_sigma_deg, setup_tilt_sigma_deg")
     # the physics of the simulated robot, probe head and body
     repeatability_um: float = _num(5.0, ge=0.0, le=1000.0,
                                    what="σ of a joint's position per move [µm] (revolute: at lever_mm)")

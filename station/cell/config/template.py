@@ -16,12 +16,16 @@ from station.cell.config.schema import _Simulation
 
 _WIDTH = 110  # the template's longest comment lines
 
-#: a shown value where the schema's default is "not given" (the seed then falls back to 1)
-_SHOWN_DEFAULT = {"seed": 1}
+#: a shown value where the schema's default is "not given" (the seed then falls back to 1; a
+#: set-up error is then drawn, so an example of the table is shown)
+_SHOWN_DEFAULT: dict[str, Any] = {"seed": 1}
 
 
 class _Form(str):
     """A shown value that is the form to write, not a value (``[ … ]``)."""
+
+
+_SHOWN_DEFAULT["setup_error"] = _Form("{ z_mm = 1.5, yaw_deg = 0.3 }")
 
 
 def _toml_value(v: Any) -> str:
@@ -82,7 +86,11 @@ def simulation_block() -> str:
         what = f"{rng}: {info.description}" if rng else str(info.description)
         indent = f"{'#':<35}# "
         body = textwrap.wrap(what, width=_WIDTH - len(indent))
-        lines.append(f"{setting:<34} # {body[0]}")
+        if len(setting) > 34:  # a long shown value (an inline table): its comment starts below it
+            lines.append(setting)
+            body = [""] + body
+        else:
+            lines.append(f"{setting:<34} # {body[0]}")
         lines += [f"{indent}{more}" for more in body[1:]]
     return "\n".join(lines) + "\n"
 
