@@ -231,45 +231,12 @@ def _identify(model: RobotModel, data: MeasurementSet, start, prefer, fix, exclu
         data, dropped = _drop_coincident(model, data, p0, notes)
     info = data_information(model, data.joints, None if data.kind == "distance" else data.measured,
                             rows_per_item=3 if data.kind == "distance" else data.rows_per_item)
-    reg = None
     if data.kind == "distance":
-        pts = forward(model, data.joints, p0, setup=False)[:, :3, 3]
-        pr = data.distance_pairs()
-        d_nom = np.linalg.norm(pts[pr[:, 0]] - pts[pr[:, 1]], axis=1)
-        scale = float(np.sum(d_nom * data.measured) / max(np.sum(d_nom**2), 1e-300))
-        if not (abs(scale - 1.0) <= 0.02):
-            likely = likely_unit(scale) if np.isfinite(scale) and scale > 0 else None
-            raise ConfigError(
-                f"the measured distances are {scale:.4g}× the nominal model's"
-                + (f": they look like {likely[0]}, not mm. Label the columns with their unit or {likely[1]}"
-                   if likely else "; check the length unit of the data and of the robot file"))
+        _check_distance_scale(model, data, p0)
     evaluator = DataEvaluator(model, data)  # one chain for the registration, the analysis, the fit and its result
+    reg = None
     if data.kind != "distance" and register_frame:
-        pos = data.measured[:, :3, 3] if data.kind == "pose" else data.measured
-        try:
-            reg = register(model, data.joints, pos, _position_sigma(data), params=p0, tool_unknown=tool_unknown,
-                           explain_marker=start is None, base_points=evaluator.chain.tool(p0, setup=False)[:, :3, 3])
-        except IdentificationError:
-            if start is None:
-                raise
-            notes.append("registration residual above the limit; fitted from the given start anyway")
-        if reg is not None and reg.tool_offset_mm is not None:
-            p0[-6:-3] = reg.tool_offset_mm
-            d = reg.tool_offset_mm - model.nominal[-6:-3]
-            notes.append(f"tool point unknown: started from the registration's, ({d[0]:.2f}, {d[1]:.2f}, "
-                         f"{d[2]:.2f}) mm from the robot file's")
-        if reg is not None and start is None and not any(
-                model.param_names[i] in (*fix, *exclude) for i in range(6)):
-            # Keep the robot file's set-up where Levenberg–Marquardt converges from it (the
-            # translation enters linearly; a rotation within REGISTRATION_START_ANGLE does), so
-            # parameters that merge into R keep their file values; otherwise start from the
-            # registration (an instrument turned or flipped far from the file's R).
-            R_file = rpy_to_matrix(p0[3:6])  # pose_to_matrix(p0[:6])'s rotation
-            angle = float(np.arccos(np.clip((np.trace(R_file.T @ reg.transform[:3, :3]) - 1) / 2, -1, 1)))
-            if angle > REGISTRATION_START_ANGLE:
-                p0[:6] = reg.setup_pose
-                notes.append(f"set-up R started from the registration (the robot file's R is turned "
-                             f"{np.degrees(angle):.0f}° from the instrument's frame)")
+        reg = _register_start(model, data, evaluator, p0, start, fix, exclude, tool_unknown, notes)
     p_struct = structural_params(model, p0)
     ident = analyze(model, data, p_struct, prefer=model.prefer if prefer is None else prefer,
                     fix=fix, exclude=exclude, describe=True,
@@ -284,19 +251,7 @@ def _identify(model: RobotModel, data: MeasurementSet, start, prefer, fix, exclu
     base = base_frame_note(model, ident) if chosen is None else None  # what the base frame is tied to (36)
     if base is not None:
         notes.append(base)
-    if chosen is not None:
-        idx = np.array(model.param_indices(chosen), dtype=int)
-        J = evaluator.residuals_and_jacobian(p0)[1][:, idx] / data.sigma[:, None]
-        Js = J / np.maximum(np.linalg.norm(J, axis=0), 1e-300)
-        s = np.linalg.svd(Js, compute_uv=False)
-        if s[-1] <= 1e-9 * s[0]:
-            raise IdentificationError(
-                f"the parameters {list(chosen)} are not all identifiable from these "
-                f"{data.kind} measurements (rank {int(np.sum(s > 1e-9 * s[0]))} of {len(idx)}); "
-                f"run 'station analyze' to see a minimal set"
-            )
-    else:
-        idx = ident.chosen_indices()
+    idx = _chosen_index(model, data, evaluator, p0, chosen, ident)
     n_rows = data.sigma.size
     if n_rows < len(idx):
         raise IdentificationError(
@@ -323,24 +278,7 @@ def _identify(model: RobotModel, data: MeasurementSet, start, prefer, fix, exclu
         notes.append(f"robust loss huber (corner {HUBER_SCALE:g} σ): {len(downweighted)} of {data.n_items} "
                      f"measurements down-weighted")
     names = tuple(model.param_names[i] for i in idx.tolist())
-    if data.kind == "distance":
-        pts = forward(model, data.joints, p, setup=False)[:, :3, 3]
-        pr = data.distance_pairs()
-        diff = pts[pr[:, 0]] - pts[pr[:, 1]]
-        unit = diff / np.linalg.norm(diff, axis=1)[:, None]
-        if data.has_body_sigma:
-            unc = body_sandwich(Jw, names, data, 1.0 / w, unit)
-        else:
-            unc = distance_sandwich(Jw, names, pr, unit, data.sigma, data.points_sigma(), data.joints.shape[0])
-        if shares_points(pr):
-            notes.append(f"{len(pr)} distances share measured points; their correlation is in the σ "
-                         f"(sandwich from the points' covariance)")
-    elif data.has_body_sigma:
-        unc = body_sandwich(Jw, names, data, 1.0 / w)
-    else:
-        unc = linear_uncertainty(Jw, names)
-    if data.has_body_sigma:
-        notes.append(body_note(data))
+    unc = _uncertainty(model, data, p, Jw, w, names, notes)
     rn = (r * w).reshape(data.n_items, data.rows_per_item)
     rn2 = rn**2  # np.mean's sums and divisions, without its layers
     per_item = np.sqrt(np.add.reduce(rn2, 1) / rn2.shape[1])
@@ -367,6 +305,99 @@ def _identify(model: RobotModel, data: MeasurementSet, start, prefer, fix, exclu
         loss=loss, downweighted=downweighted, dropped_pairs=dropped,
         pairs=data.distance_pairs() if data.kind == "distance" else None, max_evaluations=max_nfev,
     )
+
+
+def _check_distance_scale(model: RobotModel, data: MeasurementSet, p0: np.ndarray) -> None:
+    """Distances in another unit than the robot file's are refused, naming the likely unit, before
+    a fit would bend the robot to them."""
+    pts = forward(model, data.joints, p0, setup=False)[:, :3, 3]
+    pr = data.distance_pairs()
+    d_nom = np.linalg.norm(pts[pr[:, 0]] - pts[pr[:, 1]], axis=1)
+    scale = float(np.sum(d_nom * data.measured) / max(np.sum(d_nom**2), 1e-300))
+    if not (abs(scale - 1.0) <= 0.02):
+        likely = likely_unit(scale) if np.isfinite(scale) and scale > 0 else None
+        raise ConfigError(
+            f"the measured distances are {scale:.4g}× the nominal model's"
+            + (f": they look like {likely[0]}, not mm. Label the columns with their unit or {likely[1]}"
+               if likely else "; check the length unit of the data and of the robot file"))
+
+
+def _register_start(model: RobotModel, data: MeasurementSet, evaluator: DataEvaluator, p0: np.ndarray, start,
+                    fix, exclude, tool_unknown: bool, notes: list[str]) -> Registration | None:
+    """The set-up (and, with ``tool_unknown``, the tool point) registered from the measured
+    positions; ``p0`` takes what the fit should start from, and ``notes`` say why."""
+    reg = None
+    pos = data.measured[:, :3, 3] if data.kind == "pose" else data.measured
+    try:
+        reg = register(model, data.joints, pos, _position_sigma(data), params=p0, tool_unknown=tool_unknown,
+                       explain_marker=start is None, base_points=evaluator.chain.tool(p0, setup=False)[:, :3, 3])
+    except IdentificationError:
+        if start is None:
+            raise
+        notes.append("registration residual above the limit; fitted from the given start anyway")
+    if reg is not None and reg.tool_offset_mm is not None:
+        p0[-6:-3] = reg.tool_offset_mm
+        d = reg.tool_offset_mm - model.nominal[-6:-3]
+        notes.append(f"tool point unknown: started from the registration's, ({d[0]:.2f}, {d[1]:.2f}, "
+                     f"{d[2]:.2f}) mm from the robot file's")
+    if reg is not None and start is None and not any(
+            model.param_names[i] in (*fix, *exclude) for i in range(6)):
+        # Keep the robot file's set-up where Levenberg–Marquardt converges from it (the
+        # translation enters linearly; a rotation within REGISTRATION_START_ANGLE does), so
+        # parameters that merge into R keep their file values; otherwise start from the
+        # registration (an instrument turned or flipped far from the file's R).
+        R_file = rpy_to_matrix(p0[3:6])  # pose_to_matrix(p0[:6])'s rotation
+        angle = float(np.arccos(np.clip((np.trace(R_file.T @ reg.transform[:3, :3]) - 1) / 2, -1, 1)))
+        if angle > REGISTRATION_START_ANGLE:
+            p0[:6] = reg.setup_pose
+            notes.append(f"set-up R started from the registration (the robot file's R is turned "
+                         f"{np.degrees(angle):.0f}° from the instrument's frame)")
+    return reg
+
+
+def _chosen_index(model: RobotModel, data: MeasurementSet, evaluator: DataEvaluator, p0: np.ndarray, chosen,
+                  ident: Identifiability) -> np.ndarray:
+    """The fitted parameters' indices: the caller's ``chosen`` (checked identifiable from these
+    data) or the analysis's minimal set."""
+    if chosen is not None:
+        idx = np.array(model.param_indices(chosen), dtype=int)
+        J = evaluator.residuals_and_jacobian(p0)[1][:, idx] / data.sigma[:, None]
+        Js = J / np.maximum(np.linalg.norm(J, axis=0), 1e-300)
+        s = np.linalg.svd(Js, compute_uv=False)
+        if s[-1] <= 1e-9 * s[0]:
+            raise IdentificationError(
+                f"the parameters {list(chosen)} are not all identifiable from these "
+                f"{data.kind} measurements (rank {int(np.sum(s > 1e-9 * s[0]))} of {len(idx)}); "
+                f"run 'station analyze' to see a minimal set"
+            )
+    else:
+        idx = ident.chosen_indices()
+    return idx
+
+
+def _uncertainty(model: RobotModel, data: MeasurementSet, p: np.ndarray, Jw: np.ndarray, w: np.ndarray,
+                 names: tuple[str, ...], notes: list[str]) -> LinearUncertainty:
+    """The identified parameters' covariance as the data's kind needs it: the sandwich for
+    distances (they share points) and for rows sharing a body point's error, else linear."""
+    if data.kind == "distance":
+        pts = forward(model, data.joints, p, setup=False)[:, :3, 3]
+        pr = data.distance_pairs()
+        diff = pts[pr[:, 0]] - pts[pr[:, 1]]
+        unit = diff / np.linalg.norm(diff, axis=1)[:, None]
+        if data.has_body_sigma:
+            unc = body_sandwich(Jw, names, data, 1.0 / w, unit)
+        else:
+            unc = distance_sandwich(Jw, names, pr, unit, data.sigma, data.points_sigma(), data.joints.shape[0])
+        if shares_points(pr):
+            notes.append(f"{len(pr)} distances share measured points; their correlation is in the σ "
+                         f"(sandwich from the points' covariance)")
+    elif data.has_body_sigma:
+        unc = body_sandwich(Jw, names, data, 1.0 / w)
+    else:
+        unc = linear_uncertainty(Jw, names)
+    if data.has_body_sigma:
+        notes.append(body_note(data))
+    return unc
 
 
 def require_converged(res: IdentificationResult) -> None:
