@@ -291,6 +291,15 @@ def build_parser() -> argparse.ArgumentParser:
                    "recorded with the run, else [cell] operator)")
     p.set_defaults(func="station.ui.cli.commands_cell:cmd_report")
 
+    p = sub.add_parser("export-dcc", help="a finished calibration as a Digital Calibration Certificate (XML)")
+    p.add_argument("run", type=run_number)
+    p.add_argument("--db", default="runs.sqlite")
+    p.add_argument("--issuer", required=True, metavar="FILE", help="laboratory, customer, robot manufacturer and "
+                   "approver (TOML, docs/exports.md)")
+    p.add_argument("--output", "-o", required=True, metavar="FILE.xml")
+    p.add_argument("--operator", metavar="NAME", help="the operator (default: the one recorded with the run)")
+    p.set_defaults(func="station.ui.cli.commands_dcc:cmd_export_dcc")
+
     p = sub.add_parser("export", help="export a run's measurements to CSV")
     p.add_argument("--db", default="runs.sqlite")
     p.add_argument("--run", type=run_number)
