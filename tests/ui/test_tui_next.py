@@ -291,7 +291,7 @@ async def test_a_real_session_that_fails_building_its_table_is_advised_as_a_corr
     """The simulated cell through the session, its correction step made to fail as the issue saw it
     (an IdentificationError, exit code 3, after the identification held): the phase the session
     reported is what tells it from a rank deficiency."""
-    from station.cell.pipeline import pipeline
+    from station.cell.pipeline import calibration as pipeline
     from station.cell.session.calibrate import CellRequest
     from station.ui.tui.launch import make_app
 
