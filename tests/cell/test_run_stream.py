@@ -59,7 +59,7 @@ def test_a_subscriber_that_fails_stops_the_emit_and_a_kind_must_be_an_event():
     with pytest.raises(RuntimeError, match="view gone"):
         stream(Notice("info", "x"))
     with pytest.raises(TypeError):
-        stream.subscribe(print, int)  # type: ignore[arg-type]
+        stream.subscribe(print, int)  # type: ignore[type-var]
 
 
 # --- one run's facts --------------------------------------------------------------------------------
