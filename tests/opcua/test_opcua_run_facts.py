@@ -61,6 +61,7 @@ async def test_the_client_reads_the_figures_the_run_streamed(pki, tmp_path) -> N
                 idx, node = await station(client)
                 assert await read(node, idx, "ActiveTableCrc") == "unknown"  # no run database yet
                 assert math.isnan(await read(node, idx, "LastCalibration", "Gain"))
+                assert math.isnan(await read(node, idx, "LastCalibration", "InterpolationBoundMicrometre"))
                 for event in (RunStarted(5, 60), Identified(ident, tuple(float(v) for v in params)),
                               TableDesigned(table), Uploaded(upload, "1a2b3c4d", "none")):
                     service.stream(event)
@@ -76,6 +77,11 @@ async def test_the_client_reads_the_figures_the_run_streamed(pki, tmp_path) -> N
                 assert await read(node, idx, "LastCalibration", "RmsBeforeMicrometre") == 612.3
                 assert await read(node, idx, "LastCalibration", "RmsAfterMicrometre") == 17.25
                 assert await read(node, idx, "LastCalibration", "Gain") == summary.gain
+                # the table's bound: the TableDesigned event's, the one the run judged and stored
+                assert await read(node, idx, "LastCalibration", "InterpolationBoundMicrometre") == 4.73
+                bound = await node.get_child([f"{idx}:LastCalibration", f"{idx}:InterpolationBoundMicrometre"])
+                unit = await (await bound.get_child(["0:EngineeringUnits"])).read_value()
+                assert unit.DisplayName.Text == "µm"
                 assert await read(node, idx, "RunKind") == "calibration"
         finally:
             await service.stop()

@@ -299,7 +299,9 @@ class StationService:
                           ExitCode=summary.exit_code, FinishedUtc=self._started_utc,
                           RmsBeforeMicrometre=_float(summary.before.rms_um if summary.before else None),
                           RmsAfterMicrometre=_float(summary.after.rms_um if summary.after else None),
-                          Gain=_float(summary.gain))
+                          Gain=_float(summary.gain),
+                          InterpolationBoundMicrometre=_float(summary.correction.interpolation_bound_um
+                                                              if summary.correction else None))
         if summary.tables is not None:
             await self._write_state(ActiveTableCrc=summary.tables.active_at_end)
 
@@ -371,9 +373,11 @@ class StationService:
         records = await asyncio.get_running_loop().run_in_executor(None, self._read_records)
         cal, rec, params, crc = records
         if cal is not None and calibration:
+            bound = await asyncio.get_running_loop().run_in_executor(None, self._stored_bound, cal.id)
             await self._write(self.nodes.last_calibration, RunId=cal.id, Outcome=cal.outcome or "", ExitCode=_exit(cal),
                               FinishedUtc=_utc(cal.created_utc), RmsBeforeMicrometre=_float(cal.rms_before_um),
-                              RmsAfterMicrometre=_float(cal.rms_after_um), Gain=_float(cal.gain))
+                              RmsAfterMicrometre=_float(cal.rms_after_um), Gain=_float(cal.gain),
+                              InterpolationBoundMicrometre=bound)
         if rec is not None:
             await self._write(self.nodes.last_recheck, RunId=rec.id, Outcome=rec.outcome or "", ExitCode=_exit(rec),
                               FinishedUtc=_utc(rec.created_utc), Verdict=rec.outcome or "",
@@ -393,6 +397,14 @@ class StationService:
                 index, nominal, scale = spec
                 value = (float(params[index]) - nominal) * scale
             await node.write_value(ua.DataValue(ua.Variant(value, ua.VariantType.Double)))
+
+    def _stored_bound(self, run_id: int) -> float:
+        """The stored table bound of a run before this server [µm] (NaN: none, e.g. it stopped before)."""
+        with RunDB(self.request.db) as db:
+            try:
+                return _float(db.load_result(run_id, "summary")["correction"]["interpolation_bound_um"])
+            except Exception:  # noqa: BLE001 - no summary, or no table in it
+                return float("nan")
 
     def _read_records(self) -> tuple[RunInfo | None, RunInfo | None, np.ndarray | None, str]:
         """The latest finished calibration and recheck (whatever their outcome), the parameters of
