@@ -33,7 +33,7 @@ from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.run_records import MeasurementRecord
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import CompensationSummary, ErrorStats, RunSummary
-from station.cell.run.events import Event, Notice, PhaseChanged
+from station.cell.run.events import Event, Notice, PhaseChanged, Verified
 from station.cell.run.recentring import stored_recentring
 from station.cell.run.runner import Procedure, Runner, approach_and_read
 from station.core.identification.identify import IdentificationResult
@@ -199,6 +199,8 @@ def articulated_correction(cfg: CellConfig, runner: Runner, db: RunDB, run_id: i
                                  extra, orient, emit)
     emit(PhaseChanged("verify", "after correction (compensated targets)"))
     summary = summary.replace(after=measure(StepKind.VERIFY_AFTER, after_targets))
+    if summary.after is not None:  # the same fact as a SCARA's table run reports (one stream, issue 42)
+        emit(Verified(summary.before, summary.after, summary.gain))
     if with_oracle and p_true is not None:
         emit(PhaseChanged("verify", "oracle (true parameters)"))
         summary = summary.replace(oracle=measure(StepKind.ORACLE, articulated_targets(cfg, steps, p_true, p_true[:6],

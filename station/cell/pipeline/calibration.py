@@ -54,7 +54,17 @@ from station.cell.records.summary import (
     UploadSummary,
 )
 from station.cell.run.devices import CellController, ProbeHead
-from station.cell.run.events import Event, Notice, PhaseChanged, RunFinished, RunStarted
+from station.cell.run.events import (
+    Event,
+    Identified,
+    Notice,
+    PhaseChanged,
+    RunFinished,
+    RunStarted,
+    TableDesigned,
+    Uploaded,
+    Verified,
+)
 from station.cell.run.locate import locate_body, located_joints
 from station.cell.run.questions import Confirm, KeepCorrection, UploadProposal
 from station.cell.run.recentring import recentring_stats, stored_recentring
@@ -325,7 +335,9 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
         "rms_normalized": res.rms_normalized, "outliers": list(res.outliers),
         "residuals": res.residuals})
     db.set_status(run_id, "identified")
-    summary = summary.replace(identification=_identification_summary(res))
+    identified = _identification_summary(res)
+    summary = summary.replace(identification=identified)
+    emit(Identified(identified, tuple(float(v) for v in res.params)))  # the figures stored
     for note in (n for n in res.notes if n.startswith(BODY_NOTE_PREFIX)):  # the body's CMM σ is in the fit
         summary = summary.replace(notes=(*summary.notes, note))
         emit(Notice("info", note))
@@ -349,10 +361,11 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
     table, used, bound = (identified_table(cfg, params, pre.design) if delta is None
                           else identified_table(cfg, params, pre.design, delta))
     limit = float(cfg.correction.max_interpolation_um)
-    summary = summary.replace(correction=CorrectionSummary(
+    summary = summary.replace(correction=(designed := CorrectionSummary(
         n_values=int(table.data.n_values), interpolation_bound_um=bound, crc32=f"{table.data.crc32():08x}",
         predicted_bound_um=pre.design.predicted_bound_um, grid_shape=tuple(int(n) for n in used.counts),
-        refined=used.counts != pre.design.counts, limit_um=limit))
+        refined=used.counts != pre.design.counts, limit_um=limit)))
+    emit(TableDesigned(designed))  # the one bound the run judges, stores and shows
     db.save_result(run_id, "correction_grid", {**grid_to_json(used.grid), "bound_um": bound,
                                                "predicted_bound_um": pre.design.predicted_bound_um,
                                                "sampled_bounds_um": list(pre.design.bounds_um),
@@ -394,10 +407,13 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
     upload = verified_upload(controller, table.data, emit)
     runner.guard.table = table.data  # Cartesian moves are now corrected by this table
     db.set_status(run_id, "uploaded")
-    summary = summary.replace(upload=UploadSummary(crc32=f"{upload.crc32:08x}", seconds=upload.total_s))
+    summary = summary.replace(upload=(uploaded := UploadSummary(crc32=f"{upload.crc32:08x}", seconds=upload.total_s)))
+    emit(Uploaded(uploaded, *(f"{c:08x}" if c else "none" for c in (upload.active_crc32, upload.previous_crc32))))
     emit(PhaseChanged("verify", "after correction"))
     measure({StepKind.VERIFY_AFTER}, R_after)
     summary = summary.replace(after=stats(StepKind.VERIFY_AFTER))
+    if summary.after is not None:
+        emit(Verified(summary.before, summary.after, summary.gain))
     if with_oracle:
         emit(PhaseChanged("verify", "oracle (true parameters)"))
         p_true = oracle_params(cfg, options.oracle_truth)

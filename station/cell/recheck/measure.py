@@ -525,7 +525,7 @@ def run_recheck(cfg: CellConfig, probe: ProbeHead, controller: CellController, d
         resumed = len(db.completed_steps(run_id, ok_only=True))
     if devices_info:
         db.save_result(run_id, "devices", devices_info)
-    emit(RunStarted(run_id, len(steps), resumed))
+    emit(RunStarted(run_id, len(steps), resumed, kind="recheck"))
     db.log(run_id, "info", f"recheck {'resumed' if resume_run else 'started'} against run {base_id}: "
                            f"{len(steps)} steps, {resumed} on disk")
     try:

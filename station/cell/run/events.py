@@ -1,11 +1,25 @@
-"""Typed progress events of a run, consumed alike by the CLI and the terminal UI."""
+"""Typed events of a run: one stream of run facts (issue 42).
+
+The runner emits them; the CLI, the terminal UI, the OPC UA service and any other subscriber
+(:class:`station.cell.run.stream.RunStream`) read a run's figures from them. The figure events
+(:class:`Identified`, :class:`TableDesigned`, :class:`Uploaded`, :class:`Verified`,
+:class:`RunEnded`) carry the very summary objects the run stores (``summary`` in the run
+database, the ``--json`` object), so no view computes or re-reads a figure another view shows.
+Units as in the summary: µm for errors and bounds, mm and rad for parameters, s for times.
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import Literal
 
-from station.cell.records.summary import RunSummary
+from station.cell.records.summary import (
+    CorrectionSummary,
+    ErrorStats,
+    IdentificationSummary,
+    RunSummary,
+    UploadSummary,
+)
 
 Phase = Literal["connect", "plan", "measure", "identify", "correct", "upload", "verify", "done"]
 
@@ -26,6 +40,7 @@ class RunStarted(Event):
     run_id: int
     n_steps: int
     resumed_from: int = 0  # steps already on disk from an earlier attempt
+    kind: Literal["calibration", "recheck"] = "calibration"  # which session's run
 
 
 @dataclass(frozen=True)
@@ -79,16 +94,66 @@ class Resumed(Event):
 
 
 @dataclass(frozen=True)
-class RunFinished(Event):
-    """The pipeline ran to its end; ``summary.outcome`` says how well (success, target missed,
-    upload skipped)."""
+class Identified(Event):
+    """The identification the run accepted (converged, plausible, stored): the summary's figures
+    (each chosen parameter with its σ [mm | rad], the residual RMS [µm]) and the whole model's
+    parameter vector [mm | rad] (set-up first), as stored in the run database's ``identification``."""
 
-    summary: RunSummary
+    identification: IdentificationSummary
+    params: tuple[float, ...]
 
 
 @dataclass(frozen=True)
-class RunFailed(Event):
-    """An error stopped the run; ``summary.failure`` says what and what to do, everything
-    measured so far is in the run database."""
+class TableDesigned(Event):
+    """The correction table built for the identified robot: its grid's node counts, its values,
+    its CRC-32 and its interpolation bound [µm], the one stored value the run judges against
+    ``limit_um`` (``correction.interpolation_bound_um`` of the summary)."""
+
+    correction: CorrectionSummary
+
+
+@dataclass(frozen=True)
+class Uploaded(Event):
+    """The table read back identical and activated: the summary's upload (CRC-32, seconds) and the
+    controller's table slots as read after activation (8 hex digits, 'none' when empty)."""
+
+    upload: UploadSummary
+    active_crc32: str
+    previous_crc32: str  # the roll-back slot: the table that was active before
+
+
+@dataclass(frozen=True)
+class Verified(Event):
+    """The verification after correction: RMS before and after [µm] and the gain (before / after),
+    the summary's own ``before``, ``after`` and ``gain``."""
+
+    before: ErrorStats | None
+    after: ErrorStats
+    gain: float | None
+
+
+@dataclass(frozen=True)
+class RunEnded(Event):
+    """The run ended, however: its summary, outcome and exit code (the last event of a run)."""
 
     summary: RunSummary
+
+    @property
+    def outcome(self) -> str:
+        return self.summary.outcome.name
+
+    @property
+    def exit_code(self) -> int:
+        return self.summary.exit_code
+
+
+@dataclass(frozen=True)
+class RunFinished(RunEnded):
+    """The pipeline ran to its end; ``summary.outcome`` says how well (success, target missed,
+    upload skipped)."""
+
+
+@dataclass(frozen=True)
+class RunFailed(RunEnded):
+    """An error stopped the run; ``summary.failure`` says what and what to do, everything
+    measured so far is in the run database."""

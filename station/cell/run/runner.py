@@ -16,8 +16,8 @@ import functools
 import time
 from collections import Counter, deque
 from collections.abc import Callable, Collection, Generator, Mapping, Sequence
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, field
+from typing import Any, Literal
 
 import numpy as np
 
@@ -164,162 +164,258 @@ def approach_and_read(cfg: CellConfig, q_target: np.ndarray, direction: int = 1,
     out at once (no re-measure: a re-touch would repeat the frozen value), and the runner passes
     it to later readings (:class:`StuckProbes`), which solve without it from the start while it
     keeps its frozen value (:mod:`station.cell.run.stuck_probes`).
-    """
-    from station.core.probe.check import diagnose, residual_test
-    from station.core.probe.geometry import PoseSolveError, readings_from_pose, solve_pose
 
+    Each touch is its moves (:func:`_touch`), the pose solved from its readings (:func:`_solve`),
+    a redundant head's diagnosis of a disagreement (:func:`_diagnose`) and the judgement of the
+    solved pose (:func:`_judge`); each of them ends the visit, touches again, or hands on.
+    """
     full = head_of(cfg)
-    M_nom = full.nominal_contact_pose()
     stuck: dict[int, float] = {}
     if full.n_probes > 6:
         known = yield StuckProbes()
         if isinstance(known, Mapping):
             stuck = {int(k): float(v) for k, v in known.items()}
-    freed: list[int] = []
-    found: dict[int, float] = {}  # probes this reading showed stuck
-    names = tuple((pid, int(c)) for pid, c in zip(full.probe_ids, full.probe_channels))
-    raw = b""
     q = np.asarray(q_target, dtype=float)
-    pose_cmd = None if cartesian is None else np.asarray(cartesian[0], dtype=float)
-    q_first, pose_first = q, pose_cmd
-    last: Reading | None = None
-    recentred = remeasured = 0
-    first_suspect: int | None = None
-    notes: list[str] = []
+    visit = _Visit(full, full.nominal_contact_pose(), q, None if cartesian is None else np.asarray(cartesian[0], dtype=float),
+                   stuck)
+    q_first, pose_first = visit.q, visit.pose_cmd
     while True:
-        # a re-measure approaches a little differently (3.7 % more offset, a path no other visit
-        # or cycle takes): a fresh touch, not a replay of the one that disagreed
-        r = above_offset(cfg, cycle, remeasured)
-        yield Checkpoint()
-        yield MoveJoints(None, "retract to travel height")
-        yield MoveJoints(approach_pose(cfg, q, direction, cycle, remeasured), "approach")
-        if pose_cmd is None or cartesian is None:
-            yield MoveJoints(q + r, "above the point")
-            yield MoveJoints(q, "touch")
-        else:
-            # Straight from the offset approach pose: the controller's corrected joints differ
-            # from q by the table's Δq, whose sign must not decide the direction of arrival.
-            if not cfg.model.is_scara:  # an articulated arm stands short of q (its joints) first
-                yield MoveJoints(q + r, "above the point")
-            yield MoveCartesian(pose_cmd, cartesian[1], q, "touch (Cartesian)")
-        yield Settle(cfg.plan.settle_s)
-        snap = yield ReadProbes()
-        q_read = yield ReadJoints()
-        raw += snap.raw
-        all_values, all_status = probe_readings(full, snap.values_mm, snap.status)
-        stuck, gone = still_stuck(full, all_values, stuck)
-        freed += gone
-        # the pose is solved by the probes that are not stuck (the whole head when none is)
-        geom, keep = usable_head(full, stuck)
-        kept = np.flatnonzero(keep)
-        values, status = all_values[keep], tuple(all_status[i] for i in kept)
-        half = geom.strokes / 2
-        redundant = geom.n_probes > 6
-        reading = functools.partial(_reading, q, q_read, raw, all_values, all_status, names, notes)
+        snap, q_read = yield from _touch(cfg, visit, direction, cycle, cartesian)
+        touch = visit.readings(snap, q_read)
+        solved = _solve(cfg, visit, touch)
+        if isinstance(solved, _Solved) and touch.redundant and solved.excluded is None:
+            solved = yield from _diagnose(cfg, visit, touch, solved)
+        if isinstance(solved, _Solved):
+            solved = _judge(cfg, visit, touch, solved)
+        if solved == "done":
+            break
+    yield MoveJoints(None, "retract after reading")  # None: retract from where we stand
+    return _finish(cfg, visit, q_first, pose_first)
 
-        excluded: int | None = None
-        lead = ""  # what the stored message says first about a valid reading
-        try:
-            sol = solve_pose(geom, values, noise_mm=cfg.plan.max_residual_um * 1e-3 / 3,
-                             check_residuals=not redundant)
-        except PoseSolveError as exc:
-            last = reading(None, None, False, f"pose not solved: {exc}")
-            # A redundant head may still solve the pose from its probes that read: a re-centring
-            # direction when the silent probes are near their stroke end there; else (one probe
-            # silent where it should read well inside its stroke: a dead channel) the reading
-            # without it, when the others fix the pose and agree.
-            guide = _pose_from_finite(geom, values) if redundant else None
-            if guide is None:
-                # Without a pose there is no safe re-centre direction: report and move on.
-                if not keep.all() and not np.isfinite(values).all():  # the solver's probe numbers count the probes left, not the head's
-                    silent = ", ".join(geom.label(int(i)) for i in np.flatnonzero(~np.isfinite(values)))
-                    out = ", ".join(full.label(int(k)) for k in np.flatnonzero(~keep))
-                    last = reading(None, None, False, f"pose not solved: probe {silent} without a reading while "
+
+#: what a step of a touch decides: touch again (a re-centring or a re-measure), or end the visit
+_Next = Literal["again", "done"]
+
+
+@dataclass
+class _Visit:
+    """One visit to a point as it goes: where the touches are commanded, what they found (the
+    stuck probes, the re-centrings and re-measures, the notes) and the latest reading."""
+
+    full: ProbeHeadGeometry
+    M_nom: np.ndarray
+    q: np.ndarray
+    pose_cmd: np.ndarray | None
+    stuck: dict[int, float]
+    raw: bytes = b""
+    recentred: int = 0
+    remeasured: int = 0
+    first_suspect: int | None = None
+    notes: list[str] = field(default_factory=list)
+    freed: list[int] = field(default_factory=list)
+    found: dict[int, float] = field(default_factory=dict)  # probes this reading showed stuck
+    keep: np.ndarray | None = None  # the probes the latest touch solved with
+    last: Reading | None = None
+
+    def readings(self, snap: Snapshot, q_read: Any) -> _TouchReadings:
+        """A touch's probe values, without the probes that are (still) stuck."""
+        full = self.full
+        self.raw += snap.raw
+        all_values, all_status = probe_readings(full, snap.values_mm, snap.status)
+        self.stuck, gone = still_stuck(full, all_values, self.stuck)
+        self.freed += gone
+        # the pose is solved by the probes that are not stuck (the whole head when none is)
+        geom, keep = usable_head(full, self.stuck)
+        self.keep = keep
+        kept = np.flatnonzero(keep)
+        names = tuple((pid, int(c)) for pid, c in zip(full.probe_ids, full.probe_channels))
+        return _TouchReadings(geom, keep, kept, all_values[keep], tuple(all_status[i] for i in kept),
+                              functools.partial(_reading, self.q, q_read, self.raw, all_values, all_status, names,
+                                                self.notes))
+
+    def recentre(self, cfg: CellConfig, M: np.ndarray) -> None:
+        self.q, self.pose_cmd = _recentre(cfg, self.q, self.pose_cmd, M, self.M_nom)
+
+
+@dataclass(frozen=True)
+class _TouchReadings:
+    geom: ProbeHeadGeometry  # the head without its stuck probes
+    keep: np.ndarray  # which of the full head's probes that is
+    kept: np.ndarray  # their indices in the full head
+    values: np.ndarray
+    status: tuple[str, ...]
+    reading: Callable[..., Reading]  # (pose, shown residual, ok, message[, excluded]) -> Reading
+
+    @property
+    def redundant(self) -> bool:
+        return self.geom.n_probes > 6
+
+
+@dataclass(frozen=True)
+class _Solved:
+    """A solved pose, the probe it left out (None: none) and what the reading says first."""
+
+    sol: Any  # station.core.probe.geometry.PoseSolution
+    excluded: int | None
+    lead: str
+    residuals: np.ndarray
+
+
+def _touch(cfg: CellConfig, visit: _Visit, direction: int, cycle: int,
+           cartesian: tuple[np.ndarray, int] | None) -> Generator[Any, Any, tuple[Snapshot, Any]]:
+    """The moves of one touch, the settling and the reading: (probe snapshot, joints read)."""
+    q, pose_cmd = visit.q, visit.pose_cmd
+    # a re-measure approaches a little differently (3.7 % more offset, a path no other visit
+    # or cycle takes): a fresh touch, not a replay of the one that disagreed
+    r = above_offset(cfg, cycle, visit.remeasured)
+    yield Checkpoint()
+    yield MoveJoints(None, "retract to travel height")
+    yield MoveJoints(approach_pose(cfg, q, direction, cycle, visit.remeasured), "approach")
+    if pose_cmd is None or cartesian is None:
+        yield MoveJoints(q + r, "above the point")
+        yield MoveJoints(q, "touch")
+    else:
+        # Straight from the offset approach pose: the controller's corrected joints differ
+        # from q by the table's Δq, whose sign must not decide the direction of arrival.
+        if not cfg.model.is_scara:  # an articulated arm stands short of q (its joints) first
+            yield MoveJoints(q + r, "above the point")
+        yield MoveCartesian(pose_cmd, cartesian[1], q, "touch (Cartesian)")
+    yield Settle(cfg.plan.settle_s)
+    snap = yield ReadProbes()
+    q_read = yield ReadJoints()
+    return snap, q_read
+
+
+def _solve(cfg: CellConfig, visit: _Visit, t: _TouchReadings) -> _Solved | _Next:
+    """The pose from the touch's readings. A redundant head whose pose does not solve from all of
+    them may solve it from its probes that read: a re-centring direction when the silent probes
+    are near their stroke end there; else (one probe silent where it should read well inside its
+    stroke: a dead channel) the pose without it, when the others fix the pose and agree."""
+    from station.core.probe.geometry import PoseSolveError, readings_from_pose, solve_pose
+
+    geom, values = t.geom, t.values
+    try:
+        sol = solve_pose(geom, values, noise_mm=cfg.plan.max_residual_um * 1e-3 / 3, check_residuals=not t.redundant)
+        return _Solved(sol, None, "", sol.residuals_mm)
+    except PoseSolveError as exc:
+        visit.last = t.reading(None, None, False, f"pose not solved: {exc}")
+    guide = _pose_from_finite(geom, values) if t.redundant else None
+    if guide is None:
+        # Without a pose there is no safe re-centre direction: report and move on.
+        if not t.keep.all() and not np.isfinite(values).all():  # the solver's probe numbers count the probes left, not the head's
+            silent = ", ".join(geom.label(int(i)) for i in np.flatnonzero(~np.isfinite(values)))
+            out = ", ".join(visit.full.label(int(k)) for k in np.flatnonzero(~t.keep))
+            visit.last = t.reading(None, None, False, f"pose not solved: probe {silent} without a reading while "
                                                       f"probe {out} is stuck: the other {int(np.isfinite(values).sum())} "
                                                       f"probes cannot fix the pose")
-                break
-            missing = np.flatnonzero(~np.isfinite(values))
-            expect = readings_from_pose(geom, guide[0].M)[missing]
-            off_stroke = ~np.isfinite(expect) | (np.abs(expect) > half[missing] - cfg.plan.recenter_margin_mm)
-            if np.any(off_stroke) and recentred < cfg.plan.recenter_attempts:
-                recentred += 1
-                notes.append(f"touch {recentred + remeasured}: {missing.size} probe(s) without a reading; "
-                             f"re-centred on the pose of the others")
-                q, pose_cmd = _recentre(cfg, q, pose_cmd, guide[0].M, M_nom)
-                continue
-            if missing.size != 1 or np.any(off_stroke) or not guide[1].passed:
-                break
-            excluded = int(missing[0])
-            sol = guide[0]
-            lead = (f"probe {geom.label(excluded)} gave no reading ({status[excluded].replace('_', ' ')}) where it "
-                    f"should read {expect[0]:+.3f} mm: excluded; solved from the other {geom.n_probes - 1} probes, "
-                    f"residual test passed")
-        residuals = sol.residuals_mm
-        if redundant and excluded is None:
-            test = residual_test(geom, values, sol.M)
-            if not test.passed:
-                recent = yield RecentReadings()
-                previous = [probe_readings(full, v, ["ok"] * len(v))[0][keep] for v in list(recent)[1:]]
-                diag = diagnose(geom, values, test, previous)
-                if diag.stuck and diag.suspect is not None and diag.solution is not None:
-                    i = int(kept[diag.suspect])
-                    found[i] = stuck[i] = float(values[diag.suspect])
-                elif remeasured < cfg.plan.remeasure_attempts:
-                    remeasured += 1
-                    first_suspect = diag.suspect
-                    notes.append(f"touch {recentred + remeasured}: {diag.reason}; measured again")
-                    continue
-                agree = diag.stuck or first_suspect is None or first_suspect == diag.suspect
-                if diag.suspect is None or diag.solution is None or not agree:
-                    why = diag.reason if agree else (f"{diag.reason} (the touch before pointed at probe "
-                                                     f"{geom.label(first_suspect or 0)})")
-                    last = reading(None, test.rms_um, False, why)
-                    break
-                excluded = diag.suspect
-                sol = diag.solution
-                residuals = diag.test.residuals_mm if diag.test is not None else sol.residuals_mm
-                lead = (f"probe {geom.label(excluded)} excluded from the pose ({diag.reason}); solved from "
-                        f"the other {geom.n_probes - 1} probes, residual test passed")
-            elif remeasured and "the re-measured touch agrees" not in notes:
-                notes.append("the re-measured touch agrees")
-        res_um = float(np.sqrt(np.mean(residuals**2)) * 1e3)
-        # Six probes fix the six degrees of freedom exactly: their residual is zero by
-        # construction and says nothing about the touch, so it is not reported as a figure.
-        shown = res_um if redundant else None
-        used = np.ones(geom.n_probes, dtype=bool)
-        if excluded is not None:
-            used[excluded] = False
-        near = bool(np.any(np.abs(values[used]) > half[used] - cfg.plan.recenter_margin_mm))
-        if stuck and not keep.all():
-            # a stuck probe's plunger is where the pose puts it: keep that inside its stroke too
-            off = ~keep
-            expect = readings_from_pose(full, sol.M)[off]
-            near |= bool(np.any(~np.isfinite(expect) | (np.abs(expect) > full.strokes[off] / 2
-                                                         - cfg.plan.recenter_margin_mm)))
-            left_out = "; ".join(f"probe {full.label(k)} excluded: stuck at {v:.4f} mm" for k, v in stuck.items()
-                                 if not keep[k])
-            lead = "; ".join(m for m in (f"{left_out}; solved from the other {geom.n_probes} probes", lead) if m)
-        ok = res_um <= cfg.plan.max_residual_um
-        label = None if excluded is None else geom.label(excluded)
-        last = reading(sol.M, shown, ok, lead if ok else f"plane residual {res_um:.1f} µm exceeds "
-                                                         f"{cfg.plan.max_residual_um} µm", label)
-        if not near or recentred == cfg.plan.recenter_attempts:
-            if near:
-                last = reading(sol.M, shown, ok, "; ".join(m for m in ("probes near the end of their stroke after "
-                                                                       "re-centring", lead) if m), label)
-            break
-        recentred += 1
-        q, pose_cmd = _recentre(cfg, q, pose_cmd, sol.M, M_nom)
-    yield MoveJoints(None, "retract after reading")  # None: retract from where we stand
-    assert last is not None  # the loop runs at least once and sets it on every path
-    if recentred:
-        d = _displacement(cfg, q_first, pose_first, q, pose_cmd)
-        moved = (f"re-centred {recentred}× to bring the probes into their stroke, "
+        return "done"
+    missing = np.flatnonzero(~np.isfinite(values))
+    expect = readings_from_pose(geom, guide[0].M)[missing]
+    half = geom.strokes / 2
+    off_stroke = ~np.isfinite(expect) | (np.abs(expect) > half[missing] - cfg.plan.recenter_margin_mm)
+    if np.any(off_stroke) and visit.recentred < cfg.plan.recenter_attempts:
+        visit.recentred += 1
+        visit.notes.append(f"touch {visit.recentred + visit.remeasured}: {missing.size} probe(s) without a reading; "
+                           f"re-centred on the pose of the others")
+        visit.recentre(cfg, guide[0].M)
+        return "again"
+    if missing.size != 1 or np.any(off_stroke) or not guide[1].passed:
+        return "done"
+    excluded = int(missing[0])
+    lead = (f"probe {geom.label(excluded)} gave no reading ({t.status[excluded].replace('_', ' ')}) where it "
+            f"should read {expect[0]:+.3f} mm: excluded; solved from the other {geom.n_probes - 1} probes, "
+            f"residual test passed")
+    return _Solved(guide[0], excluded, lead, guide[0].residuals_mm)
+
+
+def _diagnose(cfg: CellConfig, visit: _Visit, t: _TouchReadings,
+              solved: _Solved) -> Generator[Any, Any, _Solved | _Next]:
+    """A redundant head's residual test of the solved pose; when the probes disagree, which one:
+    stuck (left out at once), or measured again, then left out when the same one disagrees again
+    and the others fix the pose and agree."""
+    from station.core.probe.check import diagnose, residual_test
+
+    geom, values = t.geom, t.values
+    test = residual_test(geom, values, solved.sol.M)
+    if test.passed:
+        if visit.remeasured and "the re-measured touch agrees" not in visit.notes:
+            visit.notes.append("the re-measured touch agrees")
+        return solved
+    recent = yield RecentReadings()
+    previous = [probe_readings(visit.full, v, ["ok"] * len(v))[0][t.keep] for v in list(recent)[1:]]
+    diag = diagnose(geom, values, test, previous)
+    if diag.stuck and diag.suspect is not None and diag.solution is not None:
+        i = int(t.kept[diag.suspect])
+        visit.found[i] = visit.stuck[i] = float(values[diag.suspect])
+    elif visit.remeasured < cfg.plan.remeasure_attempts:
+        visit.remeasured += 1
+        visit.first_suspect = diag.suspect
+        visit.notes.append(f"touch {visit.recentred + visit.remeasured}: {diag.reason}; measured again")
+        return "again"
+    first = visit.first_suspect
+    agree = diag.stuck or first is None or first == diag.suspect
+    if diag.suspect is None or diag.solution is None or not agree:
+        why = diag.reason if agree else f"{diag.reason} (the touch before pointed at probe {geom.label(first or 0)})"
+        visit.last = t.reading(None, test.rms_um, False, why)
+        return "done"
+    residuals = diag.test.residuals_mm if diag.test is not None else diag.solution.residuals_mm
+    lead = (f"probe {geom.label(diag.suspect)} excluded from the pose ({diag.reason}); solved from "
+            f"the other {geom.n_probes - 1} probes, residual test passed")
+    return _Solved(diag.solution, diag.suspect, lead, residuals)
+
+
+def _judge(cfg: CellConfig, visit: _Visit, t: _TouchReadings, s: _Solved) -> _Next:
+    """The reading of a solved pose: valid when its residual is within the bound; re-centred
+    (bounded) when a probe is near the end of its stroke."""
+    from station.core.probe.geometry import readings_from_pose
+
+    geom, values, full, stuck = t.geom, t.values, visit.full, visit.stuck
+    res_um = float(np.sqrt(np.mean(s.residuals**2)) * 1e3)
+    # Six probes fix the six degrees of freedom exactly: their residual is zero by
+    # construction and says nothing about the touch, so it is not reported as a figure.
+    shown = res_um if t.redundant else None
+    used = np.ones(geom.n_probes, dtype=bool)
+    if s.excluded is not None:
+        used[s.excluded] = False
+    half = geom.strokes / 2
+    near = bool(np.any(np.abs(values[used]) > half[used] - cfg.plan.recenter_margin_mm))
+    lead = s.lead
+    if stuck and not t.keep.all():
+        # a stuck probe's plunger is where the pose puts it: keep that inside its stroke too
+        off = ~t.keep
+        expect = readings_from_pose(full, s.sol.M)[off]
+        near |= bool(np.any(~np.isfinite(expect) | (np.abs(expect) > full.strokes[off] / 2
+                                                     - cfg.plan.recenter_margin_mm)))
+        left_out = "; ".join(f"probe {full.label(k)} excluded: stuck at {v:.4f} mm" for k, v in stuck.items()
+                             if not t.keep[k])
+        lead = "; ".join(m for m in (f"{left_out}; solved from the other {geom.n_probes} probes", lead) if m)
+    ok = res_um <= cfg.plan.max_residual_um
+    label = None if s.excluded is None else geom.label(s.excluded)
+    visit.last = t.reading(s.sol.M, shown, ok, lead if ok else f"plane residual {res_um:.1f} µm exceeds "
+                                                               f"{cfg.plan.max_residual_um} µm", label)
+    if not near or visit.recentred == cfg.plan.recenter_attempts:
+        if near:
+            visit.last = t.reading(s.sol.M, shown, ok, "; ".join(m for m in ("probes near the end of their stroke "
+                                                                             "after re-centring", lead) if m), label)
+        return "done"
+    visit.recentred += 1
+    visit.recentre(cfg, s.sol.M)
+    return "again"
+
+
+def _finish(cfg: CellConfig, visit: _Visit, q_first: np.ndarray, pose_first: np.ndarray | None) -> Reading:
+    """The visit's reading with its re-centring's move and the probes it found stuck or freed."""
+    last = visit.last
+    assert last is not None and visit.keep is not None  # every touch sets both on every path
+    if visit.recentred:
+        d = _displacement(cfg, q_first, pose_first, visit.q, visit.pose_cmd)
+        moved = (f"re-centred {visit.recentred}× to bring the probes into their stroke, "
                  f"{np.linalg.norm(d[:3]) * 1e3:.0f} µm from the commanded pose")
         last = dataclasses.replace(last, recentring=d, message="; ".join(m for m in (last.message, moved) if m))
-    now = {k: v for k, v in stuck.items() if not keep[k] or k in found}
-    if now or freed:
-        last = dataclasses.replace(last, stuck=tuple(now.items()), freed=tuple(freed))
+    keep = visit.keep
+    now = {k: v for k, v in visit.stuck.items() if not keep[k] or k in visit.found}
+    if now or visit.freed:
+        last = dataclasses.replace(last, stuck=tuple(now.items()), freed=tuple(visit.freed))
     return last
 
 

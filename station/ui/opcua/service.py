@@ -11,6 +11,13 @@ cannot hold the robot.
 State (``CalibrationStation/State``): ``Idle`` → (Start…) ``Running`` (``Paused`` while the
 runner stands at a paused safe point) → the outcome's name (``SUCCESS``, ``DRIFTED``, …) with a
 ResultReady event → (Acknowledge) ``Idle``. A start is refused unless the state is ``Idle``.
+
+The service subscribes to the session's stream of run facts (issue 42,
+:class:`~station.cell.run.stream.RunStream`): the axes' identified offsets come from the
+``Identified`` event, the active table's CRC from ``Uploaded`` and the run's end, and
+LastCalibration from the ``RunEnded`` event's summary, the figures the run stores and the CLI's
+JSON prints. The run database is read only for what happened before this server started (and
+for LastRecheck, whose drift figures the recheck does not stream yet).
 """
 
 from __future__ import annotations
@@ -34,16 +41,21 @@ from station.cell.recheck.measure import RecheckOptions
 from station.cell.recheck.session import run_recheck_session
 from station.cell.records.run_list import RunInfo, list_runs
 from station.cell.records.rundb import RunDB
+from station.cell.records.summary import RunSummary
 from station.cell.run.events import (
     Event,
+    Identified,
     Notice,
     Paused,
     PhaseChanged,
     Resumed,
+    RunEnded,
     RunStarted,
     StepStarted,
+    Uploaded,
 )
 from station.cell.run.runcontrol import RunControl
+from station.cell.run.stream import RunStream
 from station.cell.session.calibrate import CellLoader, CellRequest, run_calibration_session
 from station.errors import Outcome
 from station.ui.opcua.model import StationNodes, status
@@ -98,6 +110,11 @@ class StationService:
         self._steps: tuple[int, float] | None = None  # (first step index, its monotonic time) of this attempt
         self._event: Any = None
         self._vtypes: dict[ua.NodeId, ua.VariantType] = {}
+        #: the run's facts: the session emits into it, the address space follows it (a test or another
+        #: view may subscribe beside)
+        self.stream = RunStream(self._post)
+        self._started_utc = _utc(None)  # when the active run was created (its RunStarted)
+        self._ended = False  # the active run's RunEnded was applied
 
     # --- set-up -----------------------------------------------------------------------------
     async def start(self) -> None:
@@ -151,7 +168,7 @@ class StationService:
             return await self._refuse(ua.StatusCodes.BadInvalidState,
                                       f"{kind} refused: the outcome {self.state} of {self.kind} run {self.run_id} is not "
                                       f"acknowledged yet; read it, then call Acknowledge")
-        self.state, self.kind, self.run_id, self._steps = "Running", kind, 0, None
+        self.state, self.kind, self.run_id, self._steps, self._ended = "Running", kind, 0, None, False
         self.control = RunControl()
         await self._write_state(State="Running", OutcomeCode=-1, RunKind=kind, RunId=0, Phase="connect", Step=0,
                                 StepCount=0, TimeLeftSeconds=float("nan"), LastRefusal="", Message="")
@@ -211,18 +228,20 @@ class StationService:
                 ua.Variant(0, ua.VariantType.Int32)]
 
     # --- the run, in its own thread ---------------------------------------------------------------
+    def _post(self, event: Event) -> None:
+        """The stream's subscriber: from the run's thread into the server's loop, never blocking."""
+        loop = self._loop
+        assert loop is not None, "the service's loop starts before any run"
+        loop.call_soon_threadsafe(self._queue.put_nowait, event)
+
     def _work(self, kind: str, control: RunControl) -> None:
         loop = self._loop
         assert loop is not None
-
-        def emit(event: Event) -> None:  # from the run's thread into the server's loop, never blocking
-            loop.call_soon_threadsafe(self._queue.put_nowait, event)
-
         try:
             if kind == "calibration":
-                summary: Any = run_calibration_session(self.request, emit, control, None, load=self.load)
+                summary: Any = run_calibration_session(self.request, self.stream, control, None, load=self.load)
             else:
-                summary = run_recheck_session(self.request, emit, control, RecheckOptions(), load=self.load)
+                summary = run_recheck_session(self.request, self.stream, control, RecheckOptions(), load=self.load)
             out = summary.to_json()
         except Exception as exc:  # noqa: BLE001 - the sessions return failures; a bug still ends the run visibly
             out = failure_summary(exc, run_id=self.run_id or None, log_dir=Path(self.request.db).resolve().parent,
@@ -242,8 +261,15 @@ class StationService:
 
     async def _apply(self, ev: Event) -> None:
         if isinstance(ev, RunStarted):
-            self.run_id = ev.run_id
-            await self._write_state(RunId=ev.run_id, StepCount=ev.n_steps)
+            self.run_id, self.kind = ev.run_id, ev.kind  # the stream names the run (the start method did too)
+            self._started_utc = dt.datetime.now(dt.timezone.utc)
+            await self._write_state(RunId=ev.run_id, StepCount=ev.n_steps, RunKind=ev.kind)
+        elif isinstance(ev, Identified):
+            await self._write_offsets(np.asarray(ev.params, dtype=float))
+        elif isinstance(ev, Uploaded):  # the station's table, read back active on the controller
+            await self._write_state(ActiveTableCrc=ev.active_crc32)
+        elif isinstance(ev, RunEnded):
+            await self._run_ended(ev.summary)
         elif isinstance(ev, PhaseChanged):
             await self._write_state(Phase=ev.phase)
         elif isinstance(ev, StepStarted):
@@ -263,6 +289,22 @@ class StationService:
         elif isinstance(ev, Notice):
             await self._write_state(Message=ev.message[:500])
 
+    async def _run_ended(self, summary: RunSummary) -> None:
+        """A calibration's end, from its ``RunEnded`` event: LastCalibration and the table left
+        active, as the run's summary states them (a run that never started has no record)."""
+        if self.kind != "calibration" or summary.run_id is None:
+            return
+        self._ended = True
+        await self._write(self.nodes.last_calibration, RunId=summary.run_id, Outcome=summary.outcome.name,
+                          ExitCode=summary.exit_code, FinishedUtc=self._started_utc,
+                          RmsBeforeMicrometre=_float(summary.before.rms_um if summary.before else None),
+                          RmsAfterMicrometre=_float(summary.after.rms_um if summary.after else None),
+                          Gain=_float(summary.gain),
+                          InterpolationBoundMicrometre=_float(summary.correction.interpolation_bound_um
+                                                              if summary.correction else None))
+        if summary.tables is not None:
+            await self._write_state(ActiveTableCrc=summary.tables.active_at_end)
+
     async def _finished(self, done: _Done) -> None:
         s = done.summary
         self.thread = None
@@ -272,10 +314,13 @@ class StationService:
         self.state = outcome.name
         await self._write_state(State=outcome.name, OutcomeCode=int(outcome), RunId=self.run_id, TimeLeftSeconds=0.0,
                                 Phase="done")
+        if done.kind == "calibration" and not self._ended:  # a bug ended it before its RunEnded
+            await self._run_ended(RunSummary.from_json(s))
         try:  # the records first, so that a client reading them on ResultReady reads this run's
-            await self._refresh_records()
+            if done.kind == "recheck":  # its drift figures are not streamed yet: read from the run database
+                await self._refresh_records(calibration=False)
         except Exception:  # a damaged run database must not swallow the ResultReady
-            log.exception("run %s: LastCalibration / LastRecheck not updated", self.run_id)
+            log.exception("run %s: LastRecheck not updated", self.run_id)
         result = self._result(s, done.kind, dt.datetime.now(dt.timezone.utc))
         rid = result.ResultMetaData.ResultId
         self.results[rid] = result
@@ -321,28 +366,45 @@ class StationService:
                 return None
         return self._result(summary, str(summary.get("kind", "calibration")), _utc(created))
 
-    async def _refresh_records(self) -> None:
+    async def _refresh_records(self, calibration: bool = True) -> None:
         """LastCalibration, LastRecheck, the axes' identified offsets and the active table's CRC,
-        from the run database (read in a worker thread: the loop keeps serving)."""
+        from the run database (read in a worker thread: the loop keeps serving); ``calibration``
+        False: LastRecheck alone (a calibration of this server streamed its figures)."""
         records = await asyncio.get_running_loop().run_in_executor(None, self._read_records)
         cal, rec, params, crc = records
-        if cal is not None:
+        if cal is not None and calibration:
+            bound = await asyncio.get_running_loop().run_in_executor(None, self._stored_bound, cal.id)
             await self._write(self.nodes.last_calibration, RunId=cal.id, Outcome=cal.outcome or "", ExitCode=_exit(cal),
                               FinishedUtc=_utc(cal.created_utc), RmsBeforeMicrometre=_float(cal.rms_before_um),
-                              RmsAfterMicrometre=_float(cal.rms_after_um), Gain=_float(cal.gain))
+                              RmsAfterMicrometre=_float(cal.rms_after_um), Gain=_float(cal.gain),
+                              InterpolationBoundMicrometre=bound)
         if rec is not None:
             await self._write(self.nodes.last_recheck, RunId=rec.id, Outcome=rec.outcome or "", ExitCode=_exit(rec),
                               FinishedUtc=_utc(rec.created_utc), Verdict=rec.outcome or "",
                               BaselineRunId=int(rec.baseline or 0), DriftRmsMicrometre=_float(rec.drift_rms_um),
                               DriftMaxMicrometre=_float(rec.drift_max_um),
                               ToleranceMicrometre=_float(rec.drift_tolerance_um))
+        if calibration:
+            await self._write_offsets(params)
+            await self._write_state(ActiveTableCrc=crc)
+
+    async def _write_offsets(self, params: np.ndarray | None) -> None:
+        """Each axis's identified zero offset (degrees or mm from the robot file's nominal; NaN
+        where the minimal set does not hold it) from the identified parameter vector."""
         for node, spec in zip(self.nodes.axis_offsets, self.offset_parameters):
             value = float("nan")
             if spec is not None and params is not None and spec[0] < len(params):
                 index, nominal, scale = spec
                 value = (float(params[index]) - nominal) * scale
             await node.write_value(ua.DataValue(ua.Variant(value, ua.VariantType.Double)))
-        await self._write_state(ActiveTableCrc=crc)
+
+    def _stored_bound(self, run_id: int) -> float:
+        """The stored table bound of a run before this server [µm] (NaN: none, e.g. it stopped before)."""
+        with RunDB(self.request.db) as db:
+            try:
+                return _float(db.load_result(run_id, "summary")["correction"]["interpolation_bound_um"])
+            except Exception:  # noqa: BLE001 - no summary, or no table in it
+                return float("nan")
 
     def _read_records(self) -> tuple[RunInfo | None, RunInfo | None, np.ndarray | None, str]:
         """The latest finished calibration and recheck (whatever their outcome), the parameters of

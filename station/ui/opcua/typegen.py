@@ -48,6 +48,8 @@ CALIBRATION_VARIABLES = (
     ("RmsBeforeMicrometre", ua.VariantType.Double, "verification RMS position error before correction [µm]"),
     ("RmsAfterMicrometre", ua.VariantType.Double, "verification RMS position error after correction [µm]"),
     ("Gain", ua.VariantType.Double, "before / after"),
+    ("InterpolationBoundMicrometre", ua.VariantType.Double,
+     "the correction table's interpolation bound [µm], the one the run judged against its limit and stored"),
 )
 RECHECK_VARIABLES = (
     ("Verdict", ua.VariantType.String, "SUCCESS (within tolerance), DRIFTED, RECHECK_UNTRUSTED or a failure"),
@@ -111,8 +113,8 @@ def _never(parent: ua.NodeId) -> ua.StatusCode:  # the server links its own call
 
 
 #: the model's version: raise it with every change of the types above
-MODEL_VERSION = "1.0.0"
-MODEL_DATE = "2026-12-02T00:00:00Z"
+MODEL_VERSION = "1.1.0"
+MODEL_DATE = "2026-12-07T00:00:00Z"
 
 
 async def write(path: Path) -> None:

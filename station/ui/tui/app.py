@@ -62,6 +62,7 @@ from station.ui.report.writer import ReportData
 from station.ui.tui.actions import EventMessage, QuestionMessage
 from station.ui.tui.result_panel import CONTINUE_KEY, CellContext, can_continue, summary_markup
 from station.ui.tui.run_end import RunEnd
+from station.ui.tui.run_facts import fact_line
 from station.ui.tui.widgets import (
     ABORTED,
     ABORTING,
@@ -506,6 +507,8 @@ class StationApp(RunEnd):
             if self.state in (PAUSED, PAUSING):
                 self._set_state(RUNNING)
             self._note(f"Resumed at step {ev.index + 1}")
+        elif (fact := fact_line(ev)) is not None:  # the run's figures, as the stream carries them
+            self._note(fact)
         elif isinstance(ev, (RunFinished, RunFailed)) and not self._settled:
             self._show_summary(ev.summary)
 
