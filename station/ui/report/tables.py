@@ -504,7 +504,7 @@ def tool_rows(d: ReportData) -> list[tuple[str, ...]]:
 
 def tool_check_rows(d: ReportData) -> list[tuple[str, ...]]:
     """Simulation only: per tool, the real robot's error over the tool's verification targets
-    with its own correction, the oracle's and the head's (empty without a truth)."""
+    with its own correction, the oracle's and the head's (empty for a real cell)."""
     if d.summary is None:
         return []
     return [(s.name, str(s.n_after), fmt(s.after_rms_um), fmt(s.after_max_um), fmt(s.oracle_rms_um),
