@@ -410,7 +410,7 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
         oracle_table = build_table_for(cfg, p_ref, used.grid, judge_delta(options.judge)).data
         verified_upload(controller, oracle_table, emit)
         runner.guard.table = oracle_table
-        emit(PhaseChanged("verify", "oracle (true parameters)"))  # back from the upload's phase
+        emit(PhaseChanged("verify", "oracle (reference parameters)"))  # back from the upload's phase
         measure({StepKind.REFERENCE}, p_ref[:6])
         summary = summary.replace(oracle=stats(StepKind.REFERENCE))
         controller.rollback_table()  # the station's own table is the one left active
