@@ -29,7 +29,7 @@ import numpy as np
 from simulators.base_frame import base_frame_check, targets_in_box
 from simulators.from_config import simulated_cell_for
 from station.cell.config.cell_config import load_config
-from station.cell.pipeline.results import grid_for, oracle_params
+from station.cell.pipeline.results import grid_for, reference_params
 from station.cell.plan.assembly import head_targets_world
 from station.cell.session.calibrate import CellRequest, run_calibration_session
 from station.core.kinematics.transforms import invert, pose_to_matrix
@@ -89,7 +89,7 @@ def one(config: Path, seed: int) -> dict:
     p[[model.param_index(n) for n in chosen]] = [e.value for e in s.identification.parameters]
     lo, hi = _region(cfg)
     targets = targets_in_box(model, lo, hi, N_TARGETS, np.random.default_rng(1000 + seed))
-    c = base_frame_check(model, oracle_params(cfg, truth), p, chosen, s.identification.objective, targets)
+    c = base_frame_check(model, reference_params(cfg, truth), p, chosen, s.identification.objective, targets)
     return {**row, "nominal": c.nominal_um, "table": c.corrected_um, "reference": c.reference_um, "ratio": c.ratio,
             "after_vs_oracle": s.after_vs_oracle}
 

@@ -41,7 +41,7 @@ def main() -> None:
         t0 = time.perf_counter()
         evaluate_tool(cfg, cfg.tools[0], p_id, steps, head)
         t1 = time.perf_counter()
-        evaluate_tool(cfg, cfg.tools[0], p_id, steps, head, p_true=p_true)
+        evaluate_tool(cfg, cfg.tools[0], p_id, steps, head, p_ref=p_true)
         t2 = time.perf_counter()
         real.append(t1 - t0)
         sim.append(t2 - t1)

@@ -1,4 +1,4 @@
-"""Outcomes and typed errors of the station: the one source of truth for exit codes.
+"""Outcomes and typed errors of the station: the one definition of the exit codes.
 
 Every layer imports this module (it imports nothing). An error class names its
 :class:`Outcome`; ``station.cell.pipeline.outcomes`` maps every other exception (driver errors,

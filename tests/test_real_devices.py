@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pytest
 
+from simulators.judge import CellJudge
 from station.cell.config.cell_config import load_config
 from station.ui.cli.main import main
 
@@ -43,7 +44,7 @@ def test_a_rehearsal_of_the_example_cell_stays_inside_registers_128_to_255(tmp_p
         db = stack.enter_context(RunDB(tmp_path / "runs.sqlite"))
         devices = open_cell(rehearsal.cfg, stack)
         summary = run_calibration(rehearsal.cfg, devices.probe, devices.controller, db, lambda e: None,
-                                  options=Options(oracle_truth=rehearsal.servers.cell.truth))
+                                  options=Options(judge=CellJudge(rehearsal.servers.cell.truth)))
         log = list(server.requests_log)
     assert summary.outcome is Outcome.SUCCESS and summary.gain >= 20.0
     assert len(log) > 1000

@@ -1,7 +1,7 @@
 """The cell a command asked for, composed above the cell layer: a real cell's configuration is
 read by :func:`station.cell.session.calibrate.load_cell`; ``--simulated`` starts the simulators here and
 hands the session a :class:`~station.cell.session.calibrate.LoadedCell` whose ``[devices]`` point at them
-(the configuration, the simulator's truth for the oracle, its endpoints).
+(the configuration, the simulated cell's judge (``simulators.judge.CellJudge``), its endpoints).
 
 The session functions take :func:`load_cell` as their ``load`` argument, so the cell layer
 never imports the simulators (an import contract in ``pyproject.toml`` keeps it so).
@@ -37,13 +37,20 @@ _TAKEN = ("recheck", "warmup", "fleet")  # [fleet]: a rehearsal publishes where 
 BUILTIN_ROBOT_CELLS = ("irb2600",)
 
 
+def _judge(cell: Any) -> Any:
+    """The judge of the running simulated ``cell`` (imported here: a real run never loads it)."""
+    from simulators.judge import CellJudge
+
+    return CellJudge.of(cell)
+
+
 def load_cell(request: CellRequest, stack: ExitStack) -> LoadedCell:
     """The request's cell. With ``simulated`` the simulators are started (stopped when ``stack``
     closes) and the configuration is theirs: a CONFIG that describes a cell ([robot], [body]) is
     rehearsed, the station's configuration being CONFIG with [devices] pointing at the
     simulators; without CONFIG, or with one holding only [simulation], [recheck] and [warmup],
     the built-in cell is started with those. The seed: ``request.seed`` (``--seed``) when given,
-    else ``[simulation].seed``, else 1. ``LoadedCell.truth`` is the oracle. Without
+    else ``[simulation].seed``, else 1. ``LoadedCell.judge`` knows the simulated robot. Without
     ``simulated``: the configuration file (:func:`station.cell.session.calibrate.load_cell`)."""
     if request.simulated and request.robot not in (None, "sr800"):  # another robot's built-in cell (issue 9)
         return _load_builtin_robot_cell(request, stack)
@@ -77,7 +84,7 @@ def _load_simulated(request: CellRequest, stack: ExitStack) -> LoadedCell:
         except ValueError as exc:  # e.g. a step change on a prismatic joint
             raise ConfigError(f"{request.config}: [simulation]: {exc}") from None
         stack.callback(rehearsal.stop)
-        return LoadedCell(rehearsal.cfg, rehearsal.servers.cell.truth, rehearsal.endpoints())
+        return LoadedCell(rehearsal.cfg, _judge(rehearsal.servers.cell), rehearsal.endpoints())
     sim = simulation_settings(text, str(request.config)) if request.config else {}
     given = sim.pop("seed", None)
     # joint errors beyond geometry (issue 30): the built-in cell is a SCARA, its kind is "scara"
@@ -102,7 +109,7 @@ def _load_simulated(request: CellRequest, stack: ExitStack) -> LoadedCell:
     if taken:
         cell_text += "\n" + tomli_w.dumps(taken)
     cfg = parse_text(cell_text, f"<simulated cell{' with ' + request.config if request.config else ''}>")
-    return LoadedCell(cfg, servers.cell.truth, servers.endpoints())
+    return LoadedCell(cfg, _judge(servers.cell), servers.endpoints())
 
 
 def _merge_table(text: str, table: str, given: dict[str, Any]) -> str:
@@ -141,4 +148,4 @@ def _load_builtin_robot_cell(request: CellRequest, stack: ExitStack) -> LoadedCe
     servers = start_six_axis_cell(seed=seed, time_scale=request.time_scale)
     stack.callback(servers.stop)
     cfg = parse_text(six_axis_config_text(servers, seed), "<simulated six-axis cell>")
-    return LoadedCell(cfg, servers.cell.truth, servers.endpoints())
+    return LoadedCell(cfg, _judge(servers.cell), servers.endpoints())

@@ -10,6 +10,7 @@ from drivers.controller_errors import EmergencyStop, HandshakeTimeout
 from drivers.correction_table import TableVerifyError
 from drivers.probe_protocol import ProbeDisconnected
 from simulators import start_simulated_cell
+from simulators.judge import CellJudge
 from simulators.reference_cell import cell_config_text
 from station.cell.config.cell_config import parse_text
 from station.cell.pipeline.calibration import Options, run_calibration
@@ -53,7 +54,7 @@ def cell(tmp_path):
 
 
 def test_simulated_calibration_meets_the_targets(cell):
-    summary = cell.run(options=Options(oracle_truth=cell.srv.cell.truth))
+    summary = cell.run(options=Options(judge=CellJudge(cell.srv.cell.truth)))
     assert summary.outcome is Outcome.SUCCESS and summary.exit_code == 0
     assert summary.identification.n_parameters == 20
     # ≥ 20× smaller RMS error than before correction, within 1.2× of the oracle's

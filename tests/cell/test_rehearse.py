@@ -103,12 +103,12 @@ def test_the_rehearsed_truth_is_the_user_cell_and_the_seed_flag_overrides(tmp_pa
     stack, loaded = _loaded(CellRequest(config=str(path), simulated=True))
     with stack:
         assert loaded.endpoints["seed"] == 3 and loaded.cfg.simulated_seed == 3
-        setup = loaded.truth.model.nominal[loaded.truth.model.setup_slice()]
+        setup = loaded.judge.robot.model.nominal[loaded.judge.robot.model.setup_slice()]
         assert np.allclose(setup, [-430.0, 25.0, -160.0, 0.0, 0.0, np.deg2rad(4.0)])
         assert loaded.cfg.point_ids[0] == "B1a" and loaded.cfg.devices.word_order == "little"
         assert loaded.cfg.devices.controller_host == "127.0.0.1"
-        n_t = loaded.truth.model.n_params // 6
-        lengths = loaded.truth.errors.reshape(n_t, 6)[1:, :3]
+        n_t = loaded.judge.robot.model.n_params // 6
+        lengths = loaded.judge.robot.errors.reshape(n_t, 6)[1:, :3]
         assert np.max(np.abs(lengths)) < 0.06  # σ 10 µm, not the default 40 µm
     stack, loaded = _loaded(CellRequest(config=str(path), simulated=True, seed=8))
     with stack:
@@ -118,7 +118,7 @@ def test_the_rehearsed_truth_is_the_user_cell_and_the_seed_flag_overrides(tmp_pa
 def test_no_file_is_todays_builtin_cell():
     stack, loaded = _loaded(CellRequest(simulated=True, seed=2))
     with stack:
-        assert np.array_equal(loaded.truth.params, CellTruth.generate(seed=2).params)
+        assert np.array_equal(loaded.judge.robot.params, CellTruth.generate(seed=2).params)
         assert loaded.cfg.name == "simulated reference cell" and len(loaded.cfg.point_ids) == 24
         assert tomllib.loads(loaded.cfg.source_text)["simulation"] == {"seed": 2}
 
@@ -129,13 +129,13 @@ def test_a_file_with_only_simulation_keeps_the_builtin_cell(tmp_path):
     stack, loaded = _loaded(CellRequest(config=str(path), simulated=True))
     with stack:
         assert loaded.cfg.name == "simulated reference cell" and len(loaded.cfg.point_ids) == 24
-        assert np.array_equal(loaded.truth.params, CellTruth.generate(seed=4).params)
+        assert np.array_equal(loaded.judge.robot.params, CellTruth.generate(seed=4).params)
         assert loaded.cfg.recheck.poses == 5
         assert tomllib.loads(loaded.cfg.source_text)["simulation"] == {"seed": 4, "probe_noise_um": 1.0}
     stack, loaded = _loaded(CellRequest(config=str(path), simulated=True, seed=6))
     with stack:
         assert loaded.endpoints["seed"] == 6
-        assert np.array_equal(loaded.truth.params, CellTruth.generate(seed=6).params)
+        assert np.array_equal(loaded.judge.robot.params, CellTruth.generate(seed=6).params)
 
 
 @pytest.mark.parametrize("text,key", [

@@ -155,9 +155,9 @@ def test_the_oracle_of_a_bending_arm_puts_the_true_robot_on_target():
     every verification target, where the geometric truth alone misses by the arm's bending."""
     from simulators.cell import SimulatedCell
     from simulators.joint_errors import six_axis_joint_errors
+    from simulators.judge import CellJudge
     from simulators.six_axis_cell import six_axis_body, six_axis_config_text, six_axis_truth
-    from station.cell.pipeline.calibration import articulated_targets, oracle_params
-    from station.cell.pipeline.terms import truth_delta
+    from station.cell.pipeline.calibration import articulated_targets, reference_params
     from station.cell.plan.measurement_plan import build_plan, head_targets_world
     from station.core.kinematics.forward import forward
 
@@ -171,11 +171,11 @@ def test_the_oracle_of_a_bending_arm_puts_the_true_robot_on_target():
 
     cfg = parse_text(six_axis_config_text(Servers(), 2), "<six-axis>")
     truth = cell.truth
-    assert truth.joint_errors is not None and truth_delta(truth) is not None
-    assert truth_delta(six_axis_truth(2)) is None  # a rigid arm's oracle stays geometric
+    assert truth.joint_errors is not None and CellJudge(truth).reference_delta() is not None
+    assert CellJudge(six_axis_truth(2)).reference_delta() is None  # a rigid arm's oracle stays geometric
     steps = build_plan(cfg).run_steps(1, True)
-    p_true = oracle_params(cfg, truth)
-    honest = articulated_targets(cfg, steps, p_true, p_true[:6], truth_delta(truth))
+    p_true = reference_params(cfg, truth)
+    honest = articulated_targets(cfg, steps, p_true, p_true[:6], CellJudge(truth).reference_delta())
     rigid = articulated_targets(cfg, steps, p_true, p_true[:6])
     heads = head_targets_world(cfg)
     missed = []

@@ -125,7 +125,7 @@ def test_verification_passes_change_configuration_once_per_configuration(puma):
     assert ver[0].elbow == ident[-1].elbow  # the verification begins where the identification ends
     switches = sum(1 for a, b in zip(ver, ver[1:]) if a.elbow != b.elbow)
     assert switches == 3 * (n_conf - 1)  # before, after, oracle: each joins the last where it ended
-    for kind in (StepKind.VERIFY_BEFORE, StepKind.VERIFY_AFTER, StepKind.ORACLE):
+    for kind in (StepKind.VERIFY_BEFORE, StepKind.VERIFY_AFTER, StepKind.REFERENCE):
         mine = [(s.point, s.elbow, s.cycle) for s in ver if s.kind is kind]
         assert sorted(mine) == sorted((t.point, t.elbow, c) for t in plan.verification for c in range(cycles))
     # consecutive visits of one target come from separate passes over its configuration's targets

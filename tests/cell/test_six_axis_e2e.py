@@ -78,13 +78,13 @@ def test_oracle_folds_the_half_backlash_into_the_joint_zeros_of_tilted_frames():
     joint's zero is not the transform's yaw)."""
     import numpy as np
 
-    from station.cell.pipeline.calibration import oracle_params
+    from station.cell.pipeline.calibration import reference_params
     from station.core.kinematics.forward import forward
 
     cfg, cell = _cfg_and_cell()
     t = cell.truth
     q = np.deg2rad([[10.0, 30.0, -20.0, 40.0, 50.0, -60.0], [-20.0, 10.0, 5.0, -30.0, -70.0, 100.0]])
-    np.testing.assert_allclose(forward(cfg.model, q, oracle_params(cfg, t)),
+    np.testing.assert_allclose(forward(cfg.model, q, reference_params(cfg, t)),
                                forward(cfg.model, q - 0.5 * t.backlash, t.params), atol=1e-9)
 
 
@@ -93,14 +93,14 @@ def test_compensated_verification_targets_put_the_true_robot_on_target():
     joints at which the true robot's head lies on the wanted world pose (the oracle's premise)."""
     import numpy as np
 
-    from station.cell.pipeline.calibration import articulated_targets, oracle_params
+    from station.cell.pipeline.calibration import articulated_targets, reference_params
     from station.cell.plan.measurement_plan import build_plan, head_targets_world
     from station.core.kinematics.forward import forward
     from station.core.kinematics.transforms import pose_to_matrix
 
     cfg, cell = _cfg_and_cell()
     steps = build_plan(cfg).run_steps(1, True)
-    p_true = oracle_params(cfg, cell.truth)
+    p_true = reference_params(cfg, cell.truth)
     targets = articulated_targets(cfg, steps, p_true, p_true[:6])
     plain = articulated_targets(cfg, steps, None, p_true[:6])
     assert targets.keys() == plain.keys() and len(targets) == len(build_plan(cfg).verification)

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from simulators.from_config import simulate_config
+from simulators.judge import CellJudge
 from station.cell.config.cell_config import parse_text
 from station.cell.pipeline.calibration import Options, run_calibration
 from station.cell.records.run_records import MeasurementRecord
@@ -76,7 +77,7 @@ def rehearse(tmp: Path, stuck: str | None, plan: dict[str, str] | None = None,
         db = stack.enter_context(RunDB(tmp / "runs.sqlite"))
         dev = open_cell(sim.cfg, stack)
         summary = run_calibration(sim.cfg, dev.probe, dev.controller, db, emit,
-                                  options=Options(upload=True, oracle_truth=sim.servers.cell.truth))
+                                  options=Options(upload=True, judge=CellJudge(sim.servers.cell.truth)))
         records = db.measurements(db.latest_run().id)
         touches = phys.touches
     return Run(summary, records, notices, touches)

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from simulators import start_simulated_cell
+from simulators.judge import CellJudge
 from simulators.reference_cell import cell_config_text
 from station.cell.config.cell_config import parse_text
 from station.cell.correction.table_keeping import RESULT_KEY
@@ -86,7 +87,7 @@ def test_declining_the_upload_and_no_upload_keep_the_operators_table(cell):
 
 def test_a_kept_table_leaves_the_operators_one_for_a_roll_back_and_the_oracles_nowhere(cell):
     a = cell.activate(1e-6)
-    summary = cell.run(options=Options(oracle_truth=cell.srv.cell.truth))
+    summary = cell.run(options=Options(judge=CellJudge(cell.srv.cell.truth)))
     assert summary.outcome is Outcome.SUCCESS
     crcs = cell.crcs()
     assert crcs["active"] == int(summary.correction.crc32, 16)

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from simulators import start_simulated_cell
+from simulators.judge import CellJudge
 from simulators.reference_cell import cell_config_text
 from station.cell.config.cell_config import parse_text
 from station.cell.config.template import TEMPLATE
@@ -22,7 +23,7 @@ from station.cell.correction.robot_tools import (
     result_key,
 )
 from station.cell.correction.tool_export import table_from_json, tool_export
-from station.cell.pipeline.calibration import Options, oracle_params, run_calibration, stored_plan
+from station.cell.pipeline.calibration import Options, reference_params, run_calibration, stored_plan
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import RunSummary
@@ -134,7 +135,7 @@ def test_a_truth_that_splits_a4_and_k_otherwise_needs_no_other_correction():
     p_true = _resplit_last(cfg.model, p_id, dz=0.6, dyaw=0.004)
     joints = np.array([[-0.6, 1.6, -60.0, 0.2], [0.6, -1.6, -40.0, 1.0], [-0.9, 2.0, -80.0, -2.0]])
     steps = _steps(cfg, joints, [1, -1, 1])
-    ev = evaluate_tool(cfg, cfg.tools[0], p_id, steps, None, p_true=p_true)
+    ev = evaluate_tool(cfg, cfg.tools[0], p_id, steps, None, p_ref=p_true)
     assert ev.own_um is not None and ev.oracle_um is not None
     assert np.all(np.isfinite(ev.own_um))
     np.testing.assert_allclose(ev.own_um, ev.oracle_um, atol=0.05)  # µm
@@ -166,7 +167,7 @@ def test_other_robots_get_compensated_targets_for_the_tool():
     joints = np.radians([[10, 20, -30, 40, 50, 60], [-20, 40, -10, -30, 40, 10], [30, 10, -50, 10, -60, -40]])
     steps = _steps(cfg, joints, [1, 1, 1])
     tool = cfg.tools[0]
-    ev = evaluate_tool(cfg, tool, p_true, steps, None, p_true=p_true)  # identified = true
+    ev = evaluate_tool(cfg, tool, p_true, steps, None, p_ref=p_true)  # identified = true
     corr = ev.correction
     assert corr.kind == "targets" and corr.table is None and corr.commands is not None
     assert ev.own_um is not None and ev.head_um is not None and ev.oracle_um is not None
@@ -202,7 +203,7 @@ def run(tmp_path_factory):
         devices = open_cell(cfg, stack)
         events: list = []
         summary = run_calibration(cfg, devices.probe, devices.controller, db, events.append,
-                                  options=Options(oracle_truth=srv.cell.truth))
+                                  options=Options(judge=CellJudge(srv.cell.truth)))
         yield {"cfg": cfg, "db": db, "summary": summary, "events": events, "srv": srv, "tmp": tmp}
 
 
@@ -273,11 +274,11 @@ def test_the_stored_figures_follow_from_the_run_database(run):
     """The tool's figures are recomputed alike from the stored plan and identification (the
     joint scatter is seeded by the simulator's seed)."""
     cfg, db, s, srv = run["cfg"], run["db"], run["summary"], run["srv"]
-    p_true = oracle_params(cfg, srv.cell.truth)
+    p_true = reference_params(cfg, srv.cell.truth)
     steps = stored_plan(db, s.run_id)
     ident = db.load_result(s.run_id, "identification")
-    ev = evaluate_tool(cfg, cfg.tools[0], np.asarray(ident["params"]), steps, None, p_true=p_true,
-                       truth=srv.cell.truth)
+    ev = evaluate_tool(cfg, cfg.tools[0], np.asarray(ident["params"]), steps, None, p_ref=p_true,
+                       judge=CellJudge(srv.cell.truth))
     stored = db.load_result(s.run_id, result_key("gripper"))
     np.testing.assert_allclose(ev.oracle_um, np.array(stored["oracle_um"], dtype=float), rtol=1e-9)
     np.testing.assert_allclose(ev.own_um, np.array(stored["after_um"], dtype=float), rtol=1e-9)

@@ -10,12 +10,13 @@ import dataclasses
 import numpy as np
 import pytest
 
+from simulators.judge import CellJudge
 from station.cell.config.cell_config import parse_text
 from station.cell.config.template import TEMPLATE
 from station.cell.correction.design import region_for
 from station.cell.correction.robot_tools import evaluate_tool, result_key
 from station.cell.correction.tool_export import tool_export
-from station.cell.pipeline.calibration import oracle_params
+from station.cell.pipeline.calibration import reference_params
 from station.cell.pipeline.results import build_table_for
 from station.cell.pipeline.terms import error_model_record
 from station.cell.records.rundb import RunDB
@@ -35,10 +36,10 @@ def test_a_scara_tools_table_with_the_terms_puts_the_true_robot_closer_than_the_
     s = scara_terms()
     cfg, tool = s.cfg, s.cfg.tools[0]
     still = dataclasses.replace(s.truth, repeatability=np.zeros_like(s.truth.repeatability))
-    p_true, p_terms = oracle_params(cfg, s.truth), np.asarray(s.sel.fit.params, dtype=float)
+    p_true, p_terms = reference_params(cfg, s.truth), np.asarray(s.sel.fit.params, dtype=float)
     head = build_table_for(cfg, p_terms, region_for(cfg).grid((7, 7, 2, 12)), s.delta)  # the head's, with the terms
-    terms = evaluate_tool(cfg, tool, p_terms, s.steps, head, p_true=p_true, truth=still, delta=s.delta)
-    geo = evaluate_tool(cfg, tool, s.geo.params, s.steps, None, p_true=p_true, truth=still)
+    terms = evaluate_tool(cfg, tool, p_terms, s.steps, head, p_ref=p_true, judge=CellJudge(still), delta=s.delta)
+    geo = evaluate_tool(cfg, tool, s.geo.params, s.steps, None, p_ref=p_true, judge=CellJudge(still))
     assert terms.correction.table is not None and terms.correction.table.with_terms and terms.correction.with_terms
     assert geo.correction.table is not None and not geo.correction.with_terms
     assert terms.result()["error_terms"] is True and geo.result()["error_terms"] is False
@@ -53,10 +54,10 @@ def test_a_scara_tools_table_with_the_terms_puts_the_true_robot_closer_than_the_
     assert t.head_rms_um is not None and t.head_predicted_rms_um == pytest.approx(t.head_rms_um, rel=0.05)
 
 
-class _BendingTruth:
-    """A simulator's truth as the tools read it: joints that stand at ``q + δ(q)``, no scatter."""
+class _BendingJudge:
+    """A simulated cell's judge as the tools read it (station.cell.records.judge.RunJudge): joints
+    that stand at ``q + δ(q)``, no scatter."""
 
-    joint_errors = "harmonic"
     seed = 0
 
     def __init__(self, g: int) -> None:
@@ -65,6 +66,9 @@ class _BendingTruth:
     @staticmethod
     def joint_delta(q: np.ndarray) -> np.ndarray:
         return 2e-4 * np.sin(q) + 1e-4 * np.cos(2.0 * q)  # rad: about 40″ and 20″
+
+    def reference_delta(self):
+        return self.joint_delta
 
 
 def test_other_robots_tool_targets_are_compensated_with_the_terms():
@@ -78,9 +82,9 @@ def test_other_robots_tool_targets_are_compensated_with_the_terms():
     p[6:] += rng.normal(0.0, 1.0, model.n_params - 6) * np.tile([0.05, 0.05, 0.05, 5e-4, 5e-4, 5e-4], 7)
     joints = np.radians([[10, 20, -30, 40, 50, 60], [-20, 40, -10, -30, 40, 10], [30, 10, -50, 10, -60, -40]])
     steps = _steps(cfg, joints, [1, 1, 1])
-    truth = _BendingTruth(model.n_joints)
-    with_terms = evaluate_tool(cfg, cfg.tools[0], p, steps, None, p_true=p, truth=truth, delta=truth.joint_delta)
-    geometric = evaluate_tool(cfg, cfg.tools[0], p, steps, None, p_true=p, truth=truth)
+    judge = _BendingJudge(model.n_joints)
+    with_terms = evaluate_tool(cfg, cfg.tools[0], p, steps, None, p_ref=p, judge=judge, delta=judge.joint_delta)
+    geometric = evaluate_tool(cfg, cfg.tools[0], p, steps, None, p_ref=p, judge=judge)
     for ev in (with_terms, geometric):
         assert ev.own_um is not None and ev.oracle_um is not None and ev.head_um is not None
         assert float(np.max(ev.oracle_um)) < 1e-3  # the oracle knows the joint errors
@@ -95,7 +99,7 @@ def test_other_robots_tool_targets_are_compensated_with_the_terms():
     np.testing.assert_allclose(forward(corr.kin.nominal, corr.commanded_joints, setup=False), corr.commands, atol=1e-9)
     q = corr.commanded_joints
     true_tool = tool_params(model, p, pose_to_matrix(model.nominal[-6:]), cfg.tools[0].tcp_matrix)
-    reached = forward(model, q + truth.joint_delta(q), true_tool, setup=False)
+    reached = forward(model, q + judge.joint_delta(q), true_tool, setup=False)
     np.testing.assert_allclose(reached[:, :3, 3], corr.targets.base[:, :3, 3], atol=1e-6)
 
 

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from station.cell.config.cell_config import load_config
-from station.cell.pipeline.results import oracle_params, verification_errors
+from station.cell.pipeline.results import reference_params, verification_errors
 from station.cell.plan.measurement_plan import head_targets_world, joints_for
 from station.cell.plan.steps import StepKind
 from station.cell.records.rundb import RunDB
@@ -152,7 +152,7 @@ def _truth_before_um(cfg, db: RunDB, run: int, truth) -> tuple[np.ndarray, np.nd
     reported = verification_errors(cfg, steps, records, stored_recentring(db, run))
     as_read = verification_errors(cfg, steps, records)
     heads = head_targets_world(cfg)
-    p_true = oracle_params(cfg, truth)  # the true robot as the station approaches it
+    p_true = reference_params(cfg, truth)  # the true robot as the station approaches it
     rep, tru, raw = [], [], []
     for key, e in reported.items():
         st = next(s for s in steps if s.kind is StepKind.VERIFY_BEFORE and (s.point_id, s.elbow) == key)

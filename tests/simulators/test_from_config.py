@@ -124,7 +124,7 @@ def test_the_builtin_scara_with_joint_errors_takes_the_model_from_the_same_file(
                       '[identification]\nmodel = "cyclic"\nsigma_position_um = 7.5\n', encoding="utf-8")
     with ExitStack() as stack:
         loaded = load_cell(CellRequest(config=str(config), simulated=True, seed=3), stack)
-        cfg, truth = loaded.cfg, loaded.truth
+        cfg, truth = loaded.cfg, loaded.judge.robot
         assert cfg.identification.terms == ("cyclic",) and cfg.identification.sigma_position_um == 7.5
         text = cfg.source_text
         assert text.count("sigma_position_um") == 1 and "# The simulated head" in text

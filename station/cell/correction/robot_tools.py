@@ -19,7 +19,7 @@ Figures per tool (:func:`evaluate_tools`):
 
 * always: what the head's correction (its table used as it is) would leave at the tool's targets,
   *predicted* from the identified model (the reason to switch tables when the tool goes on);
-* in simulation (the simulator's truth known): the real robot's position error at the tool's
+* in simulation (a judge knows the simulated robot, ``station.cell.records.judge``): the real robot's position error at the tool's
   targets with the tool's own correction, with the oracle's (the correction built from the true
   parameters with the true ``K_tool = K_true · H⁻¹ · T``) and with the head's correction. The
   real robot's joints scatter with the simulator's repeatability over
@@ -32,9 +32,9 @@ error ``delta`` ``q ↦ δ(q)`` — the joints' errors are the robot's, the same
 (the SCARA table's nodes carry them, other robots' targets are compensated with them,
 :func:`station.core.terms.compensation.compensated_targets_with_terms`). Compliance is the one term
 that depends on the load: ``[[tool]]`` has no mass, so the terms are those identified with the
-probe head (the head's payload is assumed). In simulation the true robot stands at
-``q + δ_true(q)`` when the simulator's truth has joint errors (``truth.joint_delta``), and the
-oracle's correction is built with them too.
+probe head (the head's payload is assumed). In simulation the simulated robot stands at
+``q + δ_ref(q)`` when the judge knows joint errors (``RunJudge.reference_delta``), and the
+reference (oracle's) correction is built with them too.
 
 Nothing here uploads: the head's table stays the one the pipeline uploads; ``station export
 --tool NAME`` writes a tool's table for the controller (a run with terms: rebuilt with its stored
@@ -54,6 +54,7 @@ from station.cell.config.cell_config import CellConfig
 from station.cell.config.sections import ToolConfig
 from station.cell.correction.design import head_in_flange, tool_grid_for
 from station.cell.plan.steps import PlannedStep
+from station.cell.records.judge import RunJudge
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import ToolSummary
 from station.cell.run.events import Event, Notice
@@ -86,7 +87,7 @@ __all__ = [
     "run_tools",
     "tool_grid",
     "tool_targets",
-    "truth_delta",
+    "judge_delta",
 ]
 
 #: a SCARA table corrects x, y, z and yaw of a tool whose axis is parallel to the last joint's
@@ -330,7 +331,7 @@ def _rms_max(e: np.ndarray | None) -> tuple[float | None, float | None, int]:
 @dataclass(frozen=True, eq=False)
 class ToolEvaluation:
     """One tool's correction and figures. Error arrays ``(n_targets, cycles)`` [µm], NaN rows for
-    targets a correction does not cover; None where unknown (no truth: a real cell)."""
+    targets a correction does not cover; None where unknown (no judge: a real cell)."""
 
     correction: ToolCorrection
     head_predicted_um: np.ndarray
@@ -392,33 +393,30 @@ def _json_summary(s: ToolSummary) -> dict[str, Any]:
     return {k: (list(v) if isinstance(v, tuple) else v) for k, v in dataclasses.asdict(s).items()}
 
 
-def _scatter(truth: Any, n: int, g: int, cycles: int) -> np.ndarray:
-    """``(cycles, n, g)`` seeded joint scatter with the simulator's repeatability σ per joint."""
-    sigma = np.asarray(getattr(truth, "repeatability", np.zeros(g)), dtype=float).reshape(-1)
+def _scatter(judge: RunJudge | None, n: int, g: int, cycles: int) -> np.ndarray:
+    """``(cycles, n, g)`` seeded joint scatter with the simulated robot's repeatability σ per joint."""
+    sigma = np.asarray(getattr(judge, "repeatability", np.zeros(g)), dtype=float).reshape(-1)
     if sigma.shape != (g,):
         sigma = np.zeros(g)
-    rng = np.random.default_rng([int(getattr(truth, "seed", 0)), _SCATTER_SALT])
+    rng = np.random.default_rng([int(getattr(judge, "seed", 0)), _SCATTER_SALT])
     return rng.normal(0.0, 1.0, (cycles, n, g)) * sigma
 
 
-def truth_delta(truth: Any) -> JointDelta | None:
-    """The simulator's joint errors as ``Δq(q)`` at the commanded joints, or None without them (a
-    real cell, or a simulated arm with ``joint_errors = "none"``): what the oracle and the
-    simulated tool figures know of the true robot (``simulators.cell.CellTruth.joint_delta``)."""
-    if truth is None or getattr(truth, "joint_errors", None) is None:
-        return None
-    fn: JointDelta = truth.joint_delta
-    return fn
+def judge_delta(judge: RunJudge | None) -> JointDelta | None:
+    """The simulated robot's joint errors as ``Δq(q)`` at the commanded joints, or None without
+    them (a real cell: no judge; a simulated arm with ``joint_errors = "none"``): what the
+    reference correction and the simulated tool figures know of the robot (``RunJudge.reference_delta``)."""
+    return None if judge is None else judge.reference_delta()
 
 
 def evaluate_tool(cfg: CellConfig, tool: ToolConfig, params: np.ndarray, steps: Sequence[PlannedStep],
-                  head_table: CorrectionTable | None, p_true: np.ndarray | None = None,
-                  truth: Any = None, delta: JointDelta | None = None) -> ToolEvaluation:
+                  head_table: CorrectionTable | None, p_ref: np.ndarray | None = None,
+                  judge: RunJudge | None = None, delta: JointDelta | None = None) -> ToolEvaluation:
     """One tool: its correction, the head correction's predicted error at its targets, and — with
-    the true parameters ``p_true`` ``(n_params,)`` (simulation; ``truth`` the simulator's
-    :class:`~simulators.cell.CellTruth` for the repeatability and its joint errors, under which the
-    real robot stands at ``q + δ_true(q)``) — the real robot's errors with its own, the oracle's
-    and the head's correction. ``delta``: the identified error terms' joint error (``params`` the
+    the reference parameters ``p_ref`` ``(n_params,)`` (simulation; ``judge`` the simulated cell's
+    :class:`~station.cell.records.judge.RunJudge` for the repeatability and its joint errors, under
+    which the simulated robot stands at ``q + δ_ref(q)``) — the simulated robot's errors with its
+    own, the reference (oracle's) and the head's correction. ``delta``: the identified error terms' joint error (``params`` the
     geometry fitted with them), which the tool's correction, the head's and the prediction carry."""
     p_id = np.asarray(params, dtype=float)
     corr = build_tool_correction(cfg, tool, p_id, steps, delta)
@@ -457,35 +455,35 @@ def evaluate_tool(cfg: CellConfig, tool: ToolConfig, params: np.ndarray, steps: 
     no_scatter = np.zeros((1, n, g))
     # what the identified model says the head's correction leaves for this tool (a real cell's figure)
     head_predicted = _errors(cfg.model, kin.params, q_head, tg.world, no_scatter, delta)
-    if p_true is None:
+    if p_ref is None:
         return ToolEvaluation(corr, head_predicted, notes=tuple(notes))
-    p_true = np.asarray(p_true, dtype=float)
-    p_true_tool = tool_params(cfg.model, p_true, H, tool.tcp_matrix)
-    true_delta = truth_delta(truth)  # the simulated robot's joints err: it stands at q + δ_true(q)
-    X_oracle = invert(pose_to_matrix(p_true[:6]))[None] @ tg.world
+    p_ref = np.asarray(p_ref, dtype=float)
+    p_ref_tool = tool_params(cfg.model, p_ref, H, tool.tcp_matrix)
+    ref_delta = judge_delta(judge)  # the simulated robot's joints err: it stands at q + δ_ref(q)
+    X_oracle = invert(pose_to_matrix(p_ref[:6]))[None] @ tg.world
     if scara:  # the oracle knows what the simulator knows: its table carries the true joint errors
-        oracle_table = build_correction_table(kin.nominal, p_true_tool, tool_grid(cfg, tool), capacity=MAX_TABLE_VALUES,
-                                              delta=true_delta)
+        oracle_table = build_correction_table(kin.nominal, p_ref_tool, tool_grid(cfg, tool), capacity=MAX_TABLE_VALUES,
+                                              delta=ref_delta)
         q_oracle = _scara_commands(kin.nominal, X_oracle, tg.elbows, oracle_table.data, oracle_table.elbows)
     else:
-        q_oracle = _exact_correction_joints(kin.nominal, p_true_tool, X_oracle, tg.joints, true_delta)
-    scatter = _scatter(truth, n, g, max(int(cfg.plan.verification_cycles), 1))
-    own = _errors(cfg.model, p_true_tool, q_own, tg.world, scatter, true_delta)
-    oracle = _errors(cfg.model, p_true_tool, q_oracle, tg.world, scatter, true_delta)
-    head = _errors(cfg.model, p_true_tool, q_head, tg.world, scatter, true_delta) if with_head else None
+        q_oracle = _exact_correction_joints(kin.nominal, p_ref_tool, X_oracle, tg.joints, ref_delta)
+    scatter = _scatter(judge, n, g, max(int(cfg.plan.verification_cycles), 1))
+    own = _errors(cfg.model, p_ref_tool, q_own, tg.world, scatter, ref_delta)
+    oracle = _errors(cfg.model, p_ref_tool, q_oracle, tg.world, scatter, ref_delta)
+    head = _errors(cfg.model, p_ref_tool, q_head, tg.world, scatter, ref_delta) if with_head else None
     return ToolEvaluation(corr, head_predicted, own, oracle, head, tuple(notes))
 
 
 def evaluate_tools(cfg: CellConfig, params: np.ndarray, steps: Sequence[PlannedStep],
-                   head_table: CorrectionTable | None, p_true: np.ndarray | None = None,
-                   truth: Any = None, delta: JointDelta | None = None) -> tuple[ToolEvaluation, ...]:
+                   head_table: CorrectionTable | None, p_ref: np.ndarray | None = None,
+                   judge: RunJudge | None = None, delta: JointDelta | None = None) -> tuple[ToolEvaluation, ...]:
     """:func:`evaluate_tool` for every configured tool, in the configuration's order."""
-    return tuple(evaluate_tool(cfg, t, params, steps, head_table, p_true, truth, delta) for t in cfg.tools)
+    return tuple(evaluate_tool(cfg, t, params, steps, head_table, p_ref, judge, delta) for t in cfg.tools)
 
 
 
 def run_tools(cfg: CellConfig, db: RunDB, run_id: int, steps: Sequence[PlannedStep], params: np.ndarray,
-              head_table: CorrectionTable | None, p_true: np.ndarray | None, truth: Any,
+              head_table: CorrectionTable | None, p_ref: np.ndarray | None, judge: RunJudge | None,
               emit: Callable[[Event], None], delta: JointDelta | None = None) -> tuple[ToolSummary, ...]:
     """The pipeline's step after the head's table: every tool's correction and figures, stored as
     ``tool:<name>`` results; returns their summaries. Nothing is uploaded. With error terms kept,
@@ -493,7 +491,7 @@ def run_tools(cfg: CellConfig, db: RunDB, run_id: int, steps: Sequence[PlannedSt
     out = []
     for tool in cfg.tools:
         try:
-            ev = evaluate_tool(cfg, tool, params, steps, head_table, p_true, truth, delta)
+            ev = evaluate_tool(cfg, tool, params, steps, head_table, p_ref, judge, delta)
         except (StationError, np.linalg.LinAlgError, ValueError) as exc:  # a tool never stops the head's run
             emit(Notice("warning", f"tool {tool.name!r}: no correction was built ({exc}); the head's calibration "
                                    f"goes on"))

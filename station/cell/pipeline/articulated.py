@@ -1,6 +1,6 @@
 """Correction and verification of an articulated arm (issue 9): compensated targets instead of a
 table. The held-out targets are commanded as Cartesian targets, before correction as they are,
-after it compensated with the identified model (and, in simulation, with the true one: the
+after it compensated with the identified model (and, in simulation, with the judge's: the
 oracle); beside the full model stand the joint-zero-offset-only figures and the orientation
 errors. :func:`station.cell.pipeline.calibration.run_calibration` hands over here after the identification.
 """
@@ -15,7 +15,7 @@ import numpy as np
 from station.cell.config.cell_config import CellConfig
 from station.cell.correction.robot_tools import run_tools
 from station.cell.pipeline.results import (
-    oracle_params,
+    reference_params,
     verification_errors,
     verification_orientation_errors,
     verified_outcome,
@@ -24,12 +24,13 @@ from station.cell.pipeline.terms import (
     JointDelta,
     error_model_record,
     error_model_summary,
+    judge_delta,
     terms_delta,
     terms_note,
-    truth_delta,
 )
 from station.cell.plan.measurement_plan import head_targets_world
 from station.cell.plan.steps import PlannedStep, StepKind
+from station.cell.records.judge import RunJudge
 from station.cell.records.run_records import MeasurementRecord
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import CompensationSummary, ErrorStats, RunSummary
@@ -110,7 +111,7 @@ def joint_offset_figures(cfg: CellConfig, steps: Sequence[PlannedStep], records:
                          params: np.ndarray, reference: np.ndarray | None) -> dict[str, Any]:
     """The joint-zero-offset-only correction beside the full model, on the verification targets
     (:mod:`station.core.kinematics.joint_offsets`): offsets fitted to the identified model over the
-    identification joints; errors against ``reference`` (the simulator's truth) or, without one,
+    identification joints; errors against ``reference`` (a simulated cell's judge's robot) or, without one,
     predicted by the identified model."""
     from station.core.kinematics.joint_offsets import fit_joint_offsets, offset_accuracy
 
@@ -137,14 +138,14 @@ def joint_offset_figures(cfg: CellConfig, steps: Sequence[PlannedStep], records:
 def articulated_correction(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tuple[PlannedStep, ...],
                            emit: Callable[[Event], None], with_oracle: bool, summary: RunSummary,
                            res: IdentificationResult, *, upload: bool, min_gain: float,
-                           oracle_truth: Any, terms: Selection | None = None) -> RunSummary:
+                           judge: RunJudge | None, terms: Selection | None = None) -> RunSummary:
     """Correct and verify an articulated arm: no table; the held-out targets are commanded as
     Cartesian targets, before correction as they are, after it compensated with the identified
     model (and, in simulation, with the true one: the oracle). Beside the full model: what
     joint-zero offsets alone would reach on the same targets, and the orientation errors.
     ``terms``: the error model of ``[identification] model`` (:mod:`station.cell.pipeline.terms`);
     with terms kept, the targets are compensated with the geometry fitted with them and the terms,
-    and the oracle with the simulator's joint errors as well as its geometry."""
+    and the reference (a simulated cell's judge) with its joint errors as well as its geometry."""
     total = len(steps)
     params, delta = res.params, None
     if terms is not None:
@@ -173,15 +174,15 @@ def articulated_correction(cfg: CellConfig, runner: Runner, db: RunDB, run_id: i
     after_targets = articulated_targets(cfg, steps, params, R_id, delta)  # every target compensable, before moving
     extra: dict[str, Any] = {"method": "compensated targets" + (" with error terms" if delta else ""),
                              "n_targets": len(after_targets)}
-    p_true = oracle_params(cfg, oracle_truth) if oracle_truth is not None else None
-    true_delta = truth_delta(oracle_truth)  # the simulator's joint errors: the oracle knows them too
+    p_ref = reference_params(cfg, judge) if judge is not None else None
+    ref_delta = judge_delta(judge)  # the simulated robot's joint errors: the reference knows them too
     if cfg.tools:  # [[tool]]: each tool's own compensated targets, stored as tool:<name>
-        summary = summary.replace(tools=run_tools(cfg, db, run_id, steps, params, None, p_true,  # the terms too
-                                                  oracle_truth, emit, delta=delta))
+        summary = summary.replace(tools=run_tools(cfg, db, run_id, steps, params, None, p_ref,  # the terms too
+                                                  judge, emit, delta=delta))
     try:
         extra["joint_offsets_only"] = joint_offset_figures(
             cfg, steps, db.measurements(run_id, kind=StepKind.IDENTIFICATION.value), res.params,
-            p_true if true_delta is None else None)  # a geometric truth misses a bending arm: predicted then
+            p_ref if ref_delta is None else None)  # a geometric reference misses a bending arm: predicted then
     except Exception as exc:  # noqa: BLE001 - a figure beside the result must not stop the run
         emit(Notice("warning", f"joint-offset-only figure not computed: {exc}"))
     runner.guard.table = None
@@ -201,10 +202,10 @@ def articulated_correction(cfg: CellConfig, runner: Runner, db: RunDB, run_id: i
     summary = summary.replace(after=measure(StepKind.VERIFY_AFTER, after_targets))
     if summary.after is not None:  # the same fact as a SCARA's table run reports (one stream, issue 42)
         emit(Verified(summary.before, summary.after, summary.gain))
-    if with_oracle and p_true is not None:
-        emit(PhaseChanged("verify", "oracle (true parameters)"))
-        summary = summary.replace(oracle=measure(StepKind.ORACLE, articulated_targets(cfg, steps, p_true, p_true[:6],
-                                                                                      true_delta)))
+    if with_oracle and p_ref is not None:
+        emit(PhaseChanged("verify", "oracle (reference parameters)"))
+        summary = summary.replace(oracle=measure(StepKind.REFERENCE, articulated_targets(cfg, steps, p_ref, p_ref[:6],
+                                                                                         ref_delta)))
     outcome, missed = verified_outcome(cfg, summary, min_gain)
     summary = summary.replace(notes=(*summary.notes, *missed))
     db.set_status(run_id, "verified")
@@ -223,7 +224,7 @@ def _articulated_done(db: RunDB, run_id: int, summary: RunSummary, extra: dict[s
     jo = extra.get("joint_offsets_only")
     if jo:
         a = jo["accuracy"]
-        ref = "against the simulator's truth" if a["reference"] == "reference parameters" else a["reference"]
+        ref = "against the simulated robot" if a["reference"] == "reference parameters" else a["reference"]
         notes.append(f"joint-zero offsets only ({ref}, {a['targets']} targets): RMS "
                      f"{a['joint_offsets']['rms_position_um']:.1f} µm, {a['joint_offsets']['rms_orientation_arcsec']:.1f}″; "
                      f"full model {a['full_model']['rms_position_um']:.1f} µm, "
@@ -249,4 +250,4 @@ def _compensation_summary(extra: dict[str, Any], orient: dict[str, dict[str, flo
                    uncorrected_rms_um=acc["uncorrected"]["rms_position_um"],
                    offsets_reference=str(acc["reference"]))
     return CompensationSummary(str(extra.get("method", "")), int(extra.get("n_targets", 0)),
-                               rms(StepKind.VERIFY_BEFORE), rms(StepKind.VERIFY_AFTER), rms(StepKind.ORACLE), **fig)
+                               rms(StepKind.VERIFY_BEFORE), rms(StepKind.VERIFY_AFTER), rms(StepKind.REFERENCE), **fig)

@@ -28,12 +28,13 @@ from station.cell.correction.robot_tools import run_tools
 from station.cell.correction.table_keeping import finish_tables, restore_after_failure, table_at_start
 from station.cell.correction.upload import verified_upload
 from station.cell.pipeline.articulated import articulated_correction, articulated_targets
+from station.cell.pipeline.judging import judged
 from station.cell.pipeline.premotion import Premotion, premotion_check
 from station.cell.pipeline.results import (
     build_table_for,
     grid_for,
     identify_run,
-    oracle_params,
+    reference_params,
     reversal_error,
     run_measurements,
     verification_errors,
@@ -42,6 +43,7 @@ from station.cell.pipeline.results import (
 from station.cell.plan.measurement_plan import head_targets_world, joints_for
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.fingerprint import check_same_cell, current_like, fingerprint, resume_note
+from station.cell.records.judge import RunJudge
 from station.cell.records.run_records import MeasurementRecord
 from station.cell.records.rundb import RunDB
 from station.cell.records.stored_config import POSTPROCESSED_CONFIG, config_source, stored_config, stored_plan
@@ -78,7 +80,7 @@ from station.errors import ConfigError, IdentificationError, Outcome, RunAborted
 # the articulated arm's step (pipeline_articulated) live apart; their names stay importable here.
 __all__ = ["Options", "run_calibration", "MIN_VALID_FRACTION", "MAX_RMS_NORMALIZED", "MAX_OUTLIER_FRACTION",
            "min_valid_identification", "check_identification", "check_plausible", "identify_run", "reversal_error",
-           "verification_errors", "oracle_params", "grid_for", "build_table_for", "articulated_targets",
+           "verification_errors", "reference_params", "grid_for", "build_table_for", "articulated_targets",
            "config_source", "stored_config", "stored_plan"]
 
 #: share of the planned identification poses that must be valid before anything is identified
@@ -134,7 +136,7 @@ def check_plausible(cfg: CellConfig, records: Sequence[MeasurementRecord], res: 
 @dataclass(frozen=True)
 class Options:
     upload: bool = True
-    oracle_truth: Any = None  # simulators.cell.CellTruth in simulation
+    judge: RunJudge | None = None  # a simulated cell's judge (station/cell/records/judge.py); None: a real cell
     confirm: Confirm | None = None  # the operator's yes/no before the upload and to keep it
     min_gain: float = 20.0  # required RMS improvement (before / after)
 
@@ -167,7 +169,7 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
     control = control or RunControl()
     pre = premotion_check(cfg)  # tools, plan, correction: what 'station plan' checks, before anything moves
     runner = Runner(cfg, probe, controller, emit, control)
-    with_oracle = options.oracle_truth is not None and options.upload
+    with_oracle = options.judge is not None and options.upload
     reused: tuple[str, ...] = ()  # a resume: the post-processing sections changed since
     if resume_run is None:
         emit(PhaseChanged("plan"))
@@ -208,6 +210,8 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
     start = table_at_start(controller, db, run_id, emit)  # before anything changes the controller's tables
     try:
         summary = _pipeline(cfg, runner, db, run_id, steps, emit, options, with_oracle, summary, pre)
+        if options.judge is not None:  # a simulated cell: its judge's figures (station/cell/pipeline/judging.py)
+            summary = judged(cfg, options.judge, db, run_id, summary, emit)
         summary = summary.replace(recentring=recentring_stats(
             steps, {k: db.measurements(run_id, kind=k.value) for k in StepKind if k is not StepKind.RECHECK},
             stored_recentring(db, run_id)))
@@ -344,13 +348,13 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
     if res.outliers:
         emit(Notice("warning", f"suspected outliers among identification measurements: {list(res.outliers)}"))
     R_id = res.params[:6]
-    from station.cell.pipeline.terms import select_terms, truth_delta  # [identification] model (issue 30)
+    from station.cell.pipeline.terms import judge_delta, select_terms  # [identification] model (issue 30)
 
     terms = select_terms(cfg, records, res, reversal_records)
     if not cfg.model.is_scara:  # an articulated arm: compensated targets, no table (issue 9)
         return articulated_correction(cfg, runner, db, run_id, steps, emit, with_oracle, summary, res,
                                       upload=options.upload, min_gain=options.min_gain,
-                                      oracle_truth=options.oracle_truth, terms=terms)
+                                      judge=options.judge, terms=terms)
 
     # a SCARA with error terms: the table's nodes carry them, on the geometry fitted with them, and the
     # targets after correction are commanded in that fit's base frame (before: the geometric fit's)
@@ -375,9 +379,9 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
     if not bound <= limit:
         return _not_uploaded(cfg, summary, run_id, table, used, bound, emit)
     if cfg.tools:  # [[tool]]: each tool's own correction, stored as tool:<name>; the head's table is uploaded
-        truth = options.oracle_truth
+        judge = options.judge
         summary = summary.replace(tools=run_tools(cfg, db, run_id, steps, params, table,  # with the terms, as the head's
-                                                  None if truth is None else oracle_params(cfg, truth), truth, emit,
+                                                  None if judge is None else reference_params(cfg, judge), judge, emit,
                                                   delta=delta))
 
     emit(PhaseChanged("verify", "before correction"))
@@ -415,15 +419,16 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
     if summary.after is not None:
         emit(Verified(summary.before, summary.after, summary.gain))
     if with_oracle:
-        emit(PhaseChanged("verify", "oracle (true parameters)"))
-        p_true = oracle_params(cfg, options.oracle_truth)
-        # a simulated arm whose joints err (truth.joint_delta): the oracle's table carries them too
-        oracle_table = build_table_for(cfg, p_true, used.grid, truth_delta(options.oracle_truth)).data
+        emit(PhaseChanged("verify", "oracle (reference parameters)"))
+        assert options.judge is not None  # with_oracle
+        p_ref = reference_params(cfg, options.judge)
+        # a simulated arm whose joints err (the judge's reference_delta): the oracle's table carries them too
+        oracle_table = build_table_for(cfg, p_ref, used.grid, judge_delta(options.judge)).data
         verified_upload(controller, oracle_table, emit)
         runner.guard.table = oracle_table
-        emit(PhaseChanged("verify", "oracle (true parameters)"))  # back from the upload's phase
-        measure({StepKind.ORACLE}, p_true[:6])
-        summary = summary.replace(oracle=stats(StepKind.ORACLE))
+        emit(PhaseChanged("verify", "oracle (reference parameters)"))  # back from the upload's phase
+        measure({StepKind.REFERENCE}, p_ref[:6])
+        summary = summary.replace(oracle=stats(StepKind.REFERENCE))
         controller.rollback_table()  # the station's own table is the one left active
         # the oracle's table must never be what a later roll back revives: the roll-back slot is
         # emptied (the table of the run's start stays recoverable from the run database)

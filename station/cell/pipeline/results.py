@@ -18,6 +18,7 @@ from station.cell.config.cell_config import CellConfig, correction_grid
 from station.cell.correction.design import design_for
 from station.cell.plan.measurement_plan import all_motion_poses, approach_offsets, head_targets_world
 from station.cell.plan.steps import PlannedStep, StepKind
+from station.cell.records.judge import RunJudge
 from station.cell.records.run_records import MeasurementRecord
 from station.cell.records.summary import ReversalSummary, RunSummary
 from station.cell.run.recentring import head_as_commanded
@@ -30,7 +31,7 @@ from station.core.terms.error_model import TermRows
 from station.errors import IdentificationError, Outcome
 
 __all__ = ["verified_outcome", "reversal_error", "identify_run", "run_measurements", "verification_errors", "verification_orientation_errors",
-           "oracle_params", "grid_for", "build_table_for", "arrival_sides", "run_term_rows"]
+           "reference_params", "grid_for", "build_table_for", "arrival_sides", "run_term_rows"]
 
 
 def _kept(records: Sequence[MeasurementRecord]) -> list[MeasurementRecord]:
@@ -165,19 +166,20 @@ def verification_errors(cfg: CellConfig, steps: Sequence[PlannedStep], records: 
     return {k: np.array(v) for k, v in out.items()}
 
 
-def oracle_params(cfg: CellConfig, truth: Any) -> np.ndarray:
-    """The simulator's true parameters as seen through the station's approach: every joint
-    arrives from the same side, so half the reversal error is a constant joint offset (revolute
-    joints from below, the quill from above), which belongs to the true model of this cell."""
-    p = np.array(truth.params, dtype=float)
+def reference_params(cfg: CellConfig, judge: RunJudge) -> np.ndarray:
+    """The judge's robot parameters as seen through the station's approach (a simulated cell's
+    reference, :mod:`station.cell.records.judge`): every joint arrives from the same side, so half
+    the reversal error is a constant joint offset (revolute joints from below, the quill from
+    above), which belongs to the model of this cell's robot."""
+    p = np.array(judge.params, dtype=float)
     if not cfg.model.is_scara:  # a tilted joint frame: the zero offset is folded in as C·Rz(δ)
         from station.core.kinematics.joint_offsets import apply_joint_offsets
 
-        half = 0.5 * np.asarray(truth.backlash, dtype=float)
+        half = 0.5 * np.asarray(judge.backlash, dtype=float)
         return apply_joint_offsets(cfg.model, p, np.where(np.array(cfg.model.joint_types) == "revolute", -half, half))
     for k, (t, kind) in enumerate(zip(cfg.model.joint_transforms, cfg.model.joint_types)):
         direction = 1.0 if kind == "revolute" else -1.0
-        p[6 * t + (5 if kind == "revolute" else 2)] -= 0.5 * truth.backlash[k] * direction
+        p[6 * t + (5 if kind == "revolute" else 2)] -= 0.5 * judge.backlash[k] * direction
     return p
 
 
@@ -194,7 +196,7 @@ def build_table_for(cfg: CellConfig, params: np.ndarray, grid: GridSpec | None =
                     delta: Any = None) -> CorrectionTable:
     """The correction table of ``params`` on ``grid`` (default :func:`grid_for`; the controller's
     nominal model); ``delta``: joint errors beyond geometry ``q ↦ δ(q)`` the robot stands with
-    (the identified terms, or a simulator's truth; None: geometric)."""
+    (the identified terms, or a simulated cell's judge's; None: geometric)."""
     return build_correction_table(cfg.model, params, grid_for(cfg) if grid is None else grid,
                                   capacity=MAX_TABLE_VALUES, delta=delta)
 

@@ -8,11 +8,12 @@ verification targets are then compensated with the full model
 (:func:`station.core.terms.compensation.compensated_targets_with_terms`); a SCARA's correction table
 carries the terms (:func:`station.core.table.build.build_correction_table` with ``delta``).
 
-The oracle must know what the simulator knows: a simulated arm whose joints bend and err once per
-turn (``[simulation] joint_errors``) has them in its truth (``truth.joint_delta``), and the
-oracle's targets are compensated with them too; otherwise after/oracle compares the station's
-model with a geometric oracle that cannot reach the targets. Pure functions of the configuration,
-the records and the truth; nothing moves or writes.
+The reference (a simulated cell's judge, :mod:`station.cell.records.judge`) must know what the
+simulator knows: a simulated arm whose joints bend and err once per turn (``[simulation]
+joint_errors``) has them in its judge (``RunJudge.reference_delta``), and the reference targets
+are compensated with them too; otherwise after/oracle compares the station's model with a
+geometric reference that cannot reach the targets. Pure functions of the configuration, the
+records and the judge; nothing moves or writes.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from station.cell.config.cell_config import CellConfig
-from station.cell.correction.robot_tools import truth_delta  # the oracle's joint errors (one definition, below)
+from station.cell.correction.robot_tools import judge_delta  # the reference's joint errors (one definition)
 from station.cell.records.run_records import MeasurementRecord
 from station.cell.records.stored_error_model import StoredErrorModel, stored_error_model  # read back (records)
 from station.cell.records.summary import ErrorModelSummary, ErrorTermEstimate
@@ -32,7 +33,7 @@ from station.core.identification.identify import IdentificationResult
 from station.core.terms.selection import Selection
 from station.core.units import UM
 
-__all__ = ["JointDelta", "select_terms", "terms_delta", "truth_delta", "error_model_summary", "error_model_record",
+__all__ = ["JointDelta", "select_terms", "terms_delta", "judge_delta", "error_model_summary", "error_model_record",
            "terms_note", "StoredErrorModel", "stored_error_model"]
 
 #: ``q ↦ Δq(q)``: ``(n, g)`` joints [rad | mm] → ``(n, g)`` where they really stand, minus ``q``
@@ -74,7 +75,7 @@ def _fold_backlash(cfg: CellConfig, sel: Selection, q: np.ndarray) -> Selection:
     """``sel`` with its kept backlash folded into the joint zeros of the fitted geometry for the side
     the station's own moves arrive from (direction +1: the verification, a recheck, the table's
     use; :func:`~station.cell.pipeline.results.arrival_sides`), as
-    :func:`~station.cell.pipeline.results.oracle_params` folds the simulator's: the fit
+    :func:`~station.cell.pipeline.results.reference_params` folds the simulated robot's: the fit
     puts each joint's zero in the middle of its lost motion, and every reader of the model leaves
     backlash at zero (:func:`~station.core.terms.error_model.prediction_basis`), which would put every
     corrected pose half the lost motion off. The geometry so moved stands, at the station's

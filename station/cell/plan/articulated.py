@@ -468,7 +468,7 @@ class ArticulatedPlan(Plan):
         steps = list(self.identification)
         kinds = [StepKind.VERIFY_BEFORE]
         if with_upload:
-            kinds += [StepKind.VERIFY_AFTER] + ([StepKind.ORACLE] if with_oracle else [])
+            kinds += [StepKind.VERIFY_AFTER] + ([StepKind.REFERENCE] if with_oracle else [])
         groups: list[list[Target]] = []
         for t in self.verification:
             if groups and groups[-1][0].elbow == t.elbow:

@@ -58,7 +58,7 @@ class Plan:
         steps = list(self.identification)
         kinds = [StepKind.VERIFY_BEFORE]
         if with_upload:
-            kinds += [StepKind.VERIFY_AFTER] + ([StepKind.ORACLE] if with_oracle else [])
+            kinds += [StepKind.VERIFY_AFTER] + ([StepKind.REFERENCE] if with_oracle else [])
         for kind in kinds:
             for cycle in range(cycles):
                 for t in self.verification:

@@ -22,7 +22,9 @@ class StepKind(str, enum.Enum):
     REVERSAL = "reversal"  # the same pose approached from the other side (reversal error)
     VERIFY_BEFORE = "verification_before"  # held-out pose, no correction active
     VERIFY_AFTER = "verification_after"  # held-out pose, the station's correction active
-    ORACLE = "oracle"  # held-out pose, the simulator's true correction active (simulation only)
+    # held-out pose, a simulated cell's reference correction active (simulation only: its judge,
+    # station/cell/records/judge.py); stored as "oracle", as runs before issue 42 stored it
+    REFERENCE = "oracle"
     RECHECK = "recheck"  # a recheck pose, compared with a baseline calibration's model (station recheck)
 
     @property
@@ -32,7 +34,7 @@ class StepKind(str, enum.Enum):
 
     @property
     def is_verification(self) -> bool:
-        return self in (StepKind.VERIFY_BEFORE, StepKind.VERIFY_AFTER, StepKind.ORACLE)
+        return self in (StepKind.VERIFY_BEFORE, StepKind.VERIFY_AFTER, StepKind.REFERENCE)
 
 
 _TITLES = {
@@ -40,7 +42,7 @@ _TITLES = {
     StepKind.REVERSAL: "reversal (other side)",
     StepKind.VERIFY_BEFORE: "verification before correction",
     StepKind.VERIFY_AFTER: "verification after correction",
-    StepKind.ORACLE: "verification with the true correction",
+    StepKind.REFERENCE: "verification with the reference correction (simulation)",
     StepKind.RECHECK: "recheck against the baseline",
 }
 

@@ -155,7 +155,7 @@ def check_same_cell(stored: dict[str, str], current: dict[str, str], run_id: int
 #: (sections, step kinds measured with them): the before poses are commanded through the identified
 #: set-up, the after and oracle poses also through the uploaded table
 _MEASURED_WITH = (({"[identification]"}, {StepKind.VERIFY_BEFORE.value}),
-                  ({"[identification]", "[correction]"}, {StepKind.VERIFY_AFTER.value, StepKind.ORACLE.value}))
+                  ({"[identification]", "[correction]"}, {StepKind.VERIFY_AFTER.value, StepKind.REFERENCE.value}))
 
 
 def resume_note(changed: Collection[str]) -> str | None:

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from station.cell.records.judge import JudgeFigure
 from station.core.accuracy.iso9283 import iso9283_pose
 from station.errors import Outcome
 
@@ -138,7 +139,7 @@ class ToolSummary:
     ``head_predicted_*``: what the head's correction would leave at the tool's targets, predicted
     from the identified model. ``after_*`` / ``oracle_*`` / ``head_*`` (simulation only): the
     real robot's error at the tool's ``n_targets`` verification targets with the tool's own
-    correction, the oracle's, and the head's; None without a truth."""
+    correction, the oracle's (the simulated cell's reference), and the head's; None for a real cell."""
 
     name: str
     tcp_mm_deg: tuple[float, ...]
@@ -181,7 +182,7 @@ class CompensationSummary:
     ``orientation_*_arcsec``: RMS orientation error of the verification before, after and with
     the oracle (simulation) [″]. ``joint_offsets_*``: what joint-zero offsets alone reach on the
     same targets, beside the full model's and the uncorrected robot's, predicted from the
-    identified model (``offsets_reference`` says against what: the simulator's truth in simulation)."""
+    identified model (``offsets_reference`` says against what: the simulated robot in simulation)."""
 
     method: str
     n_targets: int
@@ -277,6 +278,8 @@ class RunSummary:
     #: controller's capacity meets correction.max_interpolation_um for the identified robot); None otherwise
     not_uploaded_reason: str | None = None
     error_model: ErrorModelSummary | None = None  # [identification] model other than geometric (issue 30)
+    #: a simulated cell's judge's figures (station/cell/records/judge.py); empty for a real cell
+    simulation: tuple[JudgeFigure, ...] = field(default=())
 
     @property
     def exit_code(self) -> int:
@@ -388,6 +391,9 @@ class RunSummary:
         if self.tools:
             out["tools"] = [{**_plain(dataclasses.asdict(t)), "after_vs_oracle": t.after_vs_oracle}
                             for t in self.tools]
+        if self.simulation:  # each figure with its unit: µm, or × for a ratio
+            out["simulation"] = {f.name: {"value": f.value, "unit": f.unit, "caption": f.caption}
+                                 for f in self.simulation}
         out["units"] = {"lengths": "µm (keys *_um)", "times": "s (keys *_s, seconds)",
                         "parameters": "mm and rad (identification.parameters)",
                         "error terms": "each term's own unit (error_model.terms[].unit)"}
@@ -412,7 +418,9 @@ class RunSummary:
             tools=tuple(_build(ToolSummary, t) for t in d.get("tools", ())),
             compensation=sub("compensation", CompensationSummary), tables=sub("tables", TableSummary),
             recentring=tuple(_build(RecentringStats, r) for r in d.get("recentring", ())),
-            not_uploaded_reason=d.get("not_uploaded_reason"), error_model=sub("error_model", ErrorModelSummary))
+            not_uploaded_reason=d.get("not_uploaded_reason"), error_model=sub("error_model", ErrorModelSummary),
+            simulation=tuple(JudgeFigure(k, float(v["value"]), str(v["unit"]), str(v.get("caption", "")))
+                             for k, v in (d.get("simulation") or {}).items()))
 
 
 _KIND_WORDS = {"identification": "identification", "reversal": "reversal", "verification_before": "before",

@@ -28,6 +28,7 @@ from drivers.probe_head import ProbeHead as SerialProbeHead
 from station.cell.config.cell_config import CellConfig, load_config
 from station.cell.pipeline.calibration import Options, run_calibration
 from station.cell.pipeline.outcomes import classify, failure_summary, hint_for
+from station.cell.records.judge import RunJudge
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import RunSummary
 from station.cell.run.device_check import controller_lines, probe_lines, wired_channels_invalid
@@ -66,10 +67,10 @@ class Devices:
 
 @dataclass(frozen=True)
 class LoadedCell:
-    """A validated configuration; in simulation also the simulator's truth (the oracle)."""
+    """A validated configuration; in simulation also the cell's judge (station/cell/records/judge.py)."""
 
     cfg: CellConfig
-    truth: Any = None
+    judge: RunJudge | None = None
     endpoints: dict[str, Any] = field(default_factory=dict)
 
 
@@ -245,7 +246,7 @@ def run_calibration_session(request: CellRequest, emit: Callable[[Event], None],
             check_controller_correction(devices.controller)
             seed = loaded.endpoints.get("seed", request.seed) if request.simulated else None
             summary = run_calibration(cfg, devices.probe, devices.controller, db, tracker, control,
-                                      Options(upload=request.upload, oracle_truth=loaded.truth, confirm=confirm),
+                                      Options(upload=request.upload, judge=loaded.judge, confirm=confirm),
                                       resume_run=request.resume, seed=seed,
                                       devices_info=describe_devices(devices))
         publish_finished(request.db, summary.run_id, cfg, emit)  # devices closed: the fleet store, or its queue

@@ -196,7 +196,7 @@ def pose_accuracy(model: RobotModel, params, chosen_index, covariance, joints, s
 @dataclass(frozen=True)
 class MonteCarloResult:
     """``estimates``: ``(n_sets, p)`` identified values of the chosen parameters;
-    ``sigma``: ``(p,)`` their sample standard deviation; ``bias``: mean − truth."""
+    ``sigma``: ``(p,)`` their sample standard deviation; ``bias``: mean − the exact value (``true_params``)."""
 
     names: tuple[str, ...]
     estimates: np.ndarray
@@ -224,26 +224,26 @@ def monte_carlo(model: RobotModel, data: MeasurementSet, true_params, chosen_ind
     from ``start`` (default nominal), all sets at once.
     """
     idx = np.asarray(chosen_index, dtype=int)
-    p_true = np.asarray(true_params, dtype=float)
+    p_exact = np.asarray(true_params, dtype=float)
     q_act = (np.broadcast_to(data.joints, (n_sets,) + data.joints.shape) if sigma_joints is None else
              data.joints + rng.standard_normal((n_sets,) + data.joints.shape) * np.asarray(sigma_joints))
     if data.kind == "distance":
         # What is measured are points: perturb them (instrument, body geometry), then form the distances.
-        pts = add_body_error(data, forward(model, q_act, p_true, setup=False)[..., :3, 3], rng)
+        pts = add_body_error(data, forward(model, q_act, p_exact, setup=False)[..., :3, 3], rng)
         pts = pts + rng.standard_normal(pts.shape) * data.points_sigma()
         if point_ids is not None and sigma_point is not None:
             pts = _perturb_points("position", pts, np.asarray(point_ids), np.asarray(sigma_point), rng)
         pr = data.distance_pairs()
         measured = np.linalg.norm(pts[..., pr[:, 0], :] - pts[..., pr[:, 1], :], axis=-1)
     else:
-        exact = (np.broadcast_to(model_outputs(model, data, p_true), (n_sets,) + data.measured.shape)
-                 if sigma_joints is None else _outputs_at(model, data, p_true, q_act))
+        exact = (np.broadcast_to(model_outputs(model, data, p_exact), (n_sets,) + data.measured.shape)
+                 if sigma_joints is None else _outputs_at(model, data, p_exact, q_act))
         measured = add_noise(data, add_body_error(data, exact, rng), rng)
         if point_ids is not None and sigma_point is not None:
             measured = _perturb_points(data.kind, measured, np.asarray(point_ids), np.asarray(sigma_point), rng)
     p0 = np.array(model.nominal if start is None else start, dtype=float)
     P = np.broadcast_to(p0, (n_sets, p0.size)).copy()
-    w = 1.0 / data.fit_sigma(pair_units(model, data, p_true) if data.has_body_sigma else None)
+    w = 1.0 / data.fit_sigma(pair_units(model, data, p_exact) if data.has_body_sigma else None)
     it = 0
     for it in range(1, max_iter + 1):  # noqa: B007 - the count is reported after the loop
         r, J = residuals_and_jacobian(model, data, P, joints=data.joints, measured=measured)
@@ -263,7 +263,7 @@ def monte_carlo(model: RobotModel, data: MeasurementSet, true_params, chosen_ind
     corr = np.corrcoef(est_ok, rowvar=False) if est_ok.shape[0] > 2 else np.eye(len(idx))
     return MonteCarloResult(
         names=tuple(model.param_names[i] for i in idx), estimates=_ro(est), sigma=_ro(sig),
-        bias=_ro(est_ok.mean(axis=0) - p_true[idx]), correlation=_ro(np.atleast_2d(corr)),
+        bias=_ro(est_ok.mean(axis=0) - p_exact[idx]), correlation=_ro(np.atleast_2d(corr)),
         iterations=it, n_failed=int((~ok).sum()),
     )
 
@@ -279,10 +279,10 @@ def pair_units(model: RobotModel, data: MeasurementSet, params) -> np.ndarray | 
     return diff / np.linalg.norm(diff, axis=1)[:, None]
 
 
-def _outputs_at(model: RobotModel, data: MeasurementSet, p_true: np.ndarray, q_act: np.ndarray) -> np.ndarray:
-    """Exact outputs of the robot ``p_true`` ``(P,)`` at the actual joints ``(n_sets, n, g)``:
+def _outputs_at(model: RobotModel, data: MeasurementSet, p_exact: np.ndarray, q_act: np.ndarray) -> np.ndarray:
+    """Exact outputs of the robot ``p_exact`` ``(P,)`` at the actual joints ``(n_sets, n, g)``:
     poses ``(n_sets, n, 4, 4)``, positions ``(n_sets, n, 3)`` or distances ``(n_sets, k)``."""
-    T = forward(model, q_act, p_true, setup=data.uses_setup)
+    T = forward(model, q_act, p_exact, setup=data.uses_setup)
     if data.kind == "pose":
         return T
     p = T[..., :3, 3]

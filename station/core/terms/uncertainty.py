@@ -4,7 +4,7 @@ scatter of their estimates over synthetic data sets, for the σ-versus-scatter h
 
 Like :func:`station.core.measurement.uncertainty.monte_carlo`: ``n_sets`` data sets of the robot ``true_params``
 with the terms ``x_true`` of ``basis`` (built at the data's joints), each with fresh measurement
-noise of the data's σ, all solved at once by Gauss–Newton from the truth. Pose and position data.
+noise of the data's σ, all solved at once by Gauss–Newton from the exact values. Pose and position data.
 mm and rad inside.
 """
 
@@ -45,16 +45,16 @@ def monte_carlo_terms(model: RobotModel, data: MeasurementSet, true_params, chos
     if data.kind == "distance":
         raise ConfigError("the error terms' Monte Carlo study needs pose or position data")
     idx = np.asarray(chosen_index, dtype=int)
-    p_true = np.asarray(true_params, dtype=float)
+    p_exact = np.asarray(true_params, dtype=float)
     x_true = np.asarray(x_true, dtype=float)
     m, k = len(idx), basis.size
     q_true = data.joints + basis.joint_delta(x_true)
-    T_true = np.array(forward(model, q_true, p_true))
+    T_true = np.array(forward(model, q_true, p_exact))
     T_true[:, :3, 3] += basis.point_delta(x_true)
     exact = T_true if data.kind == "pose" else T_true[:, :3, 3]
     measured = add_noise(data, np.broadcast_to(exact, (n_sets,) + exact.shape), rng)
     w = 1.0 / data.fit_sigma()
-    P = np.broadcast_to(p_true, (n_sets, p_true.size)).copy()
+    P = np.broadcast_to(p_exact, (n_sets, p_exact.size)).copy()
     X = np.broadcast_to(x_true, (n_sets, k)).copy()
     it = 0
     for it in range(1, max_iter + 1):  # noqa: B007 - the count is reported after the loop
@@ -80,9 +80,9 @@ def monte_carlo_terms(model: RobotModel, data: MeasurementSet, true_params, chos
     est = np.concatenate([P[:, idx], X], axis=1)
     ok = np.all(np.isfinite(est), axis=1)
     e = est[ok]
-    truth = np.concatenate([p_true[idx], x_true])
+    exact_values = np.concatenate([p_exact[idx], x_true])
     corr = np.corrcoef(e, rowvar=False) if e.shape[0] > 2 else np.eye(m + k)
-    ro = [np.array(a) for a in (est, e.std(axis=0, ddof=1), e.mean(axis=0) - truth, np.atleast_2d(corr))]
+    ro = [np.array(a) for a in (est, e.std(axis=0, ddof=1), e.mean(axis=0) - exact_values, np.atleast_2d(corr))]
     for a in ro:
         a.setflags(write=False)
     return MonteCarloResult(names=tuple(model.param_names[i] for i in idx) + basis.names, estimates=ro[0],

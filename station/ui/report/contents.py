@@ -202,7 +202,7 @@ class ReportData:
     * ``errors_before_um`` / ``errors_after_um`` (k,) position error per verification pose and
       cycle (NaN: that cycle gave no valid measurement; ``errors_after_um`` empty when nothing
       was uploaded), ``oracle_after_um`` (k,) or None: the error after correction as the
-      simulator's ground truth sees it (simulated runs only). ``verify_labels`` (k,) read
+      simulated cell's reference correction leaves it (simulated runs only). ``verify_labels`` (k,) read
       ``"<point> elbow <±1> #<cycle>"``; the report shows point and elbow per row from them.
     * ``summary``: the run's :class:`~station.cell.records.summary.RunSummary` (shown first).
     * The record: ``config_toml`` (the run's configuration snapshot), ``station_version``,

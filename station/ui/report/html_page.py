@@ -129,6 +129,7 @@ SECTIONS = (
     ("table", "Correction table and its bound"),
     ("reversal", "Reversal error"),
     ("tools", "Tools after the head"),
+    ("simulation", "Simulation"),
     ("trend", "Trend: this robot's calibrations and rechecks"),
     ("signoff", "Sign-off"),
 )
@@ -419,6 +420,11 @@ def _tools(d: ReportData) -> str:
                 + _table(t.TOOL_CHECK_HEAD, check, table_id="tools-check-table")) if check else ""))
 
 
+def _simulation(d: ReportData) -> str:
+    return (f'<p class="note">{_e(t.SIMULATION_NOTE)}</p>'
+            + _table(t.SIMULATION_HEAD, t.simulation_rows(d), table_id="simulation-table", num_from=2))
+
+
 def _trend(d: ReportData) -> str:
     this = str(d.run_id)
     rows = t.trend_rows(d)
@@ -447,6 +453,8 @@ def render_html(d: ReportData) -> str:
                 ("reversal", _reversal)]
     if t.has_tools(d):  # [[tool]]: each tool's own correction
         builders.append(("tools", _tools))
+    if t.has_simulation(d):  # a simulated cell's judge's figures: simulated runs only
+        builders.append(("simulation", _simulation))
     if t.has_trend(d):  # one run has no history: no section
         builders.append(("trend", _trend))
     builders.append(("signoff", _signoff))

@@ -132,6 +132,10 @@ def render_markdown(d: ReportData) -> str:
             L += [t.TOOL_CHECK_NOTE, ""]
             L += _table(t.TOOL_CHECK_HEAD, t.tool_check_rows(d))
 
+    if t.has_simulation(d):  # a simulated cell's judge's figures: simulated runs only
+        L += ["## Simulation", "", t.SIMULATION_NOTE, ""]
+        L += _table(t.SIMULATION_HEAD, t.simulation_rows(d), num_from=2)
+
     if t.has_trend(d):  # one run has no history: no section
         L += ["## Trend: this robot's calibrations and rechecks", "", t.trend_line(d), ""]
         this = str(d.run_id)

@@ -28,7 +28,7 @@ _SLUG = re.compile(r"[^A-Za-z0-9]+")
 #: the phases of a calibration in order, as the report names them
 _KIND_WORDS = ((StepKind.IDENTIFICATION, "identification"), (StepKind.REVERSAL, "reversal"),
                (StepKind.VERIFY_BEFORE, "verification before correction"),
-               (StepKind.VERIFY_AFTER, "verification after correction"), (StepKind.ORACLE, "oracle check"))
+               (StepKind.VERIFY_AFTER, "verification after correction"), (StepKind.REFERENCE, "oracle check"))
 
 
 def _slug(text: str, limit: int = 24) -> str:

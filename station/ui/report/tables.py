@@ -484,6 +484,24 @@ TOOL_CHECK_HEAD = ("tool", "targets", "own RMS µm", "own max µm", "oracle RMS 
                    "head's RMS µm", "head's max µm", "own / oracle")
 
 
+#: what the simulation section says first (a simulated cell's judge, station/cell/records/judge.py)
+SIMULATION_NOTE = ("Simulated run: the simulator knows the robot it plays. These figures judge the identified "
+                   "model against that robot; a real cell's report has no such section.")
+SIMULATION_HEAD = ("figure", "what it is", "value")
+
+
+def has_simulation(d: ReportData) -> bool:
+    return d.summary is not None and bool(d.summary.simulation)
+
+
+def simulation_rows(d: ReportData) -> list[tuple[str, str, str]]:
+    """The judge's figures: name, caption, value with its unit (the summary's ``simulation``)."""
+    if d.summary is None:
+        return []
+    return [(f.name, f.caption, f"{f.value:.2f} {f.unit}" if f.unit == "×" else f"{f.value:.1f} {f.unit}")
+            for f in d.summary.simulation]
+
+
 def has_tools(d: ReportData) -> bool:
     return d.summary is not None and bool(d.summary.tools)
 
@@ -504,7 +522,7 @@ def tool_rows(d: ReportData) -> list[tuple[str, ...]]:
 
 def tool_check_rows(d: ReportData) -> list[tuple[str, ...]]:
     """Simulation only: per tool, the real robot's error over the tool's verification targets
-    with its own correction, the oracle's and the head's (empty without a truth)."""
+    with its own correction, the oracle's and the head's (empty for a real cell)."""
     if d.summary is None:
         return []
     return [(s.name, str(s.n_after), fmt(s.after_rms_um), fmt(s.after_max_um), fmt(s.oracle_rms_um),

@@ -396,6 +396,9 @@ def summary_markup(summary: RunSummary, step_index: int | None = None, ctx: Cell
         rows.append(("run", f"#{summary.run_id}" + (f" ({of})" if of else "")))
     if summary.upload_skipped:
         rows.append(("upload", "skipped (the table was not sent)"))
+    if summary.simulation:  # a simulated cell's judge's figures (the report's "Simulation" section)
+        rows.append(("simulation", esc(", ".join(f"{f.name} {fmt_num(f.value, f.unit, 2 if f.unit == '×' else 1)}"
+                                                  for f in summary.simulation))))
     for note in summary.notes:
         rows.append(("note", esc(exact_commands(note, ctx))))
     if summary.db and (failure is not None or summary.report is None):
