@@ -130,6 +130,13 @@ def robot_from_dh_file(path: Path) -> RobotModel:
 #: the optional columns of a DH table that map the controller's joints onto the model's
 #: (``offset`` has a unit like the limits; ``sign``, ``coupled_to`` and ``k`` have none)
 MAP_COLUMNS = ("sign", "offset", "coupled_to", "k")
+#: the optional column of each joint's maximum speed from the data sheet (``station plan``'s motion
+#: time; issue 37 §3: a DH table had nowhere to put what the plan asked for)
+SPEED_COLUMN = "max_speed"
+#: where a robot file takes its joint speeds, whatever its format (docs/robot-file.md)
+SPEED_HINT = ("add each joint's maximum speed from the robot's data sheet: in a DH table (*.dh.csv, *.mdh.csv) a "
+              "column 'max_speed [deg/s|mm/s]' with one value per joint row; in a TOML robot file max_speed = … in "
+              "every joint's [[transform]] (docs/robot-file.md)")
 _UNITLESS = ("type", "sign", "coupled_to", "k")
 
 
@@ -147,9 +154,9 @@ def read_dh_file(path: Path) -> tuple[RobotModel, JointMap]:
     if missing:
         raise ConfigError(f"{path}: missing columns {missing}; expected {need} with units")
     for n in names:  # an unknown column (a typo of 'offset') would otherwise be ignored
-        if n not in need and n not in MAP_COLUMNS:
-            raise ConfigError(f"{path}: unknown column {n!r}{nearest(n, (*need, *MAP_COLUMNS))}; the columns are "
-                              f"{', '.join(need)} and optionally {', '.join(MAP_COLUMNS)}")
+        if n not in need and n not in MAP_COLUMNS and n != SPEED_COLUMN:
+            raise ConfigError(f"{path}: unknown column {n!r}{nearest(n, (*need, *MAP_COLUMNS, SPEED_COLUMN))}; the "
+                              f"columns are {', '.join(need)} and optionally {', '.join(MAP_COLUMNS)}, {SPEED_COLUMN}")
     if len(set(names)) != len(names):
         raise ConfigError(f"{path}: a column appears twice ({', '.join(sorted({n for n in names if names.count(n) > 1}))}); "
                           f"keep one")
@@ -189,7 +196,35 @@ def read_dh_file(path: Path) -> tuple[RobotModel, JointMap]:
     check_raw_units(raw, str(path), "if so, write [{unit}] for the angles in that column's header",
                     "if so, write [{unit}] for the lengths in the d and a columns' headers")
     model = robot_from_dh(out, conv, name=path.name.split(".")[0])
+    if SPEED_COLUMN in names:
+        model = _with_speeds(path, model, rows[1:], names, units[SPEED_COLUMN])
     return model, _dh_joint_map(path, model, map_rows, units.get("offset") or "deg|mm", scale)
+
+
+def _with_speeds(path: Path, model: RobotModel, rows: list[list[str]], names: list[str], unit: str) -> RobotModel:
+    """``model`` with the ``max_speed`` column's speeds [rad/s | mm/s], one per joint row (a fixed
+    row leaves it empty); the unit ``deg/s|mm/s`` reads like the limits' ``deg|mm``."""
+    import dataclasses
+
+    scale = {"deg/s": math.pi / 180, "rad/s": 1.0, "mm/s": 1.0, "m/s": 1000.0}
+    parts = unit.split("|")
+    if any(u not in scale for u in parts):
+        raise ConfigError(f"{path}: unknown unit {unit!r} in column 'max_speed'; use deg/s|mm/s (or rad/s, m/s)")
+    speeds = []
+    for k, r in enumerate(rows, start=2):
+        rec = dict(zip(names, (c.strip() for c in r)))
+        if rec["type"] == "fixed":
+            continue
+        u = parts[0 if rec["type"] == "revolute" else -1]
+        try:
+            v = float(rec.get(SPEED_COLUMN) or "nan") * scale[u]
+        except ValueError:
+            v = math.nan
+        if not (math.isfinite(v) and v > 0):
+            raise ConfigError(f"{path}, line {k}: max_speed must be a number > 0 on every joint row (the joint's "
+                              f"maximum speed from the data sheet, in {u}), got {rec.get(SPEED_COLUMN)!r}")
+        speeds.append(v)
+    return dataclasses.replace(model, max_speed=np.array(speeds))
 
 
 def _dh_joint_map(path: Path, model: RobotModel, map_rows: list[tuple[int, dict[str, str]]], offset_unit: str,

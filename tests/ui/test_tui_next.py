@@ -147,6 +147,8 @@ async def test_the_activity_line_is_never_stale_under_a_dialog_or_after_the_end(
         await pilot.press("a")  # the abort's own question, over the upload's
         await wait_until(pilot, lambda: isinstance(app.screen, ConfirmScreen), "abort?")
         assert str(detail.render()).startswith("Waiting for you: Abort run #7?")
+        said = " ".join(app.screen.question.split())  # the key it names is the docs' (issue 37 §5)
+        assert "c continues it" in said and "resumed (r)" not in said
         await pilot.press("n")
         await wait_until(pilot, lambda: isinstance(app.screen, QuestionScreen), "back to the upload question")
         assert str(detail.render()) == "Waiting for you: Upload the correction table? (y / n)"

@@ -28,6 +28,7 @@ from station.cell.correction.robot_tools import run_tools
 from station.cell.correction.table_keeping import finish_tables, restore_after_failure, table_at_start
 from station.cell.correction.upload import verified_upload
 from station.cell.pipeline.articulated import articulated_correction, articulated_targets
+from station.cell.pipeline.invalid_poses import invalid_advice, rejudge
 from station.cell.pipeline.judging import judged
 from station.cell.pipeline.premotion import Premotion, premotion_check
 from station.cell.pipeline.results import (
@@ -306,6 +307,7 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
 
         run_warmup(cfg, runner, db, run_id, steps[0], emit)
     db.set_status(run_id, "measuring")
+    rejudge(cfg, db, run_id, emit)  # a resume after [plan] max_residual_um changed: judged, not measured, again
     located = locate_body(cfg, runner, db, run_id, steps, emit)  # the body is found, not assumed (issue 37)
     emit(PhaseChanged("measure", "identification poses"))
     measure({StepKind.IDENTIFICATION, StepKind.REVERSAL}, None, located)
@@ -328,8 +330,8 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
     if n_valid < needed:
         raise IdentificationError(
             f"only {n_valid} of {n_planned} identification poses are valid, {needed} are needed "
-            f"({MIN_VALID_FRACTION:.0%}); no correction was identified. Fix what the warnings name, then resume: "
-            f"the invalid poses are measured again")
+            f"({MIN_VALID_FRACTION:.0%}); no correction was identified. Of the invalid: "
+            f"{invalid_advice(cfg, records, needed) or 'fix what the warnings name, then resume'}")
     res = identify_run(cfg, records)
     check_identification(res)
     check_plausible(cfg, records, res)

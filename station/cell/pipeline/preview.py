@@ -27,6 +27,7 @@ from station.core.kinematics.forward import forward, scara_reach_margin
 from station.core.measurement.measurements import residuals_and_jacobian, synthetic_set
 from station.core.measurement.uncertainty import body_sandwich, linear_uncertainty, pose_accuracy
 from station.core.units import ARCSEC, DEG
+from station.io.robot_import import SPEED_HINT
 
 
 @dataclass(frozen=True)
@@ -190,7 +191,7 @@ def describe(p: PlanPreview) -> list[str]:
         lines.append(f"  travel height: {p.travel_clearance_mm:.1f} mm above the highest target")
     if p.motion_s_estimate is None:
         lines.append(f"  settling: {p.settle_s_total:.0f} s in all; motion time is not estimated "
-                     f"(the robot file gives no joint speeds: add max_speed per joint)")
+                     f"(the robot file gives no joint speeds: {SPEED_HINT})")
     else:
         total = p.motion_s_estimate + p.settle_s_total
         lines.append(f"  estimated duration: {total / 60:.1f} min ({p.motion_s_estimate:.0f} s of motion at the "

@@ -52,16 +52,41 @@ def without_file_paths(data: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def fingerprint(cfg: CellConfig, by_content: bool = True) -> dict[str, str]:
+#: the keys that only judge a stored reading (section, key): each gets its own digest, so that a
+#: resume may change it (issue 37 §4: a bound too tight for the head refused readings whose pose
+#: was solved and stored; the stored readings are judged again, nothing is measured again)
+JUDGING_KEYS = (("plan", "max_residual_um"),)
+#: the entry a fingerprint with the judging keys apart carries (one stored before has them in [plan])
+JUDGED_APART = ("judged apart", "plan.max_residual_um")
+
+
+def _judging_apart(data: dict[str, Any]) -> tuple[dict[str, Any], dict[str, str]]:
+    """``data`` without :data:`JUDGING_KEYS`, and their digests as ``[section] key`` entries."""
+    out, apart = dict(data), {}
+    for section, key in JUDGING_KEYS:
+        table = out.get(section)
+        value = table.get(key) if isinstance(table, dict) else None
+        if isinstance(table, dict):
+            out[section] = {k: v for k, v in table.items() if k != key}
+        apart[f"[{section}] {key}"] = _digest(value)
+    return out, apart
+
+
+def fingerprint(cfg: CellConfig, by_content: bool = True, judged_apart: bool = True) -> dict[str, str]:
     """Section name → digest, plus ``robot model`` for the loaded robot (and ``body points``,
     ``probe head`` for a body or head file). ``by_content=False``: the fingerprint as made before
-    issue 37, with the files' paths in their sections' digests (to compare with a stored one)."""
+    issue 37, with the files' paths in their sections' digests (to compare with a stored one);
+    ``judged_apart=False``: as made before the judging keys had their own entries."""
     try:
         data = tomllib.loads(cfg.source_text) if cfg.source_text else {}
     except tomllib.TOMLDecodeError:  # pragma: no cover - a CellConfig was parsed from this text
         data = {}
     hashed = without_file_paths(data) if by_content else data
-    out = {f"[{k}]": _digest(v) for k, v in hashed.items() if k not in _IGNORED}
+    apart: dict[str, str] = {}
+    if judged_apart:
+        hashed, apart = _judging_apart(hashed)
+        apart[JUDGED_APART[0]] = JUDGED_APART[1]
+    out = {f"[{k}]": _digest(v) for k, v in hashed.items() if k not in _IGNORED} | apart
     if by_content:
         out[BY_CONTENT[0]] = BY_CONTENT[1]
     m = cfg.model
@@ -112,7 +137,8 @@ def baseline_fingerprint(config_toml: str, by_content: bool = False) -> dict[str
 
 #: what only post-processes the measurements (the identification, the correction grid, tolerances,
 #: the report's names, the tools' tables): a resume with only these changed reuses every measurement
-POST_PROCESSING = ("[identification]", "[correction]", "[recheck]", "[tool]", "[cell]", "[verification]")
+POST_PROCESSING = ("[identification]", "[correction]", "[recheck]", "[tool]", "[cell]", "[verification]",
+                   *(f"[{s}] {k}" for s, k in JUDGING_KEYS))
 
 
 def post_processing_only(changed: Collection[str]) -> bool:
@@ -122,7 +148,8 @@ def post_processing_only(changed: Collection[str]) -> bool:
 
 def current_like(stored: dict[str, str], cfg: CellConfig) -> dict[str, str]:
     """``cfg``'s fingerprint made the way ``stored`` was (by content, or with paths before issue 37)."""
-    return fingerprint(cfg, by_content=stored.get(BY_CONTENT[0]) == BY_CONTENT[1])
+    return fingerprint(cfg, by_content=stored.get(BY_CONTENT[0]) == BY_CONTENT[1],
+                       judged_apart=stored.get(JUDGED_APART[0]) == JUDGED_APART[1])
 
 
 def check_same_cell(stored: dict[str, str], current: dict[str, str], run_id: int,
@@ -154,8 +181,9 @@ def check_same_cell(stored: dict[str, str], current: dict[str, str], run_id: int
 
 #: (sections, step kinds measured with them): the before poses are commanded through the identified
 #: set-up, the after and oracle poses also through the uploaded table
-_MEASURED_WITH = (({"[identification]"}, {StepKind.VERIFY_BEFORE.value}),
-                  ({"[identification]", "[correction]"}, {StepKind.VERIFY_AFTER.value, StepKind.REFERENCE.value}))
+_JUDGED = {f"[{s}] {k}" for s, k in JUDGING_KEYS}  # they change which poses the identification uses
+_MEASURED_WITH = (({"[identification]", *_JUDGED}, {StepKind.VERIFY_BEFORE.value}),
+                  ({"[identification]", "[correction]", *_JUDGED}, {StepKind.VERIFY_AFTER.value, StepKind.REFERENCE.value}))
 
 
 def resume_note(changed: Collection[str]) -> str | None:

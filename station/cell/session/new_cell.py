@@ -288,4 +288,9 @@ def new_cell_text(dest: str | Path, robot: str | None = None, head: str | None =
         except ConfigError as exc:
             notes.append(f"[correction]: {exc}")
         notes.append(f"the correction grid's x, y, z describe {GRID_POINT}")
+    else:  # an articulated arm: its own placement, park pose and words (issue 37 §3)
+        from station.cell.session.new_arm import arm_cell_text
+
+        text, more = arm_cell_text(text, dest, cfg, _with_setup, _set, _repeats_cycles)
+        notes += more
     return NewCell(text, tuple(notes))

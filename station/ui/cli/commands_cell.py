@@ -326,7 +326,9 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from station.cell.pipeline.preview import describe, preview
 
     cfg = load_config(args.config)
-    design = premotion_check(cfg).design  # what 'calibrate' refuses before moving, refused here the same way (exit 2)
+    pre = premotion_check(cfg)  # what 'calibrate' refuses before moving, refused here the same way (exit 2)
+    design = pre.design
+    locating = [] if pre.locating is None else [f"  locating: {pre.locating.describe()}"]  # the run's first motions
     p = preview(cfg, with_upload=not args.no_upload)
     head = check_head(cfg.head)  # the probe head's arrangement and sensitivity (docs/probe-head.md)
     warnings = plan_warnings(p, cfg)
@@ -338,14 +340,16 @@ def cmd_plan(args: argparse.Namespace) -> int:
             "predicted_bound_um": design.predicted_bound_um, "sampled_bounds_um": list(design.bounds_um),
             "max_interpolation_um": design.limit_um, "designed": not cfg.correction.explicit, "grid_point": GRID_POINT}
         print(json.dumps({"outcome": "SUCCESS", "exit_code": 0, **p.to_json(), "head": head.to_json(),
-                          "warnings": warnings, "correction": correction}))
+                          "warnings": warnings, "correction": correction,
+                          "locating": None if pre.locating is None else pre.locating.describe()}))
     else:
         lines = describe(p)
         at = next((i + 1 for i, ln in enumerate(lines) if ln.lstrip().startswith("predicted accuracy")), len(lines))
         table = [] if design is None else [
             f"  correction table ({'configured' if cfg.correction.explicit else 'designed by the station'}): "
             f"{design.describe()}", f"  the grid's x, y, z and yaw are {GRID_POINT}"]
-        print("\n".join([*lines[:at], *table, *(f"  warning: {w}" for w in warnings), *lines[at:], *head.lines()]))
+        print("\n".join([*lines[:at], *table, *locating, *(f"  warning: {w}" for w in warnings), *lines[at:],
+                          *head.lines()]))
     return 0
 
 

@@ -421,7 +421,8 @@ class StationApp(RunEnd):
             return
         run = f"run #{self.run_id}" if self.run_id is not None else "the calibration run"
         self._confirm_abort(f"Abort {run}?\nThe robot stops at the next safe point; what is measured stays "
-                            f"in the database and the run can be resumed (r).", False)
+                            f"in the database; afterwards {CONTINUE_KEY} continues it (r picks any unfinished run), "
+                            f"as docs/operator-ui.md says.", False)
 
     async def action_quit(self) -> None:
         if not self.running:
