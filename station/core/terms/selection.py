@@ -97,14 +97,36 @@ class Selection:
             return ("model forced: geometric" if not self.chosen else
                     f"model forced: geometric + {' + '.join(self.chosen)}")
         if not self.chosen:
-            return "no term beyond geometry earned its place: the result is the geometric fit"
+            near = self.closest
+            why = "" if near is None else (
+                f"; closest: {near.label}, {self.cv} RMS {near.cv_rms_mm / UM:.1f} µm ({near.change_pct:+.1f} %), "
+                f"p {near.p_value:.3g} where {self.alpha / self.step_candidates:.2g} was needed")
+            return "no term beyond geometry earned its place: the result is the geometric fit" + why
         geo = self.table[0].cv_rms_mm
         best = next(r for r in self.table if r.families == self.chosen and r.kept).cv_rms_mm
         return (f"kept {' + '.join(self.chosen)}: {self.cv} RMS {best / UM:.1f} µm against the geometric "
                 f"{geo / UM:.1f} µm ({100 * (best - geo) / geo:+.0f} %)")
 
+    @property
+    def step_candidates(self) -> int:
+        """Candidates scored in the first step (the Bonferroni divisor there)."""
+        return max(1, sum(1 for r in self.table if r.families and not r.base))
+
+    @property
+    def closest(self) -> CandidateScore | None:
+        """Where nothing beyond geometry was kept (and it was chosen, not forced): the candidate that
+        came closest to being kept, the lowest p of the paired test (ties: the lower CV RMS); what
+        the summary and the JSON name so that "nothing kept" says by how much."""
+        if self.chosen or self.forced:
+            return None
+        scored = [r for r in self.table if r.families and r.p_value is not None]
+        return min(scored, key=lambda r: (r.p_value, r.cv_rms_mm)) if scored else None
+
     def to_dict(self) -> dict:
+        near = self.closest
         return {"chosen": list(self.chosen), "summary": self.summary, "cv": self.cv, "alpha": self.alpha,
+                "closest": None if near is None else {
+                    **near.to_dict(), "level_needed": self.alpha / self.step_candidates},
                 "test": "one-sided Wilcoxon signed-rank on the per-pose sums of σ-normalised squared held-out "
                         "residuals, paired against the model extended; kept: p < alpha / candidates of the step, "
                         "their mean lower, and the CV position RMS below the geometric model's",
