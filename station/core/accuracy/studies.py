@@ -143,7 +143,7 @@ def _mc_pose_sigma(model, start, true, idx, estimates, joints, chunk: int = 500)
     for lo in range(0, estimates.shape[0], chunk):
         P = np.broadcast_to(start, (min(chunk, estimates.shape[0] - lo), start.size)).copy()
         P[:, idx] = estimates[lo:lo + chunk]
-        err = pose_error(forward(model, np.broadcast_to(joints, (P.shape[0],) + joints.shape), P), T0)
+        err = pose_error(forward(model, joints, P), T0)  # the joints broadcast against the models
         n_b, mean_b = err.shape[0], err.mean(axis=0)
         delta = mean_b - mean
         m2 = m2 + ((err - mean_b) ** 2).sum(axis=0) + delta**2 * count * n_b / (count + n_b)
