@@ -287,7 +287,8 @@ def residuals_and_jacobian(model: RobotModel, data: MeasurementSet, params, join
         return r, J
     p = T[..., :3, 3]
     if data.kind == "position":
-        r = (p - meas).reshape(p.shape[:-2] + (-1,))
+        r = p - meas  # either may carry the batch axes
+        r = r.reshape(r.shape[:-2] + (-1,))
         if J is not None:
             J = J[..., :3, :].reshape(J.shape[:-3] + (-1, J.shape[-1]))
         return r, J

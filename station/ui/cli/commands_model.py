@@ -65,8 +65,9 @@ def print_terms(sel) -> None:
         mark = " kept" if r.kept and r.families else ""
         print(f"{r.label[:58]:58s} {r.n_parameters:6d} {r.cv_rms_mm / UM:19.1f} µm {r.change_pct:+7.1f}% {p:>10s}{mark}")
     if not sel.forced:
-        print(f"(a term is kept when a one-sided Wilcoxon signed-rank test on the per-pose σ-normalised held-out "
-              f"residuals gives p < {sel.alpha:g} / candidates of its step and the CV errors drop; docs/error-terms.md)")
+        print(f"(a term is kept when a one-sided bootstrap of the CV gain on the per-pose σ-normalised held-out "
+              f"squared residuals gives p < {sel.alpha:g} / candidates of its step and the CV errors drop; "
+              f"docs/error-terms.md)")
     fit = sel.fit
     if fit.basis.size:
         print(f"{'term':22s} {'value':>28s} {'σ':>12s}  unit")

@@ -27,6 +27,20 @@ def _terms_study(args, model, n_sets: int) -> list | None:
     return [terms_study(model, families, n_sets=sets, seed=args.seed)]
 
 
+def _progress():
+    """Each study as it ends, on stderr (stdout stays the report or the JSON): a long --sets shows
+    where it is."""
+    import sys
+    import time
+
+    t0 = time.perf_counter()
+
+    def show(done: int, total: int, report) -> None:
+        print(f"study {done}/{total} done after {time.perf_counter() - t0:.1f} s: {report.name}", file=sys.stderr,
+              flush=True)
+    return show
+
+
 def cmd_study(args) -> int:
     from station.core.accuracy.studies import chapter_studies
 
@@ -34,7 +48,8 @@ def cmd_study(args) -> int:
     n_sets = min(args.sets, 200) if getattr(args, "quick", False) else args.sets
     if n_sets < 3:
         raise ConfigError("--sets must be at least 3 Monte Carlo data sets")
-    reports = _terms_study(args, model, n_sets) or chapter_studies(model, seed=args.seed, n_sets=n_sets)
+    reports = _terms_study(args, model, n_sets) or chapter_studies(model, seed=args.seed, n_sets=n_sets,
+                                                                   progress=_progress())
     if args.json:
         _print_json({"robot": model.name, "seed": args.seed, "monte_carlo_sets": n_sets,
                      "studies": [{"study": r.name, "figures": r.numbers, "parameters": list(r.table),
