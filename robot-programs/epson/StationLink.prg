@@ -49,11 +49,101 @@
 '     heartbeat re-publishes the identification registers and rebuilds the CRC table.
 '
 ' WHAT WAS NOT DONE
-'   * This program has NOT run on a real controller, nor in the RC+ simulator. It was not
-'     compiled. Build it in RC+ first and fix what the compiler says.
-'   * One Modbus client at a time (the station); a second connection waits.
+'   * This program has NOT run on a real controller, nor in the RC+ simulator, and RC+ has not
+'     compiled it. It builds and runs, unchanged, in the tests' SPEL+ executor
+'     (simulators/epson/), written from the pages and Epson's code listed under SOURCES with the
+'     strictest reading where they are silent: `station check` and `station conformance` exit 0
+'     against it over loopback (tests/robot_programs/test_epson_station_cli.py), and the line's
+'     faults - a client gone mid-request, a half-sent frame, an emergency stop and a restart of
+'     main, the motors off, a joint-range stop - are tests (test_epson_faults.py). An executor
+'     is not RC+: build it in RC+ first and fix what the compiler says.
+'   * One Modbus client at a time (the station); a second connection waits until the first
+'     closes or stalls for NET_TIMEOUT_MS.
 '   * The controller's own kinematics and any arm calibration set with ArmSet are the "nominal"
 '     kinematics here: CORRECTION_STATE defaults to 2 (unknown).
+'
+' MINIMUM VERSIONS
+'   Epson RC+ 7.0 with an RC700 / RC700-A or RC90 controller, or RC+ 8.0 with an RC800: the
+'   manual sets the program follows ([UG-BG], [UG-TYPES], [REF-GLOBAL]) are those of RC+ 7 and
+'   8. It needs background tasks [UG-BG], the UByte type [UG-TYPES] and Global Static
+'   [REF-GLOBAL]; no page read states the first release of each. An older RC+ (5, 6) or
+'   controller (RC170, RC180) is not supported: the program follows none of their manuals.
+'   Confirm both versions against the release notes of your RC+ before the first build.
+'
+' WHAT WAS CHECKED: each construct class the program uses and where it is written (document,
+'   section; SOURCES below). Where Epson documents nothing - a Modbus TCP server in SPEL+ - the
+'   program keeps to constructs Epson's own code uses [EPSON-MODBUS].
+'   * Function name (a As T, ...) As T ... Fend, the result by assigning the function's name,
+'     Exit Function, calls written f(args) or Call f(args) (never "f a, b"), local declarations
+'     "Long a, b" / "UByte buf(7)" at the top of a function: [EPSON-MODBUS] (every function).
+'   * OnErr GoTo label with the handler at the end of the function, after Exit Function (no
+'     EResume anywhere): [EPSON-MODBUS] (ErrProc in every function), [UG-BG] (errors in
+'     background tasks). Err in the handler: Language Reference, not confirmed page by page;
+'     ErrAxis: no page (see CONFIRM ON A REAL CONTROLLER).
+'   * If ... Then / ElseIf / Else / EndIf, single-line If, Do While ... Loop, Do ... Loop,
+'     For ... To ... [Step] ... Next, Exit Do / Exit For, Wait <seconds>: [REF-HALT] (example),
+'     [REF-TASKINFO] (example), [EPSON-MODBUS] (Do While ChkNet(port) < 7 ... Wait 0.05 ... Loop,
+'     For index = 0 To count - 1 ... Next).
+'   * Global Static <type> name(dims), Static on every Global (Globals not Preserve / Static are
+'     cleared when a function starts from the Run / Operator window; Epson's library code writes
+'     the pair Global NonStatic): [REF-GLOBAL], [EPSON-MODBUS]. At most 100,000 elements per
+'     array, 3 dimensions: [REF-GLOBAL], [UG-ARRAYS] (TBuf 96,000, StoreReg 64,032; locals
+'     under 2,000).
+'   * Types Boolean, UByte (0..255, the ReadBin / WriteBin buffers as in [EPSON-MODBUS]), Integer
+'     (16 bit: only loop counters and indices), Long (32 bit: every register value), Double:
+'     [UG-TYPES]. A register value (0..65535) is never stored in an Integer.
+'   * Identifiers: no SPEL+ keyword or point syntax (Off, Speed, Err, Val, Base, P(...)) names a
+'     variable, parameter, function or #define; no local has a global's, function's or
+'     #define's name in any case (SPEL+ names are not case-sensitive: Index / index in
+'     [EPSON-MODBUS]). #define NAME number: [EPSON-MODBUS] (Modbus.inc's constants).
+'   * And / Or / Not on Long words and Booleans, &H literals, /: [EPSON-MODBUS] (address And
+'     &HFF, address / &H100, ... And tmoutcnt > 0). Xor, LShift, RShift, Mod (always in
+'     parentheses), Int, Abs: Language Reference, not confirmed page by page.
+'   * Background tasks: BgMain is task 65 and starts when the project loads; Xqt from it makes
+'     background tasks; not stopped by an emergency stop or a safeguard; no manipulator command
+'     (Go, Speed, Accel, Motor, Power, Tool, Here, Agl) in them; "any error that occurs in the
+'     background task cannot be recovered in AUTO mode" - hence OnErr in ServeConnection and
+'     HeartbeatLoop, each called again by an endless loop: [UG-BG]. Program lines at most 512
+'     characters: [UG-RULES].
+'   * Xqt funcName, task numbers (normal 1-32, background 65-80): [REF-HALT], [REF-TASKINFO].
+'     TaskInfo(MAIN_TASK, 3): main is up only in state 1 (running) or 2 (waiting); MoveTask is
+'     Xqt'd from main, never from the background side: [REF-TASKINFO].
+'   * OpenNet #p As Server, WaitNet #p [, timeout], ChkNet(p) (the bytes waiting; < 0: not
+'     connected / not open), CloseNet #p, ReadBin #p, buf(), n, WriteBin #p, buf(), n, ports
+'     201-216: [EPSON-MODBUS] (OpenNet As Client, WaitNet #port, 3.0, ChkNet(port) <= -3,
+'     ReadBin #port, bufHeader(), 7, WriteBin #port, bufSend(), 12), [TCP-14.3]. A receive waits
+'     at most NET_TIMEOUT_MS in Wait 0.01 steps, as [EPSON-MODBUS] bounds its receive.
+'   * Motor On, Power High, Tool n in main before the first motion; Speed / Accel whole
+'     percents 1..100 ([RCREF80] Command 1): cmd_speed (0.1 % steps) below 1 % is refused
+'     BAD_COMMAND, others round down (never faster than asked). Motors off: NOT_READY, nothing
+'     latched.
+'   * Go JA(j1, j2, j3, j4) Till MemSw(bit) = On, TillOn, MemOn / MemOff: [REF-JA], [REF-TILL]
+'     (MemSw is one of the functions a Till condition may use). P900 = XY(x, y, z, u) /L or /R,
+'     PAgl, Agl, CX / CY / CZ / CU (Here), DegToRad / RadToDeg: SPEL+ Language Reference, not
+'     confirmed page by page; the executor runs them as the station's protocol needs.
+'   * Roll and pitch of MOVE_CARTESIAN: refused UNREACHABLE (a SCARA sets neither).
+'   * The logic was traced against simulators/controller_server.py, controller_tables.py,
+'     controller_claim.py and drivers/correction_table.py; tests/test_robot_programs.py checks
+'     every map constant and the CRC polynomial halves against drivers/controller_map.py and zlib.
+'
+' CONFIRM ON A REAL CONTROLLER (the executor follows the pages; no controller confirmed them)
+'   * Global Static: that a Global declared Static keeps its value when main is started from the
+'     Run / Operator window, and that the arrays fit the controller's memory for globals
+'     (about 160,000 Long elements) [REF-GLOBAL]. The tables and the claim depend on it.
+'   * TaskInfo(task, 3) state numbers: 1 running, 2 waiting, 3 halted, 5 ended by an error, -1
+'     not executing, as read on [REF-TASKINFO]; and that a background task may call TaskInfo.
+'   * The Motor function: `Motor = Off` tests the motors' state in main (no page read shows
+'     Motor used as a function; only the Motor On / Off statement).
+'   * ErrAxis: that it returns the axis of the last error (0 for none) inside an OnErr handler;
+'     no page for it was found. Without it error_joint of a DRIVE_FAULT is wrong, not the code.
+'   * That the emergency stop aborts main and not BgMain [UG-BG] (the program reports the running
+'     motion as ESTOP and refuses commands NOT_READY until main runs again).
+'   * ReadBin / WriteBin "#port, buf(), n", ChkNet's return values and WaitNet's timeout beyond
+'     [EPSON-MODBUS] and the reprint [TCP-14.3]; whether ChkNet turns negative when the client
+'     closes the connection (the executor keeps counting the bytes waiting: the 2 s receive
+'     timeout ends the connection either way).
+'   * The precedence of Mod among + and - (every Mod here is parenthesised) and how RC+ stores a
+'     Double into an integer variable (the program stores only whole values: Int, FloorD).
 '
 ' INSTALL AND CONFIGURE
 '   1. Add this file to an Epson RC+ project and build. Enable background tasks in the
@@ -61,79 +151,20 @@
 '      (Auto mode or the Run window) for the motion side.
 '   2. Controller TCP/IP port #201 (NET_PORT): server, local port 502 (or the port of
 '      [devices] controller), no terminator.
-'   3. Set the #defines below: BASE (= [devices] controller_register_base), WORD_ORDER_BIG
+'   3. Set the #defines below: REG_BASE (= [devices] controller_register_base), WORD_ORDER_BIG
 '      (1 = "big", 0 = "little"), WATCHDOG_MS, TOOL_NO (a Tool defined as the probe head K),
-'      CORRECTION_STATE, MAIN_TASK (main's task number, 1 when started normally), and the soft
-'      limits in InitConfig (station units: rad, rad, mm, rad).
+'      CORRECTION_STATE, MAIN_TASK (main's task number, 1 when started normally),
+'      NET_TIMEOUT_MS, and the soft limits in InitConfig (station units: rad, rad, mm, rad).
 '   4. The station's robot file must describe the robot as Epson does: J1, J2, J4 in Epson's
 '      zero and sign (deg in SPEL+, rad on the wire), J3 in mm, base frame = Epson's robot
 '      coordinates, the elbow flag +1 = J2 > 0.
 '   5. With the robot parked at [conformance].park_joints run `station conformance CONFIG`
 '      before the first calibration.
 '
-' WHAT WAS CHECKED (document, page; sources are listed under SOURCES at the end of this header)
-'   * Function main ... Fend, Xqt funcName, Do ... Loop, Wait <seconds> (fractions), ' comments,
-'     On / Off: the example of [REF-HALT]. Task numbers (normal 1-32, background 65-80):
-'     [REF-HALT], [REF-TASKINFO].
-'   * If ... Then / Else / EndIf, TaskInfo(task, 3) = -1 when a task does not execute:
-'     [REF-TASKINFO] (used to see that main no longer runs).
-'   * Go ... Till MemSw(bit) = On, TillOn: [REF-TILL] (MemSw is one of the functions a Till
-'     condition may use; TillOn tells whether the condition stopped the motion).
-'   * JA(j1, j2, j3, j4) in deg / mm, Go JA(...), point assignment P10 = JA(...): [REF-JA].
-'   * Global <type> name(dims): [REF-GLOBAL]; at most 100,000 elements per global array and 3
-'     dimensions [REF-GLOBAL], [UG-ARRAYS]: TBuf 3 x 32,000 = 96,000, StoreReg 1,104 x 58 =
-'     64,032; local arrays stay under 2,000 elements [UG-ARRAYS].
-'   * Types Boolean, Byte (-128..127), Integer (16 bit), Long (32 bit), Double: [UG-TYPES].
-'   * Background tasks: BgMain is task 65, starts when the project loads, Xqt from it makes
-'     background tasks, not stopped by emergency stop or safeguard, no manipulator commands:
-'     [UG-BG]. Program lines are at most 512 characters: [UG-RULES].
-'   * OpenNet #p As Server, WaitNet #p, ChkNet(p) (no #; returns the byte count, or -1 open
-'     but not connected, -2 used by another task, -3 not open), CloseNet #p, ReadBin # / WriteBin #
-'     (receive / send one or more bytes), ports 201-216: [TCP-14.3] - a third-party reprint of
-'     Epson's chapter, not Epson's own page (see NOT CONFIRMED).
-'   * Speed and Accel are whole percents 1..100: the station's cmd_speed (1..1000, 0.1 %) is
-'     rounded and clamped to 1..100 before use; [RCREF80] Command 1 gives PTP acceleration as a
-'     whole percent >= 1 (the Accel statement's own page was not found).
-'   * The logic was traced against simulators/controller_server.py, controller_tables.py,
-'     controller_claim.py (the claim rules) and drivers/correction_table.py; tests/test_robot_programs.py checks every map constant and
-'     the CRC polynomial halves against drivers/controller_map.py and zlib.
-'
-' REPLACED (the constructs issue 28 doubted)
-'   * ErrAxis (no page found): a drive fault now reports error_joint 0 ("0 if none", map).
-'   * Case 3, 4 (comma list, no Select page found): Select ... Send is no longer used at all;
-'     every dispatch is If / ElseIf.
-'   * ChkNet(NET_PORT): kept - [TCP-14.3] shows ChkNet(201) without #; NET_PORT is a #define.
-'   * User function Exception: renamed MbException.
-'   * ~160,000 Long elements: kept, each global array is under the documented 100,000-element
-'     limit per array; the total controller memory for globals is NOT CONFIRMED.
-'   * Till MemSw(...): kept, confirmed by [REF-TILL].
-'   * Accel below 1 %: cannot happen (clamped to 1..100, see above).
-'   * NoEmgAbort tasks during an e-stop: replaced by background tasks [UG-BG].
-'   * Also removed: TmReset / Tmr (the watchdog counts 0.1 s heartbeat cycles), Mod in the
-'     heartbeat, ByRef array parameters (a global Dq() instead), several statements on one
-'     line ("a = 1: b = 2"), the ReadOnly() array (a range test, so that zeroed globals are safe).
-'   * Fixed: after EResume Next, MoveTask overwrote the error result with 1 or 2 and NominalIK
-'     could accept a stale P900; both now flag the error and test the flag.
-'
-' NOT CONFIRMED (no Epson page for them was found in the stores searched; confirm each in the
-'   SPEL+ Language Reference of your RC+ version before the first run)
-'   * ReadBin / WriteBin argument form "#port, ByteArray(), count", Epson's Byte arrays for it,
-'     and ChkNet / WaitNet / OpenNet / CloseNet beyond the reprint [TCP-14.3]. Public SPEL+ code
-'     uses the same form (e.g. WriteBin #204, modMessage(), 8), which is not a confirmation.
-'   * Function ... (x As T) As T, return by assigning the function name, Exit Function, Exit
-'     Do / Exit For, For ... Next [Step], Do While, ElseIf, single-line If, #define in a .prg.
-'   * Operators And / Or / Xor / Not on integers, Mod, Int, Abs, LShift, RShift, &H literals.
-'   * MemOn / MemOff, OnErr GoTo label / EResume Next (MoveTask, NominalIK), EStopOn (main's
-'     command loop), Agl, PAgl, XY(...) /L /R, P900 = ..., CX / CY / CZ / CU, Here, Tool, Speed,
-'     Accel, DegToRad, RadToDeg, True / False; that a background task may call TaskInfo.
-'   * Whether a normal task survives an emergency stop (if main is aborted, the background side
-'     reports the running motion as E_ESTOP and refuses new commands with E_NOT_READY until
-'     main runs again); whether the controller has memory for all globals together; whether
-'     starting main really clears the Globals that BgMain uses (see [REF-GLOBAL]).
-'   * No SPEL+ executor was added to the tests: the pages found do not define ReadBin, Xqt,
-'     OnErr or the expression rules well enough to build one that would prove anything.
-'
 ' SOURCES (download.epson.biz/robots/ww/data/html/... is Epson's online manual set)
+'   [EPSON-MODBUS] Epson's own SPEL+ code, a Modbus TCP client: Epson-Robots/rcplus-extensions,
+'                  samples/rcplus-custom/VanguardModelPFScrewdriver/VanguardModelPFScrewdriver/
+'                  Libraries/Source/VGD_PF/Modbus.prg (and Modbus.inc).
 '   [REF-HALT]     SPEL+ Language Reference, "Halt Statement", SPEL/en/030/030-120/030-120-010/
 '                  030-120-010-010.html (syntax, task numbers, example program).
 '   [REF-TASKINFO] SPEL+ Language Reference, "TaskInfo Function", SPEL/en/030/030-230/
