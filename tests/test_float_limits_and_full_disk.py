@@ -67,7 +67,7 @@ def test_validate_on_data_of_1e308_is_refused(tmp_path, capsys, calibration):
 
 
 @pytest.mark.skipif(not os.path.exists("/dev/full"), reason="needs /dev/full (Linux)")
-@pytest.mark.parametrize("fmt", ["toml", "urdf", "dh"])
+@pytest.mark.parametrize("fmt", ["toml", "urdf-new", "dh"])
 def test_export_model_to_a_full_disk_is_refused(capsys, fmt):
     """Was ``OSError: [Errno 28] No space left on device`` (internal error)."""
     rc, text = _run(capsys, "export-model", "sr800", "--format", fmt, "-o", "/dev/full")

@@ -65,8 +65,8 @@ def test_a_physically_implausible_value_is_refused_with_the_bound(tmp_path, edit
 
 def test_the_built_in_and_exported_robots_still_load(tmp_path, capsys):
     load_robot("sr800")
-    for fmt in ("toml", "urdf", "dh", "mdh"):
-        out = tmp_path / f"m.{fmt}" if fmt in ("toml", "urdf") else tmp_path / f"m.{fmt}.csv"
+    for fmt in ("toml", "urdf-new", "dh", "mdh"):
+        out = tmp_path / {"toml": "m.toml", "urdf-new": "m.urdf"}.get(fmt, f"m.{fmt}.csv")
         assert main(["export-model", "sr800", "--format", fmt, "-o", str(out)]) == 0
         load_robot(out)
 

@@ -189,13 +189,13 @@ def test_validate_and_export_model(capsys, pose_file, tmp_path):
     assert d["nominal_errors"]["rms_position_um"] > 5 * d["model_errors"]["rms_position_um"]
     rc, out, _ = run(capsys, "validate", model_file, f)
     assert rc == 0 and "improvement" in out and "worst rows" in out
-    for fmt, suffix in (("mdh", ".mdh.csv"), ("urdf", ".urdf"), ("dh", ".dh.csv"), ("toml", ".toml")):
+    for fmt, suffix in (("mdh", ".mdh.csv"), ("urdf-new", ".urdf"), ("dh", ".dh.csv"), ("toml", ".toml")):
         target = tmp_path / f"exported{suffix}"
         rc, out, err = run(capsys, "export-model", model_file, "--format", fmt, "-o", target, "--json")
         assert rc == 0, err
         e = json.loads(out)
         assert e["max_position_difference_um"] >= 0 and target.exists()
-        if fmt in ("urdf", "toml"):
+        if fmt in ("urdf-new", "toml"):
             assert e["exact"] is True
         else:  # tilted parallel axes: DH states what it loses
             assert e["exact"] or any("cannot hold" in n for n in e["notes"])

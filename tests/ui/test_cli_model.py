@@ -99,7 +99,7 @@ def test_identified_terms_travel_in_the_robot_file(bent_file, tmp_path, capsys):
     assert any("not written in MDH" in n and "geometric fit of the same data" in n and "µm RMS" in n
                for n in json.loads(text)["notes"])
     assert terms.geometric_params is not None and terms.effect_on_fit_um is not None and terms.effect_on_fit_um > 5
-    rc, _, _ = run(capsys, "export-model", out, "--format", "urdf", "-o", tmp_path / "bent.urdf")
+    rc, _, _ = run(capsys, "export-model", out, "--format", "urdf-new", "-o", tmp_path / "bent.urdf")
     assert rc == 0
     urdf = load_robot(tmp_path / "bent.urdf")  # URDF holds any geometry: here the geometric fit, exactly
     np.testing.assert_allclose(forward(urdf, q)[:, :3, 3], forward(model, q, np.array(terms.geometric_params))[:, :3, 3],

@@ -521,16 +521,27 @@ def cmd_export_model(args) -> int:
     from station.io.robot_terms import gears_toml, gravity_toml
     from station.ui.cli.commands_model import gear_ratios_of, gravity_of, lost_in_format, stored_terms
 
-    model, jmap = _robot(args, args.model)
+    if getattr(args, "robot", None) and not str(args.model).endswith(".urdf"):  # the links are --robot's URDF's
+        from station.io.robot_files import load_mapped_robot
+
+        model, jmap = load_mapped_robot(args.model)
+    else:
+        model, jmap = _robot(args, args.model)
     terms = stored_terms(args.model)
     gravity = gravity_of(args.model, model)
     exported = model  # a format without the terms gets the geometric fit of the same data (issue 30)
     if args.format != "toml" and terms is not None and terms.geometric_params is not None:
         exported = model.with_params(np.asarray(terms.geometric_params, dtype=float))
+    ratios = gear_ratios_of(args.model, model)
+    lost = lost_in_format(model, terms, args.format.removesuffix("-new"), gravity=gravity,
+                          ratios=ratios)  # only TOML holds the terms
+    if args.format in ("urdf", "ur-calibration"):  # into the robot's own URDF, UR's YAML (issue 41 §2)
+        from station.ui.cli.commands_export import export_calibrated
+
+        return export_calibrated(args, exported, jmap, lost)
+    args.format = "urdf" if args.format == "urdf-new" else args.format
     res = export_model(exported, args.format, setup=not args.base)
     notes = list(res.notes)
-    ratios = gear_ratios_of(args.model, model)
-    lost = lost_in_format(model, terms, args.format, gravity=gravity, ratios=ratios)  # only TOML holds the terms
     if lost:
         notes.append(lost)
     text = res.text

@@ -179,9 +179,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true")
     p.set_defaults(func="station.ui.cli.commands_core:cmd_validate")
 
-    p = sub.add_parser("export-model", help="a model as MDH, DH, URDF or TOML")
+    p = sub.add_parser("export-model", help="a model as MDH, DH, URDF or TOML, into its own URDF, or for UR's driver")
     p.add_argument("model", help="identified robot file (or built-in robot)")
-    p.add_argument("--format", choices=["mdh", "dh", "urdf", "toml"], required=True)
+    p.add_argument("--format", choices=["mdh", "dh", "urdf", "urdf-new", "toml", "ur-calibration"], required=True,
+                   help="urdf: into the robot's own URDF; urdf-new: a new URDF; ur-calibration: UR's kinematics YAML")
+    p.add_argument("--robot", metavar="FILE.urdf", help="--format urdf: the URDF the model was identified with")
     p.add_argument("--output", "-o", required=True, help="file to write")
     p.add_argument("--base", action="store_true", help="robot base frame (leave out the set-up R)")
     _add_chain(p, short=False)
