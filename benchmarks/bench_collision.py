@@ -18,7 +18,7 @@ def main(path: str) -> None:
     r = runs[0]
     print(f"{path}: {r.poses} poses, {r.samples} samples at {r.margin_mm:g} mm, "
           f"median {statistics.median(x.seconds for x in runs):.2f} s; first clash: "
-          f"{'none' if r.clash is None else r.clash.describe(r.margin_mm)}")
+          f"{'none' if r.clash is None else r.clash.describe()}")
 
 
 if __name__ == "__main__":

@@ -40,7 +40,13 @@ from station.core.kinematics.transforms import invert, pose_to_matrix
 from station.errors import ConfigError
 
 __all__ = ["Shape", "CellShapes", "Clash", "CollisionReport", "cell_shapes", "default_radii", "check_path",
-           "check_plan", "plan_path", "fcl_available"]
+           "check_plan", "plan_path", "fcl_available", "TOUCH_MARGIN_MM",
+           "head_depth_mm"]
+
+#: the least clearance [mm] of the probes' bodies (their tips excepted) from the cube they touch,
+#: during that touch (approach, above the point, touch, retract): the tips press on its faces, the
+#: bodies behind them must not (every other move keeps [plan] collision_margin_mm from that cube too)
+TOUCH_MARGIN_MM = 0.5
 
 #: default link radius as a fraction of the robot's size (the sum of its link offsets): 4 % gives
 #: 58 mm on the PUMA 560's 1.45 m and 57 mm on a 600 mm SCARA with its 820 mm column, about an
@@ -142,22 +148,42 @@ def _link_shapes(cfg: CellConfig) -> tuple[list[Shape], list[str]]:
 
 
 def _head_shapes(cfg: CellConfig) -> list[Shape]:
-    """The probes' bodies and the mount, riding on the last frame (the head frame MKKS)."""
+    """The probes and the mount, riding on the last frame (the head frame MKKS). Each probe is two
+    capsules of its tip's radius: its tip ("tip", from the free tip, half the stroke beyond the
+    mount point, back to one tip diameter behind it: what presses on the face at a touch) and its
+    body ("head", from there back by the stroke: what must never touch the cube)."""
     from station.core.probe.geometry import default_probe_head
 
     head = cfg.head if cfg.head is not None else default_probe_head(cube_edge_mm=cfg.cube_edge_mm)
     last = len(cfg.model.transforms) - 1
     out = []
     for i in range(head.n_probes):
-        tip = head.mount_points[i]
-        r = float(head.tip_radii[i])
-        back = tip - head.directions[i] * (float(head.strokes[i]) + 2 * r)
-        out.append(_segment(f"probe {head.label(i)}", tip, back, r, last, "head"))
+        mount, d = head.mount_points[i], head.directions[i]
+        r, stroke = float(head.tip_radii[i]), float(head.strokes[i])
+        neck = mount - d * 2 * r
+        out.append(_segment(f"probe {head.label(i)}'s tip", mount + d * stroke / 2, neck, r, last, "tip"))
+        out.append(_segment(f"probe {head.label(i)}", neck, neck - d * stroke, r, last, "head"))
     K = pose_to_matrix(cfg.model.nominal.reshape(-1, 6)[-1])
     flange = invert(K)[:3, 3]  # the flange's origin in MKKS
     r_mount = float(np.max(np.linalg.norm(head.mount_points, axis=1))) / 4
     out.append(_segment("head mount", flange, np.zeros(3), r_mount, last, "head"))
     return [s for s in out if s.kind in ("capsule", "sphere")]
+
+
+def head_depth_mm(cfg: CellConfig) -> float:
+    """How far [mm] the head's lowest point (a free probe's tip, a probe's body, the mount) hangs
+    below its nominal contact, along the contact frame's z (up, out of the cube's top face): a
+    SCARA's travel height lifts the contact this much more, or a side probe drags over a cube."""
+    from station.cell.plan.assembly import nominal_contact
+
+    M = nominal_contact(cfg)
+    up, c = M[:3, 2], M[:3, 3]
+    low = 0.0
+    for s in _head_shapes(cfg):
+        half = s.local[:3, 2] * (s.size[1] / 2 if s.kind == "capsule" else 0.0)
+        for end in (s.local[:3, 3] + half, s.local[:3, 3] - half):
+            low = max(low, float((c - end) @ up) + s.size[0])
+    return low
 
 
 def _body_shapes(cfg: CellConfig) -> tuple[list[Shape], tuple[str, ...]]:
@@ -208,6 +234,7 @@ def cell_shapes(cfg: CellConfig) -> tuple[CellShapes, tuple[str, ...]]:
              for s in (*body, *_obstacle_shapes(cfg))]
     chain = [g for g in dict.fromkeys(s.group for s in links)] + ["head"]
     allowed = {frozenset(p) for p in zip(chain, chain[1:])}
+    allowed |= {frozenset(("tip", "head")), frozenset(("tip", chain[-2]))}  # the tips ride on the head
     spec = cfg.robot_collision
     allowed |= {frozenset((f"link:{a}", f"link:{b}")) for a, b in (spec.allowed_pairs if spec is not None else ())}
     base = f"link:{names[0]}"  # the base stands where it stands: nothing fixed is checked against it
@@ -246,61 +273,73 @@ def _grown(fcl, s: Shape, grow: float):
 
 
 class _Checker:
-    """The shapes as fcl objects, grown by half the margin, in two broad-phase managers."""
+    """The checked pairs, a cheap screen of every sample in numpy (a lower bound of each pair's
+    distance: a moving capsule's segment boxed in a fixed shape's frame, or two bounding spheres),
+    and fcl's exact signed distance of each pair the screen leaves within twice the margin (so the
+    plan's closest approach is reported even where nothing clashes)."""
 
     def __init__(self, cfg: CellConfig, shapes: CellShapes):
         self.fcl = fcl = _fcl()
-        self.cfg, self.shapes = cfg, shapes
-        half = shapes.margin_mm / 2
-        g_moving = [_grown(fcl, s, half) for s in shapes.moving]
-        g_fixed = [_grown(fcl, s, half) for s in shapes.fixed]
-        self.moving = [fcl.CollisionObject(g, _tf(fcl, s.local)) for g, s in zip(g_moving, shapes.moving)]
-        fixed = [fcl.CollisionObject(g, _tf(fcl, s.local)) for g, s in zip(g_fixed, shapes.fixed)]
-        # a contact names its geometries: the shapes they were made for
-        self.by_geom = {id(g): s for g, s in zip([*g_moving, *g_fixed], [*shapes.moving, *shapes.fixed])}
-        self._keep = (g_moving, g_fixed)  # the ids above stay valid while the geometries live
-        self.m_moving = fcl.DynamicAABBTreeCollisionManager()
-        self.m_moving.registerObjects(self.moving)
-        self.m_moving.setup()
-        self.m_fixed = fcl.DynamicAABBTreeCollisionManager()
-        self.m_fixed.registerObjects(fixed)
-        self.m_fixed.setup()
+        self.shapes = shapes
+        mv, fx = shapes.moving, shapes.fixed
 
-    def place(self, frames: np.ndarray) -> None:
-        """Put the moving shapes where the chain's ``frames`` (nt, 4, 4) carry them."""
-        for o, s in zip(self.moving, self.shapes.moving):
-            if s.frame >= 0:
-                o.setTransform(_tf(self.fcl, frames[s.frame] @ s.local))
-        self.m_moving.update()
+        def checked(x: Shape, y: Shape) -> bool:
+            return x.group != y.group and frozenset((x.group, y.group)) not in shapes.allowed
 
-    def clash(self, touched: str | None, frames: np.ndarray) -> tuple[Shape, Shape, float] | None:
-        """The first pair closer than the margin where the shapes are placed, with its clearance, or
-        None. A grown box's corners reach beyond the margin: each pair found is measured again."""
+        self.mm = np.array([(i, j) for i in range(len(mv)) for j in range(i + 1, len(mv)) if checked(mv[i], mv[j])],
+                           dtype=int).reshape(-1, 2)
+        self.mf = np.array([(i, j) for i in range(len(mv)) for j in range(len(fx)) if checked(mv[i], fx[j])],
+                           dtype=int).reshape(-1, 2)
+        self.half_len = np.array([s.size[1] / 2 if s.kind == "capsule" else 0.0 for s in mv])
+        self.radius = np.array([s.size[0] for s in mv])
+        # a fixed shape's half extents in its own frame (a cylinder's bounding box: still a lower bound)
+        self.half_box = np.array([np.array(s.size) / 2 if s.kind == "box" else
+                                  np.array([s.size[0], s.size[0], s.size[1] / 2]) for s in fx]).reshape(-1, 3)
+        self.fixed_inv = np.array([invert(s.local) for s in fx]).reshape(-1, 4, 4)
+        self.objs = {id(s): fcl.CollisionObject(_grown(fcl, s, 0.0), _tf(fcl, s.local)) for s in (*mv, *fx)}
+
+    def placed(self, frames: np.ndarray) -> np.ndarray:
+        """(n, moving, 4, 4): every moving shape's pose for each of ``frames`` (n, nt, 4, 4)."""
+        n = len(frames)
+        return np.stack([frames[:, s.frame] @ s.local if s.frame >= 0 else np.broadcast_to(s.local, (n, 4, 4))
+                         for s in self.shapes.moving], axis=1)
+
+    def screen(self, W: np.ndarray, watch: float) -> tuple[np.ndarray, np.ndarray]:
+        """Per sample, which moving-moving and moving-fixed pairs may lie within ``watch`` [mm]:
+        boolean (n, pairs) each, never False for a pair that does. The first of a pair is a segment
+        grown by its radius, the second is boxed in its own frame (a capsule or cylinder in its
+        bounding box: the bound stays a lower one)."""
+        c, z = W[..., :3, 3], W[..., :3, 2]
+        ends = [c + s * self.half_len[:, None] * z for s in (1.0, -1.0)]  # (n, moving, 3) each
+        i, j = self.mm.T
+        Rt = W[:, j, :3, :3]  # into the second capsule's frame: x_box = Rᵀ (x - c)
+        local = [(np.swapaxes(Rt, -1, -2) @ (e[:, i] - c[:, j])[..., None])[..., 0] for e in ends]
+        box = np.stack([self.radius[j], self.radius[j], self.radius[j] + self.half_len[j]], axis=-1)
+        near_mm = _box_gap(local[0], local[1], box) - self.radius[i] < watch
+        i, f = self.mf.T
+        gaps = np.empty((len(W), len(self.mf)))
+        for g in np.unique(f):  # each fixed shape: every moving segment's ends in its frame at once
+            k = np.flatnonzero(f == g)
+            R, t = self.fixed_inv[g, :3, :3], self.fixed_inv[g, :3, 3]
+            p0, p1 = (e[:, i[k]] @ R.T + t for e in ends)
+            gaps[:, k] = _box_gap(p0, p1, self.half_box[g]) - self.radius[i[k]]
+        return near_mm, gaps < watch
+
+    def clearance(self, a: Shape, b: Shape, Wa: np.ndarray, Wb: np.ndarray) -> float:
+        """The true distance [mm] between ``a`` and ``b`` placed at ``Wa``, ``Wb``; negative: the depth
+        by which they overlap."""
         fcl = self.fcl
-        for other in (None, self.m_fixed):
-            data = fcl.CollisionData(request=fcl.CollisionRequest(num_max_contacts=10_000, enable_contact=False))
-            if other is None:
-                self.m_moving.collide(data, fcl.defaultCollisionCallback)
-            else:
-                self.m_moving.collide(other, data, fcl.defaultCollisionCallback)
-            for c in data.result.contacts:
-                a, b = self.by_geom[id(c.o1)], self.by_geom[id(c.o2)]
-                pair = frozenset((a.group, b.group))
-                if a.group == b.group or pair in self.shapes.allowed or pair == frozenset(("head", touched)):
-                    continue
-                d = self.clearance(a, b, frames)
-                if d < self.shapes.margin_mm:
-                    return a, b, d
-        return None
+        oa, ob = self.objs[id(a)], self.objs[id(b)]
+        oa.setTransform(_tf(fcl, Wa))
+        ob.setTransform(_tf(fcl, Wb))
+        return float(fcl.distance(oa, ob, fcl.DistanceRequest(enable_signed_distance=True), fcl.DistanceResult()))
 
-    def clearance(self, a: Shape, b: Shape, frames: np.ndarray) -> float:
-        """The true (not grown) distance [mm] between ``a`` and ``b`` placed by ``frames``; negative:
-        the depth by which they overlap."""
-        fcl = self.fcl
-        objs = [fcl.CollisionObject(_grown(fcl, s, 0.0), _tf(fcl, frames[s.frame] @ s.local if s.frame >= 0
-                                                              else s.local)) for s in (a, b)]
-        return float(fcl.distance(objs[0], objs[1], fcl.DistanceRequest(enable_signed_distance=True),
-                                  fcl.DistanceResult()))
+
+def _box_gap(p0: np.ndarray, p1: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """A lower bound [mm] of the distance from the segments ``p0``–``p1`` (…, 3) to the centred box of
+    ``half`` extents: the distance of the segment's own bounding box to it."""
+    lo, hi = np.minimum(p0, p1), np.maximum(p0, p1)
+    return np.linalg.norm(np.maximum(0.0, np.maximum(lo - half, -half - hi)), axis=-1)
 
 
 def _tf(fcl, T: np.ndarray):
@@ -311,28 +350,46 @@ def _tf(fcl, T: np.ndarray):
 
 @dataclass(frozen=True)
 class Clash:
-    """Where a plan would collide: the two shapes, the step and the move, the clearance [mm]."""
+    """Two shapes' closest approach: the shapes, the step and the move, the clearance [mm] and the
+    least clearance that pair must keep there [mm] (under it: a clash)."""
 
     a: str
     b: str
     where: str
     clearance_mm: float
+    limit_mm: float
 
-    def describe(self, margin_mm: float) -> str:
+    def describe(self) -> str:
+        under = "overlapping" if self.clearance_mm < 0 else "under" if self.clearance_mm < self.limit_mm else "over"
         return (f"{self.a} and {self.b} come within {self.clearance_mm:.1f} mm of each other "
-                f"({'overlapping' if self.clearance_mm < 0 else 'under the margin'} of {margin_mm:g} mm) {self.where}")
+                f"({under} the margin of {self.limit_mm:g} mm) {self.where}")
 
 
 @dataclass(frozen=True)
 class CollisionReport:
     """What the check found: poses and path samples checked, the first clash (None: clear), the
-    margin [mm] and the time the check took [s]."""
+    closest approach of any pair held to the full margin (None: none came within twice the margin)
+    and of a probe's body to the cube it touches, the margin [mm] and the time the check took [s]."""
 
     poses: int
     samples: int
     clash: Clash | None
     margin_mm: float
+    closest: Clash | None = None
+    closest_touch: Clash | None = None
     seconds: float = field(compare=False, default=0.0)
+
+    def lines(self) -> list[str]:
+        """What ``station plan`` prints."""
+        head = (f"collision check: {self.poses} poses and the paths between them ({self.samples} samples), "
+                f"margin {self.margin_mm:g} mm, {self.seconds:.1f} s")
+        if self.clash is not None:
+            return [head, f"  CLASH: {self.clash.describe()}"]
+        out = [head, "  least clearance: " + (f"over {2 * self.margin_mm:g} mm" if self.closest is None else
+                                              self.closest.describe())]
+        if self.closest_touch is not None:
+            out.append(f"  during the touches: {self.closest_touch.describe()}")
+        return out
 
 
 def plan_path(cfg: CellConfig, plan: Plan, with_upload: bool = True) -> list[tuple[np.ndarray, str, int]]:
@@ -350,48 +407,87 @@ def plan_path(cfg: CellConfig, plan: Plan, with_upload: bool = True) -> list[tup
     return out
 
 
+def _where(poses: list[tuple[np.ndarray, str, int]], i: int, on_path: bool) -> str:
+    """What people read for pose ``i`` (or the path from it to the next)."""
+    label = poses[i][1]
+    if not on_path:
+        return f"at {label}"
+    step, nxt = label.split(":")[0], poses[i + 1][1]
+    same = nxt.split(":")[0] == step
+    return (f"on the move from {label} to {nxt.split(': ', 1)[-1]}" + ("" if same else f" ({nxt.split(':')[0]})"))
+
+
 def _samples(shapes: CellShapes, poses: list[tuple[np.ndarray, str, int]], point_cube: tuple[str, ...]):
     """The joints of every pose and of the path to the next one, at a step that moves no point of
-    the arm by more than the margin; with each sample what it is and the cube the head may touch."""
-    qs, where, touched = [], [], []
+    the arm by more than the margin; per sample its pose's index and whether it lies on the path
+    from it, and per pose and path the cube the head may touch there (None: none)."""
+    qs, owner, on_path, touch = [], [], [], []
     for i, (q, label, point) in enumerate(poses):
         nxt = poses[i + 1] if i + 1 < len(poses) else None
         step = label.split(":")[0]
         same = nxt is not None and nxt[1].split(":")[0] == step  # within one touch: the head meets its cube
         cube = point_cube[point] if point >= 0 else None
-        qs.append(q)
-        where.append(f"at {label}")
-        touched.append(cube if label.endswith(("touch", "above the point")) or same else None)
+        qs.append(q[None])
+        owner.append(i)
+        on_path.append(False)
+        # the touch is its approach, the pose above the point, the touch and the retract, and the
+        # moves between them; the retract pose itself starts the next travel move
+        touch.append((cube if label.endswith(("touch", "above the point")) or same else None, cube if same else None))
         if nxt is None:
             break
         n = int(np.ceil(np.sum(np.abs(nxt[0] - q) * shapes.levers) / shapes.margin_mm))
-        for k in range(1, n):
-            qs.append(q + (nxt[0] - q) * k / n)
-            where.append(f"on the move from {label} to {nxt[1].split(': ', 1)[-1]}"
-                         + ("" if same else f" ({nxt[1].split(':')[0]})"))
-            touched.append(cube if same else None)
-    return np.array(qs), where, touched
+        if n > 1:
+            qs.append(q + (nxt[0] - q) * (np.arange(1, n) / n)[:, None])
+            owner.extend([i] * (n - 1))
+            on_path.extend([True] * (n - 1))
+    return np.concatenate(qs), np.array(owner), np.array(on_path), touch
 
 
 def check_path(cfg: CellConfig, poses: list[tuple[np.ndarray, str, int]], chunk: int = 4096) -> CollisionReport:
     """Check every pose of ``poses`` and every path between consecutive ones (joint-space samples);
-    stops at the first clash."""
+    stops at the first clash, else reports the closest approach."""
     t0 = time.perf_counter()
     shapes, point_cube = cell_shapes(cfg)
     checker = _Checker(cfg, shapes)
-    Q, where, touched = _samples(shapes, poses, point_cube)
+    Q, owner, on_path, touch = _samples(shapes, poses, point_cube)
     clash = None
+    best: dict[bool, tuple] = {}  # a touch pair or not: (clearance, a, b, sample, limit)
+    mv, fx, margin = shapes.moving, shapes.fixed, shapes.margin_mm
     for start in range(0, len(Q), chunk):
-        frames = chain_frames(cfg.model, Q[start:start + chunk], setup=False)
-        for k in range(len(frames)):
-            checker.place(frames[k])
-            hit = checker.clash(touched[start + k], frames[k])
-            if hit is not None:
-                clash = Clash(hit[0].name, hit[1].name, where[start + k], hit[2])
+        W = checker.placed(chain_frames(cfg.model, Q[start:start + chunk], setup=False))
+        near_mm, near_mf = checker.screen(W, 2 * margin)
+        for k in np.flatnonzero(near_mm.any(axis=1) | near_mf.any(axis=1)):
+            n = start + k
+            touched = touch[owner[n]][int(on_path[n])]
+            todo = [(mv[i], mv[j], W[k, i], W[k, j]) for i, j in checker.mm[near_mm[k]]]
+            todo += [(mv[i], fx[j], W[k, i], fx[j].local) for i, j in checker.mf[near_mf[k]]]
+            for a, b, Wa, Wb in todo:
+                limit = margin
+                if touched is not None and b.group == touched:
+                    if a.group == "tip":
+                        continue  # the tips press on the cube they touch
+                    if a.group == "head":
+                        limit = TOUCH_MARGIN_MM
+                d = checker.clearance(a, b, Wa, Wb)
+                key = limit != margin
+                if d < 2 * margin and (key not in best or d < best[key][0]):  # beyond: unmeasured
+                    best[key] = (d, a, b, n, limit)
+                if d < limit:
+                    clash = best[key]
+                    break
+            if clash is not None:
                 break
         if clash is not None:
             break
-    return CollisionReport(len(poses), len(Q), clash, shapes.margin_mm, time.perf_counter() - t0)
+
+    def named(hit) -> Clash | None:
+        if hit is None:
+            return None
+        d, a, b, n, limit = hit
+        return Clash(a.name, b.name, _where(poses, int(owner[n]), bool(on_path[n])), d, limit)
+
+    return CollisionReport(len(poses), len(Q), named(clash), shapes.margin_mm, named(best.get(False)),
+                           named(best.get(True)), time.perf_counter() - t0)
 
 
 def check_plan(cfg: CellConfig, plan: Plan, with_upload: bool = True) -> CollisionReport:
@@ -399,7 +495,7 @@ def check_plan(cfg: CellConfig, plan: Plan, with_upload: bool = True) -> Collisi
     step and the clearance; the report of a clear plan."""
     report = check_path(cfg, plan_path(cfg, plan, with_upload))
     if report.clash is not None:
-        raise ConfigError(f"the plan collides: {report.clash.describe(report.margin_mm)}; nothing was moved. "
+        raise ConfigError(f"the plan collides: {report.clash.describe()}; nothing was moved. "
                           f"Move the obstacle or the body, change [limits] or [plan], or state the robot's link "
                           f"radii in its file's [collision] table (docs/collision.md)")
     return report
