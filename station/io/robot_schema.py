@@ -85,6 +85,12 @@ class _Gears(_Section):
     ratios: list[Number] = Field(default_factory=list, max_length=64)
 
 
+class _Collision(_Section):
+    # the links' collision capsules (issue 40; docs/robot-file.md "Collision shapes")
+    radius_mm: list[Number] | None = Field(default=None, max_length=257)
+    allowed_pairs: list[Annotated[tuple[Name, Name], Field(strict=False)]] = Field(default_factory=list, max_length=1024)
+
+
 class _RobotFile(_Section):
     robot: _Robot
     transform: list[_Transform] = Field(min_length=3, max_length=256)
@@ -93,11 +99,13 @@ class _RobotFile(_Section):
     error_terms: _ErrorTerms = Field(default_factory=_ErrorTerms)
     gravity: _Gravity = Field(default_factory=_Gravity)
     gears: _Gears = Field(default_factory=_Gears)
+    collision: _Collision = Field(default_factory=_Collision)
 
 
 _NOTES = {"tool": "the tool itself is the last [[transform]]"}
 _TABLES = {"robot": "[robot]", "transform": "[[transform]]", "joint_map": "[joint_map]", "tool": "[tool]",
-           "error_terms": "[error_terms]", "gravity": "[gravity]", "gears": "[gears]"}
+           "error_terms": "[error_terms]", "gravity": "[gravity]", "gears": "[gears]",
+           "collision": "[collision]"}
 
 
 def validate_robot_toml(data: dict, source: str) -> None:

@@ -54,6 +54,7 @@ from station.cell.config.sections import (
     DeviceConfig,
     FleetConfig,
     IdentificationConfig,
+    ObstacleConfig,
     PlanConfig,
     RecheckConfig,
     ToolConfig,
@@ -99,6 +100,8 @@ class CellConfig:
     head_in_flange: np.ndarray | None = None  # (4,4) MKKS in the flange frame, from the head's CMM report
     body_sigma: np.ndarray | None = None  # (n_points, 2) σ of each body point: position [mm], angle [rad]
     tools: tuple[ToolConfig, ...] = ()  # the tools that replace the head ([[tool]])
+    obstacles: tuple[ObstacleConfig, ...] = ()  # the cell's fixed obstacles ([[obstacle]], issue 40)
+    robot_collision: Any = None  # the robot file's [collision] (station.io.robot_collision.CollisionSpec)
     simulation: Any = None  # the validated [simulation] table (what --simulated CONFIG simulates)
     source: str = ""  # the file it was read from (or a label such as "<simulated cell>")
     verification: VerificationConfig = VerificationConfig()  # [verification]: the report's specification
@@ -357,7 +360,7 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
         select=p.select, repeats=p.repeats, recenter_attempts=p.recenter_attempts,
         recenter_margin_mm=p.recenter_margin_mm, max_residual_um=p.max_residual_um,
         remeasure_attempts=p.remeasure_attempts, setup_uncertainty_mm=f.robot.setup_uncertainty_mm,
-        locate_steps=p.locate_steps)
+        locate_steps=p.locate_steps, collision_margin_mm=p.collision_margin_mm)
 
     i = f.identification
     ident = IdentificationConfig(
@@ -393,6 +396,10 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
     if sim.joint_backlash_um is not None and len(sim.joint_backlash_um) != model.n_joints:
         raise ConfigError(f"{source}: simulation.joint_backlash_um has {len(sim.joint_backlash_um)} values: give one "
                           f"per joint of the robot ({model.n_joints})")
+    from station.io.robot_collision import read_collision
+
+    links = tuple(t.name for t in model.transforms if t.joint is not None or t is model.transforms[0])
+    robot_collision = read_collision(_robot_path(f.robot.model, source), links)
     return CellConfig(
         f.cell.name, model, soft, ids, pose_to_matrix(poses), f.body.cube_edge_mm,
         devices, plan, ident, corr, text, f.simulation.seed, recheck, warmup,
@@ -401,6 +408,10 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
         head_in_flange=head_in_flange,  # (4,4) MKKS in the flange frame (the robot model's nominal K)
         body_sigma=body_sigma,  # (n, 2) [mm, rad] from the CMM report or the inline points (0: exact)
         tools=_tools(f.tool, corr, plan.elbows, model.n_joints, source),  # [[tool]] (station/cell/correction/robot_tools.py)
+        obstacles=tuple(ObstacleConfig(o.name, o.shape, o.frame, pose_to_matrix(_pose_deg(o.pose)),
+                                       tuple(float(v) for v in (o.size_mm or (o.radius_mm, o.height_mm)) if v is not None))
+                       for o in f.obstacle),
+        robot_collision=robot_collision,  # the links' capsules (station/cell/plan/collision.py)
         simulation=f.simulation,  # the validated [simulation] table (simulators/from_config.py reads it)
         source=source,  # where it was read: relative robot, head and body files resolve beside it
         verification=VerificationConfig(**f.verification.model_dump()),  # [verification] (the report's)

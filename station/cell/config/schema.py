@@ -184,6 +184,8 @@ class _Plan(_Section):
     remeasure_attempts: int = _num(1, ge=0, le=5, what="re-touches when the probes of a redundant head disagree")
     locate_steps: int = _num(3, ge=0, le=20, what="search steps per face normal when locating the body "
                              "beyond the probes' stroke")
+    collision_margin_mm: float = _num(2.0, gt=0.0, le=200.0, what="least clearance between any two shapes of the "
+                                      "cell at every pose and along every path [mm] (docs/collision.md)")
 
     @field_validator("elbows")
     @classmethod
@@ -455,6 +457,32 @@ class _Tool(_Section):
         return v
 
 
+class _Obstacle(_Section):
+    """A fixed obstacle of the cell (issue 40; docs/collision.md): a box or a cylinder (axis along its
+    own z), centred at ``pose`` in the body frame or the robot's base frame."""
+
+    name: ToolName = Field(description='the obstacle\'s name (it names the obstacle in a refusal), e.g. "column"')
+    shape: Literal["box", "cylinder"] = Field(description='"box" or "cylinder"')
+    frame: Literal["body", "base"] = Field("body", description='"body" (the body frame KKS) or "base" (the robot base)')
+    pose: Pose = Field(description="pose of the obstacle's centre: " + _POSE_WHAT)
+    size_mm: Annotated[tuple[float, float, float], Field(strict=False)] | None = _absent(
+        description="a box's edges x, y, z [mm], each within (0, 10000]")
+    radius_mm: float | None = _absent(gt=0.0, le=MAX_MM, description="a cylinder's radius [mm], within (0, 10000]")
+    height_mm: float | None = _absent(gt=0.0, le=MAX_MM, description="a cylinder's height [mm], within (0, 10000]")
+
+    @model_validator(mode="after")
+    def _dimensions(self) -> "_Obstacle":
+        """A box has size_mm and nothing else; a cylinder radius_mm and height_mm."""
+        if self.shape == "box":
+            if self.size_mm is None or self.radius_mm is not None or self.height_mm is not None:
+                raise ValueError(f"obstacle {self.name!r}: a box takes size_mm = [x, y, z] (mm) and no radius or height")
+            if not all(0.0 < v <= MAX_MM for v in self.size_mm):
+                raise ValueError(f"obstacle {self.name!r}: size_mm: each edge within (0, {MAX_MM:g}] mm")
+        elif self.radius_mm is None or self.height_mm is None or self.size_mm is not None:
+            raise ValueError(f"obstacle {self.name!r}: a cylinder takes radius_mm and height_mm (mm) and no size_mm")
+        return self
+
+
 class _Head(_Section):
     file: PathText | None = _absent(description='the probe-head file (docs/probe-head.md), e.g. "head.toml", '
                                                 'relative to this configuration')
@@ -477,6 +505,8 @@ class _CellFile(_Section):
     fleet: _Fleet = Field(default_factory=lambda: _Fleet.model_validate({}), description="a table [fleet]")
     conformance: _Conformance = Field(default_factory=lambda: _Conformance.model_validate({}), description="a table [conformance]")
     head: _Head = Field(default_factory=lambda: _Head.model_validate({}), description="a table [head] with file = \"head.toml\"")
+    obstacle: list[_Obstacle] = Field([], max_length=64, description="[[obstacle]] tables, at most 64: the "
+                                      "cell's fixed obstacles (docs/collision.md)")
     tool: list[_Tool] = Field([], max_length=MAX_TOOLS, description=f"[[tool]] tables, at most {MAX_TOOLS}, "
                               f'each with name = "…" and tcp = [x, y, z, roll, pitch, yaw] (mm, deg)')
 

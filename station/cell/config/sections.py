@@ -16,7 +16,8 @@ from station.core.terms.error_model import GravityModel
 from station.core.units import ARCSEC
 
 __all__ = ["DeviceConfig", "PlanConfig", "IdentificationConfig", "CorrectionConfig", "RecheckConfig", "FleetConfig",
-           "VerificationConfig", "CellIdentity", "WarmupConfig", "ConformanceConfig", "ToolConfig"]
+           "VerificationConfig", "CellIdentity", "WarmupConfig", "ConformanceConfig", "ToolConfig",
+           "ObstacleConfig"]
 
 
 @dataclass(frozen=True)
@@ -60,6 +61,7 @@ class PlanConfig:
     #: how far a measuring point may lie from where [robot].setup puts it [mm] ([robot] setup_uncertainty_mm)
     setup_uncertainty_mm: float = 5.0
     locate_steps: int = 3  # search steps per face normal when locating the body (station/cell/plan/locating.py)
+    collision_margin_mm: float = 2.0  # least clearance of every pose and path (station/cell/plan/collision.py)
 
 
 @dataclass(frozen=True)
@@ -191,3 +193,16 @@ class ToolConfig:
     def tcp_matrix(self) -> np.ndarray:
         """``(4, 4)`` flange ← TCP [mm]."""
         return pose_to_matrix(self.tcp)
+
+
+@dataclass(frozen=True)
+class ObstacleConfig:
+    """A fixed obstacle (``[[obstacle]]``, issue 40): ``shape`` "box" (``size`` its edges) or
+    "cylinder" (``size`` = radius, height; axis along its own z), centred at ``pose`` (4, 4) in
+    ``frame`` ("body" or "base"); mm."""
+
+    name: str
+    shape: str
+    frame: str
+    pose: np.ndarray
+    size: tuple[float, ...]

@@ -183,6 +183,7 @@ recenter_margin_mm = 1.5         # 0 … 4, less than half the probes' stroke (t
 max_residual_um = 10.0           # plane residual above which a reading is not valid, > 0 … 1000
 remeasure_attempts = 1           # re-touches when a redundant head's probes disagree, 0 … 5
 locate_steps = 3                 # search steps per face normal when locating the body, 0 … 20
+collision_margin_mm = 2.0        # least clearance of every pose and path [mm], > 0 … 200 (docs/collision.md)
 
 # [head]
 # file = "head.toml"             # the probe-head file (docs/probe-head.md), relative to this file;
@@ -274,6 +275,15 @@ position_tolerance = 0.01        # arrived joints vs target (deg | mm), 0.0001 �
 # tcp = [50.0, 0.0, -200.0, 0.0, 0.0, 0.0]  # TCP in the flange frame from the tool's measurement:
 #                                # x, y, z [mm] within ±2000, roll, pitch, yaw [deg] within ±360
 # z_mm = [150.0, 350.0, 200.0]   # optional x_mm, y_mm, z_mm: the tool's own grid (default: [correction])
+
+# The cell's fixed obstacles, at most 64, one [[obstacle]] table each (docs/collision.md):
+# [[obstacle]]
+# name = "column"                # names it in a refusal
+# shape = "cylinder"             # "box" (size_mm = [x, y, z]) or "cylinder" (radius_mm, height_mm; axis along z)
+# frame = "body"                 # "body" (the body frame) or "base" (the robot's base frame)
+# pose = [400.0, 0.0, 500.0, 0.0, 0.0, 0.0]  # its centre: x, y, z [mm], roll, pitch, yaw [deg]
+# radius_mm = 60.0
+# height_mm = 1000.0
 
 [simulation]
 # Read only by a rehearsal, 'station calibrate --simulated THIS_FILE' (this cell against

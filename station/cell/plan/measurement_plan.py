@@ -64,8 +64,8 @@ _TRAVEL: weakref.WeakKeyDictionary[CellConfig, np.ndarray] = weakref.WeakKeyDict
 
 
 def travel_joints(cfg: CellConfig) -> np.ndarray:
-    """Per joint, the travel position of the prismatic joints (NaN for the others): the clearance
-    above the highest reachable measuring point, capped by the soft limit. Lateral moves happen
+    """Per joint, the travel position of the prismatic joints (NaN for the others): the head's
+    lowest point the clearance above the highest reachable measuring point, capped by the soft limit. Lateral moves happen
     only at this height, so the head never sweeps through a cube, wherever a crash left the robot.
     A point out of reach is left out here (the plan names it); with none in reach, the soft limit."""
     hit = _TRAVEL.get(cfg)
@@ -73,11 +73,16 @@ def travel_joints(cfg: CellConfig) -> np.ndarray:
         return hit
     out = np.full(cfg.model.n_joints, np.nan)
     if cfg.model.is_scara:  # an articulated arm retracts along the corner's diagonal instead
+        from station.cell.plan.collision import head_depth_mm
+
         q = point_joints(cfg, cfg.plan.elbows[0])
+        # the clearance is the head's lowest point's above the highest cube, not the contact's: a side
+        # probe hanging below the corner would otherwise drag over a neighbouring cube (issue 40)
+        lift = cfg.plan.clearance_mm + head_depth_mm(cfg)
         for j, kind in enumerate(cfg.model.joint_types):
             if kind == "prismatic":
                 col = q[:, j][np.isfinite(q[:, j])]
-                top = float(col.max()) + cfg.plan.clearance_mm if col.size else np.inf
+                top = float(col.max()) + lift if col.size else np.inf
                 out[j] = min(cfg.soft_limits[j, 1], top)
     out.setflags(write=False)
     _TRAVEL[cfg] = out

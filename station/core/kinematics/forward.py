@@ -22,6 +22,7 @@ from station.errors import UnreachableError
 
 __all__ = [
     "forward",
+    "chain_frames",
     "forward_with_jacobian",
     "joint_jacobian",
     "scara_ik",
@@ -103,6 +104,15 @@ def forward(model: RobotModel, joints, params=None, setup: bool = True) -> np.nd
     """
     T, _, _, _ = _chain(model, joints, params, setup, keep_frames=False)
     return T
+
+
+def chain_frames(model: RobotModel, joints, params=None, setup: bool = True) -> np.ndarray:
+    """The frame after every transform (its joint included) ``(..., n, nt, 4, 4)`` for joints
+    ``(..., n, g)``: where each link stands (the collision shapes ride on them, issue 40); the last
+    is :func:`forward`'s tool frame."""
+    T, pres, _, _ = _chain(model, joints, params, setup, keep_frames=True)
+    after = [*pres[1:], T]  # the frame before transform t + 1 is the one after transform t
+    return np.stack(np.broadcast_arrays(*after), axis=-3)
 
 
 def forward_with_jacobian(model: RobotModel, joints, params=None, setup: bool = True) -> KinematicsResult:
