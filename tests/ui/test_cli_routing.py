@@ -16,7 +16,7 @@ from station.cell.records.run_records import RunDatabaseError
 from station.cell.run import events as ev
 from station.errors import ConfigError, IdentificationError, Outcome, RunAborted, StationError, UnreachableError
 from station.ui.cli.main import main
-from station.ui.cli.progress_clock import ProgressClock, clock_text
+from station.ui.cli.process.progress_clock import ProgressClock, clock_text
 
 
 class _Drifted(StationError):

@@ -11,8 +11,8 @@ import pytest
 
 from station.cell.session.calibrate import check_probe_url
 from station.errors import ConfigError
-from station.ui.cli.library_log import route_library_logs
 from station.ui.cli.main import main
+from station.ui.cli.process.library_log import route_library_logs
 
 
 @pytest.mark.parametrize("url, why", [

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from station.cell.records.rundb import RunDB
-from station.ui.cli.stop_signals import StopSignals
+from station.ui.cli.process.stop_signals import StopSignals
 
 ROOT = Path(__file__).resolve().parents[2]
 ENV = dict(os.environ, PYTHONPATH=str(ROOT))
@@ -64,7 +64,7 @@ def test_a_signal_after_the_session_only_says_so_once(capsys):
 @pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
 def test_main_of_the_process_holds_the_signals_until_exit():
     """``catch_stop_signals(hold=True)`` leaves SIGTERM and SIGINT ignored when it ends."""
-    from station.ui.cli.stop_signals import catch_stop_signals
+    from station.ui.cli.process.stop_signals import catch_stop_signals
 
     before = {s: signal.getsignal(s) for s in (signal.SIGTERM, signal.SIGINT)}
     try:

@@ -284,38 +284,101 @@ def _identification_summary(res: IdentificationResult) -> IdentificationSummary:
                          for n, v, s in zip(res.chosen, res.estimates, res.uncertainty.sigma)))
 
 
+@dataclass(frozen=True)
+class _Run:
+    """What every part of one run's pipeline works with: the devices' runner, the run database and
+    the run, its planned steps, the event stream and the options."""
+
+    runner: Runner
+    db: RunDB
+    run_id: int
+    steps: tuple[PlannedStep, ...]
+    emit: Callable[[Event], None]
+    options: Options
+
+    def measure(self, cfg: CellConfig, kinds: set[StepKind], R: np.ndarray | None,
+                located: np.ndarray | None = None) -> None:
+        """The planned steps of ``kinds``, each on disk before the next motion."""
+        self.runner.measure_steps(self.db, self.run_id, self.steps, kinds, len(self.steps), _proc_for(cfg, R, located))
+
+    def stats(self, cfg: CellConfig, kind: StepKind) -> ErrorStats | None:
+        """The stored verification steps of ``kind`` as error statistics; re-centred readings said."""
+        recs = self.db.measurements(self.run_id, kind=kind.value)
+        moved = stored_recentring(self.db, self.run_id)
+        (rc,) = recentring_stats(self.steps, {kind: recs}, moved) or (None,)
+        if rc is not None and rc.n_recentred:
+            self.emit(Notice("info", f"{kind.caption}: {rc.n_recentred} of {rc.n_readings} readings re-centred to "
+                                     f"bring the probes into their stroke (up to {rc.max_um:.0f} µm); the "
+                                     f"re-centring's move is counted in the measured error"))
+        return ErrorStats.from_errors(verification_errors(cfg, self.steps, recs, moved))
+
+
 def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tuple[PlannedStep, ...],
               emit: Callable[[Event], None], options: Options, with_oracle: bool,
               summary: RunSummary, pre: Premotion) -> RunSummary:
-    total = len(steps)
+    run = _Run(runner, db, run_id, steps, emit, options)
+    cfg, records, reversal_records, summary = _measure_identification(run, cfg, summary)
+    res, summary = _identify_recorded(run, cfg, records, summary)
+    from station.cell.pipeline.terms import select_terms  # [identification] model (issue 30)
 
-    def measure(kinds: set[StepKind], R: np.ndarray | None, located: np.ndarray | None = None) -> None:
-        runner.measure_steps(db, run_id, steps, kinds, total, _proc_for(cfg, R, located))
+    terms = select_terms(cfg, records, res, reversal_records)
+    if not cfg.model.is_scara:  # an articulated arm: compensated targets, no table (issue 9)
+        return articulated_correction(cfg, runner, db, run_id, steps, emit, with_oracle, summary, res,
+                                      upload=options.upload, min_gain=options.min_gain,
+                                      judge=options.judge, terms=terms)
 
-    def stats(kind: StepKind) -> ErrorStats | None:
-        recs = db.measurements(run_id, kind=kind.value)
-        moved = stored_recentring(db, run_id)
-        (rc,) = recentring_stats(steps, {kind: recs}, moved) or (None,)
-        if rc is not None and rc.n_recentred:
-            emit(Notice("info", f"{kind.caption}: {rc.n_recentred} of {rc.n_readings} readings re-centred to bring "
-                                f"the probes into their stroke (up to {rc.max_um:.0f} µm); the re-centring's move "
-                                f"is counted in the measured error"))
-        return ErrorStats.from_errors(verification_errors(cfg, steps, recs, moved))
+    # a SCARA with error terms: the table's nodes carry them, on the geometry fitted with them, and the
+    # targets after correction are commanded in that fit's base frame (before: the geometric fit's)
+    summary, params, delta = _scara_terms(cfg, db, run_id, terms, summary, res, emit)
+    emit(PhaseChanged("correct"))
+    table, used, bound, summary = _designed_table(run, cfg, params, delta, pre, summary)
+    if not bound <= float(cfg.correction.max_interpolation_um):
+        return _not_uploaded(cfg, summary, run_id, table, used, bound, emit)
+    if cfg.tools:  # [[tool]]: each tool's own correction, stored as tool:<name>; the head's table is uploaded
+        judge = options.judge
+        summary = summary.replace(tools=run_tools(cfg, db, run_id, steps, params, table,  # with the terms, as the head's
+                                                  None if judge is None else reference_params(cfg, judge), judge, emit,
+                                                  delta=delta))
 
-    if cfg.warmup is not None and len(db.completed_steps(run_id, ok_only=True)) < total:  # [warmup] (issue 13)
+    emit(PhaseChanged("verify", "before correction"))
+    if runner.controller.status().table_active:  # the operator's table: kept aside (table_keeping.py)
+        runner.controller.deactivate_table()
+    runner.guard.table = None
+    run.measure(cfg, {StepKind.VERIFY_BEFORE}, res.params[:6])
+    summary = summary.replace(before=run.stats(cfg, StepKind.VERIFY_BEFORE))
+    if not options.upload:
+        return summary.replace(upload_skipped=True, outcome=Outcome.NOT_UPLOADED)
+    declined = _upload_declined(run, cfg, table, bound, summary)
+    if declined is not None:
+        return declined
+    summary = _upload_and_verify(run, cfg, table, params[:6], summary)
+    if with_oracle:
+        summary = _reference_check(run, cfg, table, used, summary)
+    outcome, missed = verified_outcome(cfg, summary, options.min_gain)
+    summary = summary.replace(notes=(*summary.notes, *missed))
+    db.set_status(run_id, "verified")
+    return _kept_or_restored(run, table, summary, outcome)
+
+
+def _measure_identification(run: _Run, cfg: CellConfig, summary: RunSummary):
+    """Warm-up, locating the body and the identification poses, each on disk before the next
+    motion; returns the configuration the rest works in (its set-up the located one, where the
+    body was located), the identification and reversal records, and the summary with the
+    reversal error."""
+    db, run_id, emit = run.db, run.run_id, run.emit
+    if cfg.warmup is not None and len(db.completed_steps(run_id, ok_only=True)) < len(run.steps):  # [warmup] (13)
         from station.cell.run.warmup import run_warmup
 
-        run_warmup(cfg, runner, db, run_id, steps[0], emit)
+        run_warmup(cfg, run.runner, db, run_id, run.steps[0], emit)
     db.set_status(run_id, "measuring")
     rejudge(cfg, db, run_id, emit)  # a resume after [plan] max_residual_um changed: judged, not measured, again
-    located = locate_body(cfg, runner, db, run_id, steps, emit)  # the body is found, not assumed (issue 37)
+    located = locate_body(cfg, run.runner, db, run_id, run.steps, emit)  # the body is found, not assumed (issue 37)
     emit(PhaseChanged("measure", "identification poses"))
-    measure({StepKind.IDENTIFICATION, StepKind.REVERSAL}, None, located)
+    run.measure(cfg, {StepKind.IDENTIFICATION, StepKind.REVERSAL}, None, located)
     db.set_status(run_id, "measured")
     if located is not None:  # the identification starts from the located set-up, and the set-up parameters
         # it cannot tell from the arm's (its minimal set) stay there: the verification's base frame is the body's
         cfg = dataclasses.replace(cfg, model=cfg.model.with_setup(located))
-
     records = db.measurements(run_id, kind=StepKind.IDENTIFICATION.value)
     reversal_records = db.measurements(run_id, kind=StepKind.REVERSAL.value)  # the terms' backlash uses them too
     reversal = reversal_error(cfg, records, reversal_records, stored_recentring(db, run_id))
@@ -323,8 +386,15 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
         summary = summary.replace(reversal=reversal)
         emit(Notice("info", f"reversal error (both approach directions): RMS {reversal.rms_um:.1f} µm, "
                             f"max {reversal.max_um:.1f} µm over {reversal.n} poses"))
+    return cfg, records, reversal_records, summary
+
+
+def _identify_recorded(run: _Run, cfg: CellConfig, records, summary: RunSummary):
+    """The identification of the stored poses, refused where too few are valid, where it did not
+    converge or where its robot is implausible; stored and streamed."""
+    db, run_id, emit = run.db, run.run_id, run.emit
     emit(PhaseChanged("identify"))
-    n_planned = sum(1 for st in steps if st.kind is StepKind.IDENTIFICATION)
+    n_planned = sum(1 for st in run.steps if st.kind is StepKind.IDENTIFICATION)
     n_valid = sum(1 for r in records if r.ok and r.pose is not None)
     needed = min_valid_identification(n_planned)
     if n_valid < needed:
@@ -349,104 +419,99 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
         emit(Notice("info", note))
     if res.outliers:
         emit(Notice("warning", f"suspected outliers among identification measurements: {list(res.outliers)}"))
-    R_id = res.params[:6]
-    from station.cell.pipeline.terms import judge_delta, select_terms  # [identification] model (issue 30)
+    return res, summary
 
-    terms = select_terms(cfg, records, res, reversal_records)
-    if not cfg.model.is_scara:  # an articulated arm: compensated targets, no table (issue 9)
-        return articulated_correction(cfg, runner, db, run_id, steps, emit, with_oracle, summary, res,
-                                      upload=options.upload, min_gain=options.min_gain,
-                                      judge=options.judge, terms=terms)
 
-    # a SCARA with error terms: the table's nodes carry them, on the geometry fitted with them, and the
-    # targets after correction are commanded in that fit's base frame (before: the geometric fit's)
-    summary, params, delta = _scara_terms(cfg, db, run_id, terms, summary, res, emit)
-    R_after = params[:6]
-    emit(PhaseChanged("correct"))
+def _designed_table(run: _Run, cfg: CellConfig, params: np.ndarray, delta, pre: Premotion, summary: RunSummary):
+    """The identified robot's table on the pre-motion design (refined where the identified robot
+    needs it), its one bound, stored and streamed."""
     assert pre.design is not None  # a SCARA's pre-motion check designs its table
     table, used, bound = (identified_table(cfg, params, pre.design) if delta is None
                           else identified_table(cfg, params, pre.design, delta))
-    limit = float(cfg.correction.max_interpolation_um)
     summary = summary.replace(correction=(designed := CorrectionSummary(
         n_values=int(table.data.n_values), interpolation_bound_um=bound, crc32=f"{table.data.crc32():08x}",
         predicted_bound_um=pre.design.predicted_bound_um, grid_shape=tuple(int(n) for n in used.counts),
-        refined=used.counts != pre.design.counts, limit_um=limit)))
-    emit(TableDesigned(designed))  # the one bound the run judges, stores and shows
-    db.save_result(run_id, "correction_grid", {**grid_to_json(used.grid), "bound_um": bound,
-                                               "predicted_bound_um": pre.design.predicted_bound_um,
-                                               "sampled_bounds_um": list(pre.design.bounds_um),
-                                               "error_terms": table.with_terms})  # its nodes carry the terms
+        refined=used.counts != pre.design.counts, limit_um=float(cfg.correction.max_interpolation_um))))
+    run.emit(TableDesigned(designed))  # the one bound the run judges, stores and shows
+    run.db.save_result(run.run_id, "correction_grid", {**grid_to_json(used.grid), "bound_um": bound,
+                                                       "predicted_bound_um": pre.design.predicted_bound_um,
+                                                       "sampled_bounds_um": list(pre.design.bounds_um),
+                                                       "error_terms": table.with_terms})  # its nodes carry the terms
     if used.counts != pre.design.counts:
-        emit(Notice("info", f"the correction grid was refined for the identified robot: {used.describe()}"))
-    if not bound <= limit:
-        return _not_uploaded(cfg, summary, run_id, table, used, bound, emit)
-    if cfg.tools:  # [[tool]]: each tool's own correction, stored as tool:<name>; the head's table is uploaded
-        judge = options.judge
-        summary = summary.replace(tools=run_tools(cfg, db, run_id, steps, params, table,  # with the terms, as the head's
-                                                  None if judge is None else reference_params(cfg, judge), judge, emit,
-                                                  delta=delta))
+        run.emit(Notice("info", f"the correction grid was refined for the identified robot: {used.describe()}"))
+    return table, used, bound, summary
 
-    emit(PhaseChanged("verify", "before correction"))
-    controller = runner.controller
-    if controller.status().table_active:  # the operator's table: kept aside (table_keeping.py)
-        controller.deactivate_table()
-    runner.guard.table = None
-    measure({StepKind.VERIFY_BEFORE}, R_id)
-    summary = summary.replace(before=stats(StepKind.VERIFY_BEFORE))
 
-    if not options.upload:
-        return summary.replace(upload_skipped=True, outcome=Outcome.NOT_UPLOADED)
+def _upload_declined(run: _Run, cfg: CellConfig, table, bound: float, summary: RunSummary) -> RunSummary | None:
+    """The upload question; the summary of a run the operator declined it in, else None."""
+    options = run.options
     proposal = UploadProposal(
         n_values=int(table.data.n_values), grid_shape=tuple(int(n) for n in table.data.grid_shape),
         # the one stored bound (over the working cells, judged against the limit), which the report,
         # the JSON and the fleet read; the whole table's (every reachable cell) read 5.6 µm where they said 4.7
         interpolation_bound_um=float(bound), crc32=f"{table.data.crc32():08x}",
         max_correction=tuple(float(v) for v in table.max_correction), joint_types=tuple(cfg.model.joint_types))
-    if options.confirm is not None and not options.confirm(proposal):
-        if runner.control.aborted:  # the abort answered the open question "no": an abort, not a decline,
-            # so the run stays resumable at this question (its measurements are all stored)
-            raise RunAborted("run aborted by the operator at the upload question; nothing was uploaded")
-        emit(Notice("info", "upload declined by the operator: the controller's table of the run's start is kept"))
-        return summary.replace(upload_skipped=True, outcome=Outcome.NOT_UPLOADED,
-                               notes=(*summary.notes, "upload declined by the operator"))
+    if options.confirm is None or options.confirm(proposal):
+        return None
+    if run.runner.control.aborted:  # the abort answered the open question "no": an abort, not a decline,
+        # so the run stays resumable at this question (its measurements are all stored)
+        raise RunAborted("run aborted by the operator at the upload question; nothing was uploaded")
+    run.emit(Notice("info", "upload declined by the operator: the controller's table of the run's start is kept"))
+    return summary.replace(upload_skipped=True, outcome=Outcome.NOT_UPLOADED,
+                           notes=(*summary.notes, "upload declined by the operator"))
 
-    upload = verified_upload(controller, table.data, emit)
-    runner.guard.table = table.data  # Cartesian moves are now corrected by this table
-    db.set_status(run_id, "uploaded")
+
+def _upload_and_verify(run: _Run, cfg: CellConfig, table, R_after: np.ndarray, summary: RunSummary) -> RunSummary:
+    """The verified upload, then the held-out poses through the active table."""
+    emit = run.emit
+    upload = verified_upload(run.runner.controller, table.data, emit)
+    run.runner.guard.table = table.data  # Cartesian moves are now corrected by this table
+    run.db.set_status(run.run_id, "uploaded")
     summary = summary.replace(upload=(uploaded := UploadSummary(crc32=f"{upload.crc32:08x}", seconds=upload.total_s)))
     emit(Uploaded(uploaded, *(f"{c:08x}" if c else "none" for c in (upload.active_crc32, upload.previous_crc32))))
     emit(PhaseChanged("verify", "after correction"))
-    measure({StepKind.VERIFY_AFTER}, R_after)
-    summary = summary.replace(after=stats(StepKind.VERIFY_AFTER))
+    run.measure(cfg, {StepKind.VERIFY_AFTER}, R_after)
+    summary = summary.replace(after=run.stats(cfg, StepKind.VERIFY_AFTER))
     if summary.after is not None:
         emit(Verified(summary.before, summary.after, summary.gain))
-    if with_oracle:
-        emit(PhaseChanged("verify", "oracle (reference parameters)"))
-        assert options.judge is not None  # with_oracle
-        p_ref = reference_params(cfg, options.judge)
-        # a simulated arm whose joints err (the judge's reference_delta): the oracle's table carries them too
-        oracle_table = build_table_for(cfg, p_ref, used.grid, judge_delta(options.judge)).data
-        verified_upload(controller, oracle_table, emit)
-        runner.guard.table = oracle_table
-        emit(PhaseChanged("verify", "oracle (reference parameters)"))  # back from the upload's phase
-        measure({StepKind.REFERENCE}, p_ref[:6])
-        summary = summary.replace(oracle=stats(StepKind.REFERENCE))
-        controller.rollback_table()  # the station's own table is the one left active
-        # the oracle's table must never be what a later roll back revives: the roll-back slot is
-        # emptied (the table of the run's start stays recoverable from the run database)
-        controller.discard_previous_table()
-        runner.guard.table = table.data
-        emit(Notice("info", "rolled back to the station's table after the oracle check"))
-    gain = summary.gain
-    outcome, missed = verified_outcome(cfg, summary, options.min_gain)
-    summary = summary.replace(notes=(*summary.notes, *missed))
-    db.set_status(run_id, "verified")
-    if options.confirm is not None and summary.before is not None and summary.after is not None:
-        keep = KeepCorrection(summary.before.rms_um, summary.after.rms_um, float(gain or 0.0),
+    return summary
+
+
+def _reference_check(run: _Run, cfg: CellConfig, table, used, summary: RunSummary) -> RunSummary:
+    """A simulated cell's reference: the held-out poses through the table of the judge's robot,
+    then the station's own table active again and the roll-back slot emptied."""
+    emit, controller, judge = run.emit, run.runner.controller, run.options.judge
+    assert judge is not None  # with_oracle
+    from station.cell.pipeline.terms import judge_delta
+
+    emit(PhaseChanged("verify", "oracle (reference parameters)"))
+    p_ref = reference_params(cfg, judge)
+    # a simulated arm whose joints err (the judge's reference_delta): the oracle's table carries them too
+    oracle_table = build_table_for(cfg, p_ref, used.grid, judge_delta(judge)).data
+    verified_upload(controller, oracle_table, emit)
+    run.runner.guard.table = oracle_table
+    emit(PhaseChanged("verify", "oracle (reference parameters)"))  # back from the upload's phase
+    run.measure(cfg, {StepKind.REFERENCE}, p_ref[:6])
+    summary = summary.replace(oracle=run.stats(cfg, StepKind.REFERENCE))
+    controller.rollback_table()  # the station's own table is the one left active
+    # the oracle's table must never be what a later roll back revives: the roll-back slot is
+    # emptied (the table of the run's start stays recoverable from the run database)
+    controller.discard_previous_table()
+    run.runner.guard.table = table.data
+    emit(Notice("info", "rolled back to the station's table after the oracle check"))
+    return summary
+
+
+def _kept_or_restored(run: _Run, table, summary: RunSummary, outcome: Outcome) -> RunSummary:
+    """The operator's last word on the new table: kept (the run's outcome), or declined (the
+    table of the run's start restored by run_calibration)."""
+    confirm = run.options.confirm
+    if confirm is not None and summary.before is not None and summary.after is not None:
+        keep = KeepCorrection(summary.before.rms_um, summary.after.rms_um, float(summary.gain or 0.0),
                               f"{table.data.crc32():08x}")
-        if not options.confirm(keep):  # run_calibration puts the table of the run's start back
-            runner.guard.table = None
-            emit(Notice("warning", "declined by the operator: the table of the run's start is restored"))
+        if not confirm(keep):  # run_calibration puts the table of the run's start back
+            run.runner.guard.table = None
+            run.emit(Notice("warning", "declined by the operator: the table of the run's start is restored"))
             return summary.replace(outcome=Outcome.NOT_UPLOADED,
                                    notes=(*summary.notes, "the new table was rolled back by the operator"))
     return summary.replace(outcome=outcome)

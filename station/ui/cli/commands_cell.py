@@ -31,10 +31,10 @@ from station.cell.run.runcontrol import RunControl
 from station.cell.session.calibrate import CellRequest, check_cell, reset_controller, run_calibration_session
 from station.core.probe.check import check_head
 from station.errors import ConfigError, Outcome, RunAborted, StationError
-from station.ui.cli.output import DISK_ERRNOS
-from station.ui.cli.progress_clock import ProgressClock, plan_seconds
-from station.ui.cli.stop_signals import current as current_stop_signals
-from station.ui.cli.stop_signals import safe_stop_on_signals
+from station.ui.cli.process.output import DISK_ERRNOS
+from station.ui.cli.process.progress_clock import ProgressClock, plan_seconds
+from station.ui.cli.process.stop_signals import current as current_stop_signals
+from station.ui.cli.process.stop_signals import safe_stop_on_signals
 from station.ui.report.before_basis import before_basis_line
 from station.ui.report.paths import report_dir
 from station.ui.simulated_cell import load_cell

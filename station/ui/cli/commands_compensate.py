@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from station.errors import ConfigError, Outcome
-from station.ui.cli.output import write_file
+from station.ui.cli.process.output import write_file
 
 POSE_COLUMNS = ("x_mm", "y_mm", "z_mm", "roll_deg", "pitch_deg", "yaw_deg")
 CONFIG_COLUMNS = ("shoulder", "elbow", "wrist")

@@ -11,7 +11,7 @@ import numpy as np
 
 from station.core.units import ARCSEC
 from station.errors import ConfigError
-from station.ui.cli.output import write_file
+from station.ui.cli.process.output import write_file
 
 
 def _names(s: str) -> tuple[str, ...]:

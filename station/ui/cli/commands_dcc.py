@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from station.cell.records.rundb import RunDB
-from station.ui.cli.output import write_file
+from station.ui.cli.process.output import write_file
 
 
 def cmd_export_dcc(args: argparse.Namespace) -> int:

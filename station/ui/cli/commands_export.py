@@ -16,7 +16,7 @@ import numpy as np
 from station.core.kinematics.transforms import matrix_to_pose, pose_to_matrix
 from station.core.units import ARCSEC, UM
 from station.errors import ConfigError
-from station.ui.cli.output import write_file
+from station.ui.cli.process.output import write_file
 
 
 def _urdf_source(args) -> Path:

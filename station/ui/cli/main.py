@@ -20,10 +20,10 @@ from collections.abc import Callable, Sequence
 from typing import NoReturn
 
 from station.errors import ConfigError, Outcome, StationError
-from station.ui.cli.library_log import route_library_logs
-from station.ui.cli.output import DISK_ERRNOS, guarded_streams
-from station.ui.cli.stop_signals import catch_stop_signals
-from station.ui.cli.warning_policy import station_warnings
+from station.ui.cli.process.library_log import route_library_logs
+from station.ui.cli.process.output import DISK_ERRNOS, guarded_streams
+from station.ui.cli.process.stop_signals import catch_stop_signals
+from station.ui.cli.process.warning_policy import station_warnings
 
 #: the commands that run a session: their SIGTERM and SIGINT are caught from main()'s first line
 SESSION_COMMANDS = ("calibrate", "recheck")
@@ -130,6 +130,15 @@ def build_parser() -> argparse.ArgumentParser:
     ap = StationArgumentParser(prog="station", description="Robot calibration station")
     sub = ap.add_subparsers(dest="command", required=True)
 
+    _add_model_commands(sub)
+    _add_cell_commands(sub)
+    _add_record_commands(sub)
+    _add_fleet(sub)
+    return ap
+
+
+def _add_model_commands(sub) -> None:
+    """The commands on robot models and measurement files: nothing moves."""
     p = sub.add_parser("analyze", help="identifiability of a robot's parameters")
     _add_robot(p)
     p.add_argument("--objective", "--kind", dest="objective", choices=["pose", "position", "distance"],
@@ -225,6 +234,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func="station.ui.cli.commands_study:cmd_study")
 
 
+def _add_cell_commands(sub) -> None:
+    """The commands on a cell: its configuration, its devices, its plan and its runs."""
     p = sub.add_parser("init", help="write a commented cell configuration: the template, or one derived from the "
                        "cell's robot, head and body files")
     p.add_argument("path")
@@ -277,6 +288,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true")
     p.set_defaults(func="station.ui.cli.commands_cell:cmd_plan")
 
+
+def _add_record_commands(sub) -> None:
+    """The commands on a run database: lists, reports, exports, and the operator's UI."""
     p = sub.add_parser("runs", help="list the runs of a run database (status, outcome, figures, resumable)")
     p.add_argument("--db", default="runs.sqlite")
     p.add_argument("--unlock", type=run_number, metavar="RUN",
@@ -323,8 +337,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--baseline", type=run_number, metavar="RUN", help="with --recheck: the calibration run to compare with")
     p.add_argument("--poses", type=int, metavar="N", help="with --recheck: poses to measure (default [recheck].poses)")
     p.set_defaults(func="station.ui.cli.commands_cell:cmd_tui")
-    _add_fleet(sub)
-    return ap
 
 
 def _add_fleet(sub) -> None:

@@ -23,6 +23,14 @@ def _table(head: Sequence[str], rows: Sequence[Sequence[object]], num_from: int 
 
 
 def render_markdown(d: ReportData) -> str:
+    L: list[str] = []
+    for part in (_front, _parameters, _verification, _correction_and_after):
+        L += part(d)
+    return "\n".join(L)
+
+
+def _front(d: ReportData) -> list[str]:
+    """Title, summary and acceptance, test conditions, traceability and the run record."""
     L: list[str] = [f"# {'SIMULATED — ' if d.simulated else ''}Calibration report — {d.robot_name}, run {d.run_id}", ""]
     if d.simulated:
         L += [f"> **{so.SIMULATED_BANNER}**", ""]
@@ -61,7 +69,12 @@ def render_markdown(d: ReportData) -> str:
         rounded = (f" (numbers shown to {so.SNAPSHOT_DECIMALS} decimals; the run database keeps the text as it was)"
                    if so.snapshot_changed(d.config_toml) else "")
         L += [f"Configuration snapshot{rounded}:", "", "```toml", so.tidy_config(d.config_toml).rstrip("\n"), "```", ""]
+    return L
 
+
+def _parameters(d: ReportData) -> list[str]:
+    """The identified parameters with their σ, strong correlations and the residuals."""
+    L: list[str] = []
     L += ["## Identified parameters", "", t.parameter_line(d) if d.param_names else "No parameters: nothing identified.", ""]
     for key, title, what in t.groups_present(d):
         L += [f"### {title}", "", f"{what}.", ""]
@@ -83,7 +96,12 @@ def render_markdown(d: ReportData) -> str:
     head = ["pose", "n", "RMS µm", "max µm"] + (["RMS ″"] if ori else []) + ["outliers"]
     L += _table(head, [[g.label, g.n, t.fmt(g.rms_pos_um), t.fmt(g.max_pos_um)]
                        + ([t.fmt(g.rms_ori_arcsec)] if ori else []) + [g.outliers or ""] for g in groups])
+    return L
 
+
+def _verification(d: ReportData) -> list[str]:
+    """Before and after correction per elbow and per point, and ISO 9283 per pose."""
+    L: list[str] = []
     L += ["## Verification before and after correction", ""]
     if (basis := before_basis(d.summary.before if d.summary else None)) is not None:
         L += [basis, ""]
@@ -107,7 +125,13 @@ def render_markdown(d: ReportData) -> str:
     if d.iso_poses:
         L += ["### ISO 9283 pose accuracy AP and repeatability RP per pose", "", so.ISO_NOTE, ""]
         L += _table(so.ISO_HEAD, so.iso_rows(d), num_from=2)
+    return L
 
+
+def _correction_and_after(d: ReportData) -> list[str]:
+    """Predicted accuracy, the correction table, the reversal error, tools, the simulation's
+    figures, the trend and the sign-off."""
+    L: list[str] = []
     L += ["## Predicted accuracy over the workspace", "", f"Includes the {t.ACCURACY_SCOPE}.", ""]
     if d.accuracy_where:
         L += [f"Evaluated at: {d.accuracy_where}.", ""]
@@ -148,4 +172,4 @@ def render_markdown(d: ReportData) -> str:
     else:
         L += [so.SIGNATURE_ATTESTS, ""]
         L += _table(so.SIGNATURE_HEAD, so.signature_rows(), num_from=9)
-    return "\n".join(L)
+    return L
