@@ -85,7 +85,8 @@ def cmd_fleet(args: argparse.Namespace) -> int:
               else f"fleet store at schema version {version}; applied: {applied or 'none'}")
         return 0
     with store.store_errors(url), store.connect(url, read_only=True) as conn:
-        robots = fleet_status(conn, default_interval_days=args.interval_days)
+        robots = fleet_status(conn, default_interval_days=args.interval_days,
+                              include_simulated=bool(getattr(args, "include_simulated", False)))
     overdue = [r for r in robots if r.overdue]
     if args.json:
         print(json.dumps({"robots": [r.to_json() for r in robots], "overdue": len(overdue)}))
@@ -98,7 +99,9 @@ def cmd_fleet(args: argparse.Namespace) -> int:
                   f"{(r.last_calibration_utc or '—')[:10]:<11} {_fmt(r.gain, 1, '×'):>6} "
                   f"{_fmt(r.rms_after_um, 1, ' µm'):>10} {_fmt(r.ap_max_um, 1, ' µm'):>8} {rec[:20]:<20} "
                   f"{_fmt(r.drift_rms_um, 1):>7} {_fmt(r.drift_trend_um_per_30d, 2):>9} "
-                  f"{(r.next_recheck_due_utc or '—')[:10]:<11} {r.state}")
+                  f"{(r.next_recheck_due_utc or '—')[:10]:<11} {r.state}"
+                  + (f" (simulated run {r.last_simulated_utc[:10]}, not counted)" if r.last_simulated_utc else "")
+                  + (f" ({r.damaged})" if r.damaged else ""))
         print(f"{len(robots)} robot(s), {len(overdue)} needing a recheck or calibration")
     if args.overdue and overdue:
         return int(Outcome.DRIFTED)

@@ -33,6 +33,7 @@ from starlette.staticfiles import StaticFiles
 
 from station.fleet import store
 from station.fleet.overview import STATES, fleet_status
+from station.ui.dashboard.figures import parameter_rows
 from station.ui.dashboard.plots import history_svg
 
 __all__ = ["DashboardAuth", "create_app", "SORT_KEYS"]
@@ -176,10 +177,12 @@ def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: in
             runs = store.robot_history(conn, key)
         if not runs:
             return render("missing.html", 404, what=f"robot {key}")
-        accuracy, drift = history_svg(runs)
+        # the plots show the robot's own history: neither rehearsals nor rows without a readable date
+        accuracy, drift = history_svg([r for r in runs if not r.get("simulated") and r.get("finished_utc")])
         return render("robot.html", key=key, runs=list(reversed(runs)), latest=runs[-1], accuracy_svg=accuracy,
                       drift_svg=drift, n_cal=sum(r["kind"] == "calibration" for r in runs),
-                      n_rec=sum(r["kind"] == "recheck" for r in runs), _started=started)
+                      n_rec=sum(r["kind"] == "recheck" for r in runs), n_sim=sum(bool(r.get("simulated")) for r in runs),
+                      _started=started)
 
     def run_page(request: Request) -> Response:
         uid = request.path_params["uuid"]
@@ -188,10 +191,13 @@ def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: in
             has_report = run is not None and store.report_html(conn, str(uid)) is not None
         if run is None:
             return render("missing.html", 404, what=f"run {uid}")
-        ident = (run.get("detail") or {}).get("identification") or {}
-        params = list(zip(ident.get("names") or [], ident.get("params") or [], ident.get("sigma") or []))
-        return render("run.html", run=run, params=params, has_report=has_report,
-                      has_covariance=bool(ident.get("covariance")))
+        stored = run.get("detail")
+        detail: dict[str, Any] = stored if isinstance(stored, dict) else {}  # a stored list: no 500
+        ident = detail.get("identification")
+        ident = ident if isinstance(ident, dict) else {}
+        params, params_note = parameter_rows(detail)
+        return render("run.html", run={**run, "detail": detail}, params=params, params_note=params_note,
+                      has_report=has_report, has_covariance=bool(ident.get("covariance")))
 
     def report_page(request: Request) -> Response:
         uid = request.path_params["uuid"]
