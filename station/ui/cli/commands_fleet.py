@@ -40,6 +40,15 @@ def _url(args: argparse.Namespace) -> str:
     return url
 
 
+def _configured_station(args: argparse.Namespace) -> str | None:
+    """CONFIG's ``[fleet] station`` (None without CONFIG or without one)."""
+    if not getattr(args, "config", None):
+        return None
+    from station.cell.config.cell_config import load_config
+
+    return load_config(args.config).fleet.station
+
+
 def cmd_sync(args: argparse.Namespace) -> int:
     from station.cell.publication.outbox import pending, sync
 
@@ -49,8 +58,10 @@ def cmd_sync(args: argparse.Namespace) -> int:
     backfilled, problems = 0, list[str]()
     if args.all:
         from station.cell.publication.outbox import enqueue_finished
+        from station.ui.report.paths import report_dir
 
-        backfilled, problems = enqueue_finished(args.db)
+        backfilled, problems = enqueue_finished(args.db, station=_configured_station(args),
+                                                report_dir=lambda run_id: report_dir(args.db, run_id))
         for line in problems:
             print(f"  not queued: {line}", file=sys.stderr)
     before = len(pending(args.db))
