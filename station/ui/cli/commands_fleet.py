@@ -132,6 +132,9 @@ def cmd_serve(args: argparse.Namespace) -> int:
     token = None
     if args.token_file:
         token = Path(args.token_file).read_text(encoding="utf-8").strip()
+        if not token:  # an empty token would turn authentication off without a word (issue 39)
+            raise ConfigError(f"{args.token_file}: the token file is empty; write the bearer token into it "
+                              f"(e.g. 'openssl rand -hex 32 > {args.token_file}')")
     elif os.environ.get(TOKEN_ENV):
         token = os.environ[TOKEN_ENV].strip()
     basic = None
