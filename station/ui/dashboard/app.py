@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
+from urllib.parse import quote
 
 import psycopg
 from jinja2 import Environment, FileSystemLoader, select_autoescape
@@ -140,10 +141,18 @@ def _date(v: Any) -> str:
     return str(v)[:16].replace("T", " ")
 
 
+def path_segment(key: str) -> str:
+    """A robot key as one path segment: every reserved character encoded, '/' and '.' included
+    (Jinja's urlencode leaves '/' as is: a serial 'a/../b' linked to a page the browser rewrote
+    to /robots/b). The route takes the key with its '/' decoded ({key:path})."""
+    return quote(str(key), safe="")
+
+
 def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: int = 30) -> Starlette:
     env = Environment(loader=FileSystemLoader(str(_HERE / "templates")), autoescape=select_autoescape(["html"]))
     env.filters["fmt"] = _fmt
     env.filters["date"] = _date
+    env.filters["segment"] = path_segment
     pool = _Pool(url)
 
     def render(name: str, status: int = 200, **ctx: Any) -> HTMLResponse:
@@ -173,6 +182,8 @@ def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: in
     def robot_page(request: Request) -> Response:
         started = time.perf_counter()
         key = request.path_params["key"]
+        if not key.isprintable():  # a NUL or another control character: no stored key has one (the store refused it: 503)
+            return render("missing.html", 404, what=f"robot {key!r}")
         with pool.connection() as conn:
             runs = store.robot_history(conn, key)
         if not runs:
