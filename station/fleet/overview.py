@@ -8,6 +8,10 @@ recalibrate), ``overdue`` (the next recheck's date has passed), ``damaged`` (a s
 reader cannot take at its word, e.g. an impossible date: shown, never a failed page), ``ok``.
 Simulated runs (rehearsals) are none of these unless the plant asks (``include_simulated``); the
 latest one is shown beside the state. A robot is *overdue* for ``--overdue`` in all but ``ok``.
+
+Due: the last recheck (or calibration) plus the interval, or earlier where the drift forecast
+(ILAC-G24's control chart over the rechecks since the calibration) says the drift may cross its
+tolerance before then: the earliest date of the crossing's 95 % interval (``due_from``).
 """
 
 from __future__ import annotations
@@ -18,9 +22,11 @@ from dataclasses import asdict, dataclass
 from datetime import datetime, timedelta, timezone
 from typing import Any
 
+import numpy as np
 import psycopg
 
 from station.fleet import store
+from station.fleet.drift_forecast import forecast_crossing
 
 __all__ = ["RobotStatus", "STATES", "fleet_status", "drift_trend", "robot_status"]
 
@@ -57,6 +63,12 @@ class RobotStatus:
     last_simulated_utc: str | None = None  # the latest rehearsal on the simulator (never counted unless asked)
     last_simulated_kind: str | None = None
     damaged: str | None = None  # why a stored row could not be read at its word
+    # the drift forecast (ILAC-G24 control chart, station.fleet.drift_forecast): when the
+    # trend of the rechecks since the calibration reaches the tolerance, and that date's 95 % interval
+    drift_crossing_utc: str | None = None
+    drift_crossing_earliest_utc: str | None = None
+    drift_crossing_latest_utc: str | None = None
+    due_from: str | None = None  # what set next_recheck_due_utc: "interval", "forecast" or "drifted"
 
     @property
     def overdue(self) -> bool:
@@ -135,6 +147,8 @@ def robot_status(row: Mapping[str, Any], rechecks: Sequence[Mapping[str, Any]], 
     if damaged or not isinstance(interval, int):
         interval = default_interval_days
     due: datetime | None = None
+    due_from: str | None = None
+    forecast = forecast_dates(rechecks, cal_t, rec) if rec_current and not damaged and cal_t is not None else None
     if damaged:
         state = "damaged"
     elif cal is None or cal_t is None:
@@ -143,9 +157,11 @@ def robot_status(row: Mapping[str, Any], rechecks: Sequence[Mapping[str, Any]], 
         state = "failed"  # the figures beside it are this attempt's, not an older good run's
     else:
         last = rec_t if rec_current and rec_t is not None else cal_t
-        due = last + timedelta(days=interval)
+        due, due_from = last + timedelta(days=interval), "interval"
+        if forecast is not None and forecast[1] < due:  # the drift may cross before the interval ends
+            due, due_from = forecast[1], "forecast"
         if rec_current and rec is not None and rec.get("outcome") != "SUCCESS":
-            state, due = "drifted", rec_t
+            state, due, due_from = "drifted", rec_t, "drifted"
         else:
             state = "overdue" if due < now else "ok"
     return RobotStatus(
@@ -160,7 +176,28 @@ def robot_status(row: Mapping[str, Any], rechecks: Sequence[Mapping[str, Any]], 
         drift_trend_um_per_30d=drift_trend(rechecks) if rec_current and not damaged else None,
         next_recheck_due_utc=_iso(due), state=state, last_good_calibration_utc=_iso(good_t),
         last_simulated_utc=_iso(_ts(sim.get("finished_utc"))) if sim else None,
-        last_simulated_kind=_text(sim.get("kind")) if sim else None, damaged=damaged)
+        last_simulated_kind=_text(sim.get("kind")) if sim else None, damaged=damaged,
+        drift_crossing_utc=_iso(forecast[0]) if forecast else None,
+        drift_crossing_earliest_utc=_iso(forecast[1]) if forecast else None,
+        drift_crossing_latest_utc=_iso(forecast[2]) if forecast else None, due_from=due_from)
+
+
+def forecast_dates(rechecks: Sequence[Mapping[str, Any]], cal_t: datetime,
+              rec: Mapping[str, Any] | None) -> tuple[datetime, datetime, datetime] | None:
+    """The dates the drift trend crosses the latest recheck's tolerance (central, earliest,
+    latest at 95 %), from the rechecks since the calibration; None where there is no forecast."""
+    tolerance = _num((rec or {}).get("tolerance_um"))
+    pts = [((t - cal_t).total_seconds() / 86400.0, v) for r in rechecks
+           if (v := _num(r.get("drift_rms_um"))) is not None and (t := _ts(r.get("finished_utc"))) is not None]
+    if tolerance is None or not pts:
+        return None
+    f = forecast_crossing(np.array([p[0] for p in pts]), np.array([p[1] for p in pts]), tolerance)
+    if f is None:
+        return None
+    try:  # a crossing centuries away is no date to show: no forecast
+        return cal_t + timedelta(days=f.crossing), cal_t + timedelta(days=f.earliest), cal_t + timedelta(days=f.latest)
+    except OverflowError:
+        return None
 
 
 def _text(v: Any) -> str | None:
@@ -180,3 +217,16 @@ def fleet_status(conn: psycopg.Connection, now: datetime | None = None,
                     if row.get("last_recheck") and since else [])
         out.append(robot_status(row, rechecks, now, default_interval_days))
     return out
+
+
+def history_forecast(runs: Sequence[Mapping[str, Any]]) -> tuple[datetime, datetime, datetime] | None:
+    """:func:`forecast_dates` from a robot's history (:func:`station.fleet.store.robot_history`):
+    the rechecks after its latest calibration, rehearsals left out, as the fleet table has it."""
+    real = [r for r in runs if not r.get("simulated") and _ts(r.get("finished_utc")) is not None]
+    cals = [r for r in real if r.get("kind") == "calibration"]
+    if not cals or cals[-1].get("outcome") != "SUCCESS":
+        return None
+    cal_t = _ts(cals[-1]["finished_utc"])
+    assert cal_t is not None
+    rechecks = [r for r in real if r.get("kind") == "recheck" and (_ts(r["finished_utc"]) or cal_t) > cal_t]
+    return forecast_dates(rechecks, cal_t, rechecks[-1]) if rechecks else None

@@ -33,7 +33,7 @@ from starlette.routing import Mount, Route
 from starlette.staticfiles import StaticFiles
 
 from station.fleet import store
-from station.fleet.overview import STATES, RobotStatus, fleet_status
+from station.fleet.overview import STATES, RobotStatus, fleet_status, history_forecast
 from station.ui.dashboard.export import rows_csv, rows_json
 from station.ui.dashboard.figures import parameter_rows
 from station.ui.dashboard.plots import history_svg
@@ -227,6 +227,7 @@ def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: in
         # the plots show the robot's own history: neither rehearsals nor rows without a readable date
         accuracy, drift = history_svg([r for r in runs if not r.get("simulated") and r.get("finished_utc")])
         return render("robot.html", key=key, runs=list(reversed(runs)), latest=runs[-1], accuracy_svg=accuracy,
+                      forecast=history_forecast(runs),
                       drift_svg=drift, n_cal=sum(r["kind"] == "calibration" for r in runs),
                       n_rec=sum(r["kind"] == "recheck" for r in runs), n_sim=sum(bool(r.get("simulated")) for r in runs),
                       _started=started)
