@@ -20,7 +20,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
+from scipy.special import stdtrit
 
 #: two-sided confidence of the crossing interval (the band of ILAC-G24's control chart: 95 %)
 CONFIDENCE = 0.95
@@ -61,7 +61,9 @@ def forecast_crossing(t_days: np.ndarray, drift: np.ndarray, tolerance: float,
     b = float(((t - tm) * (y - ym)).sum()) / sxx
     resid = y - (ym + b * (t - tm))
     s2 = float((resid ** 2).sum()) / (n - 2)
-    k = float(stats.t.ppf(0.5 + confidence / 2.0, n - 2))
+    # Student's t quantile: scipy.special's, as stats.t.ppf computes it without its ~0.3 ms of
+    # argument handling per call (200 robots on the fleet page)
+    k = float(stdtrit(n - 2, 0.5 + confidence / 2.0))
     # Fieller: (c - b u)^2 = k^2 s^2 (1/n + u^2 / Sxx), u = t - tm, c = tolerance - ym
     c = tolerance - ym
     qa = b * b - k * k * s2 / sxx
