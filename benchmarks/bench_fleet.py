@@ -10,6 +10,7 @@ The fleet: ROBOTS robots, YEARS years of nightly rechecks and monthly calibratio
   by ``sync`` (connecting as the station's role included), and the store's insert alone on an
   open connection;
 * the fleet page's server time (``GET /``, the app in-process; goal ≤ 200 ms);
+* the fleet table's CSV export (``GET /fleet.csv``, issue 39);
 * a robot's history page (``GET /robots/KEY``, its runs and both SVG plots; goal ≤ 200 ms);
 * the database's size.
 
@@ -64,12 +65,14 @@ def _rows(robots: int, years: int, seed: int = 31):
                                              "sigma": [1e-3] * n_par, "covariance": cov}}
                 yield (str(uuid.uuid4()), key, key, "sr800", cell, station, "0.1.0", d, "calibration", "SUCCESS",
                        t - timedelta(hours=1), t, 650 + rng.random() * 100, after, 680 / after, after + 3, 20.0,
-                       None, None, None, 30, json.dumps({"[cell]": "5d3478fb28c75e88"}), json.dumps(detail))
+                       None, None, None, 30, json.dumps({"[cell]": "5d3478fb28c75e88"}), json.dumps(detail), False,
+                       "operator Y")
             t += timedelta(hours=1)  # the nightly recheck (on a calibration's day too, an hour after it)
             drift = max(0.5, rng.gauss(4 + (d % 30) * 0.3, 1.5))
             yield (str(uuid.uuid4()), key, key, "sr800", cell, station, "0.1.0", d, "recheck",
                    "SUCCESS" if drift <= tol else "DRIFTED", t - timedelta(minutes=10), t, None, None, None, None,
-                   None, drift, drift * 1.6, tol, 30, "{}", json.dumps({"recheck": {"rms_um": drift}}))
+                   None, drift, drift * 1.6, tol, 30, "{}", json.dumps({"recheck": {"rms_um": drift}}), False,
+                   "operator Y")  # schema 4's columns: simulated, operator
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -147,6 +150,7 @@ def main(argv: list[str] | None = None) -> int:
                 return get
 
             fleet_med, fleet_best = _median_ms(page("/"), args.repeat)
+            csv_med, csv_best = _median_ms(page("/fleet.csv"), args.repeat)  # the export (issue 39)
             robot = f"/robots/SR800-{min(42, args.robots - 1):05d}"
             hist_med, hist_best = _median_ms(page(robot), args.repeat)
             history = client.get(robot).text
@@ -156,6 +160,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"publish one run (the store's insert on an open connection):  median {ins_med:.2f} ms (best {ins_best:.2f})")
         print(f"fleet page GET / ({args.robots} robots):                        median {fleet_med:.1f} ms (best "
               f"{fleet_best:.1f}); goal 200 ms")
+        print(f"fleet export GET /fleet.csv ({args.robots} robots, with the drift forecasts): median {csv_med:.1f} ms "
+              f"(best {csv_best:.1f})")
         print(f"robot history GET /robots/KEY ({hist_runs} runs, {hist_len // 1024} KiB): median "
               f"{hist_med:.1f} ms (best {hist_best:.1f}); goal 200 ms")
         print(f"database size: {size[0]} ({size[1] / n:.0f} bytes per run)")

@@ -15,6 +15,7 @@ from typing import Any
 
 import psycopg
 from psycopg.rows import dict_row
+from psycopg.types.datetime import TimestamptzLoader
 from psycopg.types.json import Jsonb
 
 from station.errors import Outcome, StationError
@@ -42,6 +43,7 @@ def connect(url: str, *, read_only: bool = False, check_schema: bool = True,
                                autocommit=autocommit)
     except psycopg.Error as e:
         raise FleetStoreError(f"fleet store {_safe(url)}: cannot connect ({_first_line(e)})") from e
+    conn.adapters.register_loader("timestamptz", _LenientTimestamptz)
     try:
         if read_only:  # every transaction of the session, autocommit's included
             conn.execute("SET default_transaction_read_only = on")
@@ -60,6 +62,18 @@ def connect(url: str, *, read_only: bool = False, check_schema: bool = True,
         conn.close()
         raise
     return conn
+
+
+class _LenientTimestamptz(TimestamptzLoader):
+    """A stored time Python cannot hold ('infinity', a year beyond 9999, a BC date: rows stored
+    before schema 4's checks) reads as None, which the readers show as damaged, instead of
+    failing the whole query, and with it the fleet page."""
+
+    def load(self, data: Any) -> datetime | None:  # type: ignore[override]
+        try:
+            return super().load(data)
+        except psycopg.DataError:
+            return None
 
 
 @contextmanager
@@ -95,7 +109,11 @@ def _safe(url: str) -> str:
 _RUN_COLUMNS = ("run_uuid", "robot_key", "robot_serial", "robot_model", "cell", "station", "station_version",
                 "local_run_id", "kind", "outcome", "started_utc", "finished_utc", "rms_before_um", "rms_after_um",
                 "gain", "ap_max_um", "rp_max_um", "drift_rms_um", "drift_max_um", "tolerance_um",
-                "recheck_interval_days", "fingerprint", "detail")
+                "recheck_interval_days", "fingerprint", "detail", "simulated", "operator")
+
+#: what a publication queued before a column existed stands for (schema 4: a queued run of an older
+#: station was not simulated as far as it said, and named no operator)
+_RUN_DEFAULTS = {"simulated": False, "operator": None}
 
 _INSERT_RUN = (f"INSERT INTO runs ({', '.join(_RUN_COLUMNS)}) VALUES ({', '.join(['%s'] * len(_RUN_COLUMNS))}) "
                "ON CONFLICT DO NOTHING")
@@ -104,7 +122,8 @@ _INSERT_RUN = (f"INSERT INTO runs ({', '.join(_RUN_COLUMNS)}) VALUES ({', '.join
 def insert_publication(conn: psycopg.Connection, pub: Mapping[str, Any]) -> bool:
     """Insert one run (and its robot, once) in one transaction; True if it was new, False if the
     store already held this run UUID (a retry, or another sync got there first)."""
-    values = [Jsonb(pub[c]) if c in ("fingerprint", "detail") else pub[c] for c in _RUN_COLUMNS]
+    values = [Jsonb(pub[c]) if c in ("fingerprint", "detail") else pub[c] if c in pub else _RUN_DEFAULTS[c]
+              for c in _RUN_COLUMNS]
     with conn.transaction():
         conn.execute("INSERT INTO robots (robot_key, serial) VALUES (%s, %s) ON CONFLICT DO NOTHING",
                      (pub["robot_key"], pub["robot_serial"]))
@@ -129,23 +148,28 @@ def robot_keys(conn: psycopg.Connection) -> list[str]:
 _SUMMARY_COLUMNS = ("run_uuid::text AS run_uuid, robot_key, robot_serial, robot_model, cell, station, "
                     "station_version, local_run_id, kind, outcome, started_utc, finished_utc, rms_before_um, "
                     "rms_after_um, gain, ap_max_um, rp_max_um, drift_rms_um, drift_max_um, tolerance_um, "
-                    "recheck_interval_days")
+                    "recheck_interval_days, simulated, operator")
 
 
-def latest_runs(conn: psycopg.Connection) -> list[dict[str, Any]]:
-    """Per robot: its latest run, latest calibration, latest successful calibration and latest
-    recheck (each a dict or None), one index probe each (``runs_robot_kind_time``)."""
+def latest_runs(conn: psycopg.Connection, *, include_simulated: bool = False) -> list[dict[str, Any]]:
+    """Per robot: its latest calibration attempt (whatever its outcome), latest successful
+    calibration, latest recheck and latest simulated run (each a dict or None), one index probe
+    each. Simulated runs (rehearsals) count as none of the first three unless ``include_simulated``."""
+    real = "" if include_simulated else "AND NOT simulated"
     query = f"""
         SELECT r.robot_key,
                (SELECT to_jsonb(x) FROM (SELECT {_SUMMARY_COLUMNS} FROM runs
-                  WHERE robot_key = r.robot_key AND kind = 'calibration'
+                  WHERE robot_key = r.robot_key AND kind = 'calibration' {real}
                   ORDER BY finished_utc DESC LIMIT 1) x) AS last_calibration,
                (SELECT to_jsonb(x) FROM (SELECT {_SUMMARY_COLUMNS} FROM runs
-                  WHERE robot_key = r.robot_key AND kind = 'calibration' AND outcome = 'SUCCESS'
+                  WHERE robot_key = r.robot_key AND kind = 'calibration' AND outcome = 'SUCCESS' {real}
                   ORDER BY finished_utc DESC LIMIT 1) x) AS last_good_calibration,
                (SELECT to_jsonb(x) FROM (SELECT {_SUMMARY_COLUMNS} FROM runs
-                  WHERE robot_key = r.robot_key AND kind = 'recheck'
-                  ORDER BY finished_utc DESC LIMIT 1) x) AS last_recheck
+                  WHERE robot_key = r.robot_key AND kind = 'recheck' {real}
+                  ORDER BY finished_utc DESC LIMIT 1) x) AS last_recheck,
+               (SELECT to_jsonb(x) FROM (SELECT finished_utc, kind, outcome FROM runs
+                  WHERE robot_key = r.robot_key AND simulated
+                  ORDER BY finished_utc DESC LIMIT 1) x) AS last_simulated
           FROM robots r ORDER BY r.robot_key"""
     with conn.cursor(row_factory=dict_row) as cur:
         rows = cur.execute(query.encode()).fetchall()
@@ -153,13 +177,14 @@ def latest_runs(conn: psycopg.Connection) -> list[dict[str, Any]]:
 
 
 def recent_rechecks(conn: psycopg.Connection, robot_key: str, since: datetime | str | None,
-                    limit: int = 10) -> list[dict[str, Any]]:
+                    limit: int = 10, *, include_simulated: bool = False) -> list[dict[str, Any]]:
     """A robot's latest rechecks after ``since`` (its last calibration), newest first."""
+    real = "" if include_simulated else "AND NOT simulated "
     with conn.cursor(row_factory=dict_row) as cur:
         return list(cur.execute(
-            "SELECT finished_utc, drift_rms_um, outcome FROM runs WHERE robot_key = %s AND kind = 'recheck' "
-            "AND (%s::timestamptz IS NULL OR finished_utc > %s::timestamptz) ORDER BY finished_utc DESC LIMIT %s",
-            (robot_key, since, since, limit)).fetchall())
+            "SELECT finished_utc, drift_rms_um, tolerance_um, outcome FROM runs WHERE robot_key = %s "
+            f"AND kind = 'recheck' {real}AND (%s::timestamptz IS NULL OR finished_utc > %s::timestamptz) "
+            "ORDER BY finished_utc DESC LIMIT %s".encode(), (robot_key, since, since, limit)).fetchall())
 
 
 def robot_history(conn: psycopg.Connection, robot_key: str, limit: int = 2000) -> list[dict[str, Any]]:

@@ -35,7 +35,7 @@ def test_fleet_json_lists_each_robot_with_its_figures_state_and_due_date(fleet_d
     out = json.loads(capsys.readouterr().out)
     robots = {r["robot_key"]: r for r in out["robots"]}
     assert {k: r["state"] for k, r in robots.items()} == {"OK-1": "ok", "LATE-1": "overdue", "DRIFT-1": "drifted",
-                                                          "NEW-1": "uncalibrated"}
+                                                          "NEW-1": "failed"}  # its only attempt failed (issue 39)
     ok = robots["OK-1"]
     assert ok["rms_after_um"] == pytest.approx(12.0) and ok["last_recheck_verdict"] == "SUCCESS"
     assert ok["next_recheck_due_utc"][:10] == days_ago(3 - 30).strftime("%Y-%m-%d")

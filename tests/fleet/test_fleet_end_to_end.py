@@ -45,13 +45,22 @@ def test_a_run_during_an_outage_is_queued_then_synced_once_and_listed(fleet_db, 
 
     listed = _station("fleet", "--json", url=fleet_db.dashboard_url, cwd=tmp_path)
     assert listed.returncode == 0, listed.stderr
+    (rehearsal,) = json.loads(listed.stdout)["robots"]  # a simulated run never makes a robot calibrated (39)
+    assert rehearsal["state"] == "uncalibrated" and rehearsal["last_simulated_utc"] is not None
+    listed = _station("fleet", "--json", "--include-simulated", url=fleet_db.dashboard_url, cwd=tmp_path)
+    assert listed.returncode == 0, listed.stderr
     (robot,) = json.loads(listed.stdout)["robots"]
     assert robot["cell"] == summary["cell"] and robot["last_calibration_outcome"] == "SUCCESS"
     assert robot["gain"] == pytest.approx(summary["gain"]) and robot["rms_after_um"] == pytest.approx(summary["after"]["rms_um"])
     with store.connect(fleet_db.dashboard_url, read_only=True) as c:
         (row,) = store.robot_history(c, robot["robot_key"])
         detail = store.run_detail(c, row["run_uuid"])
-    assert detail is not None and row["has_report"]
+    assert detail is not None and row["has_report"] and row["simulated"] is True
     ident = detail["detail"]["identification"]
     n = len(ident["chosen"])
     assert len(ident["covariance"]) == n and len(ident["covariance"][0]) == n  # parameters with covariance
+    # each parameter published with its own value and unit, paired by name (39: not by position)
+    by_name = {p["name"]: p for p in ident["parameters"]}
+    assert list(by_name) == ident["chosen"] and {p["unit"] for p in by_name.values()} <= {"mm", "rad"}
+    estimates = {p["name"]: p["value"] for p in summary["identification"]["parameters"]}
+    assert all(by_name[k]["value"] == pytest.approx(v) for k, v in estimates.items())

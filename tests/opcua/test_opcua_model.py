@@ -43,4 +43,4 @@ async def test_the_cells_files_fill_the_companion_models(tmp_path) -> None:
     for spec, name, t in zip(specs, names, [t for t in cfg.model.transforms if t.joint is not None]):
         if spec is not None:
             suffix = "yaw" if str(t.joint) == "revolute" else "z"
-            assert spec[0] == cfg.model.param_index(f"{name}.{suffix}")
+            assert spec.index == cfg.model.param_index(f"{name}.{suffix}")

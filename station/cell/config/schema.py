@@ -65,6 +65,15 @@ class _Cell(_Section):
     operator: Text | None = _absent(description="who runs the station (the report's operator unless "
                                                 "--operator names another), 1 … 256 characters")
 
+    @field_validator("robot_serial")
+    @classmethod
+    def _serial_names_a_page(cls, serial: str | None) -> str | None:
+        # the serial is the robot's key in the fleet and its dashboard page /robots/KEY: '.' or '..'
+        # alone is a path segment every browser resolves away (WHATWG URL, encoded or not)
+        if serial is not None and set(serial.strip()) <= {"."}:
+            raise ValueError("is dots only: give the serial number from the robot's plate")
+        return serial
+
 
 class _Robot(_Section):
     model: PathText = Field(description='a built-in robot ("sr800") or a robot file (docs/robot-file.md)')
@@ -377,6 +386,10 @@ class _Recheck(_Section):
                               "recheck_interval_days")
 
 
+class SecretInput(ValueError):
+    """A refusal whose message must not show the value refused (it may hold a password)."""
+
+
 class _Fleet(_Section):
     """[fleet]: the plant's central fleet store (issue 31). No credentials here: the libpq service
     file, ~/.pgpass or PG* environment variables supply them."""
@@ -390,9 +403,22 @@ class _Fleet(_Section):
     @field_validator("url")
     @classmethod
     def _no_password(cls, url: str | None) -> str | None:
-        if url is not None and re.search(r"(?i)(password\s*=|^[a-z]+://[^/@]*:[^/@]*@)", url):
-            raise ValueError("holds a password: put credentials in ~/.pgpass, the libpq service file or "
-                             "PGPASSWORD, never in the cell file")
+        # read as libpq reads it (psycopg's conninfo_to_dict is libpq's PQconninfoParse): a
+        # password in any spelling (user:pw@, ?password=, ?pass%77ord=, password = …) is found;
+        # the refusal never shows the value (SecretInput)
+        if url is None:
+            return url
+        from psycopg import Error
+        from psycopg.conninfo import conninfo_to_dict
+
+        try:
+            keys = conninfo_to_dict(url)
+        except Error:  # libpq's message may quote the string: not shown
+            raise SecretInput("is not a connection string libpq reads: give postgresql://host/dbname or "
+                              "service=NAME") from None
+        if keys.get("password") or keys.get("sslpassword"):
+            raise SecretInput("holds a password: put credentials in ~/.pgpass, the libpq service file or "
+                              "PGPASSWORD, never in the cell file (the value is not shown)")
         return url
 
 
@@ -613,7 +639,8 @@ def _describe(err: dict) -> str:
         problem = f"must be {bound[1]} {limit:g}" if isinstance(limit, (int, float)) else "out of range"
     elif typ == "value_error":  # the validator's message says what to write
         v = err.get("input")
-        shown = f" = {_short.repr(v)}" if isinstance(v, (str, int, float)) else ""
+        secret = isinstance(ctx.get("error"), SecretInput)
+        shown = f" = {_short.repr(v)}" if isinstance(v, (str, int, float)) and not secret else ""
         return f"{key}{shown}: {str(err['msg']).removeprefix('Value error, ')}"
     elif typ in ("too_short", "too_long"):
         n = ctx.get("actual_length")

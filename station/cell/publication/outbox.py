@@ -10,9 +10,12 @@ never waits on the network longer than the connection timeout and never fails be
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
+import os
 import sqlite3
+import stat
 import uuid
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -113,10 +116,15 @@ def enqueue_run(db_path: str | Path, run_id: int, cfg: CellConfig, db: RunDB | N
         conn.close()
 
 
-def enqueue_finished(db_path: str | Path) -> tuple[int, list[str]]:
+def enqueue_finished(db_path: str | Path, station: str | None = None,
+                     report_dir: Callable[[int], Path] | None = None) -> tuple[int, list[str]]:
     """Queue every run of ``db_path`` that has a stored summary and is not queued yet (a station
-    joining the fleet with its history), each with the configuration it was made with. Returns
-    how many were queued and, for each run that could not be, why."""
+    joining the fleet with its history), each with the configuration it was made with, under
+    ``station`` (the current ``[fleet] station``: the runs were made before it was set, and published
+    under the host name two stations' histories merged into one robot, issue 39), with the report
+    the run wrote where there is one (its summary names it, else ``report_dir(run_id)`` holds it:
+    the default folder of ``station report``). Returns how many were queued and, for each run that could
+    not be, why."""
     from station.cell.records.stored_config import stored_config
 
     conn = _open(db_path)
@@ -130,11 +138,32 @@ def enqueue_finished(db_path: str | Path) -> tuple[int, list[str]]:
     with RunDB(db_path) as db:
         for run_id in todo:
             try:
-                enqueue_run(db_path, run_id, stored_config(db, run_id), db)
+                cfg = stored_config(db, run_id)
+                if station:
+                    cfg = dataclasses.replace(cfg, fleet=dataclasses.replace(cfg.fleet, station=station))
+                enqueue_run(db_path, run_id, cfg, db)
                 queued += 1
             except Exception as exc:  # noqa: BLE001 - one unreadable run does not stop the others
                 problems.append(f"run {run_id}: {exc}")
+    for run_id in todo:  # the report each run wrote (its summary names it), checked when it is read
+        report = _written_report(db_path, run_id, report_dir)
+        if report is not None:
+            attach_report(db_path, run_id, report)
     return queued, problems
+
+
+def _written_report(db_path: str | Path, run_id: int, report_dir: Callable[[int], Path] | None) -> str | None:
+    """The report.html a run's stored summary names (``calibrate --report``), else the one in its
+    default report folder, if it is there."""
+    with RunDB(db_path) as db:
+        summary = db.load_result(run_id, "summary", default=None)
+    named = summary.get("report") if isinstance(summary, dict) else None
+    folders = ([Path(named)] if isinstance(named, str) and named else []) + ([report_dir(run_id)] if report_dir else [])
+    for folder in folders:
+        candidate = folder if folder.suffix == ".html" else folder / "report.html"
+        if candidate.is_file():
+            return str(candidate)
+    return None
 
 
 def attach_report(db_path: str | Path, run_id: int, report_path: str | Path) -> bool:
@@ -146,7 +175,7 @@ def attach_report(db_path: str | Path, run_id: int, report_path: str | Path) -> 
             return False
         cur = conn.execute("UPDATE fleet_outbox SET report_path = ?, report_sent_utc = NULL WHERE run_uuid = "
                            "(SELECT run_uuid FROM fleet_outbox WHERE run_id = ? ORDER BY summary_utc DESC LIMIT 1)",
-                           (str(Path(report_path).resolve()), run_id))
+                           (os.path.abspath(report_path), run_id))  # as named: a link is refused when read
         return cur.rowcount == 1
     finally:
         conn.close()
@@ -180,8 +209,31 @@ def queue_state(db_path: str | Path) -> list[QueueEntry]:
         conn.close()
 
 
+#: the largest report sent (a self-contained report.html with its plots is a few MB)
+MAX_REPORT_BYTES = 32 * 1024 * 1024
+
+
 def _read_report(path: str) -> str:
-    return Path(path).read_text(encoding="utf-8")
+    """The report a run wrote, read as the station wrote it and nothing else (issue 39: a queued
+    path that was a symlink to /etc/passwd was served to QA as the run's report): a regular file
+    named report.html, reached through no symbolic link, opened without following one, at most
+    :data:`MAX_REPORT_BYTES`. Anything else is an OSError naming why (the run stays published)."""
+    p = Path(path)
+    if p.name != "report.html":
+        raise OSError(f"not a station's report (its file is report.html): {p.name!r}")
+    if os.path.realpath(p) != os.path.abspath(p):
+        raise OSError("the path passes through a symbolic link; a report is read only where the station wrote it")
+    fd = os.open(p, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_NONBLOCK", 0))
+    with os.fdopen(fd, "rb") as f:
+        st = os.fstat(f.fileno())
+        if not stat.S_ISREG(st.st_mode):
+            raise OSError("not a regular file")
+        if st.st_size > MAX_REPORT_BYTES:
+            raise OSError(f"{st.st_size} bytes, more than the {MAX_REPORT_BYTES} a report may have")
+        data = f.read(MAX_REPORT_BYTES + 1)
+    if len(data) > MAX_REPORT_BYTES:
+        raise OSError(f"more than the {MAX_REPORT_BYTES} bytes a report may have")
+    return data.decode("utf-8")
 
 
 def sync(db_path: str | Path, url: str, *, only_run: int | None = None,

@@ -49,14 +49,43 @@ def _clean(obj: Any) -> Any:
     return obj
 
 
-def _identification(stored: Any, summary: dict[str, Any]) -> dict[str, Any] | None:
-    """The identified parameters: names, values, σ and the covariance of the chosen ones."""
+def _parameters(stored: dict[str, Any], cfg: CellConfig) -> list[dict[str, Any]] | None:
+    """One entry per identified parameter: its name, nominal, identified value and σ in the
+    model's units, and that unit (``mm`` or ``rad``), paired by name through the robot's model
+    (issue 39: the stored ``params`` are the whole model's vector, the names only the chosen ones)."""
+    chosen, params, sigma = stored.get("chosen"), stored.get("params"), stored.get("sigma")
+    if not isinstance(chosen, list) or not isinstance(params, list) or not isinstance(sigma, list) \
+            or len(sigma) != len(chosen):
+        return None
+    names, nominal, angle = cfg.model.param_names, np.asarray(cfg.model.nominal), cfg.model.is_angle()
+    if len(params) != len(names) or not all(isinstance(n, str) and n in names for n in chosen):
+        return None  # not this model's vector: no pairing is better than a wrong one
+    out = []
+    for name, s in zip(chosen, sigma):
+        i = names.index(name)
+        out.append({"name": name, "unit": "rad" if angle[i] else "mm", "nominal": float(nominal[i]),
+                    "value": params[i], "sigma": s})
+    return out
+
+
+def _identification(stored: Any, summary: dict[str, Any], cfg: CellConfig) -> dict[str, Any] | None:
+    """The identified parameters (each with its unit), σ and the covariance of the chosen ones."""
     if not isinstance(stored, dict):
         return None
     names = [p.get("name") for p in summary.get("identification", {}).get("parameters", [])]
     return {"names": names, "chosen": stored.get("chosen"), "params": stored.get("params"),
+            "parameters": _parameters(stored, cfg),
             "sigma": stored.get("sigma"), "covariance": stored.get("covariance"),
             "rms_normalized": stored.get("rms_normalized"), "outliers": stored.get("outliers")}
+
+
+def _operator(db: RunDB, run_id: int, cfg: CellConfig) -> str | None:
+    """Who ran it: the operator recorded with the run's report (``calibrate --operator``), else
+    ``[cell] operator`` (the report's own order, station/ui/report/run.py)."""
+    stored = db.load_result(run_id, "operator", default=None)
+    if isinstance(stored, str) and stored.strip():
+        return stored.strip()
+    return cfg.identity.operator or None
 
 
 def build_publication(db: RunDB, run_id: int, cfg: CellConfig, run_uuid: str, finished_utc: str) -> dict[str, Any]:
@@ -73,12 +102,12 @@ def build_publication(db: RunDB, run_id: int, cfg: CellConfig, run_uuid: str, fi
     tolerances = recheck.get("tolerances") or {}
     detail: dict[str, Any] = {
         "summary": summary,
-        "identification": _identification(db.load_result(run_id, "identification", default=None), summary),
+        "identification": _identification(db.load_result(run_id, "identification", default=None), summary, cfg),
         "devices": db.load_result(run_id, "devices", default=None),
         "head_certificate": dataclasses.asdict(cfg.head_certificate),
         "body_certificate": dataclasses.asdict(cfg.body_certificate),
         "controller": cfg.identity.controller,
-        "operator": cfg.identity.operator,
+        "operator": _operator(db, run_id, cfg),
         "recheck": recheck or None,
         "baseline": summary.get("baseline"),
     }
@@ -106,4 +135,7 @@ def build_publication(db: RunDB, run_id: int, cfg: CellConfig, run_uuid: str, fi
         "recheck_interval_days": cfg.fleet.recheck_interval_days,
         "fingerprint": db.load_result(run_id, "fingerprint", default=None) or {},
         "detail": detail,
+        # a rehearsal on the simulator: it stores its seed (as the report's banner reads it) or an oracle
+        "simulated": run.seed is not None or bool(summary.get("oracle")),
+        "operator": _operator(db, run_id, cfg),
     })

@@ -29,8 +29,10 @@ from station.cell.config.cell_config import CellConfig
 from station.cell.plan.steps import StepKind
 from station.errors import ConfigError
 
-#: sections of the configuration that may change between attempts of one run
-_IGNORED = ("devices",)
+#: sections of the configuration that may change between attempts of one run: the devices' ports,
+#: and where results go (``[fleet]``: the plant's store, never the cell; issue 39: adding it, as
+#: README's plant recipe says, made every recheck refuse the earlier calibrations)
+_IGNORED = ("devices", "fleet")
 
 
 def _digest(obj: Any) -> str:
@@ -109,7 +111,7 @@ def fingerprint(cfg: CellConfig, by_content: bool = True, judged_apart: bool = T
 
 #: what a recheck may change against its baseline calibration: its own settings and the warm-up
 #: (sections), and in simulation the drift it injects (keys of ``[simulation]``; the seed stays)
-_BASELINE_IGNORED = ("devices", "recheck", "warmup")
+_BASELINE_IGNORED = ("devices", "recheck", "warmup", "fleet")
 _SIMULATED_DRIFT_KEYS = ("thermal_length_um", "thermal_offset_arcsec", "thermal_time_constant_s",
                          "step_joint", "step_offset_deg", "step_tool_um")
 
@@ -159,7 +161,8 @@ def check_same_cell(stored: dict[str, str], current: dict[str, str], run_id: int
     changed. Returns the post-processing sections that changed (``POST_PROCESSING``): the
     measurements stay valid and are reused, except verification readings (``records``: the run's
     measurements) made with the old identification or table, which refuse the resume."""
-    changed = sorted(k for k in stored.keys() | current.keys() if stored.get(k) != current.get(k))
+    changed = sorted(k for k in stored.keys() | current.keys()
+                     if stored.get(k) != current.get(k) and k.strip("[]") not in _IGNORED)  # one stored before 39
     measuring = [k for k in changed if k not in POST_PROCESSING]
     if measuring:
         raise ConfigError(

@@ -40,6 +40,15 @@ def _url(args: argparse.Namespace) -> str:
     return url
 
 
+def _configured_station(args: argparse.Namespace) -> str | None:
+    """CONFIG's ``[fleet] station`` (None without CONFIG or without one)."""
+    if not getattr(args, "config", None):
+        return None
+    from station.cell.config.cell_config import load_config
+
+    return load_config(args.config).fleet.station
+
+
 def cmd_sync(args: argparse.Namespace) -> int:
     from station.cell.publication.outbox import pending, sync
 
@@ -49,8 +58,10 @@ def cmd_sync(args: argparse.Namespace) -> int:
     backfilled, problems = 0, list[str]()
     if args.all:
         from station.cell.publication.outbox import enqueue_finished
+        from station.ui.report.paths import report_dir
 
-        backfilled, problems = enqueue_finished(args.db)
+        backfilled, problems = enqueue_finished(args.db, station=_configured_station(args),
+                                                report_dir=lambda run_id: report_dir(args.db, run_id))
         for line in problems:
             print(f"  not queued: {line}", file=sys.stderr)
     before = len(pending(args.db))
@@ -85,7 +96,8 @@ def cmd_fleet(args: argparse.Namespace) -> int:
               else f"fleet store at schema version {version}; applied: {applied or 'none'}")
         return 0
     with store.store_errors(url), store.connect(url, read_only=True) as conn:
-        robots = fleet_status(conn, default_interval_days=args.interval_days)
+        robots = fleet_status(conn, default_interval_days=args.interval_days,
+                              include_simulated=bool(getattr(args, "include_simulated", False)))
     overdue = [r for r in robots if r.overdue]
     if args.json:
         print(json.dumps({"robots": [r.to_json() for r in robots], "overdue": len(overdue)}))
@@ -98,7 +110,9 @@ def cmd_fleet(args: argparse.Namespace) -> int:
                   f"{(r.last_calibration_utc or '—')[:10]:<11} {_fmt(r.gain, 1, '×'):>6} "
                   f"{_fmt(r.rms_after_um, 1, ' µm'):>10} {_fmt(r.ap_max_um, 1, ' µm'):>8} {rec[:20]:<20} "
                   f"{_fmt(r.drift_rms_um, 1):>7} {_fmt(r.drift_trend_um_per_30d, 2):>9} "
-                  f"{(r.next_recheck_due_utc or '—')[:10]:<11} {r.state}")
+                  f"{(r.next_recheck_due_utc or '—')[:10]:<11} {r.state}"
+                  + (f" (simulated run {r.last_simulated_utc[:10]}, not counted)" if r.last_simulated_utc else "")
+                  + (f" ({r.damaged})" if r.damaged else ""))
         print(f"{len(robots)} robot(s), {len(overdue)} needing a recheck or calibration")
     if args.overdue and overdue:
         return int(Outcome.DRIFTED)
@@ -118,6 +132,9 @@ def cmd_serve(args: argparse.Namespace) -> int:
     token = None
     if args.token_file:
         token = Path(args.token_file).read_text(encoding="utf-8").strip()
+        if not token:  # an empty token would turn authentication off without a word (issue 39)
+            raise ConfigError(f"{args.token_file}: the token file is empty; write the bearer token into it "
+                              f"(e.g. 'openssl rand -hex 32 > {args.token_file}')")
     elif os.environ.get(TOKEN_ENV):
         token = os.environ[TOKEN_ENV].strip()
     basic = None

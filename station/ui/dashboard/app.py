@@ -16,10 +16,11 @@ import threading
 import time
 from collections.abc import AsyncIterator, Iterator
 from contextlib import asynccontextmanager, contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
+from urllib.parse import quote
 
 import psycopg
 from jinja2 import Environment, FileSystemLoader, select_autoescape
@@ -32,7 +33,9 @@ from starlette.routing import Mount, Route
 from starlette.staticfiles import StaticFiles
 
 from station.fleet import store
-from station.fleet.overview import STATES, fleet_status
+from station.fleet.overview import STATES, RobotStatus, fleet_status, history_forecast
+from station.ui.dashboard.export import rows_csv, rows_json
+from station.ui.dashboard.figures import parameter_rows
 from station.ui.dashboard.plots import history_svg
 
 __all__ = ["DashboardAuth", "create_app", "SORT_KEYS"]
@@ -139,10 +142,29 @@ def _date(v: Any) -> str:
     return str(v)[:16].replace("T", " ")
 
 
+def _download(request: Request, name: str, rows: list[dict[str, Any]], columns: list[str], **about: Any) -> Response:
+    """The rows as the file the path's suffix names, with its units (export.py)."""
+    if request.url.path.endswith(".json"):
+        body, media = rows_json(rows, columns, **about), "application/json"
+    else:
+        body, media = rows_csv(rows, columns), "text/csv; charset=utf-8"
+    suffix = request.url.path.rsplit(".", 1)[-1]
+    return Response(body, media_type=media,
+                    headers={"Content-Disposition": f'attachment; filename="{name}.{suffix}"'})
+
+
+def path_segment(key: str) -> str:
+    """A robot key as one path segment: every reserved character encoded, '/' and '.' included
+    (Jinja's urlencode leaves '/' as is: a serial 'a/../b' linked to a page the browser rewrote
+    to /robots/b). The route takes the key with its '/' decoded ({key:path})."""
+    return quote(str(key), safe="")
+
+
 def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: int = 30) -> Starlette:
     env = Environment(loader=FileSystemLoader(str(_HERE / "templates")), autoescape=select_autoescape(["html"]))
     env.filters["fmt"] = _fmt
     env.filters["date"] = _date
+    env.filters["segment"] = path_segment
     pool = _Pool(url)
 
     def render(name: str, status: int = 200, **ctx: Any) -> HTMLResponse:
@@ -151,12 +173,11 @@ def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: in
         headers = {} if started is None else {"Server-Timing": f"app;dur={(time.perf_counter() - started) * 1e3:.1f}"}
         return HTMLResponse(html, status_code=status, headers=headers)
 
-    def fleet_page(request: Request) -> Response:
-        started = time.perf_counter()
+    def fleet_rows(request: Request) -> tuple[list[Any], list[Any], str, str, str, bool]:
+        """All robots, and those the query's cell and state show in its sort order."""
         q = request.query_params
         with pool.connection() as conn:
             robots = fleet_status(conn, default_interval_days=interval_days)
-        cells = sorted({r.cell for r in robots})
         cell, state = q.get("cell", ""), q.get("state", "")
         shown = [r for r in robots if (not cell or r.cell == cell) and (not state or r.state == state)]
         sort = q.get("sort", "robot") if q.get("sort", "robot") in SORT_KEYS else "robot"
@@ -165,21 +186,51 @@ def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: in
         present = [r for r in shown if getattr(r, attr) is not None]
         missing = [r for r in shown if getattr(r, attr) is None]
         present.sort(key=lambda r: getattr(r, attr), reverse=desc)
-        counts = {s: sum(1 for r in robots if r.state == s) for s in STATES}
-        return render("fleet.html", robots=present + missing, cells=cells, states=STATES, cell=cell, state=state,
-                      sort=sort, desc=desc, counts=counts, total=len(robots), _started=started)
+        return robots, present + missing, cell, state, sort, desc
 
-    def robot_page(request: Request) -> Response:
+    def fleet_page(request: Request) -> Response:
         started = time.perf_counter()
-        key = request.path_params["key"]
+        robots, shown, cell, state, sort, desc = fleet_rows(request)
+        counts = {s: sum(1 for r in robots if r.state == s) for s in STATES}
+        return render("fleet.html", robots=shown, cells=sorted({r.cell for r in robots}), states=STATES, cell=cell,
+                      state=state, sort=sort, desc=desc, counts=counts, total=len(robots),
+                      query=request.url.query, _started=started)
+
+    def fleet_export(request: Request) -> Response:
+        """/fleet.csv, /fleet.json: the table as shown (the same cell, state and sort)."""
+        _, shown, cell, state, _, _ = fleet_rows(request)
+        rows = [r.to_json() for r in shown]
+        columns = [f.name for f in fields(RobotStatus)] + ["overdue"]
+        return _download(request, "fleet", rows, columns, what="the fleet table", cell=cell or None,
+                         state=state or None)
+
+    def history_export(request: Request) -> Response:
+        """/history.csv?robot=KEY, /history.json?robot=KEY: a robot's runs, oldest first."""
+        key = request.query_params.get("robot", "")
+        if not key or not key.isprintable():
+            return render("missing.html", 404, what=f"robot {key!r}")
         with pool.connection() as conn:
             runs = store.robot_history(conn, key)
         if not runs:
             return render("missing.html", 404, what=f"robot {key}")
-        accuracy, drift = history_svg(runs)
+        return _download(request, "history", runs, list(runs[0]), what="a robot's runs, oldest first", robot=key)
+
+    def robot_page(request: Request) -> Response:
+        started = time.perf_counter()
+        key = request.path_params["key"]
+        if not key.isprintable():  # a NUL or another control character: no stored key has one (the store refused it: 503)
+            return render("missing.html", 404, what=f"robot {key!r}")
+        with pool.connection() as conn:
+            runs = store.robot_history(conn, key)
+        if not runs:
+            return render("missing.html", 404, what=f"robot {key}")
+        # the plots show the robot's own history: neither rehearsals nor rows without a readable date
+        accuracy, drift = history_svg([r for r in runs if not r.get("simulated") and r.get("finished_utc")])
         return render("robot.html", key=key, runs=list(reversed(runs)), latest=runs[-1], accuracy_svg=accuracy,
+                      forecast=history_forecast(runs),
                       drift_svg=drift, n_cal=sum(r["kind"] == "calibration" for r in runs),
-                      n_rec=sum(r["kind"] == "recheck" for r in runs), _started=started)
+                      n_rec=sum(r["kind"] == "recheck" for r in runs), n_sim=sum(bool(r.get("simulated")) for r in runs),
+                      _started=started)
 
     def run_page(request: Request) -> Response:
         uid = request.path_params["uuid"]
@@ -188,10 +239,13 @@ def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: in
             has_report = run is not None and store.report_html(conn, str(uid)) is not None
         if run is None:
             return render("missing.html", 404, what=f"run {uid}")
-        ident = (run.get("detail") or {}).get("identification") or {}
-        params = list(zip(ident.get("names") or [], ident.get("params") or [], ident.get("sigma") or []))
-        return render("run.html", run=run, params=params, has_report=has_report,
-                      has_covariance=bool(ident.get("covariance")))
+        stored = run.get("detail")
+        detail: dict[str, Any] = stored if isinstance(stored, dict) else {}  # a stored list: no 500
+        ident = detail.get("identification")
+        ident = ident if isinstance(ident, dict) else {}
+        params, params_note = parameter_rows(detail)
+        return render("run.html", run={**run, "detail": detail}, params=params, params_note=params_note,
+                      has_report=has_report, has_covariance=bool(ident.get("covariance")))
 
     def report_page(request: Request) -> Response:
         uid = request.path_params["uuid"]
@@ -203,6 +257,8 @@ def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: in
 
     routes = [
         Route("/", fleet_page),
+        Route("/fleet.csv", fleet_export), Route("/fleet.json", fleet_export),
+        Route("/history.csv", history_export), Route("/history.json", history_export),
         Route("/robots/{key:path}", robot_page),
         Route("/runs/{uuid:uuid}", run_page),
         Route("/runs/{uuid:uuid}/report", report_page),

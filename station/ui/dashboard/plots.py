@@ -3,6 +3,7 @@ and worst AP at each calibration, and the drift at each recheck against its tole
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from datetime import datetime, timezone
 from html import escape
@@ -23,10 +24,12 @@ def _t(v: Any) -> float:
 
 
 def _nice_max(v: float) -> float:
-    if v <= 0:
+    """The smallest 1, 2, 2.5 or 5 × 10^e at or above ``v`` (decades outside: 122.7 → 200, not the
+    1 000 the mantissa-first loop gave, issue 39)."""
+    if not math.isfinite(v) or v <= 0:
         return 1.0
-    for m in (1, 2, 2.5, 5):
-        for e in range(-3, 7):
+    for e in range(-3, 10):
+        for m in (1, 2, 2.5, 5):
             step = m * 10.0 ** e
             if step >= v:
                 return step
@@ -67,9 +70,11 @@ def _panel(title: str, series: Sequence[tuple[str, str, Sequence[tuple[float, fl
     parts = [f'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 {W} {H}" class="plot" role="img" '
              f'data-testid="{escape(test_id)}" aria-label="{escape(title)}">']
     parts += _axes(title, t0, t1, ymax, unit)
-    if band:
-        top = " ".join(xy(t, v) for t, v in band)
-        bottom = " ".join(xy(t, 0.0) for t, _ in reversed(band))
+    if band:  # a step: each recheck's tolerance holds until the next, the first from the axis' start
+        steps = [(t0, band[0][1])] + [p for (t, v), (_, prev) in zip(band[1:], band) for p in ((t, prev), (t, v))]
+        steps.append((t1, band[-1][1]))
+        top = " ".join(xy(t, v) for t, v in steps)
+        bottom = " ".join(xy(t, 0.0) for t, _ in reversed(steps))
         parts.append(f'<polygon points="{top} {bottom}" class="band"><title>tolerance</title></polygon>')
     legend_x = W - PAD_R - 10
     for i, (name, css, pts) in enumerate(series):
@@ -88,6 +93,13 @@ def _panel(title: str, series: Sequence[tuple[str, str, Sequence[tuple[float, fl
     return "".join(parts)
 
 
+def _points(runs: Sequence[Mapping[str, Any]], key: str) -> list[tuple[float, float]]:
+    """(time, value) of the runs with a finite value under ``key`` (a row stored before schema 4's
+    checks may hold NaN)."""
+    return [(_t(r["finished_utc"]), float(v)) for r in runs
+            if isinstance(v := r.get(key), (int, float)) and math.isfinite(v)]
+
+
 def history_svg(runs: Sequence[Mapping[str, Any]]) -> tuple[str, str]:
     """Two SVG panels (accuracy at calibrations; drift at rechecks with its tolerance band) for a
     robot's runs, oldest first."""
@@ -97,10 +109,8 @@ def history_svg(runs: Sequence[Mapping[str, Any]]) -> tuple[str, str]:
         t0, t1 = t0 - 43200, t1 + 43200
     cal = [r for r in runs if r["kind"] == "calibration" and r.get("outcome") == "SUCCESS"]
     rec = [r for r in runs if r["kind"] == "recheck"]
-    rms = [(_t(r["finished_utc"]), float(r["rms_after_um"])) for r in cal if r.get("rms_after_um") is not None]
-    ap = [(_t(r["finished_utc"]), float(r["ap_max_um"])) for r in cal if r.get("ap_max_um") is not None]
-    drift = [(_t(r["finished_utc"]), float(r["drift_rms_um"])) for r in rec if r.get("drift_rms_um") is not None]
-    band = [(_t(r["finished_utc"]), float(r["tolerance_um"])) for r in rec if r.get("tolerance_um") is not None]
+    rms, ap = _points(cal, "rms_after_um"), _points(cal, "ap_max_um")
+    drift, band = _points(rec, "drift_rms_um"), _points(rec, "tolerance_um")
     accuracy = _panel("accuracy after calibration", [("RMS after", "rms", rms), ("worst AP", "ap", ap)],
                       t0, t1, test_id="plot-accuracy")
     drifts = _panel("drift at each recheck (band: tolerance)", [("drift RMS", "drift", drift)], t0, t1, band,

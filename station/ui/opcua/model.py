@@ -16,6 +16,7 @@ import datetime as dt
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from asyncua import Node, Server, ua
 
@@ -40,6 +41,8 @@ ROBOTICS_MOTION_DEVICE = 1004  # MotionDeviceType, OPC 40010-1 §7.2
 ROBOTICS_AXIS = 16601  # AxisType, OPC 40010-1 §7.5
 IA_CALIBRATION_TARGET = 1019  # CalibrationTargetType, OPC 10000-200 §7
 RESULT_MANAGEMENT = 1004  # ResultManagementType, OPC 40001-101 §8.3
+MACHINERY_NS = "http://opcfoundation.org/UA/Machinery/"
+MACHINES_FOLDER = 1001  # Objects/Machines, OPC 40001-1 §9.2: "all machines are directly referenced by this object"
 # the station's own (Station.NodeSet2.xml, station.ui.opcua.typegen)
 STATION_TYPE = 1001
 #: the station's methods (operators only)
@@ -228,6 +231,11 @@ async def build_instances(server: Server, idx: int, facts: CellFacts) -> Station
     await station.add_reference(results.nodeid, ua.ObjectIds.GeneratesEvent, forward=True)  # noqa: B018
     for top in (system, body, station):
         await _drop_placeholders(top)
+    # the robot and the station are the machines of this server (OPC 40001-1 §9.2; OPC 40010-1 §6:
+    # a MotionDeviceSystem is a machine); the body is a target they use, not a machine
+    machines = server.get_node(node_id(MACHINES_FOLDER, await server.get_namespace_index(MACHINERY_NS)))
+    for machine in (system, station):
+        await machines.add_reference(machine.nodeid, ua.ObjectIds.Organizes, forward=True)  # noqa: B018
     variables = {k: v for k, v in children.items() if k not in methods and k not in ("LastCalibration", "LastRecheck")}
     last_calibration = await _children(children["LastCalibration"])
     last_recheck = await _children(children["LastRecheck"])
@@ -243,6 +251,36 @@ async def build_instances(server: Server, idx: int, facts: CellFacts) -> Station
                         methods=methods, axis_offsets=offsets, result_management=results,
                         result_methods=result_methods,
                         event_type=server.get_node(node_id(RESULT_READY_EVENT, idx)))
+
+
+@dataclass(frozen=True)
+class OffsetParameter:
+    """The parameter that is a joint's zero offset: its index in the model's vector, its name,
+    its nominal value and the factor to the unit shown (degrees for an angle, 1 for mm)."""
+
+    index: int
+    name: str
+    nominal: float
+    scale: float
+
+
+def identified_offsets(identification: dict[str, Any] | None,
+                       specs: list[OffsetParameter | None]) -> list[float]:
+    """Per axis: identified minus nominal, in the unit shown; NaN (docs/opcua.md) where no
+    calibration identified yet, the robot file gives the joint no offset parameter, or the
+    calibration did not choose it (its effect merged into another parameter: the vector then
+    holds the nominal, and a 0.0 would read as "identified, no offset")."""
+    if identification is None:
+        return [float("nan")] * len(specs)
+    params = identification.get("params")
+    chosen = set(identification.get("chosen") or ())
+    out = []
+    for spec in specs:
+        value = float("nan")
+        if spec is not None and spec.name in chosen and params is not None and spec.index < len(params):
+            value = (float(params[spec.index]) - spec.nominal) * spec.scale
+        out.append(value)
+    return out
 
 
 async def _copy_method(parent: Node, declaration: Node, ns: int) -> Node:

@@ -17,9 +17,13 @@ from __future__ import annotations
 import base64
 import hashlib
 import hmac
+import logging
+import os
 import secrets
 import socket
+import time
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -40,6 +44,11 @@ SCRYPT_N, SCRYPT_R, SCRYPT_P = 2**14, 8, 1
 SERVER_CERT = Path("own") / "cert.der"
 SERVER_KEY = Path("own") / "private" / "key.pem"
 TRUSTED = Path("trusted")
+#: wrong passwords for one user name before it is locked out, within this window; how long it is
+#: (OWASP's authentication guidance: throttle per account; 5 in a minute is far above a mistyping PLC
+#: configuration's retries and far below a guessing rate: 20 in 4.5 s went through before)
+MAX_FAILURES, FAILURE_WINDOW_S, LOCKOUT_S = 5, 60.0, 60.0
+log = logging.getLogger(__name__)
 
 
 def hash_password(password: str, *, salt: bytes | None = None) -> str:
@@ -160,29 +169,77 @@ def add_user(path: str | Path, name: str, role: str, password: str) -> None:
     path = Path(path)
     if role not in ROLES:
         raise ConfigError(f"--role {role}: give one of {', '.join(ROLES)}")
-    if not name or any(c in name for c in "\"\\\n\r"):
-        raise ConfigError(f"--add-user {name!r}: give a plain user name")
+    # TOML's basic strings take no control character (TOML 1.0 "Basic strings"): one written
+    # there made the file unreadable for the server and every later --add-user
+    if not name or any(c in name for c in "\"\\") or any(not c.isprintable() for c in name):
+        raise ConfigError(f"--add-user {name!r}: give a plain user name (printable characters, no quote or "
+                          f"backslash); nothing was written")
     text = path.read_text(encoding="utf-8") if path.exists() else (
         "# Users of 'station serve --opcua' (docs/opcua.md): password hashes (scrypt), never passwords\n")
     if path.exists() and any(a.name == name for a in read_users(path).accounts):
         raise ConfigError(f"{path}: a user {name!r} exists already; remove its [[user]] table first")
     text += f'\n[[user]]\nname = "{name}"\nrole = "{role}"\npassword = "{hash_password(password)}"\n'
-    path.write_text(text, encoding="utf-8")
-    path.chmod(0o600)
+    write_secret(path, text.encode("utf-8"))
+
+
+def write_secret(path: Path, data: bytes) -> None:
+    """Replace ``path`` with ``data`` through a file that is mode 600 from its creation (never
+    readable by others, not for an instant: write then chmod left a window), renamed over it."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.chmod(tmp, 0o600)  # the umask can only remove bits; this keeps it 600 whatever the umask
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 class StationUserManager:
     """asyncua's user manager over the users file: a user name with its password, or a user
     certificate; None (BadUserAccessDenied) for anything else, anonymous included."""
 
-    def __init__(self, users: Users) -> None:
+    def __init__(self, users: Users, clock: Callable[[], float] = time.monotonic) -> None:
         self.users = users
+        self.clock = clock
+        self._failures: dict[str, list[float]] = {}  # user name -> times of its recent wrong passwords
+        self._locked: dict[str, float] = {}  # user name -> when its lockout ends
+
+    def locked(self, name: str) -> bool:
+        """Whether ``name`` is locked out now (after :data:`MAX_FAILURES` wrong passwords within
+        :data:`FAILURE_WINDOW_S`): every password is refused until :data:`LOCKOUT_S` have passed."""
+        until = self._locked.get(name)
+        if until is not None and self.clock() >= until:
+            del self._locked[name]
+            until = None
+        return until is not None
+
+    def _failed(self, name: str) -> None:
+        now = self.clock()
+        recent = [t for t in self._failures.get(name, []) if now - t < FAILURE_WINDOW_S] + [now]
+        self._failures[name] = recent
+        if len(recent) >= MAX_FAILURES:
+            self._locked[name] = now + LOCKOUT_S
+            self._failures.pop(name)
+            log.warning("user %r: %d wrong passwords within %.0f s, refused for %.0f s", name[:64], len(recent),
+                        FAILURE_WINDOW_S, LOCKOUT_S)
+        while len(self._failures) > 10_000:  # unknown names must not grow the table without bound
+            self._failures.pop(next(iter(self._failures)))
 
     def get_user(self, iserver: Any, username: str | None = None, password: str | None = None,
                  certificate: Any = None) -> User | None:
         account = None
         if username is not None:
+            if self.locked(username):
+                return None
             account = self.users.by_password(username, password or "")
+            if account is None:
+                self._failed(username)
         elif certificate is not None:
             account = self.users.by_certificate(bytes(certificate))
         if account is None:
@@ -249,6 +306,5 @@ def make_certificate(cert_path: Path, key_path: Path, application_uri: str, host
                                                          days=days)
     key_path.parent.mkdir(parents=True, exist_ok=True)
     cert_path.parent.mkdir(parents=True, exist_ok=True)
-    key_path.write_bytes(cert_gen.dump_private_key_as_pem(key))
-    key_path.chmod(0o600)
+    write_secret(key_path, cert_gen.dump_private_key_as_pem(key))
     cert_path.write_bytes(cert.public_bytes(Encoding.DER))

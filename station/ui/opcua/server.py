@@ -8,6 +8,7 @@ rule). Users from the users file (security.py); client certificates from the tru
 from __future__ import annotations
 
 import asyncio
+import datetime as dt
 import errno
 import logging
 import math
@@ -16,6 +17,7 @@ import socket
 import sys
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
+from importlib import metadata
 from pathlib import Path
 
 from asyncua import Server, ua
@@ -26,7 +28,8 @@ from cryptography import x509
 from station.cell.config.cell_config import CellConfig, load_config
 from station.cell.session.calibrate import CellRequest
 from station.errors import ConfigError
-from station.ui.opcua.model import CellFacts, build_instances, load_models
+from station.ui.opcua.guard import bound_logging
+from station.ui.opcua.model import CellFacts, OffsetParameter, build_instances, load_models
 from station.ui.opcua.security import SERVER_CERT, SERVER_KEY, TRUSTED, StationRuleset, StationUserManager, read_users
 from station.ui.opcua.service import StationService
 from station.ui.simulated_cell import load_cell
@@ -83,10 +86,10 @@ def cell_facts(cfg: CellConfig) -> CellFacts:
                      body_points=len(cfg.point_ids))
 
 
-def offset_parameters(cfg: CellConfig) -> list[tuple[int, float, float] | None]:
+def offset_parameters(cfg: CellConfig) -> list[OffsetParameter | None]:
     """Per joint: the parameter that is its zero offset (the yaw of its transform for a revolute
     joint, in degrees; the z of it for a prismatic one, in mm), its index and nominal value."""
-    out: list[tuple[int, float, float] | None] = []
+    out: list[OffsetParameter | None] = []
     for t in cfg.model.transforms:
         if t.joint is None:
             continue
@@ -97,7 +100,7 @@ def offset_parameters(cfg: CellConfig) -> list[tuple[int, float, float] | None]:
         except (KeyError, ValueError):
             out.append(None)
             continue
-        out.append((i, float(cfg.model.nominal[i]), math.degrees(1.0) if revolute else 1.0))
+        out.append(OffsetParameter(i, name, float(cfg.model.nominal[i]), math.degrees(1.0) if revolute else 1.0))
     return out
 
 
@@ -112,6 +115,41 @@ def application_uri(cert_path: Path) -> str:
     if not uris:
         raise ConfigError(f"{cert_path}: the certificate names no application URI (subjectAltName URI); OPC UA needs one")
     return str(uris[0])
+
+
+class TrustList(TrustStore):
+    """asyncua's trust store, which fails on an empty folder ("can't create an empty store": the
+    cryptography library's Store refuses no certificates) where docs/opcua.md's first step leaves
+    one: an empty trust list trusts no client, it is not an error."""
+
+    async def load_trust(self) -> None:
+        certs = []
+        for location in self.trust_locations:
+            certs.extend(await self._load_trust_location(location))
+        self._trust_store = x509.verification.Store(certs) if certs else None  # None: is_trusted is False
+
+
+#: the station's product URI (its application URIs are this and the host name, command.URI_PREFIX)
+PRODUCT_URI = "urn:robot-calibration-station"
+PRODUCT_NAME = "calibration-station"
+
+
+def build_info() -> tuple[str, str, str, str, str, dt.datetime]:
+    """BuildInfo (OPC 10000-5 §12.4): the station's product URI, manufacturer (the package names
+    none: empty), product name, version (the installed package's), build (its git commit when it
+    runs from a checkout, else the version) and build date (the commit's, else the package's files')."""
+    from station.ui.report.provenance import commit_date, git_commit
+
+    version = _package_version()
+    when = commit_date() or dt.datetime.fromtimestamp(Path(__file__).stat().st_mtime, dt.timezone.utc)
+    return PRODUCT_URI, "", PRODUCT_NAME, version, git_commit() or version, when
+
+
+def _package_version() -> str:
+    try:
+        return metadata.version(PRODUCT_NAME)
+    except metadata.PackageNotFoundError:
+        return "not known"
 
 
 async def build_server(opts: ServeOptions) -> tuple[Server, StationService, str]:
@@ -129,7 +167,8 @@ async def build_server(opts: ServeOptions) -> tuple[Server, StationService, str]
     await server.load_certificate(str(cert))
     await server.load_private_key(str(key))
     server.set_identity_tokens([ua.UserNameIdentityToken, ua.X509IdentityToken])  # never anonymous
-    store = TrustStore([trust], [])
+    await server.set_build_info(*build_info())
+    store = TrustList([trust], [])
     await store.load()
     validator = CertificateValidator(CertificateValidatorOptions.TRUSTED_VALIDATION
                                      | CertificateValidatorOptions.PEER_CLIENT, store)
@@ -174,6 +213,7 @@ def run(opts: ServeOptions) -> int:
     logging.getLogger("asyncua.common.xmlimporter").setLevel(logging.ERROR)
     # its one ERROR is a start that failed, with a traceback: the station says why itself (below)
     logging.getLogger("asyncua.server.server").setLevel(logging.CRITICAL)
+    bound_logging()  # a client's oversized or repeated requests must not fill the disk through the log
     try:
         asyncio.run(serve(opts))
     except OSError as exc:

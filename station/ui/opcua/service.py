@@ -58,7 +58,8 @@ from station.cell.run.runcontrol import RunControl
 from station.cell.run.stream import RunStream
 from station.cell.session.calibrate import CellLoader, CellRequest, run_calibration_session
 from station.errors import Outcome
-from station.ui.opcua.model import StationNodes, status
+from station.ui.opcua.guard import guarded, signatures
+from station.ui.opcua.model import OffsetParameter, StationNodes, identified_offsets, status
 
 log = logging.getLogger(__name__)
 #: asyncua's ua module as the place of the classes it makes from the loaded models (not in its stubs)
@@ -93,9 +94,9 @@ class StationService:
     sessions get (``station.ui.simulated_cell.load_cell`` composes simulated cells)."""
 
     def __init__(self, server: Server, nodes: StationNodes, request: CellRequest, load: CellLoader,
-                 offset_parameters: list[tuple[int, float, float] | None]) -> None:
+                 offset_parameters: list[OffsetParameter | None]) -> None:
         self.server, self.nodes, self.request, self.load = server, nodes, request, load
-        #: per axis: (index in the identified parameter vector, nominal, display scale) or None
+        #: per axis: its offset parameter (index, name, nominal, display scale) or None
         self.offset_parameters = offset_parameters
         self.state = "Idle"
         self.run_id = 0
@@ -122,12 +123,11 @@ class StationService:
         handlers: dict[str, Callable[..., Any]] = {
             "StartCalibration": self._start_calibration, "StartRecheck": self._start_recheck,
             "Abort": self._abort, "Acknowledge": self._acknowledge, "Pause": self._pause, "Resume": self._resume}
-        for name, nodes in self.nodes.methods.items():
-            for node in nodes:
-                self.server.link_method(node, handlers[name])
-        for name, nodes in self.nodes.result_methods.items():
-            for node in nodes:
-                self.server.link_method(node, self._get_latest if name == "GetLatestResult" else self._get_by_id)
+        handlers.update(GetLatestResult=self._get_latest, GetResultById=self._get_by_id)
+        sigs = signatures(self.nodes.station.nodeid, self.nodes.result_management.nodeid, self.nodes.methods)
+        for name, nodes in [*self.nodes.methods.items(), *self.nodes.result_methods.items()]:
+            for node in nodes:  # each behind its argument and object checks (guard.py)
+                self.server.link_method(node, guarded(handlers[name], sigs[name]))
         self._event = await self.server.get_event_generator(self.nodes.event_type.nodeid, self.nodes.station.nodeid)
         await self._write_state(State="Idle", OutcomeCode=-1, RunKind="", RunId=0, Phase="", Step=0, StepCount=0,
                                 TimeLeftSeconds=0.0, LastRefusal="", Message="")
@@ -265,7 +265,8 @@ class StationService:
             self._started_utc = dt.datetime.now(dt.timezone.utc)
             await self._write_state(RunId=ev.run_id, StepCount=ev.n_steps, RunKind=ev.kind)
         elif isinstance(ev, Identified):
-            await self._write_offsets(np.asarray(ev.params, dtype=float))
+            await self._write_offsets({"params": list(ev.params),
+                                       "chosen": [p.name for p in ev.identification.parameters]})
         elif isinstance(ev, Uploaded):  # the station's table, read back active on the controller
             await self._write_state(ActiveTableCrc=ev.active_crc32)
         elif isinstance(ev, RunEnded):
@@ -312,8 +313,13 @@ class StationService:
         outcome = Outcome[s.get("outcome", "INTERNAL_ERROR")]
         self.run_id = int(s.get("run_id") or 0)
         self.state = outcome.name
+        # Message: this run's end (an abort included), never a notice left from before it
+        failure: dict[str, Any] = s["failure"] if isinstance(s.get("failure"), dict) else {}
+        message = f"{done.kind} run {self.run_id}: {outcome.name} (exit code {int(outcome)})"
+        if failure.get("message"):
+            message += f": {failure['message']}"
         await self._write_state(State=outcome.name, OutcomeCode=int(outcome), RunId=self.run_id, TimeLeftSeconds=0.0,
-                                Phase="done")
+                                Phase="done", Message=message[:500])
         if done.kind == "calibration" and not self._ended:  # a bug ended it before its RunEnded
             await self._run_ended(RunSummary.from_json(s))
         try:  # the records first, so that a client reading them on ResultReady reads this run's
@@ -388,14 +394,10 @@ class StationService:
             await self._write_offsets(params)
             await self._write_state(ActiveTableCrc=crc)
 
-    async def _write_offsets(self, params: np.ndarray | None) -> None:
+    async def _write_offsets(self, identification: dict[str, Any] | None) -> None:
         """Each axis's identified zero offset (degrees or mm from the robot file's nominal; NaN
-        where the minimal set does not hold it) from the identified parameter vector."""
-        for node, spec in zip(self.nodes.axis_offsets, self.offset_parameters):
-            value = float("nan")
-            if spec is not None and params is not None and spec[0] < len(params):
-                index, nominal, scale = spec
-                value = (float(params[index]) - nominal) * scale
+        where no calibration identified yet or its minimal set does not hold it: identified_offsets)."""
+        for node, value in zip(self.nodes.axis_offsets, identified_offsets(identification, self.offset_parameters)):
             await node.write_value(ua.DataValue(ua.Variant(value, ua.VariantType.Double)))
 
     def _stored_bound(self, run_id: int) -> float:
@@ -406,10 +408,10 @@ class StationService:
             except Exception:  # noqa: BLE001 - no summary, or no table in it
                 return float("nan")
 
-    def _read_records(self) -> tuple[RunInfo | None, RunInfo | None, np.ndarray | None, str]:
-        """The latest finished calibration and recheck (whatever their outcome), the parameters of
-        the latest calibration that identified, and the table the latest calibration that knew it
-        left active."""
+    def _read_records(self) -> tuple[RunInfo | None, RunInfo | None, dict[str, Any] | None, str]:
+        """The latest finished calibration and recheck (whatever their outcome), the identification
+        (parameters and the chosen names) of the latest calibration that identified, and the table
+        the latest calibration that knew it left active."""
         if not Path(self.request.db).exists():
             return None, None, None, "unknown"
         with RunDB(self.request.db) as db:
@@ -419,7 +421,8 @@ class StationService:
             params, crc = None, "unknown"
             for r in cals:
                 try:
-                    params = np.asarray(db.load_result(r.id, "identification")["params"], dtype=float)
+                    ident = db.load_result(r.id, "identification")
+                    params = {"params": np.asarray(ident["params"], dtype=float), "chosen": ident.get("chosen")}
                     break
                 except Exception:  # noqa: BLE001 - a calibration that stopped before identifying
                     continue

@@ -5,12 +5,13 @@ metadata each give "not known"."""
 
 from __future__ import annotations
 
+import datetime as dt
 import platform
 import subprocess
 from importlib import metadata
 from pathlib import Path
 
-__all__ = ["git_commit", "software_rows"]
+__all__ = ["commit_date", "git_commit", "software_rows"]
 
 #: the station's source tree: a git checkout when it has a .git beside the package
 _TREE = Path(__file__).resolve().parents[3]
@@ -59,3 +60,14 @@ def software_rows(run_version: str, tree: Path = _TREE) -> list[tuple[str, str]]
         ("numpy", _version("numpy")),
         ("scipy", _version("scipy")),
     ]
+
+
+def commit_date(tree: Path = _TREE) -> dt.datetime | None:
+    """The checkout's HEAD commit time (UTC); None when ``tree`` is no git checkout or git is absent."""
+    if not (tree / ".git").exists():
+        return None
+    text = _git(tree, "show", "-s", "--format=%cI", "HEAD")
+    try:
+        return dt.datetime.fromisoformat(text).astimezone(dt.timezone.utc) if text else None
+    except ValueError:
+        return None
