@@ -17,8 +17,9 @@ import numpy as np
 
 from simulators.base_frame import _rms_um, prior_best_params, reference_params, targets_in_box
 from simulators.from_config import SimulationPhysics, simulated_cell_for
+from simulators.judge import CellJudge
 from station.cell.config.cell_config import load_config
-from station.cell.pipeline.results import oracle_params
+from station.cell.pipeline.results import reference_params as seen_by_the_station
 from station.cell.plan.measurement_plan import build_plan
 from station.core.identification.identifiability import analyze
 from station.core.measurement.measurements import synthetic_set
@@ -42,7 +43,7 @@ def _distances(cfg, q, chosen) -> np.ndarray:
     heads = np.array([[150.0, -300.0, 100.0], [500.0, 300.0, 300.0]])  # over the body's region
     out = []
     for seed in SEEDS:
-        truth = oracle_params(cfg, simulated_cell_for(cfg, seed).truth)
+        truth = seen_by_the_station(cfg, CellJudge(simulated_cell_for(cfg, seed).truth))
         targets = targets_in_box(m, heads[0], heads[1], 200, np.random.default_rng(seed))
         ref = reference_params(m, truth, chosen, "pose", q)
         out.append(_rms_um(m, targets, ref, prior_best_params(m, truth, sigma, "pose", q)))
