@@ -152,9 +152,13 @@ def test_a_baseline_with_error_terms_is_rechecked_with_them_like_with_like():
     rigid_base = Baseline(0, "", rigid_fit.params, sigma, None, float(rigid_fit.rms_position_mm() * 1e3), "SUCCESS")
     rigid = analyse_recheck(cfg, steps, rigid_io.measure(steps), rigid_base, tol)
     assert like.outcome is Outcome.SUCCESS, like.reasons
-    # seed 1: 12.1 µm with the terms, 21.1 µm against the geometric fit alone, 11.1 µm for the rigid robot
-    assert like.rms_um < 0.7 * unlike.rms_um and like.rms_um < 1.5 * rigid.rms_um, (like.rms_um, unlike.rms_um,
-                                                                                    rigid.rms_um)
+    # Held to the noise floor, not to one realisation: the simulated noise is keyed to the commanded
+    # joints, so another BLAS kernel draws another one (seed 1: 12.1 / 21.1 / 11.1 µm on one kernel,
+    # 12.1 / 17.1 / 12.1 µm on another). With the terms the recheck reads the rigid robot's noise;
+    # against the geometric fit alone the terms the calibration explained read as drift above it.
+    assert like.rms_um < 1.2 * rigid.rms_um, (like.rms_um, rigid.rms_um)
+    assert unlike.rms_um > 1.3 * rigid.rms_um and like.rms_um < unlike.rms_um, (like.rms_um, unlike.rms_um,
+                                                                               rigid.rms_um)
 
     damaged = {**record, "terms": [{"name": "cyclic.q1.cos1", "value": "x"}]}
     with pytest.raises(RunDatabaseError, match="json.terms"):
