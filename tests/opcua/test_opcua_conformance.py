@@ -28,7 +28,7 @@ MACHINERY_NS = "http://opcfoundation.org/UA/Machinery/"
 
 # --- against the server process ------------------------------------------------------------------------
 @pytest.mark.slow
-@pytest.mark.timeout(120)
+@pytest.mark.timeout(300)
 async def test_build_info_and_machines_say_what_the_station_is(served, pki) -> None:
     async with connected(served.url, pki.client_cert, pki.client_key, user="watch", password=PASSWORDS["watch"]) as c:
         info = await c.get_node(ua.ObjectIds.Server_ServerStatus_BuildInfo).read_value()
@@ -46,7 +46,7 @@ async def test_build_info_and_machines_say_what_the_station_is(served, pki) -> N
 
 
 @pytest.mark.slow
-@pytest.mark.timeout(120)
+@pytest.mark.timeout(300)
 async def test_calls_are_checked_before_they_run(served, pki) -> None:
     size_before = served.log.stat().st_size
     async with connected(served.url, pki.client_cert, pki.client_key, user="line", password=PASSWORDS["line"]) as c:

@@ -11,7 +11,7 @@ from asyncua.ua.uaerrors import BadUserAccessDenied, UaError
 
 from tests.opcua.clients import PASSWORDS, connected, read, station
 
-pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
 
 
 async def test_endpoints_offer_only_signed_and_encrypted_channels(served) -> None:

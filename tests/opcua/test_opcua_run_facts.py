@@ -26,7 +26,7 @@ from station.ui.opcua.server import ServeOptions, build_server, offset_parameter
 from tests.opcua.clients import CONFIG, PASSWORDS, connected, read, station
 from tests.opcua.conftest import free_port
 
-pytestmark = [pytest.mark.timeout(120)]
+pytestmark = [pytest.mark.timeout(300)]
 
 
 async def _until(check, what: str) -> None:
