@@ -122,9 +122,20 @@ def agreement_um(run: Run, base: Run) -> float:
     return float(np.sqrt(np.mean(np.sum((positions(run, q) - positions(base, q)) ** 2, axis=1))) * 1e3)
 
 
+def recorded_after(run: Run, n: int) -> list[MeasurementRecord]:
+    """The run's measurements recorded after the first ``n``, in the order they were recorded. The
+    body's locating touches come first and out of the plan's order (issue 37), so a step's index
+    says nothing about when it was measured; the order is that of the MeasurementRecorded events,
+    the same count :func:`calibrate` injects its faults by."""
+    by_step = {r.step_index: r for r in run.records}
+    order = [e.index for e in run.events if isinstance(e, MeasurementRecorded)]
+    assert sorted(order) == sorted(by_step), "every stored measurement was announced once"
+    return [by_step[i] for i in order[n:]]
+
+
 def after_fault(run: Run) -> list[MeasurementRecord]:
     # the touch during which the fault appears still reads right (a probe sticks at its reading)
-    return [r for r in run.records if r.step_index > INJECT_AFTER]
+    return recorded_after(run, INJECT_AFTER + 1)
 
 
 @pytest.fixture(scope="module")
@@ -159,7 +170,8 @@ def test_a_stuck_probe_is_named_and_the_identification_is_unaffected(tmp_path, s
 def test_debris_for_one_touch_is_detected_re_measured_and_the_reading_kept(tmp_path, seven_baseline):
     run = calibrate(tmp_path, SEVEN, lambda phys: phys.inject_debris("P6", 0.020, touches=1), every=7)
     assert run.error is None and run.summary is not None
-    hit = [r for r in run.records if r.step_index > INJECT_AFTER - 1 and "measured again" in r.message]
+    # the touch after each injection carries the debris: the 6th, 13th, ... recorded
+    hit = [r for r in recorded_after(run, INJECT_AFTER) if "measured again" in r.message]
     injected = 1 + (len(run.records) - INJECT_AFTER) // 7
     assert len(hit) >= 0.95 * injected
     # each such touch was re-measured; the second touch agreed and is the stored reading
@@ -171,7 +183,7 @@ def test_debris_that_stays_on_a_seven_probe_head_stops_the_run_naming_the_candid
     run = calibrate(tmp_path, SEVEN, lambda phys: phys.inject_debris("P6", 0.020))
     assert isinstance(run.error, MeasurementFault)
     assert "probes disagree" in str(run.error)
-    bad = [r for r in run.records if r.step_index >= INJECT_AFTER and not r.ok]  # debris: from its first touch
+    bad = [r for r in recorded_after(run, INJECT_AFTER) if not r.ok]  # debris: from its first touch
     assert len(bad) == 3 and all("P6 (channel 7)" in r.message and "cannot single out" in r.message for r in bad)
 
 
@@ -180,7 +192,7 @@ def test_a_ten_probe_head_names_permanent_debris_and_keeps_the_identification(tm
     base = calibrate(tmp_path / "base", head)
     run = calibrate(tmp_path / "debris", head, lambda phys: phys.inject_debris("Q6", 0.020))
     assert base.error is None and run.error is None and run.summary is not None
-    later = [r for r in run.records if r.step_index >= INJECT_AFTER]
+    later = recorded_after(run, INJECT_AFTER)
     named = [r for r in later if "probe Q6 (channel 6) excluded" in r.message and "off by +" in r.message]
     assert len(named) >= 0.95 * len(later)
     assert all(r.ok for r in named)
@@ -215,7 +227,7 @@ def test_a_dead_channel_on_a_redundant_head_is_left_out_and_the_run_goes_on(tmp_
     # P6 sits on channel 7: the unit's channel index 6 reports invalid from the 6th touch on
     run = calibrate(tmp_path, SEVEN, lambda phys: phys.server.probe_server.faults.force_status(6, ChannelStatus.INVALID))
     assert run.error is None and run.summary is not None
-    later = [r for r in run.records if r.step_index >= INJECT_AFTER]
+    later = recorded_after(run, INJECT_AFTER)
     assert all(r.ok and r.message.startswith("probe P6 (channel 7) gave no reading (invalid)") for r in later)
     assert all(r.channel_status[5] == "invalid" for r in later)
     notices = [e.message for e in run.events if isinstance(e, Notice)]

@@ -127,7 +127,13 @@ async def test_line_sequence(served, pki, tmp_path: Path) -> None:
         assert (calibrated.RunKind, calibrated.Verdict, calibrated.ExitCode) == ("calibration", "SUCCESS", 0)
         steps = [s for s in handler.values("Step") if s]
         assert any(0 < t < 3600 for t in handler.values("TimeLeftSeconds"))  # an estimate, in seconds
-        assert len(steps) > 10 and steps == sorted(steps)  # progress advanced, in order
+        # Step is k of StepCount counted in the order measured (docs/opcua.md), not the plan's index:
+        # the locating touches come first and out of the plan's order (issue 37); a fresh run's
+        # first step is 1 and k rises, through the pause, to StepCount at the last step
+        count = await read(node, idx, "StepCount")
+        assert len(steps) > 10 and steps[0] == 1 and steps[-1] == count, (steps[:5], steps[-3:], count)
+        # strictly up (a value may be coalesced by the 20 ms publishing interval, never repeated or reversed)
+        assert all(b > a for a, b in zip(steps, steps[1:])), steps
         assert await read(node, idx, "State") == "SUCCESS"
         assert await read(node, idx, "LastCalibration", "Gain") > 20
         assert len(await read(node, idx, "ActiveTableCrc")) == 8  # the table the calibration activated

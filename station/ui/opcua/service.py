@@ -108,7 +108,13 @@ class StationService:
         self._queue: asyncio.Queue[Event | _Done] = asyncio.Queue()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._pump: asyncio.Task[None] | None = None
-        self._steps: tuple[int, float] | None = None  # (first step index, its monotonic time) of this attempt
+        #: this attempt's progress: the steps valid on disk when it started (RunStarted), the plan
+        #: indices it has started since, and the monotonic time of its first step. Step counts these
+        #: (k of StepCount, in the order measured), not the plan index: the body's locating touches
+        #: come first and out of the plan's order (issue 37)
+        self._resumed = 0
+        self._started: set[int] = set()
+        self._t0: float | None = None
         self._event: Any = None
         self._vtypes: dict[ua.NodeId, ua.VariantType] = {}
         #: the run's facts: the session emits into it, the address space follows it (a test or another
@@ -168,7 +174,8 @@ class StationService:
             return await self._refuse(ua.StatusCodes.BadInvalidState,
                                       f"{kind} refused: the outcome {self.state} of {self.kind} run {self.run_id} is not "
                                       f"acknowledged yet; read it, then call Acknowledge")
-        self.state, self.kind, self.run_id, self._steps, self._ended = "Running", kind, 0, None, False
+        self.state, self.kind, self.run_id, self._ended = "Running", kind, 0, False
+        self._resumed, self._started, self._t0 = 0, set(), None
         self.control = RunControl()
         await self._write_state(State="Running", OutcomeCode=-1, RunKind=kind, RunId=0, Phase="connect", Step=0,
                                 StepCount=0, TimeLeftSeconds=float("nan"), LastRefusal="", Message="")
@@ -263,6 +270,7 @@ class StationService:
         if isinstance(ev, RunStarted):
             self.run_id, self.kind = ev.run_id, ev.kind  # the stream names the run (the start method did too)
             self._started_utc = dt.datetime.now(dt.timezone.utc)
+            self._resumed, self._started, self._t0 = ev.resumed_from, set(), None
             await self._write_state(RunId=ev.run_id, StepCount=ev.n_steps, RunKind=ev.kind)
         elif isinstance(ev, Identified):
             await self._write_offsets({"params": list(ev.params),
@@ -275,12 +283,15 @@ class StationService:
             await self._write_state(Phase=ev.phase)
         elif isinstance(ev, StepStarted):
             now = time.monotonic()
-            if self._steps is None:
-                self._steps = (ev.index, now)
-            first, t0 = self._steps
-            done = ev.index - first
-            left = (now - t0) / done * (ev.total - ev.index) if done > 0 else float("nan")
-            await self._write_state(Step=ev.index + 1, StepCount=ev.total, TimeLeftSeconds=left)
+            if self._t0 is None:
+                self._t0 = now
+            # a step started again in this attempt (a locating touch stored invalid is measured
+            # again with the others) is the same step: k counts distinct steps, so k <= StepCount
+            self._started.add(ev.index)
+            k = min(self._resumed + len(self._started), ev.total)
+            done = len(self._started) - 1  # steps this attempt finished, at the time since its first
+            left = (now - self._t0) / done * (ev.total - k + 1) if done > 0 else float("nan")
+            await self._write_state(Step=k, StepCount=ev.total, TimeLeftSeconds=left)
         elif isinstance(ev, Paused):
             self.state = "Paused"
             await self._write_state(State="Paused")

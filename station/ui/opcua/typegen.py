@@ -30,7 +30,7 @@ STATION_VARIABLES = (
     ("RunKind", ua.VariantType.String, "calibration or recheck: the active or last run"),
     ("RunId", ua.VariantType.Int64, "the active or last run's number in the run database (0: none)"),
     ("Phase", ua.VariantType.String, "connect, plan, measure, identify, correct, upload, verify, done"),
-    ("Step", ua.VariantType.UInt32, "the step being measured, 1 … StepCount"),
+    ("Step", ua.VariantType.UInt32, "the step being measured, 1 … StepCount, counted in the order the run measures its steps (not the plan's index)"),
     ("StepCount", ua.VariantType.UInt32, "the steps of the run's plan"),
     ("TimeLeftSeconds", ua.VariantType.Double, "estimated time to the end of the measurement [s]"),
     ("ActiveTableCrc", ua.VariantType.String, "CRC-32 (hex) of the correction table active on the controller as the "
