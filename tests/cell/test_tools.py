@@ -73,7 +73,11 @@ def test_tools_are_parsed_in_mm_and_rad():
 
 
 def test_the_templates_example_parses():
-    tools = TEMPLATE[TEMPLATE.index("# [[tool]]"):]  # the [[tool]] example (the grid's commented keys come before)
+    # the [[tool]] example alone: the grid's commented keys come before it, and the [[obstacle]] example
+    # (issue 40), with its own '# name =', after it; the tool's block ends at its blank line
+    start = TEMPLATE.index("# [[tool]]")
+    tools = TEMPLATE[start:TEMPLATE.index("\n\n", start)]
+    assert "[[obstacle]]" not in tools
     example = [ln for ln in tools.splitlines() if ln.startswith(("# [[tool]]", "# name =", "# tcp =", "# z_mm ="))]
     assert len(example) == 4
     cfg = parse_text(TEMPLATE + "\n" + "\n".join(ln[2:] for ln in example) + "\n")
