@@ -172,9 +172,14 @@ def test_simulated_run_report(simulated_run):
     html = rep / "report.html"
     assert html.is_file() and (rep / "report.md").is_file()
     page = Page(html.read_text(encoding="utf-8"))
-    assert page.sections == SECTIONS
+    # a simulated run's judge adds its Simulation section before the sign-off (issue 42); a real run's
+    # report has none (test above)
+    assert page.sections == [*SECTIONS[:-1], "simulation", "signoff"]
     assert_self_contained(page)
     assert len([v for tag, _, v in page.links if tag == "img"]) == 5
+    with RunDB(db) as d:
+        judged = report_data_for_run(d, 1).summary.simulation
+    assert judged and [r[0] for r in page.tables["simulation-table"][1:]] == [f.name for f in judged]
     # the verification table shows both elbows, one row per held-out pose
     v = page.tables["verification-table"]
     assert "elbow" in v[0] and "oracle RMS µm" in v[0]

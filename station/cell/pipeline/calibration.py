@@ -317,6 +317,7 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
               emit: Callable[[Event], None], options: Options, with_oracle: bool,
               summary: RunSummary, pre: Premotion) -> RunSummary:
     run = _Run(runner, db, run_id, steps, emit, options)
+    planned = cfg  # the configuration the run was planned and checked in before motion (its set-up the guess)
     cfg, records, reversal_records, summary = _measure_identification(run, cfg, summary)
     res, summary = _identify_recorded(run, cfg, records, summary)
     from station.cell.pipeline.terms import select_terms  # [identification] model (issue 30)
@@ -335,10 +336,15 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
     if not bound <= float(cfg.correction.max_interpolation_um):
         return _not_uploaded(cfg, summary, run_id, table, used, bound, emit)
     if cfg.tools:  # [[tool]]: each tool's own correction, stored as tool:<name>; the head's table is uploaded
+        # In the planned configuration, not the located one: a tool's grid is designed, as the head's, over
+        # the plan's poses at the configured set-up, the grid premotion checked; 'station export --tool' and
+        # the report rebuild it from the run's configuration snapshot and must get the same table (CRC-32).
+        # Nothing else of a tool's correction reads the nominal set-up (the tables are in the base frame,
+        # the targets in the identified one).
         judge = options.judge
-        summary = summary.replace(tools=run_tools(cfg, db, run_id, steps, params, table,  # with the terms, as the head's
-                                                  None if judge is None else reference_params(cfg, judge), judge, emit,
-                                                  delta=delta))
+        summary = summary.replace(tools=run_tools(planned, db, run_id, steps, params, table,  # with the terms, as the head's
+                                                  None if judge is None else reference_params(planned, judge), judge,
+                                                  emit, delta=delta))
 
     emit(PhaseChanged("verify", "before correction"))
     if runner.controller.status().table_active:  # the operator's table: kept aside (table_keeping.py)

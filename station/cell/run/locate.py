@@ -37,7 +37,7 @@ from station.core.units import DEG
 from station.errors import MeasurementFault, UnreachableError
 
 __all__ = ["N_LOCATE", "RESULT_KEY", "SearchLog", "search_and_read", "located_joints", "locate_body",
-           "stored_located_setup"]
+           "stored_located_setup", "located_config"]
 
 #: measuring points touched to locate the body (each gives the whole set-up; three average it)
 N_LOCATE = 3
@@ -164,6 +164,18 @@ def stored_located_setup(db: RunDB, run_id: int) -> tuple[np.ndarray, bool] | No
     return np.array([*s[:3], *(np.asarray(s[3:], dtype=float) * DEG)]), bool(rec["replanned"])
 
 
+def located_config(cfg: CellConfig, db: RunDB, run_id: int) -> CellConfig:
+    """The configuration run ``run_id`` identified in: ``cfg`` (its stored configuration) with the
+    located set-up where the identification poses were commanded on it, as the pipeline continues
+    after locating; ``cfg`` itself otherwise. What recomputes the run's identification from its
+    measurements (the report) starts from the same set-up, so that it gets the run's parameters and
+    its table the same CRC-32."""
+    stored = stored_located_setup(db, run_id)
+    if stored is None or not stored[1]:
+        return cfg
+    return replace(cfg, model=cfg.model.with_setup(stored[0]))
+
+
 def _locate_steps(cfg: CellConfig, steps: Sequence[PlannedStep]) -> list[PlannedStep]:
     """:data:`N_LOCATE` identification steps of the first pass: the plan's first, then each time
     the one farthest from those chosen (spread points give the yaw by their positions)."""
@@ -228,7 +240,11 @@ def _keep(cfg: CellConfig, db: RunDB, run_id: int, recs: list, index: dict[int, 
             f"points lie up to {shift:.2f} mm from where [robot].setup puts them{where}")
     emit(Notice("info", note))
     db.log(run_id, "info", note)
-    return setup if replanned else None
+    if not replanned:
+        return None
+    stored = stored_located_setup(db, run_id)  # as stored (mm, deg and back): bit for bit what a resume
+    assert stored is not None                  # and the report read
+    return stored[0]
 
 
 def _not_found(cfg: CellConfig, cov: Coverage, why: str) -> str:

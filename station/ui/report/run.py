@@ -29,6 +29,7 @@ from station.cell.records.rundb import RunDB
 from station.cell.records.stored_config import stored_config, stored_plan
 from station.cell.records.stored_error_model import stored_error_model
 from station.cell.records.summary import RunSummary
+from station.cell.run.locate import located_config
 from station.cell.run.recentring import stored_recentring
 from station.core.accuracy.iso9283 import iso9283_pose
 from station.core.identification.base_frame import BASE_FRAME_NOTE_PREFIX
@@ -378,8 +379,8 @@ def report_data_for_run(db: RunDB, run_id: int, *, operator: str | None = None) 
         # a run stopped before its identification shows none of its figures (issue 36): recomputed
         # from the measurements it had, they would read as the run's own under "Not reached"
         return _partial_report(db, run_id, cfg, steps, summary, _not_reached_reason(run_id, summary, run.status), operator)
-    try:
-        res = _identify(cfg, db, run_id, run.status, summary)
+    try:  # from the set-up the run identified from (the located one, issue 37), as the run did
+        res = _identify(located_config(cfg, db, run_id), db, run_id, run.status, summary)
     except IdentificationError as exc:  # a report all the same: how far the run got (issue 29)
         return _partial_report(db, run_id, cfg, steps, summary, str(exc), operator)
     # which directions are the set-up's and what the base frame is tied to (issue 36)
