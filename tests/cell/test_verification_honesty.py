@@ -13,6 +13,7 @@ simulator's truth, pose by pose.
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -164,16 +165,31 @@ def _truth_before_um(cfg, db: RunDB, run: int, truth) -> tuple[np.ndarray, np.nd
     return (np.concatenate(rep) * 1e3, np.concatenate(tru) * 1e3, np.concatenate(raw) * 1e3)
 
 
+def _rougher_arc_cell(tmp_path: Path) -> Path:
+    """examples/scara_arc with a robot 4× as far from its file as the example simulates: since the
+    set-up carries what the body cannot tell from it (issue 36), "before" is the robot's own error
+    (174 µm on seed 2, inside the ±0.5 mm the head reads), so nothing was re-centred there; a
+    rougher robot puts "before" beyond the window again (748 µm, every reading re-centred)."""
+    for f in ARC.parent.iterdir():
+        if f.is_file():
+            shutil.copy(f, tmp_path / f.name)
+    cell = tmp_path / ARC.name
+    text = cell.read_text()
+    assert "\nseed = 1\n" in text
+    cell.write_text(text.replace("\nseed = 1\n", "\nseed = 1\nlength_sigma_um = 160.0\nangle_sigma_arcsec = 600.0\n", 1))
+    return cell
+
+
 @pytest.mark.slow
 # Seed 2: every "before" reading is re-centred there (the old calculation read 9.7 µm for 1627 µm).
-# Seeds 1 and 3 behave alike (`station calibrate examples/scara_arc/cell.toml --simulated --seed N`);
-# one seed keeps the suite short.
+# One seed keeps the suite short.
 @pytest.mark.parametrize("seed", [2])
 def test_the_arc_cell_rehearses_with_an_honest_before(seed, tmp_path, capsys):
     from simulators.from_config import simulated_cell_for
 
+    arc = _rougher_arc_cell(tmp_path)
     db_path = tmp_path / "runs.sqlite"
-    code = main(["calibrate", "--simulated", str(ARC), "--json", "--seed", str(seed), "--db", str(db_path)])
+    code = main(["calibrate", "--simulated", str(arc), "--json", "--seed", str(seed), "--db", str(db_path)])
     out = json.loads(capsys.readouterr().out)
     assert code == 0, out.get("failure")
     assert out["robot"] == "scara550"
@@ -182,7 +198,7 @@ def test_the_arc_cell_rehearses_with_an_honest_before(seed, tmp_path, capsys):
     kinds = {r["kind"]: r for r in out["recentring"]}
     assert kinds["verification_before"]["n_recentred"] > 0  # the case of the issue: "before" re-centred
 
-    cfg = load_config(ARC)
+    cfg = load_config(arc)
     with RunDB(db_path) as db:
         reported, truth, as_read = _truth_before_um(cfg, db, out["run_id"], simulated_cell_for(cfg, seed).truth)
     half_stroke_um = float(np.min(head_of(cfg).strokes)) / 2 * 1e3
