@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import itertools
 import os
+import uuid
 from dataclasses import dataclass
 
 import psycopg
@@ -69,7 +70,9 @@ class FleetDB:
 
 
 def new_database(server: PgServer, target: int | None = None) -> FleetDB:
-    name = f"fleet_{os.getpid()}_{next(_numbers)}"
+    # unique whatever module instance runs it (tests import this file as tests.fleet.conftest: a
+    # bare "conftest" is whichever folder's conftest an xdist worker imported first)
+    name = f"fleet_{os.getpid()}_{next(_numbers)}_{uuid.uuid4().hex[:8]}"
     with psycopg.connect(server.url(), autocommit=True) as c:
         c.execute(f'CREATE DATABASE "{name}"')
     db = FleetDB(server, name)

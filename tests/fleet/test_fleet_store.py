@@ -9,12 +9,12 @@ import time
 
 import psycopg
 import pytest
-from conftest import new_database
 from fleet_runs import example_config, finished_run, recheck_summary
 
 from station.cell.publication.outbox import attach_report, enqueue_run, pending, publish_or_queue, queue_state, sync
 from station.fleet import store
 from station.fleet.migrate import current_version, latest_version, migrate
+from tests.fleet.conftest import new_database
 
 
 def test_migrations_from_empty_make_the_latest_schema_and_run_once(pg_server):

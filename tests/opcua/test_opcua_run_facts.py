@@ -16,6 +16,7 @@ from station.cell.records.summary import (
     CorrectionSummary,
     ErrorStats,
     IdentificationSummary,
+    ParameterEstimate,
     RunSummary,
     TableSummary,
     UploadSummary,
@@ -45,12 +46,16 @@ async def test_the_client_reads_the_figures_the_run_streamed(pki, tmp_path) -> N
     specs = offset_parameters(cfg)
     params = np.asarray(cfg.model.nominal, dtype=float).copy()
     axis = next(i for i, s in enumerate(specs) if s is not None)
-    index, _, scale = specs[axis]  # type: ignore[misc]  # not None: chosen so
+    spec = specs[axis]
+    assert spec is not None
+    index, scale = spec.index, spec.scale
     params[index] += 1.5e-3  # an identified zero offset of 1.5e-3 rad or mm beyond the nominal
     before = ErrorStats(n=24, rms_um=612.3, max_um=900.0, ap_max_um=700.0, rp_max_um=None)
     after = ErrorStats(n=24, rms_um=17.25, max_um=30.0, ap_max_um=20.0, rp_max_um=None)
     table = CorrectionSummary(n_values=31680, interpolation_bound_um=4.73, crc32="1a2b3c4d", grid_shape=(12, 11, 3, 8))
-    ident = IdentificationSummary("pose", 48, 20, 1.0, 8.6, (), ())
+    # the offset's parameter among the chosen: a joint the minimal set does not hold reads NaN (39)
+    ident = IdentificationSummary("pose", 48, 20, 1.0, 8.6, (),
+                                  (ParameterEstimate(spec.name, float(params[index]), 1e-5),))
     upload = UploadSummary("1a2b3c4d", 1.9)
     summary = RunSummary(outcome=Outcome.TARGET_MISSED, run_id=5, correction=table, before=before, after=after,
                          upload=upload, tables=TableSummary("none", "1a2b3c4d"), identification=ident)
