@@ -8,6 +8,7 @@ service file, ``~/.pgpass`` or ``PG*`` environment variables.
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from datetime import datetime
@@ -23,7 +24,8 @@ from station.fleet.migrate import current_version, latest_version
 from station.fleet.settings import fleet_url
 
 __all__ = ["FleetStoreError", "fleet_url", "connect", "insert_publication", "insert_report", "robot_keys",
-           "latest_runs", "robot_history", "run_detail", "report_html", "recent_rechecks", "store_errors"]
+           "latest_runs", "robot_history", "run_detail", "report_html", "recent_rechecks", "store_errors",
+           "insert_certificate", "certificate_xml"]
 
 #: seconds to wait for the server: a run's end never waits longer than this on the network
 CONNECT_TIMEOUT_S = 5
@@ -139,6 +141,16 @@ def insert_report(conn: psycopg.Connection, run_uuid: str, path: str, html: str)
         return cur.rowcount == 1
 
 
+def insert_certificate(conn: psycopg.Connection, run_uuid: str, xml: bytes, schema_version: str) -> bool:
+    """Attach a run's certificate (its bytes as written); True if new. The run must be in the
+    store already; the store checks the digest it is keyed by."""
+    digest = hashlib.sha256(xml).hexdigest()
+    with conn.transaction():
+        cur = conn.execute("INSERT INTO certificates (run_uuid, sha256, schema_version, xml) VALUES (%s, %s, %s, %s) "
+                           "ON CONFLICT DO NOTHING", (run_uuid, digest, schema_version, xml))
+        return cur.rowcount == 1
+
+
 # ------------------------------------------------------------------------------------ reading
 
 def robot_keys(conn: psycopg.Connection) -> list[str]:
@@ -207,6 +219,13 @@ def run_detail(conn: psycopg.Connection, run_uuid: str) -> dict[str, Any] | None
 def report_html(conn: psycopg.Connection, run_uuid: str) -> str | None:
     row = conn.execute("SELECT html FROM reports WHERE run_uuid = %s", (run_uuid,)).fetchone()
     return str(row[0]) if row else None
+
+
+def certificate_xml(conn: psycopg.Connection, run_uuid: str) -> bytes | None:
+    """A run's certificate as the station wrote it: the latest received; None without one."""
+    row = conn.execute("SELECT xml FROM certificates WHERE run_uuid = %s ORDER BY received_utc DESC LIMIT 1",
+                       (run_uuid,)).fetchone()
+    return bytes(row[0]) if row else None
 
 
 def fetch_all(conn: psycopg.Connection, sql: str, params: Sequence[Any] = ()) -> list[tuple]:

@@ -66,16 +66,21 @@ def cmd_sync(args: argparse.Namespace) -> int:
             print(f"  not queued: {line}", file=sys.stderr)
     before = len(pending(args.db))
     result = sync(args.db, url)
+    from station.cell.publication.certificates import send_certificates
+
+    certs = send_certificates(args.db, url)
     out = {"newly_queued": backfilled, "not_queued": problems, "queued_before": before, "sent": result.sent, "already_in_store": result.already,
-           "reports": result.reports, "still_queued": result.failed, "error": result.error or None}
+           "reports": result.reports, "still_queued": result.failed, "error": result.error or certs.error or None,
+           "certificates": certs.sent, "certificates_unsent": certs.waiting + certs.failed}
     if args.json:
         print(json.dumps(out))
     else:
         print(f"fleet sync: {result.sent} run(s) sent, {result.already} already in the store, "
-              f"{result.reports} report(s) attached, {result.failed} still queued")
-        if result.error:
-            print(f"  not sent: {result.error}", file=sys.stderr)
-    return int(Outcome.SUCCESS if result.ok else Outcome.DATABASE_ERROR)
+              f"{result.reports} report(s) attached, {certs.sent} certificate(s) attached, {result.failed} still queued")
+        for error in (result.error, certs.error):
+            if error:
+                print(f"  not sent: {error}", file=sys.stderr)
+    return int(Outcome.SUCCESS if result.ok and certs.ok else Outcome.DATABASE_ERROR)
 
 
 def _fmt(v: float | None, digits: int = 1, unit: str = "") -> str:

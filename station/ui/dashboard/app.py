@@ -12,6 +12,7 @@ from __future__ import annotations
 import base64
 import hmac
 import queue
+import re
 import threading
 import time
 from collections.abc import AsyncIterator, Iterator
@@ -237,6 +238,7 @@ def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: in
         with pool.connection() as conn:
             run = store.run_detail(conn, str(uid))
             has_report = run is not None and store.report_html(conn, str(uid)) is not None
+            has_certificate = run is not None and store.certificate_xml(conn, str(uid)) is not None
         if run is None:
             return render("missing.html", 404, what=f"run {uid}")
         stored = run.get("detail")
@@ -245,7 +247,8 @@ def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: in
         ident = ident if isinstance(ident, dict) else {}
         params, params_note = parameter_rows(detail)
         return render("run.html", run={**run, "detail": detail}, params=params, params_note=params_note,
-                      has_report=has_report, has_covariance=bool(ident.get("covariance")))
+                      has_report=has_report, has_certificate=has_certificate,
+                      has_covariance=bool(ident.get("covariance")))
 
     def report_page(request: Request) -> Response:
         uid = request.path_params["uuid"]
@@ -255,6 +258,18 @@ def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: in
             return render("missing.html", 404, what=f"a report of run {uid}")
         return HTMLResponse(html, headers={"Content-Security-Policy": _REPORT_CSP})
 
+    def certificate(request: Request) -> Response:
+        """The run's Digital Calibration Certificate: the bytes 'station export-dcc' wrote (issue 41)."""
+        uid = request.path_params["uuid"]
+        with pool.connection() as conn:
+            run = store.run_detail(conn, str(uid))
+            xml = store.certificate_xml(conn, str(uid)) if run is not None else None
+        if run is None or xml is None:
+            return render("missing.html", 404, what=f"a calibration certificate of run {uid}")
+        name = re.sub(r"[^A-Za-z0-9._-]", "_", f"certificate-{run['robot_key']}-run-{run['local_run_id']}.xml")
+        return Response(xml, media_type="application/xml",
+                        headers={"Content-Disposition": f'attachment; filename="{name}"'})
+
     routes = [
         Route("/", fleet_page),
         Route("/fleet.csv", fleet_export), Route("/fleet.json", fleet_export),
@@ -262,6 +277,7 @@ def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: in
         Route("/robots/{key:path}", robot_page),
         Route("/runs/{uuid:uuid}", run_page),
         Route("/runs/{uuid:uuid}/report", report_page),
+        Route("/runs/{uuid:uuid}/certificate.xml", certificate),
         Mount("/static", app=StaticFiles(directory=str(_HERE / "static")), name="static"),
     ]
     middleware = [Middleware(_AuthMiddleware, auth=auth or DashboardAuth())]

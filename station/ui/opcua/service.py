@@ -39,6 +39,7 @@ from asyncua import Server, ua
 from station.cell.pipeline.outcomes import failure_summary
 from station.cell.recheck.measure import RecheckOptions
 from station.cell.recheck.session import run_recheck_session
+from station.cell.records.certificates import stored_certificate
 from station.cell.records.run_list import RunInfo, list_runs
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import RunSummary
@@ -216,7 +217,7 @@ class StationService:
             if not ids:
                 return status(ua.StatusCodes.BadNoData)
             return await self._get_by_id(parent, f"run-{max(ids)}")
-        return self._result_outputs(self.results[self.latest_result])
+        return self._result_outputs(await self._with_certificate(self.latest_result))
 
     async def _get_by_id(self, parent: ua.NodeId, result_id: Any = None, timeout: Any = None) -> list[ua.Variant] | ua.StatusCode:
         rid = str(getattr(result_id, "Value", result_id) or "")
@@ -225,7 +226,21 @@ class StationService:
             if found is None:
                 return status(ua.StatusCodes.BadNotFound)
             self.results[rid] = found
-        return self._result_outputs(self.results[rid])
+        return self._result_outputs(await self._with_certificate(rid))
+
+    async def _with_certificate(self, rid: str) -> Any:
+        """The result ``rid`` with its Digital Calibration Certificate, when 'station export-dcc' wrote
+        one for the run: ResultContent[1], a ByteString holding the file's bytes (issue 41; OPC
+        40001-101 §6.3 and §10.5: ResultContent is the result's data, BaseDataType[]). Read at each
+        call: a certificate is written after the run, often after its ResultReady."""
+        result = self.results[rid]
+        if not rid.startswith("run-") or not rid[4:].isdigit():
+            return result
+        cert = await asyncio.get_running_loop().run_in_executor(None, stored_certificate, self.request.db, int(rid[4:]))
+        if cert is None:
+            return result
+        content = list(result.ResultContent or [])[:1] + [ua.Variant(cert.xml, ua.VariantType.ByteString)]
+        return _UA.ResultDataType(ResultMetaData=result.ResultMetaData, ResultContent=content)
 
     @staticmethod
     def _result_outputs(result: Any) -> list[ua.Variant]:
