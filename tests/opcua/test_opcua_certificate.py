@@ -1,0 +1,78 @@
+"""A run's Digital Calibration Certificate over OPC UA (issue 41): once 'station export-dcc' has
+written it, GetResultById and GetLatestResult return it as the result's second ResultContent, a
+ByteString holding the file's bytes (OPC 40001-101 §10.5: ResultContent is the result's data,
+BaseDataType[]); a real asyncua client over the secured endpoint reads it, and it validates
+against the kept DCC schema."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from asyncua import ua
+
+from station.ui.cli.main import main
+from station.ui.report.dcc import validate_dcc
+from tests.opcua.clients import CONFIG, PASSWORDS, connected, station
+from tests.opcua.conftest import Pki, Served, free_port
+from tests.ui.test_export_dcc import ISSUER
+
+RESULT_NS = "http://opcfoundation.org/UA/Machinery/Result/"
+
+
+@pytest.fixture(scope="module")
+def certified_server(pki: Pki, tmp_path_factory) -> Iterator[tuple[Served, Path]]:
+    """A simulated calibration of the served cell with its certificate exported, then
+    ``station serve --opcua`` over that run database."""
+    work = tmp_path_factory.mktemp("serve-dcc")
+    db, issuer, out = work / "runs.sqlite", work / "issuer.toml", work / "run1.xml"
+    assert main(["calibrate", str(CONFIG), "--simulated", "--seed", "1", "--db", str(db)]) == 0
+    issuer.write_text(ISSUER)
+    assert main(["export-dcc", "1", "--db", str(db), "--issuer", str(issuer), "-o", str(out)]) == 0
+    port, log = free_port(), work / "serve.log"
+    cmd = [sys.executable, "-m", "station.ui.cli.main", "serve", "--opcua", str(CONFIG), "--simulated",
+           "--pki", str(pki.root / "server"), "--users", str(pki.users), "--host", "127.0.0.1", "--port", str(port),
+           "--db", str(db)]
+    with log.open("w") as f:
+        proc = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, cwd=work)
+    try:
+        deadline = time.monotonic() + 90
+        while "OPC UA server on" not in log.read_text():
+            if proc.poll() is not None or time.monotonic() > deadline:
+                pytest.fail(f"station serve --opcua did not come up:\n{log.read_text()}")
+            time.sleep(0.1)
+        yield Served(f"opc.tcp://127.0.0.1:{port}/station/", proc, log, db), out
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(400)
+async def test_the_result_carries_the_exported_certificate(certified_server, pki) -> None:
+    served, out = certified_server
+    async with connected(served.url, pki.client_cert, pki.client_key, user="watch", password=PASSWORDS["watch"]) as c:
+        _, node = await station(c)
+        rns = await c.get_namespace_index(RESULT_NS)
+        results = await node.get_child([f"{rns}:ResultManagement"])
+        await c.load_data_type_definitions()
+        _, by_id, error = await results.call_method(f"{rns}:GetResultById", ua.Variant("run-1"),
+                                                    ua.Variant(1000, ua.VariantType.Int32))
+        _, latest, _ = await results.call_method(f"{rns}:GetLatestResult", ua.Variant(1000, ua.VariantType.Int32))
+    assert error == 0 and by_id.ResultMetaData.ResultId == "run-1" == latest.ResultMetaData.ResultId
+    for result in (by_id, latest):
+        summary, certificate = result.ResultContent
+        assert json.loads(summary.Value)["run_id"] == 1  # [0] stays the run's --json
+        assert certificate.VariantType == ua.VariantType.ByteString
+        assert certificate.Value == out.read_bytes()  # the exported file, byte for byte
+        validate_dcc(certificate.Value)  # offline, against the kept XSD files
