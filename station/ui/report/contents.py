@@ -98,6 +98,11 @@ class IsoPose:
     n_after: int = 0
     ap_after_um: float | None = None
     rp_after_um: float | None = None
+    #: standard uncertainties of the four figures [µm] (station/core/accuracy/iso9283_uncertainty.py)
+    u_ap_before_um: float | None = None
+    u_rp_before_um: float | None = None
+    u_ap_after_um: float | None = None
+    u_rp_after_um: float | None = None
 
     def __post_init__(self) -> None:
         target = tuple(float(v) for v in self.target_mm)
@@ -105,7 +110,8 @@ class IsoPose:
             raise ConfigError(f"report: pose {self.point}: target_mm needs x, y, z, got {len(target)} values")
         object.__setattr__(self, "target_mm", target)
         object.__setattr__(self, "elbow", int(self.elbow))
-        for attr in ("ap_before_um", "rp_before_um", "ap_after_um", "rp_after_um"):
+        for attr in ("ap_before_um", "rp_before_um", "ap_after_um", "rp_after_um", "u_ap_before_um", "u_rp_before_um",
+                     "u_ap_after_um", "u_rp_after_um"):
             object.__setattr__(self, attr, _opt(getattr(self, attr)))
 
 

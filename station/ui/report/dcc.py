@@ -442,6 +442,13 @@ def _iso_list(data: ET.Element, name: str, poses: Sequence[IsoPose], attr: str, 
     _sub(lst, _s("labelXMLList"), " ".join(_label(f"{p.point}_elbow{p.elbow:+d}") for p in have))
     _sub(lst, _s("valueXMLList"), " ".join(_num(getattr(p, attr)) for p in have))
     _sub(lst, _s("unitXMLList"), " ".join(UM_UNIT for _ in have))
+    u = [getattr(p, f"u_{attr}") for p in have]
+    if all(v is not None for v in u):  # every figure has one (AP: always; RP: with its two cycles)
+        unc = _sub(lst, _s("expandedUncXMLList"))
+        _sub(unc, _s("uncertaintyXMLList"), " ".join(_num(COVERAGE_FACTOR * v) for v in u))
+        _sub(unc, _s("coverageFactorXMLList"), _num(COVERAGE_FACTOR))
+        _sub(unc, _s("coverageProbabilityXMLList"), str(COVERAGE_PROBABILITY))
+        _sub(unc, _s("distributionXMLList"), "normal")
 
 
 def _iso(results: ET.Element, d: ReportData) -> None:
@@ -451,7 +458,13 @@ def _iso(results: ET.Element, d: ReportData) -> None:
     _texts(res, "name", "ISO 9283 pose accuracy and repeatability at the held-out poses")
     desc = _sub(res, _d("description"))
     _sub(desc, _d("content"), "AP and RP per pose (ISO 9283:1998, 7.2.1 and 7.2.2) before and after the correction; "
-         "RP needs two cycles of a pose").set("lang", "en")
+         "RP needs two cycles of a pose. Expanded uncertainty U = k·u (GUM 6.2), u by first-order propagation "
+         "(GUM 5.1.2) per pose: for AP the barycentre's u per axis from the cycles' scatter (Type A, s/√n; with one "
+         "cycle the configured σ of one reading) and the body point's CMM σ (Type B, shared by every cycle); for RP "
+         "by Monte Carlo (JCGM 101:2008): the spread of RP over 2000 seeded sets of n cycles drawn from the normal "
+         "distribution with the pose's own sample covariance (larger than the true spread with few cycles). With "
+         "few cycles the degrees of freedom are few and the coverage probability is approximate (GUM G.4); "
+         "ISO 9283 asks for 30 cycles").set("lang", "en")
     data = _sub(res, _d("data"))
     for attr, name, status in (("ap_before_um", "AP", "before correction"), ("rp_before_um", "RP", "before correction"),
                                ("ap_after_um", "AP", "after correction"), ("rp_after_um", "RP", "after correction")):

@@ -32,6 +32,7 @@ from station.cell.records.summary import RunSummary
 from station.cell.run.locate import located_config
 from station.cell.run.recentring import stored_recentring
 from station.core.accuracy.iso9283 import iso9283_pose
+from station.core.accuracy.iso9283_uncertainty import iso9283_uncertainty
 from station.core.identification.base_frame import BASE_FRAME_NOTE_PREFIX
 from station.core.identification.identify import IdentificationResult
 from station.core.kinematics.forward import forward, scara_ik
@@ -269,6 +270,14 @@ def _iso_figures(e: np.ndarray | None) -> tuple[int, float | None, float | None]
     return len(e), st.AP * 1e3, st.RP * 1e3
 
 
+def _iso_uncertainty(e: np.ndarray | None, u_reading: float, u_target: float) -> tuple[float | None, float | None]:
+    """Standard uncertainties of :func:`_iso_figures`' AP and RP [µm] (None where the figure is)."""
+    if e is None or not len(e):
+        return None, None
+    u = iso9283_uncertainty(e, u_reading, u_target)
+    return u.u_ap * 1e3, None if u.u_rp is None else u.u_rp * 1e3
+
+
 def _iso_poses(cfg: CellConfig, steps: Sequence[PlannedStep], db: RunDB, run_id: int) -> list[IsoPose]:
     """ISO 9283 AP and RP per held-out pose, before and after correction, in plan order."""
     heads = head_targets_world(cfg)
@@ -283,7 +292,11 @@ def _iso_poses(cfg: CellConfig, steps: Sequence[PlannedStep], db: RunDB, run_id:
         nb, apb, rpb = _iso_figures(before.get((pid, elbow)))
         na, apa, rpa = _iso_figures(after.get((pid, elbow)))
         x, y, z = (float(v) for v in heads[point][:3, 3])
-        out.append(IsoPose(pid, elbow, (x, y, z), nb, apb, rpb, na, apa, rpa))
+        # the body point's CMM σ per axis (0: taken as exact) and one reading's σ, both [mm]
+        u_t = float(cfg.body_sigma[point, 0]) if cfg.body_sigma is not None else 0.0
+        u_r = cfg.identification.sigma_position_um * 1e-3
+        ub, ua = _iso_uncertainty(before.get((pid, elbow)), u_r, u_t), _iso_uncertainty(after.get((pid, elbow)), u_r, u_t)
+        out.append(IsoPose(pid, elbow, (x, y, z), nb, apb, rpb, na, apa, rpa, *ub, *ua))
     return out
 
 
