@@ -1,7 +1,8 @@
 """A run's Digital Calibration Certificate through the fleet (issue 41): 'station export-dcc' keeps
 its bytes in the run database and sends them with the run; the QA dashboard serves them at
 /runs/UUID/certificate.xml to a real HTTP client over TCP, behind the same auth as its other
-pages, byte for byte the exported file, valid against the kept DCC schema (xmlschema)."""
+pages, byte for byte the exported file, valid against the kept DCC schema (xmlschema); headless
+Chromium follows the run page's link and saves the same bytes."""
 
 from __future__ import annotations
 
@@ -22,20 +23,22 @@ from station.fleet import store
 from station.ui.cli.main import main
 from station.ui.dashboard.app import DashboardAuth, create_app
 from station.ui.report.dcc import validate_dcc
+from tests.fleet.test_dashboard_browser import browser  # noqa: F401 - headless Chromium, as the browser tests have it
 from tests.ui.test_export_dcc import ISSUER
 
 TOKEN = "qa-token-41"
+WITH_TOKEN = DashboardAuth(token=TOKEN)
 
 
 @contextmanager
-def _served(url: str) -> Iterator[str]:
-    """The dashboard on a free local port (uvicorn in a thread), with a bearer token."""
+def _served(url: str, auth: DashboardAuth | None = WITH_TOKEN) -> Iterator[str]:
+    """The dashboard on a free local port (uvicorn in a thread), by default with a bearer token."""
     import uvicorn
 
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    server = uvicorn.Server(uvicorn.Config(create_app(url, auth=DashboardAuth(token=TOKEN)), host="127.0.0.1",
+    server = uvicorn.Server(uvicorn.Config(create_app(url, auth=auth), host="127.0.0.1",
                                            port=port, log_level="warning"))
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()
@@ -116,3 +119,29 @@ def test_no_certificate_is_a_404_and_the_store_checks_its_digest(fleet_db):
         assert store.certificate_xml(c, pub["run_uuid"]) == b"<x/>"
         with pytest.raises(psycopg.errors.ReadOnlySqlTransaction):
             store.insert_certificate(c, pub["run_uuid"], b"<y/>", "3.1.2")
+
+
+
+def test_chromium_downloads_the_certificate_from_the_run_page(fleet_db, browser, tmp_path):  # noqa: F811
+    """The run page's link, followed in the distribution's headless Chromium (the browser tests'
+    fixture): the file it saves is the stored certificate, byte for byte."""
+    from selenium.webdriver.common.by import By
+
+    pub = publication("SR-8", "calibration", days_ago(2))
+    xml = b'<?xml version="1.0" encoding="UTF-8"?>\n<dcc:digitalCalibrationCertificate xmlns:dcc="https://ptb.de/dcc"/>\n'
+    with store.connect(fleet_db.station_url) as c:
+        store.insert_publication(c, pub)
+        store.insert_certificate(c, pub["run_uuid"], xml, "3.1.2")
+    downloads = tmp_path / "downloads"
+    downloads.mkdir()
+    with _served(fleet_db.dashboard_url, auth=None) as base:
+        browser.execute_cdp_cmd("Browser.setDownloadBehavior", {"behavior": "allow", "downloadPath": str(downloads)})
+        browser.get(f"{base}/runs/{pub['run_uuid']}")
+        browser.find_element(By.ID, "open-certificate").click()
+        for _ in range(400):
+            saved = [p for p in downloads.iterdir() if p.suffix == ".xml"]
+            if saved:
+                break
+            time.sleep(0.05)
+    assert [p.name for p in saved] == ["certificate-SR-8-run-1.xml"]
+    assert saved[0].read_bytes() == xml
