@@ -26,6 +26,8 @@ QUIRKS: dict[str, str] = {
                      "a program that serves only the transfer buffer",
     "activate_drops_previous": "TABLE_ACTIVATE with no active table empties the previous slot (previous := active "
                                "even when none is active)",
+    "activate_unstaged": "TABLE_ACTIVATE with nothing staged is accepted (as a deactivation: previous := active, "
+                         "active := none) instead of refused with TABLE_NOT_STAGED",
     "claim_always_granted": "every claim request is granted, also while another station holds the controller (no "
                             "compare-and-set: a second station takes the controller from the first)",
     "claim_never_expires": "the watchdog does not free the claim: a dead station's claim stays until someone "

@@ -128,6 +128,8 @@ class TableSlots:
         """TABLE_ACTIVATE, TABLE_DEACTIVATE, TABLE_ROLLBACK or TABLE_DISCARD_PREVIOUS (anything
         else is a bad command); ``docs/robot-program.md`` gives the slot rules."""
         if cmd is Command.TABLE_ACTIVATE:
+            if self.staged is None and "activate_unstaged" in self.quirks:
+                return self.switch(Command.TABLE_DEACTIVATE)
             if self.staged is None:
                 return ErrorCode.TABLE_NOT_STAGED
             # activating over none keeps the previous table: the one a deactivation set aside

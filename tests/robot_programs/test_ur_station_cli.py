@@ -55,6 +55,7 @@ def test_station_check_and_conformance_pass_against_the_shipped_program(tmp_path
         requests = list(ur.server.requests)
     assert check.returncode == 0, check.stdout + check.stderr
     assert "register map 3 at base 128" in check.stdout
+    assert "station_link.script needs PolyScope 5.15 or later (make_list" in check.stdout  # its header's words
     assert conformance.returncode == 0, conformance.stdout + conformance.stderr
     assert all(128 <= a and a + n <= 256 for _fc, a, n in requests)
 

@@ -205,8 +205,11 @@ class _HandshakeChecks(_KitBase):
         freed = self._await_owner(0, wd + 2.0)
         dt = time.monotonic() - t0
         link._heartbeat_once()  # hb_pc live again before anything else: no watchdog fires on the next move
-        link.claim()
+        link.claim_after_lapse()
         link._start_heartbeat()
+        if freed:
+            self.emit(f"one station per controller: the watchdog freed the kit's silent claim after {dt:.2f} s, as "
+                      f"this check expects; claimed again")
         if not freed:
             r.failed(f"the claim was not freed {dt:.2f} s after the holder's heartbeat stopped (watchdog_ms "
                      f"{wd * 1000:.0f})", "clear claim_owner (and the holder's request, host, PID and since) when "
@@ -387,41 +390,57 @@ class _HandshakeChecks(_KitBase):
         if st is not None and not self.link.status().ready:
             r.failed("the refusal cleared READY (it latched)", "a rejection must not latch: keep READY set")
 
+    def _expect(self, ans: _Answer, code: ErrorCode, what: str, fix: str) -> None:
+        """``error_codes``: ``ans`` must be the refusal ``code``, and the refusal must not latch."""
+        r = self.req["error_codes"]
+        if ans.error_is(code):
+            st = self.link.status()
+            if not st.ready or st.error:
+                r.failed(f"{what}: {code.name}, but READY was cleared / ERROR set",
+                         "rejections do not latch: keep READY, leave the ERROR bit for e-stop, drive fault and "
+                         "watchdog")
+            else:
+                r.passed(f"{what}: {code.name}")
+        else:
+            r.failed(f"{what}: {ans.describe()}, expected {code.name}", fix)
+
     def error_codes(self) -> None:
         r = self.req["error_codes"]
-
-        def expect(ans: _Answer, code: ErrorCode, what: str, fix: str) -> None:
-            if ans.error_is(code):
-                st = self.link.status()
-                if not st.ready or st.error:
-                    r.failed(f"{what}: {code.name}, but READY was cleared / ERROR set",
-                             "rejections do not latch: keep READY, leave the ERROR bit for e-stop, drive fault and "
-                             "watchdog")
-                else:
-                    r.passed(f"{what}: {code.name}")
-            else:
-                r.failed(f"{what}: {ans.describe()}, expected {code.name}", fix)
-
         a = self._command(99)
-        expect(a, ErrorCode.BAD_COMMAND, "unknown command code 99",
-               "refuse an unknown cmd_code with error_code BAD_COMMAND (5)")
+        self._expect(a, ErrorCode.BAD_COMMAND, "unknown command code 99",
+                     "refuse an unknown cmd_code with error_code BAD_COMMAND (5)")
         if self.may_move:
             b = self._command(Command.MOVE_JOINTS, target=self._joints(), speed=0.0, what="zero-speed check (no motion)")
-            expect(b, ErrorCode.BAD_COMMAND, "MOVE_JOINTS with cmd_speed 0",
-                   "refuse cmd_speed outside 1..1000 (raw) with BAD_COMMAND (5)")
+            self._expect(b, ErrorCode.BAD_COMMAND, "MOVE_JOINTS with cmd_speed 0",
+                         "refuse cmd_speed outside 1..1000 (raw) with BAD_COMMAND (5)")
         else:
-            r.detail.append(f"zero-speed refusal not checked: {self.why_not_move}")
-        crcs = self.link.table_crcs()
-        if self.why_not_tables:  # a faulty program might activate 'nothing' over a table the kit cannot put back
-            r.detail.append(f"TABLE_NOT_STAGED not checked: {self.why_not_tables}")
-        elif crcs["staged"] == 0 and not self.link.status().table_staged:
+            r.partly("BAD_COMMAND for cmd_speed 0", self.why_not_move, self.why_not_move.rpartition(": ")[2])
+        staged = self.link.table_crcs()["staged"] != 0 or self.link.status().table_staged
+        if staged and self.uses_table and not self.why_not_tables:
+            # the operator's staged table: TABLE_ACTIVATE would activate it. The slot rules end
+            # with nothing staged (and the kit puts the slots back afterwards): checked then
+            self.not_staged_pending = True
+            return
+        self.table_not_staged()
+
+    def table_not_staged(self) -> None:
+        """``error_codes``: TABLE_ACTIVATE with nothing staged is refused with TABLE_NOT_STAGED.
+        Sent only where it cannot activate a table the kit could not put back."""
+        r = self.req["error_codes"]
+        self.not_staged_pending = False
+        part = "TABLE_NOT_STAGED for TABLE_ACTIVATE with nothing staged"
+        if self.uses_table and self.why_not_tables:  # a faulty program might activate 'nothing' over a table
+            r.partly(part, self.why_not_tables, "serve the slot reads, then run the kit again")
+        elif self.link.table_crcs()["staged"] != 0 or self.link.status().table_staged:
+            r.partly(part, "the controller still has a staged table (TABLE_ACTIVATE would activate it)",
+                     "fix the table slot rules first (see activation)" if self.uses_table else
+                     "clear the staged table on the controller (TABLE_STAGE is for SCARA cells), then run again")
+        else:
             c = self._command(Command.TABLE_ACTIVATE)
-            expect(c, ErrorCode.TABLE_NOT_STAGED, "TABLE_ACTIVATE with nothing staged",
-                   "refuse TABLE_ACTIVATE without a staged table with TABLE_NOT_STAGED (8)")
+            self._expect(c, ErrorCode.TABLE_NOT_STAGED, "TABLE_ACTIVATE with nothing staged",
+                         "refuse TABLE_ACTIVATE without a staged table with TABLE_NOT_STAGED (8)")
             if c.result == "done":  # the slots are put back at the end; say what the program did
                 self.notes.append("the controller accepted TABLE_ACTIVATE with nothing staged")
-        else:
-            r.detail.append("TABLE_NOT_STAGED not checked: the controller has a staged table")
 
     def judge_ack(self) -> None:
         r = self.req["ack"]

@@ -56,6 +56,13 @@ class _Link(ModbusController):
         if not self.claim_failed:
             super().claim(owner)
 
+    def claim_after_lapse(self) -> None:
+        """Ask for the controller again after the kit let its claim lapse on purpose (the
+        watchdog check): the lapse is that step's expected outcome, so the driver's warning that
+        a claim lapsed - a fault in a run - is not given."""
+        self._claimed = False
+        self.claim()
+
     def read_registers(self, address: int, count: int) -> list[int]:
         return self._read(address, count)
 
@@ -174,6 +181,13 @@ class _KitBase:
         self.found: dict[str, CorrectionTableData | None] = {}
         #: why the kit must not change the slots (a table it could not read back), "" if it may
         self.why_not_tables = "the slots were not read"
+        #: the TABLE_NOT_STAGED check waits until the slot rules have left nothing staged
+        self.not_staged_pending = False
+
+    @property
+    def uses_table(self) -> bool:
+        """The station uploads a correction table to this cell's controller (SCARA robots)."""
+        return bool(self.cfg.model.is_scara)
 
     # -- plumbing --------------------------------------------------------------------------
     def _guarded(self, target: np.ndarray, what: str, probe: bool = False) -> np.ndarray:

@@ -12,13 +12,17 @@ from typing import Any
 
 from station.errors import Outcome
 
-__all__ = ["REQUIREMENTS", "Requirement", "ConformanceReport", "PASSED", "FAILED", "NOT_CHECKED", "NOT_APPLICABLE"]
+__all__ = ["REQUIREMENTS", "Requirement", "ConformanceReport", "PASSED", "FAILED", "NOT_CHECKED", "NOT_APPLICABLE",
+           "PARTLY_CHECKED"]
 
 
 PASSED, FAILED, NOT_CHECKED = "passed", "failed", "not checked"
 #: a requirement this cell does not ask of its program (the table requirements on a cell whose
 #: station uploads no table): it neither passes nor fails, and does not stop the kit's exit 0
 NOT_APPLICABLE = "not applicable"
+#: every part that was checked passed, but a part could not be checked (named in ``unchecked``):
+#: not a pass - the kit cannot say the program meets the requirement - so the exit code is 7
+PARTLY_CHECKED = "partly checked"
 
 #: The requirements, in report order: (id, what the robot program must do).
 REQUIREMENTS: tuple[tuple[str, str], ...] = (
@@ -54,14 +58,16 @@ REQUIREMENTS: tuple[tuple[str, str], ...] = (
 
 @dataclass
 class Requirement:
-    """One requirement's result: ``status`` passed / failed / not checked, what was seen
-    (``detail``) and, when it failed or could not be checked, what to do (``fix``)."""
+    """One requirement's result: ``status`` passed / failed / not checked / partly checked, what
+    was seen (``detail``), the parts that could not be checked (``unchecked``) and, when it failed
+    or could not be checked, what to do (``fix``)."""
 
     id: str
     title: str
     status: str = NOT_CHECKED
     detail: list[str] = field(default_factory=list)
     fix: list[str] = field(default_factory=list)
+    unchecked: list[str] = field(default_factory=list)
 
     def failed(self, detail: str, fix: str) -> None:
         self.status = FAILED
@@ -71,7 +77,7 @@ class Requirement:
 
     def passed(self, detail: str = "") -> None:
         if self.status != FAILED:
-            self.status = PASSED
+            self.status = PARTLY_CHECKED if self.unchecked else PASSED
         if detail:
             self.detail.append(detail)
 
@@ -82,6 +88,16 @@ class Requirement:
         if fix and fix not in self.fix:
             self.fix.append(fix)
 
+    def partly(self, part: str, why: str, fix: str = "") -> None:
+        """One part of the requirement (``part``: what would have been checked) was not checked:
+        whatever else passes, the requirement is only partly checked."""
+        self.unchecked.append(part)
+        self.detail.append(f"not checked: {part}: {why}")
+        if self.status == PASSED:
+            self.status = PARTLY_CHECKED
+        if fix and fix not in self.fix:
+            self.fix.append(fix)
+
     def not_applicable(self, why: str) -> None:
         if self.status != FAILED:
             self.status = NOT_APPLICABLE
@@ -89,7 +105,7 @@ class Requirement:
 
     def to_json(self) -> dict[str, Any]:
         return {"id": self.id, "requirement": self.title, "status": self.status, "detail": list(self.detail),
-                "fix": list(self.fix)}
+                "not_checked": list(self.unchecked), "fix": list(self.fix)}
 
 
 @dataclass(frozen=True)
@@ -124,7 +140,8 @@ class ConformanceReport:
         lines = [f"conformance of the robot program at {self.controller}:"]
         for r in self.requirements:
             mark = {PASSED: "passed", FAILED: "FAILED", NOT_CHECKED: "NOT CHECKED",
-                    NOT_APPLICABLE: "not applicable"}[r.status]
+                    NOT_APPLICABLE: "not applicable",
+                    PARTLY_CHECKED: "PARTLY CHECKED"}[r.status]
             lines.append(f"  [{mark}] {r.id}: {r.title}")
             lines += [f"      {d}" for d in r.detail]
             if r.status not in (PASSED, NOT_APPLICABLE):
@@ -132,7 +149,9 @@ class ConformanceReport:
         lines += [f"  note: {n}" for n in self.notes]
         n_ok = sum(r.status == PASSED for r in self.requirements)
         n_na = sum(r.status == NOT_APPLICABLE for r in self.requirements)
+        n_part = sum(r.status == PARTLY_CHECKED for r in self.requirements)
         lines.append(f"{n_ok} of {len(self.requirements) - n_na} requirements passed"
+                     + (f", {n_part} partly checked" if n_part else "")
                      + (f" ({n_na} not applicable to this cell)" if n_na else "")
                      + ("" if self.passed else "; see docs/robot-program.md"))
         return lines

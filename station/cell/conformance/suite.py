@@ -37,6 +37,7 @@ from station.cell.conformance.report import (
     FAILED,
     NOT_APPLICABLE,
     NOT_CHECKED,
+    PARTLY_CHECKED,
     PASSED,
     REQUIREMENTS,
     ConformanceReport,
@@ -54,7 +55,7 @@ _TABLE_REQUIREMENTS = ("table", "pages", "slot_reads", "activation", "discard_pr
                        "slots_restored")
 
 __all__ = ["REQUIREMENTS", "Requirement", "ConformanceReport", "run_conformance", "PASSED", "FAILED", "NOT_CHECKED",
-           "NOT_APPLICABLE"]
+           "NOT_APPLICABLE", "PARTLY_CHECKED"]
 
 #: what to do when the kit's own motion guard refuses a target (the robot left the park zone)
 _GUARD_FIX = ("the robot is not where the kit sent it: a program that decodes the command registers wrongly "
@@ -81,11 +82,6 @@ class _Kit(_HandshakeChecks, _TableChecks, _SlotKeeper):
             self.req[rid].failed(f"{type(exc).__name__}: {exc}",
                                  "serve every register of the map (docs/robot-program.md) as documented")
 
-    @property
-    def uses_table(self) -> bool:
-        """The station uploads a correction table to this cell's controller (SCARA robots)."""
-        return bool(self.cfg.model.is_scara)
-
     def _checks(self) -> None:
         self.prepare_motion()
         steps = (("sequence", "sequence numbers", self.sequence), ("done", "test move (ack and done)", self.test_move),
@@ -108,6 +104,9 @@ class _Kit(_HandshakeChecks, _TableChecks, _SlotKeeper):
         self._step("table", self.table)
         self.emit("table slot rules")
         self._step("activation", self.switching)
+        if self.not_staged_pending:  # the operator's staged table was in the way of error_codes
+            self.emit("error codes: TABLE_NOT_STAGED")
+            self._step("error_codes", self.table_not_staged)
 
     def run(self) -> None:
         self.emit("identification and word order")
@@ -142,6 +141,9 @@ class _Kit(_HandshakeChecks, _TableChecks, _SlotKeeper):
                 self.emit("table slots put back")
                 self._step("slots_restored", self.restore_slots)
         self.judge_ack()
+        if self.not_staged_pending:  # a step before it stopped the kit
+            self.req["error_codes"].partly("TABLE_NOT_STAGED for TABLE_ACTIVATE with nothing staged",
+                                           "the slot steps it waits for did not run (see the requirements before it)")
         for rq in self.req.values():  # never a bare "not checked"
             if rq.status == NOT_CHECKED and not rq.detail:
                 rq.not_checked("the steps it needs did not run (see the requirements before it)")

@@ -15,6 +15,7 @@ import numpy as np
 from station.cell.config.cell_config import CellConfig
 from station.cell.correction.robot_tools import run_tools
 from station.cell.pipeline.results import (
+    missed_limits,
     reference_params,
     verification_errors,
     verification_orientation_errors,
@@ -207,7 +208,7 @@ def articulated_correction(cfg: CellConfig, runner: Runner, db: RunDB, run_id: i
         summary = summary.replace(oracle=measure(StepKind.REFERENCE, articulated_targets(cfg, steps, p_ref, p_ref[:6],
                                                                                          ref_delta)))
     outcome, missed = verified_outcome(cfg, summary, min_gain)
-    summary = summary.replace(notes=(*summary.notes, *missed))
+    summary = summary.replace(notes=(*summary.notes, *missed), missed=missed_limits(cfg, summary, min_gain))
     db.set_status(run_id, "verified")
     return _articulated_done(db, run_id, summary.replace(outcome=outcome), extra, orient, emit)
 

@@ -35,6 +35,7 @@ from station.cell.pipeline.results import (
     build_table_for,
     grid_for,
     identify_run,
+    missed_limits,
     reference_params,
     reversal_error,
     run_measurements,
@@ -361,7 +362,7 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
     if with_oracle:
         summary = _reference_check(run, cfg, table, used, summary)
     outcome, missed = verified_outcome(cfg, summary, options.min_gain)
-    summary = summary.replace(notes=(*summary.notes, *missed))
+    summary = summary.replace(notes=(*summary.notes, *missed), missed=missed_limits(cfg, summary, options.min_gain))
     db.set_status(run_id, "verified")
     return _kept_or_restored(run, table, summary, outcome)
 

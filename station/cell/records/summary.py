@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from station.cell.records.judge import JudgeFigure
+from station.cell.records.missed import MissedLimit, failure_json, missed_from_json
 from station.core.accuracy.iso9283 import iso9283_pose
 from station.errors import Outcome
 
@@ -280,6 +281,8 @@ class RunSummary:
     error_model: ErrorModelSummary | None = None  # [identification] model other than geometric (issue 30)
     #: a simulated cell's judge's figures (station/cell/records/judge.py); empty for a real cell
     simulation: tuple[JudgeFigure, ...] = field(default=())
+    #: TARGET_MISSED: the acceptance limits missed (station/cell/records/missed.py); the JSON's failure
+    missed: tuple[MissedLimit, ...] = field(default=())
 
     @property
     def exit_code(self) -> int:
@@ -374,6 +377,8 @@ class RunSummary:
             value = getattr(self, key)
             if value is not None:
                 out[key] = _plain(dataclasses.asdict(value))
+        if self.failure is None and self.missed and self.outcome is Outcome.TARGET_MISSED:
+            out["failure"] = failure_json(self.missed)
         if self.upload_skipped:
             out["upload_skipped"] = True
         if self.not_uploaded_reason is not None:
@@ -413,7 +418,9 @@ class RunSummary:
             correction=sub("correction", CorrectionSummary), before=sub("before", ErrorStats),
             after=sub("after", ErrorStats), oracle=sub("oracle", ErrorStats),
             upload=sub("upload", UploadSummary), upload_skipped=bool(d.get("upload_skipped", False)),
-            reversal=sub("reversal", ReversalSummary), failure=sub("failure", Failure),
+            reversal=sub("reversal", ReversalSummary),
+            failure=None if missed_from_json(d.get("failure")) else sub("failure", Failure),
+            missed=missed_from_json(d.get("failure")),
             report=d.get("report"), notes=tuple(d.get("notes", ())),
             tools=tuple(_build(ToolSummary, t) for t in d.get("tools", ())),
             compensation=sub("compensation", CompensationSummary), tables=sub("tables", TableSummary),

@@ -38,6 +38,7 @@ from station.cell.run.events import Event, Notice, PhaseChanged, RunFailed, RunS
 from station.cell.run.questions import Confirm
 from station.cell.run.runcontrol import RunControl
 from station.errors import ConfigError, Outcome, RunAborted
+from station.io.robot_program import ur_program_needs
 
 log = logging.getLogger(__name__)
 
@@ -404,4 +405,9 @@ def check_cell(cfg: CellConfig) -> CheckReport:
             lines.append(f"controller {where}: FAILED: {exc}")
             if hint := hint_for(exc):
                 lines.append(f"  what to do: {hint}")
+    ur = ur_program_needs()
+    # the UR program's cell: a six-axis arm whose map window is the program's (UR's general-purpose registers)
+    if ur is not None and d.controller_register_base == ur.register_base and cfg.model.n_joints == 6 \
+            and not cfg.model.is_scara:
+        lines.append(f"  robot program (UR, window at register {ur.register_base}): robot-programs/ur/{ur.line()}")
     return CheckReport(tuple(lines), outcome)

@@ -60,6 +60,7 @@ from station.cell.run.events import (
 from station.cell.run.runcontrol import RunControl
 from station.ui.report.writer import ReportData
 from station.ui.tui.actions import EventMessage, QuestionMessage
+from station.ui.tui.measurement_table import NOTE_COLUMN, MeasurementTable
 from station.ui.tui.result_panel import CONTINUE_KEY, CellContext, can_continue, summary_markup
 from station.ui.tui.run_end import RunEnd
 from station.ui.tui.run_facts import fact_line
@@ -222,7 +223,7 @@ class StationApp(RunEnd):
         yield Static("", id="phase-detail")
         yield Static("step —", id="step")
         yield ProgressBar(total=1, show_eta=False, id="progress")  # no pulsing bar: snapshots stay still
-        table: DataTable = DataTable(id="measurements", zebra_stripes=True, cursor_type="row")
+        table = MeasurementTable(id="measurements", zebra_stripes=True, cursor_type="row")
         table.border_title = "Measurements"
         yield table
         with Horizontal(id="bottom"):
@@ -249,7 +250,7 @@ class StationApp(RunEnd):
         table.add_column("point", key="label", width=LABEL_WIDTH)
         table.add_column("ok", key="ok", width=2)
         table.add_column("µm", key="residual", width=6)
-        table.add_column("note (why not valid)", key="note")
+        table.add_column("note (why not valid)", key=NOTE_COLUMN)
         self._fit(self.size.width, self.size.height)
         self.set_interval(0.1, self._poll_control)
         self.set_interval(1.0, self._show_eta)
@@ -514,11 +515,11 @@ class StationApp(RunEnd):
             self._show_summary(ev.summary)
 
     def _add_measurement(self, ev: MeasurementRecorded) -> None:
-        table = self.query_one("#measurements", DataTable)
+        table = self.query_one("#measurements", MeasurementTable)
         key = str(ev.index)
         ok = Text("✓", style="bold green") if ev.ok else Text("✗", style="bold red")
         residual = Text(fmt_num(ev.residual_um, digits=2), justify="right")
-        note = Text(ev.message, style="" if ev.ok else "bold red")
+        note = table.note_cell(key, ev.message, "" if ev.ok else "bold red")  # shortened in the middle
         cells = (Text(str(ev.index + 1)), Text(_shorten(ev.label)), ok, residual, note)
         if key in table.rows:  # a repeated measurement of the same step replaces the row
             for col, value in zip(("index", "label", "ok", "residual", "note"), cells):

@@ -28,6 +28,7 @@ from textual.content import Content
 
 from station.cell.records.summary import Failure, RunSummary
 from station.errors import Outcome
+from station.ui.tui.invalid_next import invalid_causes, invalid_next
 from station.ui.tui.widgets import esc, fmt_num
 
 __all__ = ["CellContext", "DeviceKind", "CONTINUE_KEY", "advice", "device_kind", "summary_markup",
@@ -178,7 +179,11 @@ def failure_kind(summary: RunSummary, phase: str | None = None) -> FailureKind |
     if outcome is Outcome.UPLOAD_FAILED:
         return "upload"
     if outcome is Outcome.IDENTIFICATION_FAILED:
-        # too few valid poses: a resume measures the invalid ones again (the pipeline's message says so)
+        # too few valid poses: a resume judges the stored readings again and measures the invalid ones
+        # again, unless the fix changes how poses are measured (invalid_next.py)
+        causes = invalid_causes(failure.message)
+        if causes is not None:
+            return "identification" if causes.needs_new_run else "measurements"
         return "measurements" if "measured again" in failure.message else "identification"
     return {Outcome.CONFIG_ERROR: "configuration", Outcome.UNREACHABLE: "unreachable",
             Outcome.DATABASE_ERROR: "database"}.get(outcome, "other")  # type: ignore[return-value]
@@ -242,6 +247,9 @@ def next_step(summary: RunSummary, ctx: CellContext | None = None, phase: str | 
         if kind == "aborted":
             return (f"press {CONTINUE_KEY}: run #{run} goes on at its next step (r: pick another run)"
                     if run is not None else "start a new run (s)")
+        causes = invalid_causes(failure.message) if summary.outcome is Outcome.IDENTIFICATION_FAILED else None
+        if causes is not None and phase != "correct":  # too few valid poses: the settings the message names
+            return invalid_next(causes, config if ctx is not None and ctx.config else "", run, CONTINUE_KEY)
         if kind == "measurements" and run is not None:
             return (f"fix what the warnings name (the probes, the body, the set-up), then press {CONTINUE_KEY}: "
                     f"run #{run} measures the invalid poses again")
