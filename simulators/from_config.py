@@ -250,13 +250,22 @@ def _joint_errors(settings: Mapping[str, Any], model: Any, seed: int):
     return six_axis_joint_errors(seed, 1.0 if scale is None else float(scale))
 
 
-def _collision(cfg: Any, settings: Mapping[str, Any]):
-    """``[simulation] collision_check``: the controller's own collision check of the cell (None: off)."""
+def _collision(cfg: Any, settings: Mapping[str, Any], cell: SimulatedCell):
+    """``[simulation] collision_check``: the controller's own collision check of the cell (None: off).
+    A robot that would start inside something is refused: no motion from there could be checked."""
     if not settings.get("collision_check"):
         return None
     from simulators.collision_check import CellCollision
+    from station.errors import ConfigError
 
-    return CellCollision.from_config(cfg)
+    check = CellCollision.from_config(cfg)
+    start = np.asarray(cell.encoder_joints(), dtype=float)
+    hit = check.check_joints(start[None])
+    if hit is not None:
+        raise ConfigError(f"[simulation] collision_check: the simulated robot would start where {hit.a} and {hit.b} "
+                          f"overlap ({hit.depth_mm:.1f} mm); set [conformance] park_joints to where the robot stands, "
+                          f"clear of the body and the obstacles")
+    return check
 
 
 def _absolute_paths(value: Any, base: Path) -> Any:
@@ -355,7 +364,7 @@ def simulate_config(cfg: Any, seed: int | None = None, source: str | Path | None
                                    ready_timeout=ready_timeout, soft_limits=np.asarray(cfg.soft_limits, dtype=float),
                                    # the program's watchdog allows what the station's heartbeat check
                                    # allows here: a loaded machine stalls both sides of one process
-                                   watchdog=SIMULATOR_CONTROLLER_DEADLINE_S, collision=_collision(cfg, settings),
+                                   watchdog=SIMULATOR_CONTROLLER_DEADLINE_S, collision=_collision(cfg, settings, cell),
                                    **drift)
     try:
         instant = time_scale == 0.0

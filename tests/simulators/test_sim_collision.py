@@ -120,6 +120,18 @@ def test_the_builtin_cell_refuses_the_switch(tmp_path, capsys):
     assert code == 2 and summary["outcome"] == "CONFIG_ERROR" and "collision_check" in summary["failure"]["message"]
 
 
+def test_a_robot_that_would_start_inside_something_is_refused():
+    """At q = 0 the PUMA's forearm hangs through the body's plate: without [conformance]
+    park_joints the simulated controller could check no motion from there, and says so."""
+    from simulators.from_config import simulate_config
+    from station.errors import ConfigError
+
+    text = PUMA.read_text()
+    text = text[:text.index("[conformance]")] + text[text.index("[identification]"):]
+    with pytest.raises(ConfigError, match=r"start where link .* the body's plate overlap .*park_joints"):
+        simulate_config(parse_text(text, str(PUMA)), seed=1, source=PUMA)
+
+
 # ------------------------------------------------------------------ today's plan collides
 
 def _commanded(cfg) -> list[np.ndarray]:
