@@ -44,6 +44,19 @@ def _over_the_column(cfg) -> np.ndarray:
     return kin.scara_inverse(target, 1)
 
 
+def _plan(cfg) -> list:
+    """(joints, what, point) of every pose the station commands for ``cfg``, in order, as planned
+    on main today."""
+    from station.cell.plan.collision import plan_path
+    from station.cell.plan.measurement_plan import build_plan
+
+    return plan_path(cfg, build_plan(cfg))
+
+
+def _commanded(cfg) -> list[np.ndarray]:
+    return [q for q, _, _ in _plan(cfg)]
+
+
 def test_the_check_finds_the_column_under_the_head_and_not_beside_it(scara):
     cc = CellCollision.from_config(scara)
     q = _over_the_column(scara)
@@ -132,14 +145,30 @@ def test_a_robot_that_would_start_inside_something_is_refused():
         simulate_config(parse_text(text, str(PUMA)), seed=1, source=PUMA)
 
 
+def test_the_plungers_may_press_on_a_cube_the_housings_may_not(scara):
+    """At a planned touch the probes' plungers press on the cube (their job: no collision); the
+    quill 12 mm lower drives the probes' housings into it (more than the 8 mm stroke allows)."""
+    cc = CellCollision.from_config(scara)
+    touch = next(q for q, label, _ in _plan(scara) if label.endswith("touch"))
+    assert cc.check_joints(touch[None]) is None
+    deeper = touch - np.array([0.0, 0.0, 12.0, 0.0])  # the quill (mm) further down
+    hit = cc.check_joints(deeper[None])
+    assert hit is not None and "plunger" not in hit.a and hit.b.startswith(("cube", "the pillar")), hit
+
+
+@pytest.mark.slow
+def test_a_plan_the_stations_check_clears_is_not_refused():
+    """examples/scara600: the station's own check finds today's plan clear (docs/collision.md,
+    "Figures"); the simulator's shapes lie inside the station's, so it refuses none of its moves."""
+    cfg = load_config(EXAMPLES / "scara600" / "cell.toml")
+    poses = _commanded(cfg)
+    cc = CellCollision.from_config(cfg)
+    refused = [i for i in range(1, len(poses)) if cc.check_move(poses[i - 1], poses[i]) is not None]
+    assert refused == [] and cc.moves_checked == len(poses) - 1
+
+
 # ------------------------------------------------------------------ today's plan collides
 
-def _commanded(cfg) -> list[np.ndarray]:
-    """The joints the station commands for ``cfg``, in order, as planned on main today."""
-    from station.cell.plan.collision import plan_path
-    from station.cell.plan.measurement_plan import build_plan
-
-    return [q for q, _, _ in plan_path(cfg, build_plan(cfg))]
 
 
 @pytest.mark.parametrize("cell", [PUMA, SCARA], ids=["puma560_obstacles", "scara600_column"])
