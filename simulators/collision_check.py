@@ -46,13 +46,15 @@ import numpy as np
 
 from simulators.truth_kinematics import inverse, pose_matrix
 
-__all__ = ["Part", "Hit", "CellCollision", "LINK_RADIUS_FRACTION", "STEP_MM"]
+__all__ = ["Part", "Hit", "CellCollision", "LINK_RADIUS_FRACTION", "STEP_MM", "COARSE"]
 
 #: link radius as a fraction of the robot's size (the sum of its transforms' offsets) when the
 #: robot file states none: slimmer than the station's 4 %, so only a planning slip is refused
 LINK_RADIUS_FRACTION = 0.03
 #: the largest distance [mm] any point of the arm moves between two checked samples of a path
 STEP_MM = 2.0
+#: a path is first looked at every COARSE-th sample (conservative advancement, ``check_move``)
+COARSE = 10
 
 
 @dataclass(frozen=True)
@@ -238,14 +240,39 @@ class CellCollision:
 
     def check_move(self, q0: np.ndarray, q1: np.ndarray) -> Hit | None:
         """The first collision on the joint-space path from ``q0`` (where the robot stands) to
-        ``q1`` (the target, included), or None: the motion is clear."""
+        ``q1`` (the target, included), or None: the motion is clear. Every :data:`COARSE`-th sample
+        first: where every pair's lower bound at both ends of such a stretch exceeds how far any
+        point can move along it, nothing between can touch (conservative advancement), and only
+        the other stretches are checked sample by sample."""
         t0 = time.perf_counter()
         Q, f = self.samples(q0, q1)
         try:
-            return self.check_joints(Q, f)
+            return self.check_joints(*self._near_stretches(np.asarray(q0, dtype=float), Q, f))
         finally:
             self.moves_checked += 1
             self.seconds += time.perf_counter() - t0
+
+    def _near_stretches(self, q0: np.ndarray, Q: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The samples of ``Q`` (and their fractions) in the stretches between every COARSE-th one
+        where some pair may come closer than the stretch lets any point move."""
+        if len(Q) <= 2 * COARSE:
+            return Q, f
+        ends = np.unique(np.append(np.arange(COARSE - 1, len(Q), COARSE), len(Q) - 1))
+        anchors = np.vstack([q0[None], Q[ends]])
+        closest = self._gaps(self._placed(anchors)).min(axis=1, initial=np.inf)
+        # how far any point of a moving part moves over each stretch: a revolute joint's step times
+        # its lever grown by the thickest part's radius (its surface, not its axis), a prismatic one's
+        grow = np.array([0.0 if k == "prismatic" else float(self._radius.max()) for k in self.kinds if k is not None])
+        motion = np.abs(np.diff(anchors, axis=0)) @ (self.levers + grow)
+        near = np.minimum(closest[:-1], closest[1:]) <= motion  # two moving parts: each moves half of it
+        starts = np.concatenate([[0], ends[:-1] + 1])
+        keep = np.concatenate([np.arange(a, b + 1) for a, b, n in zip(starts, ends, near) if n] or [np.arange(0)])
+        return Q[keep.astype(int)], f[keep.astype(int)]
+
+    def _placed(self, Q: np.ndarray) -> np.ndarray:
+        """(n, moving, 4, 4): every moving part's pose in the base frame at joints ``Q`` (n, g)."""
+        F = self.frames(Q)
+        return np.stack([F[:, m.frame] @ m.local for m in self.moving], axis=1)
 
     def check_joints(self, Q: np.ndarray, fractions: np.ndarray | None = None, chunk: int = 2048) -> Hit | None:
         """The first collision among the joint samples ``Q`` ``(n, g)``, in their order, or None."""
@@ -253,9 +280,8 @@ class CellCollision:
         f = np.ones(len(Q)) if fractions is None else np.asarray(fractions, dtype=float)
         self.samples_checked += len(Q)
         for start in range(0, len(Q), chunk):
-            F = self.frames(Q[start:start + chunk])
-            W = np.stack([F[:, m.frame] @ m.local for m in self.moving], axis=1)  # (n, moving, 4, 4)
-            near = self._screen(W)
+            W = self._placed(Q[start:start + chunk])
+            near = self._gaps(W) <= 0.0
             for k in np.flatnonzero(near.any(axis=1)):
                 hit = self._exact(W[k], near[k])
                 if hit is not None:
@@ -264,9 +290,9 @@ class CellCollision:
                     return Hit(a, b, depth, float(f[n]), tuple(float(v) for v in Q[n]))
         return None
 
-    def _screen(self, W: np.ndarray) -> np.ndarray:
-        """(n, pairs) whether each pair (moving-moving, then moving-fixed) may overlap: a lower bound
-        of its distance is not positive. The first of a pair is its axis segment grown by its
+    def _gaps(self, W: np.ndarray) -> np.ndarray:
+        """(n, pairs) a lower bound [mm] of each pair's distance (moving-moving, then moving-fixed);
+        not positive: they may overlap. The first of a pair is its axis segment grown by its
         radius, the second is boxed in its own frame."""
         c, z = W[..., :3, 3], W[..., :3, 2]
         ends = (c + self._half[:, None] * z, c - self._half[:, None] * z)
@@ -276,7 +302,7 @@ class CellCollision:
             Rt = np.swapaxes(W[:, j, :3, :3], -1, -2)
             p0, p1 = ((Rt @ (e[:, i] - c[:, j])[..., None])[..., 0] for e in ends)
             half = np.array([self._extent[k] for k in j])
-            out.append(_box_gap(p0, p1, half) - self._radius[i] <= 0.0)
+            out.append(_box_gap(p0, p1, half) - self._radius[i])
         if self._mf:
             i, j = np.array(self._mf).T
             gaps = np.empty((len(W), len(j)))
@@ -285,8 +311,8 @@ class CellCollision:
                 inv = self._fixed_inv[g]
                 p0, p1 = (e[:, i[k]] @ inv[:3, :3].T + inv[:3, 3] for e in ends)
                 gaps[:, k] = _box_gap(p0, p1, self._extent[len(self.moving) + g]) - self._radius[i[k]]
-            out.append(gaps <= 0.0)
-        return np.concatenate(out, axis=1) if out else np.zeros((len(W), 0), dtype=bool)
+            out.append(gaps)
+        return np.concatenate(out, axis=1) if out else np.zeros((len(W), 0))
 
     def _exact(self, W: np.ndarray, near: np.ndarray) -> tuple[str, str, float] | None:
         """fcl's verdict on the pairs the screen left (one sample): the first that collides."""

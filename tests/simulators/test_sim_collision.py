@@ -156,7 +156,22 @@ def test_the_plungers_may_press_on_a_cube_the_housings_may_not(scara):
     assert hit is not None and "plunger" not in hit.a and hit.b.startswith(("cube", "the pillar")), hit
 
 
-@pytest.mark.slow
+def test_skipping_the_far_stretches_finds_what_every_sample_finds():
+    """check_move looks at every COARSE-th sample first and skips stretches that cannot reach
+    anything: on 30 random moves between the PUMA plan's poses (seeded) it finds exactly the first
+    collision the check of every sample finds, or none where that finds none."""
+    cfg = load_config(PUMA)
+    poses = _commanded(cfg)
+    cc = CellCollision.from_config(cfg)
+    rng = np.random.default_rng(40)
+    verdicts = []
+    for a, b in rng.integers(0, len(poses), (30, 2)):
+        full = cc.check_joints(*cc.samples(poses[a], poses[b]))
+        assert cc.check_move(poses[a], poses[b]) == full
+        verdicts.append(full is None)
+    assert 0 < sum(verdicts) < len(verdicts)  # both kinds of move were tried
+
+
 def test_a_plan_the_stations_check_clears_is_not_refused():
     """examples/scara600: the station's own check finds today's plan clear (docs/collision.md,
     "Figures"); the simulator's shapes lie inside the station's, so it refuses none of its moves."""
