@@ -33,7 +33,8 @@ Never checked: a link and its neighbour in the chain (zero-length links skipped)
 robot file's ``[collision] allowed_pairs`` names, the head and the last link, the base link and
 anything fixed (it stands where it stands). Margin 0: shapes that overlap collide. A path is
 sampled in joint space (the controller interpolates linearly in joint space) at a step that moves
-no point of the arm by more than :data:`STEP_MM`.
+no point of the arm by more than :data:`STEP_MM`; stretches of :data:`COARSE` steps that no pair
+can cross (every pair's lower bound at both ends beyond the stretch's motion) are skipped.
 """
 
 from __future__ import annotations

@@ -208,10 +208,9 @@ def test_todays_plan_collides_in_the_simulators_check(cell):
 
 # ------------------------------------------------------------------ end to end (needs the via poses)
 
-@pytest.mark.slow
-@pytest.mark.xfail(reason="needs issue 40's via poses (branch h40a)", strict=False)
-@pytest.mark.parametrize("cell", [PUMA, SCARA], ids=["puma560_obstacles", "scara600_column"])
-def test_the_example_rehearses_to_success_without_a_collision(cell, tmp_path, capsys, monkeypatch):
+def _rehearse(cell: Path, tmp_path: Path, capsys, monkeypatch):
+    """``station calibrate --simulated CELL --json``: its exit code, its JSON summary and the
+    simulated controller it ran against."""
     import simulators.from_config as from_config
     from station.ui.cli.main import main
 
@@ -226,7 +225,30 @@ def test_the_example_rehearses_to_success_without_a_collision(cell, tmp_path, ca
     code = main(["calibrate", "--simulated", str(cell), "--db", str(tmp_path / "runs.sqlite"), "--json"])
     summary = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     (rehearsal,) = started
-    controller = rehearsal.servers.controller_server
+    return code, summary, rehearsal.servers.controller_server
+
+
+@pytest.mark.slow
+def test_a_clear_cell_rehearses_to_success_with_the_check_on(tmp_path, capsys, monkeypatch):
+    """examples/scara600 (no obstacles; the station's own check clears its plan) with the check
+    switched on: every motion of the whole run is checked, none refused, the run ends SUCCESS."""
+    import shutil
+
+    for name in ("robot.toml", "head.toml", "body.csv"):
+        shutil.copy(EXAMPLES / "scara600" / name, tmp_path / name)
+    text = (EXAMPLES / "scara600" / "cell.toml").read_text()
+    (tmp_path / "cell.toml").write_text(text.replace("[simulation]\n", "[simulation]\ncollision_check = true\n"))
+    code, summary, controller = _rehearse(tmp_path / "cell.toml", tmp_path, capsys, monkeypatch)
+    assert controller.collision is not None and controller.collision.moves_checked > 500
+    assert controller.collisions == [], [h.describe() for _, h in controller.collisions[:3]]
+    assert code == 0 and summary["outcome"] == "SUCCESS", summary.get("failure")
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(reason="needs issue 40's via poses (branch h40a)", strict=False)
+@pytest.mark.parametrize("cell", [PUMA, SCARA], ids=["puma560_obstacles", "scara600_column"])
+def test_the_example_rehearses_to_success_without_a_collision(cell, tmp_path, capsys, monkeypatch):
+    code, summary, controller = _rehearse(cell, tmp_path, capsys, monkeypatch)
     assert controller.collision is not None and controller.collision.moves_checked > 100
     assert controller.collisions == [], [h.describe() for _, h in controller.collisions[:3]]
     assert code == 0 and summary["outcome"] == "SUCCESS", summary.get("failure")
