@@ -53,6 +53,7 @@ __all__ = [
     "ControllerLinkLost",
     "CommandRejected",
     "MotionRejected",
+    "MotionCollision",
     "MotionAborted",
     "EmergencyStop",
     "DriveFault",
@@ -170,6 +171,11 @@ class MotionRejected(CommandRejected):
     """A motion target was refused: soft limit, unreachable, outside the table, or not ready."""
 
 
+class MotionCollision(MotionRejected):
+    """The controller's own collision check refused a motion (error COLLISION): its target or the
+    joint-space path to it collides in the controller's cell model. Nothing moved."""
+
+
 class MotionAborted(CommandRejected):
     """The motion was aborted by a STOP command."""
 
@@ -271,6 +277,8 @@ def error_for(st: ReportedError, seq: int, command: Command, target: Any,
     if ec is ErrorCode.BAD_COMMAND and command in (Command.MOVE_JOINTS, Command.MOVE_CARTESIAN) \
             and st.error_joint > 0:
         return MotionRejected(f"{msg} (joint {st.error_joint})", code, seq)
+    if ec is ErrorCode.COLLISION:
+        return MotionCollision(msg, code, seq)
     if ec in (ErrorCode.UNREACHABLE, ErrorCode.TARGET_OUTSIDE_TABLE, ErrorCode.NOT_READY,
               ErrorCode.BAD_COMMAND):
         return MotionRejected(msg, code, seq)

@@ -400,6 +400,7 @@ class ErrorCode(enum.IntEnum):
     PAGE_CRC_MISMATCH = 15
     PAGE_INVALID = 16
     NOT_CLAIMED = 17
+    COLLISION = 18
 
 
 ERROR_MESSAGES: dict[ErrorCode, str] = {
@@ -424,6 +425,8 @@ ERROR_MESSAGES: dict[ErrorCode, str] = {
     ErrorCode.PAGE_INVALID: "a transfer request with an unknown operation, page number or length",
     ErrorCode.NOT_CLAIMED: "the command's cmd_token is not the token of the station that holds the controller "
                            "(claim_owner): no claim, another station holds it, or the claim expired by the watchdog",
+    ErrorCode.COLLISION: "the controller's own collision check (a safety option's cell model) finds the target or the "
+                         "joint-space path to it colliding: nothing moved; check the plan and the cell's obstacles",
 }
 
 

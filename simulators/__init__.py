@@ -99,7 +99,7 @@ def start_simulated_cell(seed: int = 0, time_scale: float = 0.0, pace: bool = Fa
                          correction_state: int = 0,
                          probe_protocol: str = "keyence-dl-rs1a", probe_bytesize: int | None = None,
                          probe_parity: str | None = None, joint_errors: str = "none", joint_errors_scale: float = 1.0,
-                         **physics: float) -> SimulatedCellServers:
+                         collision: Any = None, **physics: float) -> SimulatedCellServers:
     """Start the controller and probe-head simulators on one :class:`SimulatedCell`.
     ``map_version``: publish another register-map version (the driver must refuse it).
     ``register_base``/``register_count``: the controller's register window (``[devices]
@@ -119,7 +119,9 @@ def start_simulated_cell(seed: int = 0, time_scale: float = 0.0, pace: bool = Fa
     describe it (the cell already holds them). ``soft_limits`` ``(n_joints, 2)`` [rad | mm]: the
     controller's (default: the robot's joint limits). ``joint_errors``: ``"scara"`` gives the built-in
     SCARA's gears once-per-turn errors (:func:`simulators.joint_errors.scara_joint_errors`, times
-    ``joint_errors_scale``; issue 30), ``"none"`` a rigid robot. A user's cell: :mod:`simulators.from_config`."""
+    ``joint_errors_scale``; issue 30), ``"none"`` a rigid robot. ``collision``: the controller's own
+    collision check (:class:`simulators.collision_check.CellCollision`), None: none. A user's cell:
+    :mod:`simulators.from_config`."""
     from simulators.cell import CellTruth, SimulatedCell
     from simulators.controller_server import SimulatedController
     from simulators.probe_head_sim import ProbeHeadServer
@@ -157,7 +159,7 @@ def start_simulated_cell(seed: int = 0, time_scale: float = 0.0, pace: bool = Fa
                                time_scale=time_scale, watchdog=watchdog, soft_limits=soft_limits,
                                map_version=MAP_VERSION if map_version is None else map_version,
                                register_base=register_base, register_count=register_count,
-                               correction_state=correction_state
+                               correction_state=correction_state, collision=collision
                                ).start(ready_timeout)
     try:
         _wait_tcp(ctrl.host, ctrl.port, ready_timeout)

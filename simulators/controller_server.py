@@ -20,7 +20,10 @@ table area itself is :class:`simulators.controller_tables.TableSlots`. One stati
 the claim block follows :class:`simulators.controller_claim.ClaimRules` - a request is served at
 once, the watchdog (``hb_pc`` silent for ``watchdog``) frees a claim on the program tick, and every
 command but STOP whose ``cmd_token`` is not the owner's is refused with NOT_CLAIMED;
-``command_log`` records (code, seq, token) of every command block written.
+``command_log`` records (code, seq, token) of every command block written. With ``collision`` (a
+:class:`simulators.collision_check.CellCollision`, ``[simulation] collision_check``) every motion's
+target and the joint-space path to it are checked after the soft limits; a colliding one is refused
+with COLLISION (nothing moves) and kept in ``collisions``.
 
 Faults are injected at run time through methods of :class:`SimulatedController` (thread-safe).
 A robot program that implements the protocol *wrongly* is played with ``quirks`` (see
@@ -70,6 +73,7 @@ from station.io.robot_files import load_robot
 
 if TYPE_CHECKING:
     from simulators.cell import SimulatedCell
+    from simulators.collision_check import CellCollision, Hit
 
 __all__ = ["SimulatedController", "ModbusFault", "QUIRKS"]
 
@@ -98,7 +102,8 @@ class SimulatedController(FaultInjection):
                  time_scale: float = 0.0, heartbeat_period: float = 0.1, watchdog: float = 1.0,
                  max_speed: np.ndarray | None = None, soft_limits: np.ndarray | None = None,
                  map_version: int = MAP_VERSION, quirks: Iterable[str] = (), register_base: int = 0,
-                 register_count: int = WINDOW_SIZE, correction_state: int = 0):
+                 register_count: int = WINDOW_SIZE, correction_state: int = 0,
+                 collision: "CellCollision | None" = None):
         if model is None:
             model = cell.truth.model if cell is not None else load_robot("sr800")
         self.model = model
@@ -140,6 +145,10 @@ class SimulatedController(FaultInjection):
             raise ValueError(f"register window {register_base}+{register_count} outside 0..65535")
         #: what the program reports in correction_state (CorrectionState)
         self.correction_state = int(correction_state)
+        #: the controller's own collision check of every motion (None: off, ``[simulation]
+        #: collision_check``); every refusal is kept in ``collisions`` as (seq, what hit what)
+        self.collision = collision
+        self.collisions: list[tuple[int, "Hit"]] = []
         # the image by window offset (the map's 128, or more when the window is larger)
         self._regs = [0] * max(WINDOW_SIZE, self.register_count)
         self._readonly = [False] * len(self._regs)
@@ -474,6 +483,12 @@ class SimulatedController(FaultInjection):
                 lo, hi = self.soft_limits[j]
                 if not lo <= target[j] <= hi:
                     return self._error(seq, ErrorCode.SOFT_LIMIT, j + 1, -1 if target[j] < lo else 1)
+            if self.collision is not None:  # the target and the joint-space path to it, before anything moves
+                hit = self.collision.check_move(self._q, target)
+                if hit is not None:
+                    log.info("motion seq %d refused: %s", seq, hit.describe())
+                    self.collisions.append((seq, hit))
+                    return self._error(seq, ErrorCode.COLLISION)
             self._move_task = asyncio.create_task(self._move(seq, target, speed))
             return None
         return self._table_command(seq, cmd)

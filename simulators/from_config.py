@@ -11,7 +11,9 @@ configuration the station itself reads (``station.cell.config.cell_config.CellCo
 * the probe head: the configured head (``cfg.head``), else the default 3-2-1 head for the cube edge;
   its reading noise ``[simulation].probe_noise_um`` when the file sets it, else the head's stated
   ``reading_sigma_mm`` (its certificate), else 0.5 µm;
-* the controller: the configured word order, and ``[limits]`` as its soft limits;
+* the controller: the configured word order, and ``[limits]`` as its soft limits; with
+  ``[simulation] collision_check = true`` its own collision check of every motion
+  (:mod:`simulators.collision_check`);
 * drift (thermal model, step change) from the ``[simulation]`` keys of :mod:`simulators.thermal`.
 
 It returns the running servers and the station's configuration for them: the user's, with only
@@ -248,6 +250,24 @@ def _joint_errors(settings: Mapping[str, Any], model: Any, seed: int):
     return six_axis_joint_errors(seed, 1.0 if scale is None else float(scale))
 
 
+def _collision(cfg: Any, settings: Mapping[str, Any], cell: SimulatedCell):
+    """``[simulation] collision_check``: the controller's own collision check of the cell (None: off).
+    A robot that would start inside something is refused: no motion from there could be checked."""
+    if not settings.get("collision_check"):
+        return None
+    from simulators.collision_check import CellCollision
+    from station.errors import ConfigError
+
+    check = CellCollision.from_config(cfg)
+    start = np.asarray(cell.encoder_joints(), dtype=float)
+    hit = check.check_joints(start[None])
+    if hit is not None:
+        raise ConfigError(f"[simulation] collision_check: the simulated robot would start where {hit.a} and {hit.b} "
+                          f"overlap ({hit.depth_mm:.1f} mm); set [conformance] park_joints to where the robot stands, "
+                          f"clear of the body and the obstacles")
+    return check
+
+
 def _absolute_paths(value: Any, base: Path) -> Any:
     """Strings that name a file beside the configuration (a robot file, a head file, a body
     file) made absolute, so that the station's configuration reads the same files from anywhere."""
@@ -344,7 +364,8 @@ def simulate_config(cfg: Any, seed: int | None = None, source: str | Path | None
                                    ready_timeout=ready_timeout, soft_limits=np.asarray(cfg.soft_limits, dtype=float),
                                    # the program's watchdog allows what the station's heartbeat check
                                    # allows here: a loaded machine stalls both sides of one process
-                                   watchdog=SIMULATOR_CONTROLLER_DEADLINE_S, **drift)
+                                   watchdog=SIMULATOR_CONTROLLER_DEADLINE_S, collision=_collision(cfg, settings, cell),
+                                   **drift)
     try:
         instant = time_scale == 0.0
         text = station_config_text(cfg, servers, seed, source, instant=instant)

@@ -313,6 +313,8 @@
 #define E_PAGE_CRC_MISMATCH 15
 #define E_PAGE_INVALID 16
 #define E_NOT_CLAIMED 17
+' 18: the map's code for a controller with its own collision check; this program has none
+#define E_COLLISION 18
 #define S_READY 1
 #define S_MOVING 2
 #define S_IN_POSITION 4

@@ -357,6 +357,11 @@ class _Simulation(_Section):
         "none", description='"six-axis": the joints bend under gravity and err once per turn (a 1.6 m arm\'s '
         'values, docs/error-terms.md); "scara": a SCARA\'s joints 1, 2, 4 err once per turn; "none": a rigid robot')
     joint_errors_scale: float = _num(1.0, ge=0.0, le=10.0, what="factor on every joint error of joint_errors")
+    # the simulated controller's own collision check (issue 40, simulators/collision_check.py): off by
+    # default until the station's plans carry their via poses
+    collision_check: bool = Field(False, description="true: the simulated controller refuses (error COLLISION) a "
+                                  "motion whose target or joint-space path collides in its own model of the cell "
+                                  "(links, head, body, [[obstacle]]); false: it checks nothing")
 
 
 class _Verification(_Section):

@@ -24,6 +24,7 @@ from drivers.controller_errors import (
     MapVersionError,
     ModbusExceptionError,
     ModbusResponseError,
+    MotionCollision,
     MotionTimeout,
     WordOrderError,
 )
@@ -64,6 +65,10 @@ _TABLE: tuple[_Row, ...] = (
     _Row((RunAborted,), Outcome.ABORTED, f"the robot stopped at a safe point; {RESUME}"),
     _Row((EmergencyStop,), Outcome.SAFETY_STOP, f"release the e-stop, check the cell, reset the controller, {RESUME}", device="controller"),
     _Row((DriveFault,), Outcome.SAFETY_STOP, f"clear the drive fault at the controller, {RESUME}", device="controller"),
+    _Row((MotionCollision,), Outcome.UNREACHABLE,
+         "nothing moved: the controller's collision check refused the motion (the message says which); check the "
+         "plan with 'station plan CONFIG' against the cell's [[obstacle]] tables and the controller's cell model, "
+         f"{RESUME}", device="controller"),
     _Row((TableVerifyError,), Outcome.UPLOAD_FAILED,
          "the table was NOT activated; check the link and the word order, then resume to upload again", device="controller"),
     _Row((TableError, TableDataError), Outcome.UPLOAD_FAILED,
