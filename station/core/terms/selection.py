@@ -45,7 +45,7 @@ from station.core.units import UM
 from station.errors import ConfigError, IdentificationError
 
 __all__ = ["ALPHA", "N_BOOT", "CandidateScore", "Selection", "select_model", "fit_model", "cv_errors", "nested_cv",
-           "NestedCV", "columns_of", "all_terms_basis", "expand_families"]
+           "NestedCV", "held_out_e2", "columns_of", "all_terms_basis", "expand_families"]
 
 #: the paired test's level (before the Bonferroni division by a step's candidates)
 ALPHA = 0.01
@@ -349,7 +349,9 @@ class NestedCV:
         return _rms(self.auto_e2)
 
 
-def _held_out_e2(model: RobotModel, data: MeasurementSet, fit: TermFit, basis_test: TermBasis) -> np.ndarray:
+def held_out_e2(model: RobotModel, data: MeasurementSet, fit: TermFit, basis_test: TermBasis) -> np.ndarray:
+    """``(n,)`` squared position error [mm²] of the fit ``fit`` at held-out ``data`` (``basis_test``:
+    every term's basis at its rows), by the nonlinear model."""
     from station.core.terms.error_model import apply_terms
 
     cols = [basis_test.names.index(n) for n in fit.basis.names]
@@ -385,7 +387,7 @@ def nested_cv(model: RobotModel, data: MeasurementSet, rows: TermRows | None = N
         b_train, b_test = basis_all.subset(train), basis_all.subset(f)
         sel = select_model(model, d_train, rows, spec, geometric=geo, alpha=alpha, basis_all=b_train)
         geo_fit = fit_model(model, d_train, geo, b_train, ())
-        geo_e2[f] = _held_out_e2(model, d_test, geo_fit, b_test)
-        auto_e2[f] = _held_out_e2(model, d_test, sel.fit, b_test)
+        geo_e2[f] = held_out_e2(model, d_test, geo_fit, b_test)
+        auto_e2[f] = held_out_e2(model, d_test, sel.fit, b_test)
         chosen.append(sel.chosen)
     return NestedCV(geo_e2, auto_e2, tuple(chosen), name)
