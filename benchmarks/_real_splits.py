@@ -127,3 +127,21 @@ def split_table(scores: FoldScores, extra: dict[str, list[np.ndarray]] | None = 
 def chosen_line(scores: FoldScores) -> str:
     c = Counter(" + ".join(f) or "nothing" for f in scores.chosen)
     return ", ".join(f"{k} {v}/{len(scores.chosen)}" for k, v in c.most_common())
+
+
+def figaroh_fold_e2(python: str, model: RobotModel, data: MeasurementSet, folds: list[np.ndarray],
+                    non_geometric: bool = True) -> list[np.ndarray]:
+    """FIGAROH's held-out squared position errors [mm²] on ``folds`` (pose data): its calibration of
+    every training set (``non_geometric``: its elasticity option on, the lumped gravity shape),
+    scored at the held-out poses, all in one run of its own Python."""
+    from benchmarks.bench_core import figaroh_figures
+
+    n = data.n_items
+    sets = {}
+    for k, test in enumerate(folds):
+        train = np.setdiff1d(np.arange(n), test)
+        sets[k] = (data.joints[train], data.subset(train))
+    out = figaroh_figures(python, model, sets, data.joints, 0, non_geometric=non_geometric)
+    meas = data.measured[:, :3, 3]
+    return [np.sum((np.asarray(out[k]["held_out_positions_m"])[test] * 1e3 - meas[test]) ** 2, axis=1)
+            for k, test in enumerate(folds)]

@@ -91,20 +91,30 @@ def figaroh_loo_um(python: str, model, d: MeasurementSet) -> float:
     return float(np.sqrt(np.mean(e2))) / UM
 
 
-def same_folds(model, d, geo_fit, n_splits: int) -> None:
-    """Every model on the same folds (see the module): leave-one-out, then ``n_splits`` random splits."""
+PEER = "FIGAROH elasticity"
+
+
+def same_folds(model, d, geo_fit, n_splits: int, figaroh: str | None = None) -> None:
+    """Every model on the same folds (see the module): leave-one-out, then ``n_splits`` random splits;
+    with ``figaroh`` (pose data), FIGAROH with its elasticity option on the same folds."""
     forced = tuple((f,) for f in rs.candidates(model))
     n_test = max(1, round(d.n_items / 5))
+    peer = figaroh if d.kind == "pose" else None
     t0 = time.process_time()
-    loo = rs.score_folds(model, d, [np.array([i]) for i in range(d.n_items)], geo_fit, forced)
+    folds = [np.array([i]) for i in range(d.n_items)]
+    loo = rs.score_folds(model, d, folds, geo_fit, forced)
+    extra = {PEER: np.concatenate(rs.figaroh_fold_e2(peer, model, d, folds))} if peer else None
     print(f"every model on the same folds: leave-one-out ({d.n_items} folds; auto chose {rs.chosen_line(loo)})")
-    print("\n".join(rs.loo_table(loo)))
+    print("\n".join(rs.loo_table(loo, extra)))
     if n_splits:
-        spl = rs.score_folds(model, d, rs.random_splits(d.n_items, n_test, n_splits), geo_fit, forced)
+        folds = rs.random_splits(d.n_items, n_test, n_splits)
+        spl = rs.score_folds(model, d, folds, geo_fit, forced)
+        extra_s = {PEER: rs.figaroh_fold_e2(peer, model, d, folds)} if peer else None
         print(f"{n_splits} seeded random {d.n_items - n_test}/{n_test} splits: held-out RMS per split against the "
               f"geometric fit's (auto chose {rs.chosen_line(spl)})")
-        print("\n".join(rs.split_table(spl)))
-    print(f"(folds scored in {time.process_time() - t0:.0f} s CPU)")
+        print("\n".join(rs.split_table(spl, extra_s, PEER if peer else None)))
+    print(f"(folds scored in {time.process_time() - t0:.0f} s CPU of this process"
+          + (", FIGAROH's runs beside)" if peer else ")"))
 
 
 def run_set(name: str, robot: Path, data: Path, sigma_mm: float, sigma_rad: float, peer: str,
@@ -138,7 +148,7 @@ def run_set(name: str, robot: Path, data: Path, sigma_mm: float, sigma_rad: floa
               f"{figaroh_loo_um(figaroh, model, d):.1f} µm (the station's geometric: {nest.geometric_rms_mm / UM:.1f} µm)")
     elif figaroh:
         print("FIGAROH run here: not on position data (its calibration here takes full poses)")
-    same_folds(model, d, geo_fit, n_splits)
+    same_folds(model, d, geo_fit, n_splits, figaroh)
 
 
 def main(argv=None) -> int:

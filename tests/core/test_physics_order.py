@@ -69,3 +69,16 @@ def test_a_harmonic_of_a_joint_swept_under_150_degrees_is_never_tried():
     first = sel.table[1]
     assert first.families == ("compliance",) and first.level == ALPHA_PHYSICS and first.kept
     assert sel.chosen[0] == "compliance"
+
+
+def test_a_negative_compliance_is_not_kept_however_well_it_fits():
+    """Data bent *against* gravity (a compliance of −3 µrad per lumped N·m at joints 2 and 3, a
+    physically impossible robot): the compliance passes its test but is not kept, and the table says
+    why."""
+    q = spread_joints(ARM, 60, np.random.default_rng(4))
+    d = _bent(q, 4, np.array([-3e-6, -3e-6, 0.0, 0.0]))
+    sel = select_model(ARM, d, geometric=identify(ARM, d))
+    row = sel.table[1]
+    assert row.families == ("compliance",) and row.p_value is not None and row.p_value < row.level
+    assert not row.plausible and not row.kept and "compliance" not in sel.chosen
+    assert row.to_dict()["plausible"] is False
