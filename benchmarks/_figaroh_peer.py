@@ -63,7 +63,8 @@ def main() -> int:
         pee = calc_updated_fkm(robot.model, robot.data, cal.LM_result.x, q, cfg)
         n_meas = int(cfg["calibration_index"])
         pos = np.asarray(pee).reshape(n_meas, held.shape[0])[:3].T  # DOF-major rows x, y, z
-        out[case["name"]] = {"median_s": statistics.median(times), "best_s": min(times), "runs": repeat,
+        out[case["name"]] = {"median_s": statistics.median(times) if times else None,
+                             "best_s": min(times) if times else None, "runs": repeat,
                              "held_out_positions_m": pos.tolist(), "parameters": int(len(cal.LM_result.x)),
                              "status": str(cal.STATUS)}
     print(json.dumps(out))

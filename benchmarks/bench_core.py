@@ -23,6 +23,7 @@ import argparse
 import functools
 import json
 import os
+import re
 import statistics
 import subprocess
 import sys
@@ -71,7 +72,7 @@ def held_out_um(model, params, q, true) -> float:
     return float(np.sqrt(np.mean(np.sum(d**2, axis=1)))) * 1e3
 
 
-def _figaroh_config(name: str, model, data_file: str, n: int) -> str:
+def _figaroh_config(name: str, model, data_file: str, n: int, non_geometric: bool = False) -> str:
     joints = ", ".join(f'"joint_{t.name}"' for t in model.transforms if t.joint is not None)
     return f"""robot:
   name: "{model.name}"
@@ -84,7 +85,7 @@ tasks:
     type: kinematic_calibration
     parameters:
       calibration_level: "full_params"
-      include_non_geometric: false
+      include_non_geometric: {"true" if non_geometric else "false"}
       outlier_threshold: 1.0
     kinematics:
       base_frame: "universe"
@@ -103,11 +104,26 @@ tasks:
 """
 
 
-def figaroh_figures(python: str, model, sets: dict, q_held, repeat: int) -> dict:
-    """FIGAROH's median fit time [s] and held-out positions [mm] per set, from its own venv."""
+def lumped_masses_urdf(text: str) -> str:
+    """The exported URDF with the station's lumped gravity shape as inertials (issue 38), for
+    FIGAROH's elasticity option, whose torques come from the URDF's masses: 1 kg at the origin of
+    every joint after the first and at the tool point (:func:`station.core.terms.error_model.gravity_torques`,
+    lumped). The station's URDF has no masses (kinematics only)."""
+    inertial = ('<inertial><origin xyz="0 0 0" rpy="0 0 0"/><mass value="1.0"/>'
+                '<inertia ixx="1e-9" ixy="0" ixz="0" iyy="1e-9" iyz="0" izz="1e-9"/></inertial>')
+    links = re.findall(r'<child link="(link_[^"]+|tool0)"/>', text)
+    for name in links[1:]:  # not the first joint's link: its origin loads no joint the gravity turns
+        text = text.replace(f'<link name="{name}"/>', f'<link name="{name}">{inertial}</link>')
+    return text
+
+
+def figaroh_figures(python: str, model, sets: dict, q_held, repeat: int, non_geometric: bool = False) -> dict:
+    """FIGAROH's median fit time [s] and held-out positions [mm] per set, from its own venv;
+    ``non_geometric``: with its elasticity option, the gravity shape the station's lumped one."""
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        (folder / "robot.urdf").write_text(export_model(model, "urdf", setup=True).text)
+        urdf = export_model(model, "urdf", setup=True).text
+        (folder / "robot.urdf").write_text(lumped_masses_urdf(urdf) if non_geometric else urdf)
         # the station's world frame is FIGAROH's universe; the set-up R is a fixed joint there
         names = [f"joint_{t.name}" for t in model.transforms if t.joint is not None]
         scale = np.array([1e-3 if t == "prismatic" else 1.0 for t in model.joint_types])
@@ -118,7 +134,8 @@ def figaroh_figures(python: str, model, sets: dict, q_held, repeat: int) -> dict
             head = "x1,y1,z1,phix1,phiy1,phiz1," + ",".join(names)
             rows = np.concatenate([pose, q * scale], axis=1)
             np.savetxt(folder / f"train{n}.csv", rows, delimiter=",", header=head, comments="", fmt="%.17g")
-            (folder / f"config{n}.yaml").write_text(_figaroh_config("tool", model, str(folder / f"train{n}.csv"), n))
+            (folder / f"config{n}.yaml").write_text(_figaroh_config("tool", model, str(folder / f"train{n}.csv"),
+                                                                    len(q), non_geometric))
             cases.append({"name": str(n), "config": f"config{n}.yaml", "held_out": "held.csv"})
         np.savetxt(folder / "held.csv", q_held * scale, delimiter=",", fmt="%.17g")
         (folder / "cases.json").write_text(json.dumps(cases))

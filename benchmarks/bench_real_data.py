@@ -1,6 +1,6 @@
 """``--model auto`` against the geometric fit on real measurements of real robots (issue 30).
 
-    .venv/bin/python benchmarks/bench_real_data.py [--boby-klimchik DIR] [--figaroh PYTHON]
+    .venv/bin/python benchmarks/bench_real_data.py [--boby-klimchik DIR] [--figaroh PYTHON] [--splits 200]
 
 Per data set: the poses, the selection's cross-validated RMS position error of the geometric model
 and of the chosen model (the CV that chose it: optimistic for the chosen one), the *nested*
@@ -10,6 +10,13 @@ often each outer fold chose them, and the peer's published figure where there is
 ``--figaroh PYTHON`` (a Python that has FIGAROH, as for ``bench_core.py``), FIGAROH's geometric
 calibration (``BaseCalibration``, its default cost) of every leave-one-out training set of a pose
 data set, scored on the pose left out: the peer's held-out RMS on the same split. No asserts.
+
+Then every model on the same folds (issue 38, :mod:`benchmarks._real_splits`): leave-one-out and
+``--splits`` seeded random splits (a fifth of the poses held out, 29/7 for the FANUC's 36), for
+the geometric fit, auto (selected anew on every training set) and each candidate family forced:
+the leave-one-out RMS with its change and p, the per-split changes' median and quartiles, the
+shares of splits better and worse and p; with ``--figaroh``, FIGAROH with its non-geometric
+(elasticity) option on the same folds, and the share of splits where auto is at least as good.
 
 Data sets:
 
@@ -40,6 +47,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
+from benchmarks import _real_splits as rs  # noqa: E402
 from station.core.identification.identify import identify  # noqa: E402
 from station.core.measurement.measurements import MeasurementSet  # noqa: E402
 from station.core.terms.selection import nested_cv, select_model  # noqa: E402
@@ -83,8 +91,34 @@ def figaroh_loo_um(python: str, model, d: MeasurementSet) -> float:
     return float(np.sqrt(np.mean(e2))) / UM
 
 
+PEER = "FIGAROH elasticity"
+
+
+def same_folds(model, d, geo_fit, n_splits: int, figaroh: str | None = None) -> None:
+    """Every model on the same folds (see the module): leave-one-out, then ``n_splits`` random splits;
+    with ``figaroh`` (pose data), FIGAROH with its elasticity option on the same folds."""
+    forced = tuple((f,) for f in rs.candidates(model))
+    n_test = max(1, round(d.n_items / 5))
+    peer = figaroh if d.kind == "pose" else None
+    t0 = time.process_time()
+    folds = [np.array([i]) for i in range(d.n_items)]
+    loo = rs.score_folds(model, d, folds, geo_fit, forced)
+    extra = {PEER: np.concatenate(rs.figaroh_fold_e2(peer, model, d, folds))} if peer else None
+    print(f"every model on the same folds: leave-one-out ({d.n_items} folds; auto chose {rs.chosen_line(loo)})")
+    print("\n".join(rs.loo_table(loo, extra)))
+    if n_splits:
+        folds = rs.random_splits(d.n_items, n_test, n_splits)
+        spl = rs.score_folds(model, d, folds, geo_fit, forced)
+        extra_s = {PEER: rs.figaroh_fold_e2(peer, model, d, folds)} if peer else None
+        print(f"{n_splits} seeded random {d.n_items - n_test}/{n_test} splits: held-out RMS per split against the "
+              f"geometric fit's (auto chose {rs.chosen_line(spl)})")
+        print("\n".join(rs.split_table(spl, extra_s, PEER if peer else None)))
+    print(f"(folds scored in {time.process_time() - t0:.0f} s CPU of this process"
+          + (", FIGAROH's runs beside)" if peer else ")"))
+
+
 def run_set(name: str, robot: Path, data: Path, sigma_mm: float, sigma_rad: float, peer: str,
-            figaroh: str | None = None) -> None:
+            figaroh: str | None = None, n_splits: int = 0) -> None:
     model, d = _load(robot, data, sigma_mm, sigma_rad)
 
     def geo_fit(dd):
@@ -114,6 +148,7 @@ def run_set(name: str, robot: Path, data: Path, sigma_mm: float, sigma_rad: floa
               f"{figaroh_loo_um(figaroh, model, d):.1f} µm (the station's geometric: {nest.geometric_rms_mm / UM:.1f} µm)")
     elif figaroh:
         print("FIGAROH run here: not on position data (its calibration here takes full poses)")
+    same_folds(model, d, geo_fit, n_splits, figaroh)
 
 
 def main(argv=None) -> int:
@@ -121,15 +156,16 @@ def main(argv=None) -> int:
     ap.add_argument("--boby-klimchik", metavar="DIR",
                     help="a clone of github.com/RABKKK/LaserTrackerPoseData4KinIdent (FANUC R-2000iC/165F)")
     ap.add_argument("--figaroh", metavar="PYTHON", help="a Python that has FIGAROH: its leave-one-out figure too")
+    ap.add_argument("--splits", type=int, default=200, help="seeded random splits per data set (0: leave-one-out only)")
     args = ap.parse_args(argv)
     print("real data: --model auto against the geometric fit (RMS position errors, µm)")
     run_set("ur10e-figaroh", DATA / "ur10e.dh.csv", DATA / "ur10e_figaroh_calibration.csv", 0.5, 20 * ARCSEC,
-            "none published for this set", args.figaroh)
+            "none published for this set", args.figaroh, args.splits)
     if args.boby_klimchik:
         with tempfile.TemporaryDirectory() as tmp:
             f = _fanuc_file(Path(args.boby_klimchik), Path(tmp) / "fanuc_nest.csv")
             run_set("fanuc-r2000ic", DATA / "fanuc_r2000ic_165f.dh.csv", f, 0.015, 20 * ARCSEC,
-                    "none published for this set", args.figaroh)
+                    "none published for this set", args.figaroh, args.splits)
     else:
         print("\n== fanuc-r2000ic: skipped (no licence to keep its data here; give --boby-klimchik DIR, a clone of "
               "github.com/RABKKK/LaserTrackerPoseData4KinIdent)")

@@ -35,8 +35,12 @@ def test_nothing_kept_names_the_closest_candidate_and_by_how_much():
     near = sel.closest
     scored = [r for r in sel.table if r.families]
     assert near is not None and near.p_value == min(r.p_value for r in scored)
-    level = sel.alpha / sel.step_candidates
-    assert sel.step_candidates == len(scored) and near.p_value >= level  # why it was not kept
+    # its level: compliance, tried first on physics, alpha_physics; the others alpha over their tiers
+    # and their step's candidates
+    level = near.level
+    assert level is not None and level == sel.level_of(near) and near.p_value >= level  # why it was not kept
+    assert next(r for r in scored if r.families == ("compliance",)).level == sel.alpha_physics
+    assert all(r.level is not None and r.level < sel.alpha for r in scored if r.families != ("compliance",))
     assert f"closest: {near.label}" in sel.summary and f"{near.change_pct:+.1f} %" in sel.summary
     doc = json.loads(json.dumps(sel.to_dict()))
     assert doc["closest"]["model"] == near.label and doc["closest"]["level_needed"] == level

@@ -30,6 +30,7 @@ from station.core.kinematics.transforms import pose_error, pose_to_matrix
 from station.core.measurement.measurements import MeasurementSet
 from station.core.measurement.uncertainty import LinearUncertainty, linear_uncertainty, pair_units
 from station.core.terms.error_model import TermBasis, family_of
+from station.core.units import ARCSEC, UM
 from station.errors import ConfigError, IdentificationError
 
 __all__ = ["TermFit", "TermIdentifiability", "fit_terms", "TermEvaluator"]
@@ -100,9 +101,24 @@ class TermFit:
         return float(np.sqrt(np.mean(np.sum(self.residuals[:, :3] ** 2, axis=1))))
 
     def terms_dict(self) -> list[dict]:
-        """Every kept term: name, family, unit, value and σ (JSON)."""
-        return [{"name": n, "family": family_of(n), "unit": u, "value": float(v), "sigma": float(s)}
-                for n, u, v, s in zip(self.basis.names, self.basis.units, self.values, self.sigma)]
+        """Every kept term: name, family, unit, value and σ (JSON), and its physical size where
+        people read it (issue 38): a compliance in µrad per N·m, an angle in arc seconds, and the
+        largest joint turn [″] or point shift [µm] the term gives over these data, with its σ."""
+        out = []
+        for k, (n, u, v, s) in enumerate(zip(self.basis.names, self.basis.units, self.values, self.sigma)):
+            t = {"name": n, "family": family_of(n), "unit": u, "value": float(v), "sigma": float(s)}
+            if u.startswith("rad"):
+                scale, shown = (ARCSEC, "″") if u == "rad" else (1e-6, "µ" + u)
+                t["readable"] = {"value": float(v) / scale, "sigma": float(s) / scale, "unit": shown}
+            reach = np.max(np.abs(self.basis.B[..., k]), initial=0.0)
+            if reach > 0 and u.startswith("rad"):
+                t["largest_joint_turn"] = {"value": reach * abs(float(v)) / ARCSEC, "sigma": reach * float(s) / ARCSEC,
+                                           "unit": "″"}
+            shift = np.max(np.abs(self.basis.D[..., k]), initial=0.0)
+            if shift > 0:
+                t["largest_shift"] = {"value": shift * abs(float(v)) / UM, "sigma": shift * float(s) / UM, "unit": "µm"}
+            out.append(t)
+        return out
 
 
 def _joint_columns(model: RobotModel, P: np.ndarray, C: np.ndarray, tool: np.ndarray) -> np.ndarray:

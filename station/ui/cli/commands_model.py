@@ -72,7 +72,9 @@ def print_terms(sel) -> None:
     if fit.basis.size:
         print(f"{'term':22s} {'value':>28s} {'σ':>12s}  unit")
         for t in fit.terms_dict():
-            print(f"{t['name']:22s} {t['value']:28.4g} {t['sigma']:12.2g}  {t['unit']}")
+            r, turn = t.get("readable", t), t.get("largest_joint_turn")
+            print(f"{t['name']:22s} {r['value']:28.4g} {r['sigma']:12.2g}  {r['unit']}"
+                  + ("" if turn is None else f"  (up to {turn['value']:.1f} ± {turn['sigma']:.1f}″ of the joint here)"))
         print(f"RMS position residual with the terms {fit.rms_position_mm() / UM:.1f} µm "
               f"(geometric {sel.geometric.rms_position_mm() / UM:.1f} µm); normalised {fit.rms_normalized:.3f}")
     for ti in fit.identifiability:
