@@ -61,6 +61,20 @@ class MeasurementRecorded(Event):
 
 
 @dataclass(frozen=True)
+class Progress(Event):
+    """k of n: the run's touches done (``done``) of all it will make (``total``), counted in the
+    order measured. ``total`` starts at the plan's steps and grows by one for each touch the plan
+    did not hold (a body-locating search touch, a warm-up cycle's reference touch, a step measured
+    again in the same attempt); ``done`` never goes back. A run that ends needing fewer steps (an
+    upload declined: no verification after it) ends at ``done`` of ``done``. Progress bars show
+    this, never the plan's index (:mod:`station.cell.run.progress`)."""
+
+    done: int
+    total: int
+    label: str = ""  # the touch just done, e.g. "identification: point C2.a, elbow +1"
+
+
+@dataclass(frozen=True)
 class DeviceSnapshot(Event):
     """What the devices reported at the last reading: every probe's value within its stroke,
     the joints and the controller's state (for the operator's device panel)."""

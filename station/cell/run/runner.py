@@ -28,6 +28,7 @@ from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.rundb import RunDB
 from station.cell.run.devices import CellController, ProbeHead, Snapshot
 from station.cell.run.events import DeviceSnapshot, Event, MeasurementRecorded, Notice, StepStarted
+from station.cell.run.progress import RunProgress
 from station.cell.run.recentring import RecentringLog, displacement
 from station.cell.run.runcontrol import RunControl
 from station.cell.run.stuck_probes import StuckLog, still_stuck, usable_head
@@ -65,6 +66,14 @@ class Settle:
 @dataclass(frozen=True)
 class ReadProbes:
     pass
+
+
+@dataclass(frozen=True)
+class TouchInserted:
+    """A touch the plan does not hold was made (a search touch of locating the body): it counts in
+    the run's progress, total and done alike (:mod:`station.cell.run.progress`)."""
+
+    label: str
 
 
 @dataclass(frozen=True)
@@ -501,6 +510,8 @@ class Runner:
         self._touch_steps: deque[int] = deque(maxlen=8)  # the step of each of those touches
         #: the probes found stuck (a redundant head): later readings solve without them
         self.stuck = StuckLog(head_of(cfg), emit)
+        #: k of n touches: the one count the progress bars show (started with the run)
+        self.progress = RunProgress(emit)
         #: how often each probe was left out of a reading ("P3 (channel 4)" -> count)
         self.exclusions: Counter[str] = Counter()
         # Where the wall time goes: waiting for motions, settling, sampling the probes, and the
@@ -526,6 +537,9 @@ class Runner:
             return self.stuck.known()
         if isinstance(msg, RecentReadings):
             return tuple(self._touches)
+        if isinstance(msg, TouchInserted):
+            self.progress.inserted(msg.label)
+            return None
         if isinstance(msg, ReadJoints):
             q = np.asarray(self.controller.read_joints(), dtype=float)
             self._last_q = q
@@ -618,6 +632,8 @@ class Runner:
         stored = db.completed_steps(run_id)
         recentring = RecentringLog(db, run_id)
         failures: list[tuple[str, str]] = []  # (cause, label) of the consecutive failed steps
+        if not self.progress.started:  # a runner used without a run's start (a test's): the plan's count
+            self.progress.start(total, len(valid))
         n = 0
         for st in steps:
             if st.kind not in kinds or st.index in valid:
@@ -633,6 +649,7 @@ class Runner:
                 channel_status=reading.status, pose=reading.pose,
                 pose_residual_um=reading.residual_um, ok=reading.ok, message=reading.message,
                 replace=st.index in stored)
+            self.progress.measured(st.index, f"{st.kind.caption}: {label}")  # on disk: counted
             residual = float("nan") if reading.residual_um is None else float(reading.residual_um)
             self.emit(MeasurementRecorded(st.index, total, label, reading.ok, residual, reading.message))
             n += 1
