@@ -11,7 +11,7 @@ Units as in the summary: µm for errors and bounds, mm and rad for parameters, s
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 from station.cell.records.summary import (
     CorrectionSummary,
@@ -48,6 +48,32 @@ class StepStarted(Event):
     index: int
     total: int
     label: str  # e.g. "point C2.a, elbow +1"
+
+
+@dataclass(frozen=True, eq=False)
+class StepMeasured(Event):
+    """A planned step's reading, all the run database stores of it: the run database's writer
+    (:class:`station.cell.run.recorder.RunRecorder`, the runner's first subscriber) commits it
+    before any view hears of it and before the next motion, and a failure to store it stops the
+    run. Joints [rad | mm], readings [mm], the pose solved (4×4, mm), its residual [µm]; the
+    re-centring displacement (6: mm, rad) stored with it, None where the step was not re-centred."""
+
+    run_id: int
+    index: int
+    kind: str
+    point_id: str
+    label: str
+    joints_commanded: Any
+    joints_read: Any
+    raw: bytes
+    readings_mm: Any
+    channel_status: Any
+    pose: Any
+    residual_um: float | None
+    ok: bool
+    message: str
+    recentring: Any
+    replace: bool  # a step stored invalid by an earlier attempt, measured again
 
 
 @dataclass(frozen=True)
