@@ -23,6 +23,7 @@ from station.cell.run.runner import (
     ReadJoints,
     ReadProbes,
     Settle,
+    TouchInserted,
     approach_and_read,
 )
 from station.cell.run.warmup import remaining_drift_um, run_warmup
@@ -60,7 +61,7 @@ class InProcess:
         elif isinstance(msg, MoveCartesian):
             raise AssertionError("a recheck never moves Cartesian")
         else:
-            assert isinstance(msg, (Checkpoint, Settle))
+            assert isinstance(msg, (Checkpoint, Settle, TouchInserted))  # a warm-up's touch: progress only
         return None
 
     def measure(self, steps):

@@ -29,6 +29,7 @@ from station.cell.run.events import (
     MeasurementRecorded,
     Notice,
     PhaseChanged,
+    Progress,
     RunFailed,
     RunFinished,
     RunStarted,
@@ -94,6 +95,7 @@ class FakeRunner:
                 self.in_checkpoint.clear()
                 self.checkpoints_passed += 1
                 emit(StepStarted(index=i, total=N, label=LABELS[i]))
+                emit(Progress(i + 1, N, LABELS[i]))
                 emit(MeasurementRecorded(index=i, total=N, label=LABELS[i], ok=(i != 3),
                                          residual_um=RESIDUALS[i],
                                          message="" if i != 3 else "probe 4 out of range"))

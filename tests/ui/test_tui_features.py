@@ -14,6 +14,7 @@ from station.cell.run.events import (
     MeasurementRecorded,
     Notice,
     PhaseChanged,
+    Progress,
     RunFailed,
     RunFinished,
     RunStarted,
@@ -103,6 +104,7 @@ class FakeSession:
                 control.checkpoint(timeout=10, emit=emit, index=i)
                 emit(StepStarted(i, self.steps, f"identification: {LABELS[i]}"))
                 emit(head_snapshot(i == 3) if self.head else DeviceSnapshot(**{**snapshot(i == 3).__dict__}))
+                emit(Progress(i + 1, self.steps, LABELS[i]))
                 emit(MeasurementRecorded(i, self.steps, LABELS[i], i not in NOTES, 1.25 * (i + 1), NOTES.get(i, "")))
             emit(PhaseChanged("identify"))
             emit(PhaseChanged("correct"))

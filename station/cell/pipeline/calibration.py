@@ -203,6 +203,7 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
     if devices_info:  # the devices of the latest attempt, for the report
         db.save_result(run_id, "devices", devices_info)
     emit(RunStarted(run_id, len(steps), resumed))
+    runner.progress.start(len(steps), resumed)  # k of n from here on (station/cell/run/progress.py)
     design = None if pre.design is None else f"correction table designed: {pre.design.describe()}"
     for note in (resume_note(reused), design):
         if note:
@@ -230,6 +231,7 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
         db.set_status(run_id, "aborted" if isinstance(exc, RunAborted) else "failed")
         raise
     db.save_result(run_id, "summary", summary.to_json())
+    runner.progress.finish()  # the steps a run without its upload does not measure: not left to do
     emit(RunFinished(summary))
     return summary
 

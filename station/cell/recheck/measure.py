@@ -526,6 +526,7 @@ def run_recheck(cfg: CellConfig, probe: ProbeHead, controller: CellController, d
     if devices_info:
         db.save_result(run_id, "devices", devices_info)
     emit(RunStarted(run_id, len(steps), resumed, kind="recheck"))
+    runner.progress.start(len(steps), resumed)
     db.log(run_id, "info", f"recheck {'resumed' if resume_run else 'started'} against run {base_id}: "
                            f"{len(steps)} steps, {resumed} on disk")
     try:
@@ -552,6 +553,7 @@ def run_recheck(cfg: CellConfig, probe: ProbeHead, controller: CellController, d
                              warmup=warm or db.load_result(run_id, "warmup", default=None),
                              robot_time_s=float(sum(runner.timing.values())))
     db.save_result(run_id, "summary", summary.to_json())
+    runner.progress.finish()
     emit(RunFinished(RunSummary(outcome=result.outcome, run_id=run_id, cell=cfg.name, robot=cfg.model.name,
                                 notes=result.reasons)))
     return summary

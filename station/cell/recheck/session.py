@@ -12,13 +12,14 @@ from collections.abc import Callable
 from contextlib import ExitStack
 from pathlib import Path
 
-from station.cell.config.cell_config import CellConfig
 from station.cell.pipeline.outcomes import failure_summary
+from station.cell.publication.subscriber import FleetOutbox
 from station.cell.recheck.measure import RecheckOptions, RecheckSummary, run_recheck
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import RunSummary
 from station.cell.run.events import Event, PhaseChanged, RunFailed
 from station.cell.run.runcontrol import RunControl
+from station.cell.run.stream import RunStream
 from station.cell.session.calibrate import (
     CellLoader,
     CellRequest,
@@ -27,7 +28,6 @@ from station.cell.session.calibrate import (
     describe_devices,
     load_cell,
     open_cell,
-    publish_finished,
     store_failure,
 )
 
@@ -40,9 +40,9 @@ def run_recheck_session(request: CellRequest, emit: Callable[[Event], None], con
     and run (or resume) a recheck. Never raises: a failure is classified, emitted as
     ``RunFailed`` and returned as a :class:`RunSummary`.
     ``on_cell``: called with the loaded cell (a test reaches the simulator's state through it)."""
-    tracker = RunTracker(emit)
+    stream = RunStream(emit)  # the caller's views first, then the fleet outbox (a recheck's end is published)
+    tracker = RunTracker(stream)
     cell_name = robot = ""
-    cfg: CellConfig | None = None  # known once loaded: a failed recheck is published with it
 
     try:
         with ExitStack() as stack:
@@ -51,6 +51,7 @@ def run_recheck_session(request: CellRequest, emit: Callable[[Event], None], con
                 on_cell(loaded)
             cfg = loaded.cfg
             cell_name, robot = cfg.name, cfg.model.name
+            FleetOutbox.subscribe(stream, request.db, cfg)
             db = stack.enter_context(RunDB(request.db, lock_new_runs=True))  # one process per run
             if request.resume is not None:  # refused here, before any device is connected
                 stack.enter_context(db.lock_run(request.resume))
@@ -61,7 +62,6 @@ def run_recheck_session(request: CellRequest, emit: Callable[[Event], None], con
                                   resume_run=request.resume,
                                   seed=loaded.endpoints.get("seed", request.seed) if request.simulated else None,
                                   devices_info=describe_devices(devices))
-        publish_finished(request.db, summary.run_id, cfg, emit)  # devices closed: the fleet store, or its queue
         return summary.replace(db=request.db)
     except Exception as exc:  # every failure becomes an outcome; nothing escapes as a traceback
         failed = failure_summary(exc, run_id=tracker.run_id, log_dir=Path(request.db).resolve().parent,
@@ -72,7 +72,5 @@ def run_recheck_session(request: CellRequest, emit: Callable[[Event], None], con
                 failed.failure.hint.replace("station calibrate", "station recheck"), failed.failure.log_file))
         if tracker.run_id is not None:
             store_failure(request.db, tracker.run_id, {**failed.to_json(), "kind": "recheck"})
-            if cfg is not None:
-                publish_finished(request.db, tracker.run_id, cfg, emit)
-        emit(RunFailed(failed))
+        stream(RunFailed(failed))  # stored first: the fleet outbox publishes the failure as stored
         return failed

@@ -11,7 +11,7 @@ Units as in the summary: µm for errors and bounds, mm and rad for parameters, s
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 from station.cell.records.summary import (
     CorrectionSummary,
@@ -50,6 +50,32 @@ class StepStarted(Event):
     label: str  # e.g. "point C2.a, elbow +1"
 
 
+@dataclass(frozen=True, eq=False)
+class StepMeasured(Event):
+    """A planned step's reading, all the run database stores of it: the run database's writer
+    (:class:`station.cell.run.recorder.RunRecorder`, the runner's first subscriber) commits it
+    before any view hears of it and before the next motion, and a failure to store it stops the
+    run. Joints [rad | mm], readings [mm], the pose solved (4×4, mm), its residual [µm]; the
+    re-centring displacement (6: mm, rad) stored with it, None where the step was not re-centred."""
+
+    run_id: int
+    index: int
+    kind: str
+    point_id: str
+    label: str
+    joints_commanded: Any
+    joints_read: Any
+    raw: bytes
+    readings_mm: Any
+    channel_status: Any
+    pose: Any
+    residual_um: float | None
+    ok: bool
+    message: str
+    recentring: Any
+    replace: bool  # a step stored invalid by an earlier attempt, measured again
+
+
 @dataclass(frozen=True)
 class MeasurementRecorded(Event):
     index: int
@@ -58,6 +84,20 @@ class MeasurementRecorded(Event):
     ok: bool
     residual_um: float  # plane residual of the pose solve (RMS), µm
     message: str = ""
+
+
+@dataclass(frozen=True)
+class Progress(Event):
+    """k of n: the run's touches done (``done``) of all it will make (``total``), counted in the
+    order measured. ``total`` starts at the plan's steps and grows by one for each touch the plan
+    did not hold (a body-locating search touch, a warm-up cycle's reference touch, a step measured
+    again in the same attempt); ``done`` never goes back. A run that ends needing fewer steps (an
+    upload declined: no verification after it) ends at ``done`` of ``done``. Progress bars show
+    this, never the plan's index (:mod:`station.cell.run.progress`)."""
+
+    done: int
+    total: int
+    label: str = ""  # the touch just done, e.g. "identification: point C2.a, elbow +1"
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,7 @@ from station.cell.plan.locating import FACE_NAMES, Coverage, coverage
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.rundb import RunDB
 from station.cell.run.events import Event, Notice, PhaseChanged
-from station.cell.run.runner import Procedure, Reading, Runner, approach_and_read, head_of
+from station.cell.run.runner import Procedure, Reading, Runner, TouchInserted, approach_and_read, head_of
 from station.core.identification.setup_locate import point_shift_mm, setup_from_contacts
 from station.core.kinematics.transforms import invert, pose_to_matrix
 from station.core.units import DEG
@@ -130,6 +130,7 @@ def search_and_read(cfg: CellConfig, step: PlannedStep, cov: Coverage, log: Sear
         if np.allclose(target, offset):  # nothing to search in, or the uncertainty's bound is reached
             break
         changed = [FACE_NAMES[f] for f in range(3) if target[f] != offset[f]]
+        yield TouchInserted(f"locating the body: {step.label}, searched")  # the touch just made, beyond the plan
         used += (target != offset).astype(int)
         offset = target
         q = shifted_joints(cfg, q0, dirs.T @ offset)

@@ -27,9 +27,12 @@ from station.cell.plan.measurement_plan import above_offset, approach_pose, retr
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.rundb import RunDB
 from station.cell.run.devices import CellController, ProbeHead, Snapshot
-from station.cell.run.events import DeviceSnapshot, Event, MeasurementRecorded, Notice, StepStarted
-from station.cell.run.recentring import RecentringLog, displacement
+from station.cell.run.events import DeviceSnapshot, Event, MeasurementRecorded, Notice, StepMeasured, StepStarted
+from station.cell.run.progress import RunProgress
+from station.cell.run.recentring import displacement
+from station.cell.run.recorder import RunRecorder
 from station.cell.run.runcontrol import RunControl
+from station.cell.run.stream import RunStream
 from station.cell.run.stuck_probes import StuckLog, still_stuck, usable_head
 from station.core.kinematics.forward import scara_ik
 from station.core.kinematics.transforms import invert, matrix_to_pose, pose_to_matrix
@@ -65,6 +68,14 @@ class Settle:
 @dataclass(frozen=True)
 class ReadProbes:
     pass
+
+
+@dataclass(frozen=True)
+class TouchInserted:
+    """A touch the plan does not hold was made (a search touch of locating the body): it counts in
+    the run's progress, total and done alike (:mod:`station.cell.run.progress`)."""
+
+    label: str
 
 
 @dataclass(frozen=True)
@@ -488,7 +499,10 @@ class Runner:
         self.cfg = cfg
         self.probe = probe
         self.controller = controller
-        self.emit = emit
+        #: the runner's events: the caller's ``emit``, and while steps are measured the run database's
+        #: writer before it (station/cell/run/recorder.py)
+        self.stream = RunStream(emit)
+        self.emit = self.stream
         self.control = control or RunControl()
         self._sleep = sleep
         self._last_q: np.ndarray | None = None
@@ -500,7 +514,9 @@ class Runner:
         self._touches: deque[np.ndarray] = deque(maxlen=8)
         self._touch_steps: deque[int] = deque(maxlen=8)  # the step of each of those touches
         #: the probes found stuck (a redundant head): later readings solve without them
-        self.stuck = StuckLog(head_of(cfg), emit)
+        self.stuck = StuckLog(head_of(cfg), self.emit)
+        #: k of n touches: the one count the progress bars show (started with the run)
+        self.progress = RunProgress(self.emit)
         #: how often each probe was left out of a reading ("P3 (channel 4)" -> count)
         self.exclusions: Counter[str] = Counter()
         # Where the wall time goes: waiting for motions, settling, sampling the probes, and the
@@ -526,6 +542,9 @@ class Runner:
             return self.stuck.known()
         if isinstance(msg, RecentReadings):
             return tuple(self._touches)
+        if isinstance(msg, TouchInserted):
+            self.progress.inserted(msg.label)
+            return None
         if isinstance(msg, ReadJoints):
             q = np.asarray(self.controller.read_joints(), dtype=float)
             self._last_q = q
@@ -616,48 +635,64 @@ class Runner:
         cause :data:`MAX_REPEATED_FAILURES` times in a row. Returns the number measured now."""
         valid = db.completed_steps(run_id, ok_only=True)
         stored = db.completed_steps(run_id)
-        recentring = RecentringLog(db, run_id)
         failures: list[tuple[str, str]] = []  # (cause, label) of the consecutive failed steps
+        if not self.progress.started:  # a runner used without a run's start (a test's): the plan's count
+            self.progress.start(total, len(valid))
+        # the run database's writer, first: each measurement is on disk before a view hears of it and
+        # before the next motion; its failure raises here and stops the run (station/cell/run/recorder.py)
+        token = self.stream.subscribe(RunRecorder(db, run_id), StepMeasured, first=True)
         n = 0
-        for st in steps:
-            if st.kind not in kinds or st.index in valid:
-                continue
-            label = st.label
-            self.emit(StepStarted(st.index, total, f"{st.kind.caption}: {label}"))
-            reading = self.execute(make_proc(st), st.index)
-            recentring.record(st.index, reading.recentring)  # before the measurement it belongs to
-            db.record_measurement(
-                run_id, st.index, kind=st.kind.value, point_id=st.point_id, label=label,
-                joints_commanded=reading.joints_commanded, joints_read=reading.joints_read,
-                raw_frames=reading.raw, readings_mm=reading.readings_mm,
-                channel_status=reading.status, pose=reading.pose,
-                pose_residual_um=reading.residual_um, ok=reading.ok, message=reading.message,
-                replace=st.index in stored)
-            residual = float("nan") if reading.residual_um is None else float(reading.residual_um)
-            self.emit(MeasurementRecorded(st.index, total, label, reading.ok, residual, reading.message))
-            n += 1
-            if reading.stuck or reading.freed:
-                geom = head_of(self.cfg)
-                touches = [(s, probe_readings(geom, v, ["ok"] * len(v))[0])
-                           for s, v in zip(self._touch_steps, self._touches)]
-                self.stuck.update(reading.stuck, reading.freed, st.index, label, touches)
-            if reading.excluded is not None:
-                self._excluded(reading.excluded, label)
-            if reading.ok:
-                failures.clear()
-                continue
-            cause = failure_cause(reading)
-            self.emit(Notice("warning", f"{label}: {cause}: {reading.message}"))
-            if failures and failures[-1][0] != cause:
-                failures.clear()
-            failures.append((cause, label))
-            if len(failures) >= MAX_REPEATED_FAILURES:
-                raise MeasurementFault(
-                    f"{cause} on {len(failures)} steps in a row ({', '.join(lb for _, lb in failures)}); the run "
-                    f"stopped at a safe point instead of measuring more invalid data. Check that probe "
-                    f"(cable, stroke, debris, a stuck tip) with 'station check', then resume: the invalid "
-                    f"steps are measured again")
+        try:
+            for st in steps:
+                if st.kind not in kinds or st.index in valid:
+                    continue
+                self.emit(StepStarted(st.index, total, f"{st.kind.caption}: {st.label}"))
+                reading = self.execute(make_proc(st), st.index)
+                self._measured(run_id, st, reading, total, replace=st.index in stored)
+                n += 1
+                self._judge_failures(st.label, reading, failures)
+        finally:
+            self.stream.unsubscribe(token)
         return n
+
+    def _measured(self, run_id: int, st: PlannedStep, reading: Reading, total: int, replace: bool) -> None:
+        """Stream the step's reading (stored by the recorder, then counted and shown) and keep
+        track of the probes it left out or found stuck."""
+        label = st.label
+        self.emit(StepMeasured(
+            run_id, st.index, kind=st.kind.value, point_id=st.point_id, label=label,
+            joints_commanded=reading.joints_commanded, joints_read=reading.joints_read, raw=reading.raw,
+            readings_mm=reading.readings_mm, channel_status=reading.status, pose=reading.pose,
+            residual_um=reading.residual_um, ok=reading.ok, message=reading.message,
+            recentring=reading.recentring, replace=replace))
+        self.progress.measured(st.index, f"{st.kind.caption}: {label}")  # on disk: counted
+        residual = float("nan") if reading.residual_um is None else float(reading.residual_um)
+        self.emit(MeasurementRecorded(st.index, total, label, reading.ok, residual, reading.message))
+        if reading.stuck or reading.freed:
+            geom = head_of(self.cfg)
+            touches = [(s, probe_readings(geom, v, ["ok"] * len(v))[0])
+                       for s, v in zip(self._touch_steps, self._touches)]
+            self.stuck.update(reading.stuck, reading.freed, st.index, label, touches)
+        if reading.excluded is not None:
+            self._excluded(reading.excluded, label)
+
+    def _judge_failures(self, label: str, reading: Reading, failures: list[tuple[str, str]]) -> None:
+        """Raises :class:`MeasurementFault` at :data:`MAX_REPEATED_FAILURES` failed readings in a
+        row with the same cause."""
+        if reading.ok:
+            failures.clear()
+            return
+        cause = failure_cause(reading)
+        self.emit(Notice("warning", f"{label}: {cause}: {reading.message}"))
+        if failures and failures[-1][0] != cause:
+            failures.clear()
+        failures.append((cause, label))
+        if len(failures) >= MAX_REPEATED_FAILURES:
+            raise MeasurementFault(
+                f"{cause} on {len(failures)} steps in a row ({', '.join(lb for _, lb in failures)}); the run "
+                f"stopped at a safe point instead of measuring more invalid data. Check that probe "
+                f"(cable, stroke, debris, a stuck tip) with 'station check', then resume: the invalid "
+                f"steps are measured again")
 
 
 def _link_counts(probe: object) -> tuple[int, int, int] | None:

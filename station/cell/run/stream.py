@@ -37,14 +37,20 @@ class RunStream:
         for callback in subscribers:
             self.subscribe(callback)
 
-    def subscribe(self, callback: Callable[[E], None], kind: type[E] = Event) -> int:  # type: ignore[assignment]
+    def subscribe(self, callback: Callable[[E], None], kind: type[E] = Event,  # type: ignore[assignment]
+                  first: bool = False) -> int:
         """Hand ``callback`` every event of ``kind`` (default: every event) from now on; returns
-        the token :meth:`unsubscribe` takes."""
+        the token :meth:`unsubscribe` takes. ``first``: before the subscribers there are (the run
+        database's writer: a view hears of a measurement once it is on disk)."""
         if not (isinstance(kind, type) and issubclass(kind, Event)):
             raise TypeError(f"subscribe to an Event type, not {kind!r}")
         with self._lock:
             token = next(self._tokens)
-            self._subscribers[token] = (kind, callback)  # type: ignore[assignment]
+            entry = (kind, callback)
+            if first:
+                self._subscribers = {token: entry, **self._subscribers}  # type: ignore[dict-item]
+            else:
+                self._subscribers[token] = entry  # type: ignore[assignment]
         return token
 
     def unsubscribe(self, token: int) -> None:

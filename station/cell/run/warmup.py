@@ -25,7 +25,7 @@ from station.cell.plan.steps import PlannedStep
 from station.cell.records.rundb import RunDB
 from station.cell.run.events import Event, Notice, PhaseChanged
 from station.cell.run.recentring import head_as_commanded
-from station.cell.run.runner import Checkpoint, MoveJoints, Procedure, Runner, approach_and_read
+from station.cell.run.runner import Checkpoint, MoveJoints, Procedure, Runner, TouchInserted, approach_and_read
 from station.core.kinematics.transforms import invert
 
 
@@ -61,7 +61,9 @@ def _cycle(cfg: CellConfig, program: Sequence[np.ndarray], reference: PlannedSte
     yield MoveJoints(None, "warm-up: retract to travel height")
     for q in program:
         yield MoveJoints(q, "warm-up motion")
-    return (yield from approach_and_read(cfg, reference.q, reference.direction))
+    reading = yield from approach_and_read(cfg, reference.q, reference.direction)
+    yield TouchInserted(f"warm-up: {reference.label}")  # a touch beyond the plan: counted in the run's progress
+    return reading
 
 
 def run_warmup(cfg: CellConfig, runner: Runner, db: RunDB | None, run_id: int | None, reference: PlannedStep,

@@ -28,6 +28,7 @@ from drivers.probe_head import ProbeHead as SerialProbeHead
 from station.cell.config.cell_config import CellConfig, load_config
 from station.cell.pipeline.calibration import Options, run_calibration
 from station.cell.pipeline.outcomes import classify, failure_summary, hint_for
+from station.cell.publication.subscriber import FleetOutbox
 from station.cell.records.judge import RunJudge
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import RunSummary
@@ -37,13 +38,14 @@ from station.cell.run.devices import CellController, ProbeHead
 from station.cell.run.events import Event, Notice, PhaseChanged, RunFailed, RunStarted
 from station.cell.run.questions import Confirm
 from station.cell.run.runcontrol import RunControl
+from station.cell.run.stream import RunStream
 from station.errors import ConfigError, Outcome, RunAborted
 from station.io.robot_program import ur_program_needs
 
 log = logging.getLogger(__name__)
 
 __all__ = ["CellRequest", "CellLoader", "Devices", "LoadedCell", "open_cell", "open_probe", "open_controller", "load_cell", "check_cell", "CheckReport",
-           "run_calibration_session", "reset_controller", "RunTracker", "store_failure", "publish_finished"]
+           "run_calibration_session", "reset_controller", "RunTracker", "store_failure"]
 
 
 @dataclass(frozen=True)
@@ -223,16 +225,19 @@ def run_calibration_session(request: CellRequest, emit: Callable[[Event], None],
     Returns the run's summary whatever happened; a failure is classified by type
     (:func:`station.cell.pipeline.outcomes.classify`), emitted as ``RunFailed`` and returned with its
     hint. An internal error (a bug) writes its traceback to a log file the message names.
+    The run's events go to ``emit`` and to the fleet outbox, a subscriber of the session's stream
+    once the cell is loaded (:class:`~station.cell.publication.subscriber.FleetOutbox`).
     """
-    tracker = RunTracker(emit)
+    stream = RunStream(emit)  # the caller's views first, then the fleet outbox
+    tracker = RunTracker(stream)
     cell_name = robot = ""
-    cfg: CellConfig | None = None  # known once loaded: a failed run is published with it
 
     try:
         with ExitStack() as stack:
             loaded = (load or load_cell)(request, stack)  # the module's load_cell at call time
             cfg = loaded.cfg
             cell_name, robot = cfg.name, cfg.model.name
+            FleetOutbox.subscribe(stream, request.db, cfg)  # a run that ends, finished or failed, is published
             db = stack.enter_context(RunDB(request.db, lock_new_runs=True))  # one process per run
             if request.resume is not None:  # refused here, before any device is connected
                 stack.enter_context(db.lock_run(request.resume))
@@ -250,30 +255,14 @@ def run_calibration_session(request: CellRequest, emit: Callable[[Event], None],
                                       Options(upload=request.upload, judge=loaded.judge, confirm=confirm),
                                       resume_run=request.resume, seed=seed,
                                       devices_info=describe_devices(devices))
-        publish_finished(request.db, summary.run_id, cfg, emit)  # devices closed: the fleet store, or its queue
         return summary.replace(db=request.db)
     except Exception as exc:  # every failure becomes an outcome; nothing escapes as a traceback
         summary = failure_summary(exc, run_id=tracker.run_id, log_dir=Path(request.db).resolve().parent,
                                   cell=cell_name, robot=robot, db=request.db)
         if tracker.run_id is not None:  # 'station runs' shows why it stopped
             store_failure(request.db, tracker.run_id, summary.to_json())
-            if cfg is not None:
-                publish_finished(request.db, tracker.run_id, cfg, emit)
-        emit(RunFailed(summary))
+        stream(RunFailed(summary))  # stored first: the fleet outbox publishes the failure as stored
         return summary
-
-
-def publish_finished(db_path: str, run_id: int | None, cfg: CellConfig, emit: Callable[[Event], None]) -> None:
-    """Queue a finished run for the fleet store and try to send it ([fleet] url or
-    STATION_FLEET_URL; nothing when neither is set). Never raises: a run never depends on the network."""
-    try:
-        from station.cell.publication.outbox import publish_or_queue  # the fleet's code only where a run ends
-
-        line = publish_or_queue(db_path, run_id, cfg)
-        if line is not None:
-            emit(Notice("info" if "published" in line else "warning", line))
-    except Exception as exc:  # noqa: BLE001 - the run's outcome stands whatever publishing does
-        log.warning("run %s: not published to the fleet store: %s", run_id, exc)
 
 
 def store_failure(db_path: str, run_id: int, record: dict[str, Any]) -> None:

@@ -68,10 +68,12 @@ def result_stream(args: argparse.Namespace) -> TextIO:
 def progress_printer(stream: TextIO, clock: ProgressClock | None = None) -> Callable[[ev.Event], None]:
     """Progress on ``stream``: a progress bar that redraws one line at a terminal, plain lines
     otherwise (a log file, a scheduler's journal); each measurement's line carries the elapsed
-    time and the time left (``clock``)."""
+    time and the time left (``clock``). The count is the run's own k of n (:class:`ev.Progress`:
+    touches in the order made, the body's search touches included), never the plan's index."""
     tty = stream.isatty()
     bar_shown = False
     clock = clock or ProgressClock()
+    done = total = 0  # the latest Progress
 
     def line(text: str) -> None:
         nonlocal bar_shown
@@ -80,25 +82,29 @@ def progress_printer(stream: TextIO, clock: ProgressClock | None = None) -> Call
             bar_shown = False
         print(text, file=stream, flush=True)
 
-    def emit(e: ev.Event) -> None:
+    def bar(label: str) -> None:
         nonlocal bar_shown
+        filled = int(round(30 * done / max(total, 1)))
+        print(f"\r  [{'#' * filled}{'.' * (30 - filled)}] {done:4d}/{total} {label[:24]:24s} "
+              f"{clock.text(done, total):44s}", end="", file=stream, flush=True)
+        bar_shown = True
+
+    def emit(e: ev.Event) -> None:
+        nonlocal done, total
         if isinstance(e, ev.PhaseChanged):
             line(f"[{e.phase}] {e.detail or PHASE_DETAIL.get(e.phase, e.phase)}")
         elif isinstance(e, ev.RunStarted):
             clock.started(e)
             line(f"run {e.run_id}: {e.n_steps} steps ({e.resumed_from} already on disk)")
+        elif isinstance(e, ev.Progress):
+            done, total = e.done, e.total
+            if tty and e.label:
+                bar(e.label)
         elif isinstance(e, ev.MeasurementRecorded):
-            res = "" if math.isnan(e.residual_um) else f" residual {e.residual_um:.2f} µm"
-            state = "ok" if e.ok else "NOT OK " + e.message
-            when = clock.text(e.index + 1, e.total)
-            if tty and e.ok:
-                done = (e.index + 1) / max(e.total, 1)
-                filled = int(round(30 * done))
-                print(f"\r  [{'#' * filled}{'.' * (30 - filled)}] {e.index + 1:4d}/{e.total} {e.label[:24]:24s} {when:44s}",
-                      end="", file=stream, flush=True)
-                bar_shown = True
-            else:
-                line(f"  {e.index + 1:4d}/{e.total} {e.label}: {state}{res} [{when}]")
+            if not (tty and e.ok):
+                res = "" if math.isnan(e.residual_um) else f" residual {e.residual_um:.2f} µm"
+                state = "ok" if e.ok else "NOT OK " + e.message
+                line(f"  {done:4d}/{total} {e.label}: {state}{res} [{clock.text(done, total)}]")
         elif isinstance(e, ev.Notice):
             line(f"  {e.level}: {e.message}")
         elif isinstance(e, (ev.RunFinished, ev.RunFailed)) and bar_shown:

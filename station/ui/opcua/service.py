@@ -49,6 +49,7 @@ from station.cell.run.events import (
     Notice,
     Paused,
     PhaseChanged,
+    Progress,
     Resumed,
     RunEnded,
     RunStarted,
@@ -109,13 +110,13 @@ class StationService:
         self._queue: asyncio.Queue[Event | _Done] = asyncio.Queue()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._pump: asyncio.Task[None] | None = None
-        #: this attempt's progress: the steps valid on disk when it started (RunStarted), the plan
-        #: indices it has started since, and the monotonic time of its first step. Step counts these
-        #: (k of StepCount, in the order measured), not the plan index: the body's locating touches
-        #: come first and out of the plan's order (issue 37)
-        self._resumed = 0
-        self._started: set[int] = set()
+        #: this attempt's progress as the run counts it (Progress: k of n touches in the order made,
+        #: station/cell/run/progress.py), not the plan index: the body's locating touches come first
+        #: and out of the plan's order (issue 37); the monotonic time of the attempt's first step and
+        #: the count then, for the time left
+        self._done = self._total = 0
         self._t0: float | None = None
+        self._done_at_t0 = 0
         self._event: Any = None
         self._vtypes: dict[ua.NodeId, ua.VariantType] = {}
         #: the run's facts: the session emits into it, the address space follows it (a test or another
@@ -176,7 +177,7 @@ class StationService:
                                       f"{kind} refused: the outcome {self.state} of {self.kind} run {self.run_id} is not "
                                       f"acknowledged yet; read it, then call Acknowledge")
         self.state, self.kind, self.run_id, self._ended = "Running", kind, 0, False
-        self._resumed, self._started, self._t0 = 0, set(), None
+        self._done, self._total, self._t0 = 0, 0, None
         self.control = RunControl()
         await self._write_state(State="Running", OutcomeCode=-1, RunKind=kind, RunId=0, Phase="connect", Step=0,
                                 StepCount=0, TimeLeftSeconds=float("nan"), LastRefusal="", Message="")
@@ -285,8 +286,11 @@ class StationService:
         if isinstance(ev, RunStarted):
             self.run_id, self.kind = ev.run_id, ev.kind  # the stream names the run (the start method did too)
             self._started_utc = dt.datetime.now(dt.timezone.utc)
-            self._resumed, self._started, self._t0 = ev.resumed_from, set(), None
+            self._done, self._total, self._t0 = ev.resumed_from, ev.n_steps, None
             await self._write_state(RunId=ev.run_id, StepCount=ev.n_steps, RunKind=ev.kind)
+        elif isinstance(ev, Progress):  # n grows with the search's and the warm-up's touches
+            self._done, self._total = ev.done, ev.total
+            await self._write_state(StepCount=ev.total)
         elif isinstance(ev, Identified):
             await self._write_offsets({"params": list(ev.params),
                                        "chosen": [p.name for p in ev.identification.parameters]})
@@ -299,14 +303,11 @@ class StationService:
         elif isinstance(ev, StepStarted):
             now = time.monotonic()
             if self._t0 is None:
-                self._t0 = now
-            # a step started again in this attempt (a locating touch stored invalid is measured
-            # again with the others) is the same step: k counts distinct steps, so k <= StepCount
-            self._started.add(ev.index)
-            k = min(self._resumed + len(self._started), ev.total)
-            done = len(self._started) - 1  # steps this attempt finished, at the time since its first
-            left = (now - self._t0) / done * (ev.total - k + 1) if done > 0 else float("nan")
-            await self._write_state(Step=k, StepCount=ev.total, TimeLeftSeconds=left)
+                self._t0, self._done_at_t0 = now, self._done
+            k = min(self._done + 1, self._total)  # the touch under way: k − 1 are done
+            done = self._done - self._done_at_t0  # touches this attempt finished since its first step
+            left = (now - self._t0) / done * (self._total - k + 1) if done > 0 else float("nan")
+            await self._write_state(Step=k, StepCount=self._total, TimeLeftSeconds=left)
         elif isinstance(ev, Paused):
             self.state = "Paused"
             await self._write_state(State="Paused")

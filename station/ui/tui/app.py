@@ -51,6 +51,7 @@ from station.cell.run.events import (
     Notice,
     Paused,
     PhaseChanged,
+    Progress,
     Resumed,
     RunFailed,
     RunFinished,
@@ -483,16 +484,13 @@ class StationApp(RunEnd):
             if self.phase == "upload" and self._before_upload is not None:  # the oracle's upload
                 self.on_event_message(EventMessage(self._before_upload))
             self.step_index = ev.index
-            self.query_one("#step", Static).update(f"step [b]{ev.index + 1}[/]/{ev.total}: {esc(ev.label)}")
-            bar = self.query_one("#progress", ProgressBar)
-            if bar.total != ev.total:
-                bar.update(total=ev.total)
+            self.query_one("#step", Static).update(f"plan step [b]{ev.index + 1}[/]: {esc(ev.label)}")  # the table's row
+        elif isinstance(ev, Progress):  # the run's k of n (station/cell/run/progress.py), not the plan's index
+            self.query_one("#progress", ProgressBar).update(total=ev.total, progress=ev.done)
+            self.eta.update(ev.done, ev.total)
+            self._show_eta()
         elif isinstance(ev, MeasurementRecorded):
             self._add_measurement(ev)
-            bar = self.query_one("#progress", ProgressBar)
-            bar.update(total=ev.total, progress=max(bar.progress, ev.index + 1))
-            self.eta.update(int(bar.progress), ev.total)
-            self._show_eta()
         elif isinstance(ev, Notice):
             if self.phase == "upload":  # read back, activation: shown where the operator looks
                 self._show_activity(esc(activity_text("upload", ev.message)))
