@@ -153,6 +153,15 @@ def _download(request: Request, name: str, rows: list[dict[str, Any]], columns: 
                     headers={"Content-Disposition": f'attachment; filename="{name}.{suffix}"'})
 
 
+def _certificate(detail: dict[str, Any], key: str) -> tuple[str, str]:
+    """A stored certificate's id and date; ('—', '') where the detail holds no object under ``key``
+    (a station may store a list or a string there: the page said 500, issue 39's property test)."""
+    cert = detail.get(key)
+    if not isinstance(cert, dict):
+        return "—", ""
+    return str(cert.get("id") or "—"), str(cert.get("date") or "")
+
+
 def path_segment(key: str) -> str:
     """A robot key as one path segment: every reserved character encoded, '/' and '.' included
     (Jinja's urlencode leaves '/' as is: a serial 'a/../b' linked to a page the browser rewrote
@@ -245,7 +254,9 @@ def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: in
         ident = ident if isinstance(ident, dict) else {}
         params, params_note = parameter_rows(detail)
         return render("run.html", run={**run, "detail": detail}, params=params, params_note=params_note,
-                      has_report=has_report, has_covariance=bool(ident.get("covariance")))
+                      has_report=has_report, has_covariance=bool(ident.get("covariance")),
+                      head_cert=_certificate(detail, "head_certificate"),
+                      body_cert=_certificate(detail, "body_certificate"))
 
     def report_page(request: Request) -> Response:
         uid = request.path_params["uuid"]
