@@ -14,7 +14,7 @@ import hmac
 import queue
 import threading
 import time
-from collections.abc import AsyncIterator, Iterator
+from collections.abc import AsyncIterator, Callable, Iterator
 from contextlib import asynccontextmanager, contextmanager
 from dataclasses import dataclass, fields
 from datetime import datetime, timezone
@@ -169,7 +169,10 @@ def path_segment(key: str) -> str:
     return quote(str(key), safe="")
 
 
-def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: int = 30) -> Starlette:
+def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: int = 30,
+               clock: Callable[[], datetime] | None = None) -> Starlette:
+    """The app over the store at ``url``; ``clock``: the time the states and due dates are
+    reckoned at (default now; tests pass a fixed one)."""
     env = Environment(loader=FileSystemLoader(str(_HERE / "templates")), autoescape=select_autoescape(["html"]))
     env.filters["fmt"] = _fmt
     env.filters["date"] = _date
@@ -186,7 +189,7 @@ def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: in
         """All robots, and those the query's cell and state show in its sort order."""
         q = request.query_params
         with pool.connection() as conn:
-            robots = fleet_status(conn, default_interval_days=interval_days)
+            robots = fleet_status(conn, clock() if clock else None, default_interval_days=interval_days)
         cell, state = q.get("cell", ""), q.get("state", "")
         shown = [r for r in robots if (not cell or r.cell == cell) and (not state or r.state == state)]
         sort = q.get("sort", "robot") if q.get("sort", "robot") in SORT_KEYS else "robot"
