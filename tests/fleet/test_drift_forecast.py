@@ -98,7 +98,7 @@ def test_the_forecast_sets_due_when_earlier_than_the_interval() -> None:
 
 
 def test_the_dashboard_shows_the_forecast(fleet_db) -> None:
-    from fleet_runs import days_ago, publication
+    from fleet_runs import clock, days_ago, publication
     from starlette.testclient import TestClient
 
     from station.fleet import store
@@ -110,7 +110,7 @@ def test_the_dashboard_shows_the_forecast(fleet_db) -> None:
     with store.connect(fleet_db.station_url) as c:
         for p in pubs:
             store.insert_publication(c, p)
-    with TestClient(create_app(fleet_db.dashboard_url, interval_days=365)) as client:
+    with TestClient(create_app(fleet_db.dashboard_url, interval_days=365, clock=clock)) as client:
         assert 'class="chip forecast"' in client.get("/").text
         page = client.get("/robots/SR-F").text
         assert "the trend reaches the tolerance on" in page

@@ -18,7 +18,7 @@ from urllib.parse import quote
 
 import psycopg
 import pytest
-from fleet_runs import publication
+from fleet_runs import AS_OF, clock, publication
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 from psycopg.types.json import Jsonb
@@ -162,7 +162,7 @@ def _no_constants(name: str) -> None:
 def _station_fleet(url: str, *extra: str) -> str:
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        rc = main(["fleet", "--url", url, *extra])
+        rc = main(["fleet", "--url", url, *AS_OF, *extra])
     assert rc == 0 and rc != Outcome.INTERNAL_ERROR, (extra, rc, err.getvalue()[-2000:])
     return out.getvalue()
 
@@ -204,7 +204,7 @@ def test_no_row_a_station_can_write_breaks_station_fleet_or_a_page(fleet_db, tmp
     _station_fleet(fleet_db.dashboard_url, "--include-simulated")
     with fleet_db.admin() as admin:
         paths = _pages(admin, sort)
-    with TestClient(create_app(fleet_db.dashboard_url), raise_server_exceptions=True) as client:
+    with TestClient(create_app(fleet_db.dashboard_url, clock=clock), raise_server_exceptions=True) as client:
         for path in paths:
             page = client.get(path)
             assert page.status_code < 500, (path, page.status_code, page.text[-1500:])
