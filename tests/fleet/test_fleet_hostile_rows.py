@@ -167,17 +167,22 @@ def _station_fleet(url: str, *extra: str) -> str:
     return out.getvalue()
 
 
-def _pages(db_admin: psycopg.Connection, sort: str) -> list[str]:
-    """Every page and export of the store's robots and runs."""
-    keys = [r[0] for r in db_admin.execute("SELECT robot_key FROM robots")]
-    uuids = [r[0] for r in db_admin.execute("SELECT run_uuid::text FROM runs")]
+def _pages(db_admin: psycopg.Connection, sort: str) -> list[tuple[str, int]]:
+    """Every page and export of the store's robots and runs, with the status each should answer:
+    a stored robot with runs, a stored run and its stored report are found (200), the rest not (404)."""
+    keys = {r[0]: r[1] for r in db_admin.execute(
+        "SELECT robot_key, EXISTS (SELECT 1 FROM runs WHERE runs.robot_key = robots.robot_key) FROM robots")}
+    uuids = {r[0]: r[1] for r in db_admin.execute(
+        "SELECT run_uuid::text, EXISTS (SELECT 1 FROM reports p WHERE p.run_uuid = runs.run_uuid) FROM runs")}
     cells = [r[0] for r in db_admin.execute("SELECT DISTINCT cell FROM runs LIMIT 2")]
-    paths = ["/", f"/?sort={sort}&order=desc", "/?state=damaged", "/fleet.csv", f"/fleet.json?sort={sort}"]
-    paths += [f"/?cell={quote(c)}" for c in cells]
-    for k in keys:
-        paths += [f"/robots/{path_segment(k)}", f"/history.csv?robot={quote(k)}", f"/history.json?robot={quote(k)}"]
-    for u in uuids:
-        paths += [f"/runs/{u}", f"/runs/{u}/report"]
+    paths = [(p, 200) for p in ("/", f"/?sort={sort}&order=desc", "/?state=damaged", "/fleet.csv", f"/fleet.json?sort={sort}")]
+    paths += [(f"/?cell={quote(c)}", 200) for c in cells]
+    for k, has_runs in keys.items():
+        found = 200 if has_runs else 404
+        paths += [(f"/robots/{path_segment(k)}", found), (f"/history.csv?robot={quote(k)}", found),
+                  (f"/history.json?robot={quote(k)}", found)]
+    for u, has_report in uuids.items():
+        paths += [(f"/runs/{u}", 200), (f"/runs/{u}/report", 200 if has_report else 404)]
     return paths
 
 
@@ -205,9 +210,9 @@ def test_no_row_a_station_can_write_breaks_station_fleet_or_a_page(fleet_db, tmp
     with fleet_db.admin() as admin:
         paths = _pages(admin, sort)
     with TestClient(create_app(fleet_db.dashboard_url, clock=clock), raise_server_exceptions=True) as client:
-        for path in paths:
+        for path, status in paths:
             page = client.get(path)
-            assert page.status_code < 500, (path, page.status_code, page.text[-1500:])
+            assert page.status_code == status, (path, page.status_code, page.text[-1500:])
             if path.startswith(("/fleet.json", "/history.json")) and page.status_code == 200:
                 json.loads(page.text, parse_constant=_no_constants)
 
@@ -230,3 +235,20 @@ def test_a_certificate_of_any_json_shape_is_a_page_not_a_500(fleet_db, certifica
     head = re.search(r"<th>head certificate</th><td>([^<]*)</td>", page.text)
     assert head is not None
     assert head.group(1).strip() == ("[&#39;x&#39;] 3" if isinstance(certificate, dict) else "—")
+
+
+@pytest.mark.parametrize("key", ["\x7f\x1b[31m", "tab\tname", "line\nbreak", "a\u2028b", ""])
+def test_a_robot_whose_key_has_a_control_character_has_its_pages(fleet_db, key):
+    """The store takes any text but NUL as a robot's key; its page and exports said 'no such robot'
+    (404) for one with a control character or a line break, and the exports for the empty key,
+    all of which the fleet table linked to."""
+    _publish_one(fleet_db, robot_key=key, robot_serial=key)
+    with TestClient(create_app(fleet_db.dashboard_url, clock=clock)) as client:
+        fleet = client.get("/")
+        assert f'href="/robots/{path_segment(key)}"' in fleet.text
+        page = client.get(f"/robots/{path_segment(key)}")
+        assert page.status_code == 200 and 'id="history"' in page.text
+        assert client.get(f"/history.json?robot={quote(key)}").json()["robot"] == key
+        assert client.get(f"/history.csv?robot={quote(key)}").status_code == 200
+        assert client.get("/robots/%00").status_code == 404  # no text holds a NUL: no such robot
+        assert client.get("/history.csv").status_code == 404  # no robot named at all

@@ -25,6 +25,7 @@ from urllib.parse import quote
 import psycopg
 from jinja2 import Environment, FileSystemLoader, select_autoescape
 from starlette.applications import Starlette
+from starlette.convertors import PathConvertor, register_url_convertor
 from starlette.middleware import Middleware
 from starlette.middleware.base import BaseHTTPMiddleware, RequestResponseEndpoint
 from starlette.requests import Request
@@ -162,10 +163,20 @@ def _certificate(detail: dict[str, Any], key: str) -> tuple[str, str]:
     return str(cert.get("id") or "—"), str(cert.get("date") or "")
 
 
+class _RobotKey(PathConvertor):
+    """A robot key in a path: any text, line breaks included (the path convertor's '.*' stops at
+    one: a key a station stored as "line\nbreak" linked to a 404, issue 39's property test)."""
+
+    regex = r"[\s\S]*"
+
+
+register_url_convertor("robot_key", _RobotKey())
+
+
 def path_segment(key: str) -> str:
     """A robot key as one path segment: every reserved character encoded, '/' and '.' included
     (Jinja's urlencode leaves '/' as is: a serial 'a/../b' linked to a page the browser rewrote
-    to /robots/b). The route takes the key with its '/' decoded ({key:path})."""
+    to /robots/b). The route takes the key with its '/' decoded ({key:robot_key})."""
     return quote(str(key), safe="")
 
 
@@ -218,8 +229,8 @@ def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: in
 
     def history_export(request: Request) -> Response:
         """/history.csv?robot=KEY, /history.json?robot=KEY: a robot's runs, oldest first."""
-        key = request.query_params.get("robot", "")
-        if not key or not key.isprintable():
+        key = request.query_params.get("robot")
+        if key is None or "\x00" in key:  # "" is a key a station may store (the robot page links robot=)
             return render("missing.html", 404, what=f"robot {key!r}")
         with pool.connection() as conn:
             runs = store.robot_history(conn, key)
@@ -230,7 +241,9 @@ def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: in
     def robot_page(request: Request) -> Response:
         started = time.perf_counter()
         key = request.path_params["key"]
-        if not key.isprintable():  # a NUL or another control character: no stored key has one (the store refused it: 503)
+        # a NUL: no stored key has one (no PostgreSQL text holds it; the driver refused the query: 503).
+        # Other control characters are a stored key's own: a station may write "\x1b[31m" (issue 39)
+        if "\x00" in key:
             return render("missing.html", 404, what=f"robot {key!r}")
         with pool.connection() as conn:
             runs = store.robot_history(conn, key)
@@ -273,7 +286,7 @@ def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: in
         Route("/", fleet_page),
         Route("/fleet.csv", fleet_export), Route("/fleet.json", fleet_export),
         Route("/history.csv", history_export), Route("/history.json", history_export),
-        Route("/robots/{key:path}", robot_page),
+        Route("/robots/{key:robot_key}", robot_page),
         Route("/runs/{uuid:uuid}", run_page),
         Route("/runs/{uuid:uuid}/report", report_page),
         Mount("/static", app=StaticFiles(directory=str(_HERE / "static")), name="static"),
