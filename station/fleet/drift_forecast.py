@@ -43,11 +43,15 @@ class DriftForecast:
     confidence: float = CONFIDENCE
 
 
+# figures near the largest double overflow the sums of squares: the result is checked for it, so
+# numpy's warning says nothing more
+@np.errstate(over="ignore", invalid="ignore")
 def forecast_crossing(t_days: np.ndarray, drift: np.ndarray, tolerance: float,
                       confidence: float = CONFIDENCE) -> DriftForecast | None:
     """The forecast of ``drift`` (measured at ``t_days``) reaching ``tolerance``; None with fewer
-    than :data:`MIN_POINTS` points, all at one time, a non-finite input, or a slope that is not
-    significantly positive at ``confidence`` (the interval would be unbounded)."""
+    than :data:`MIN_POINTS` points, all at one time, a non-finite input, a slope that is not
+    significantly positive at ``confidence`` (the interval would be unbounded), or figures so large
+    that the arithmetic overflows."""
     t = np.asarray(t_days, dtype=float)
     y = np.asarray(drift, dtype=float)
     n = int(t.size)
@@ -67,12 +71,16 @@ def forecast_crossing(t_days: np.ndarray, drift: np.ndarray, tolerance: float,
     # Fieller: (c - b u)^2 = k^2 s^2 (1/n + u^2 / Sxx), u = t - tm, c = tolerance - ym
     c = tolerance - ym
     qa = b * b - k * k * s2 / sxx
-    if b <= 0 or qa <= 0:  # the slope is not significantly positive: no bounded crossing
-        return None
+    if not (math.isfinite(b) and math.isfinite(qa)) or b <= 0 or qa <= 0:
+        return None  # the slope is not significantly positive (or its squares overflow): no bounded crossing
     qb = -2.0 * b * c
     qc = c * c - k * k * s2 / n
     disc = max(qb * qb - 4.0 * qa * qc, 0.0)
     u1, u2 = sorted(((-qb - math.sqrt(disc)) / (2 * qa), (-qb + math.sqrt(disc)) / (2 * qa)))
+    if not all(math.isfinite(v) for v in (u1, u2, c / b, s2)):
+        # figures near the largest double (a stored drift of 1e308 µm) overflow the sums of
+        # squares: NaN, which no date can hold (issue 39: 'station fleet' ended in an internal error)
+        return None
     return DriftForecast(slope_per_day=b, slope_sigma_per_day=math.sqrt(s2 / sxx), intercept=ym - b * tm,
                          scatter=math.sqrt(s2), n=n, crossing=tm + c / b, earliest=tm + u1, latest=tm + u2,
                          confidence=confidence)

@@ -98,7 +98,7 @@ def _iso(v: datetime | None) -> str | None:
 
 def drift_trend(rechecks: Sequence[Mapping[str, Any]]) -> float | None:
     """Least-squares slope of the drift RMS over time [µm per 30 days]; None with fewer than 3
-    rechecks or all on one day."""
+    rechecks, all on one day, or figures so large that the sums overflow."""
     pts = [(t.timestamp() / 86400.0, v) for r in rechecks
            if (v := _num(r.get("drift_rms_um"))) is not None and (t := _ts(r.get("finished_utc"))) is not None]
     if len(pts) < 3:
@@ -108,7 +108,8 @@ def drift_trend(rechecks: Sequence[Mapping[str, Any]]) -> float | None:
     sxx = sum((p[0] - mx) ** 2 for p in pts)
     if sxx < 1e-6:
         return None
-    return 30.0 * sum((p[0] - mx) * (p[1] - my) for p in pts) / sxx
+    slope = 30.0 * sum((p[0] - mx) * (p[1] - my) for p in pts) / sxx
+    return slope if math.isfinite(slope) else None  # drifts near the largest double overflow the sums
 
 
 def _unreadable(*runs: Mapping[str, Any] | None) -> str | None:

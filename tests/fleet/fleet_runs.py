@@ -72,5 +72,17 @@ def publication(robot: str, kind: str, finished: datetime, *, outcome: str = "SU
             "recheck_interval_days": interval_days, "fingerprint": {}, "detail": {}}
 
 
+#: the tests' now: their runs are dated before it and the states and due dates reckoned at it
+#: (create_app's clock, 'station fleet --as-of'), so no test follows the wall clock
+NOW = datetime(2026, 6, 15, 12, 0, tzinfo=timezone.utc)
+#: 'station fleet' at the tests' now
+AS_OF = ("--as-of", NOW.isoformat())
+
+
+def clock() -> datetime:
+    """The dashboard's clock in the tests: always :data:`NOW`."""
+    return NOW
+
+
 def days_ago(n: float) -> datetime:
-    return datetime.now(timezone.utc) - timedelta(days=n)
+    return NOW - timedelta(days=n)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import base64
 
 import pytest
-from fleet_runs import days_ago, publication
+from fleet_runs import clock, days_ago, publication
 from starlette.testclient import TestClient
 
 from station.fleet import store
@@ -30,7 +30,7 @@ def populated(fleet_db):
 
 def test_fleet_page_sorts_and_filters(populated):
     fleet_db, _ = populated
-    with TestClient(create_app(fleet_db.dashboard_url)) as client:
+    with TestClient(create_app(fleet_db.dashboard_url, clock=clock)) as client:
         page = client.get("/")
         assert page.status_code == 200 and "SR-1" in page.text and "SR-2" in page.text
         assert "script-src 'none'" in page.headers["content-security-policy"]
@@ -44,7 +44,7 @@ def test_fleet_page_sorts_and_filters(populated):
 
 def test_robot_history_has_its_plots_and_the_report_opens_sandboxed(populated):
     fleet_db, pubs = populated
-    with TestClient(create_app(fleet_db.dashboard_url)) as client:
+    with TestClient(create_app(fleet_db.dashboard_url, clock=clock)) as client:
         page = client.get("/robots/SR-1")
         assert page.status_code == 200
         assert 'data-testid="plot-accuracy"' in page.text and 'data-testid="plot-drift"' in page.text
@@ -60,13 +60,13 @@ def test_robot_history_has_its_plots_and_the_report_opens_sandboxed(populated):
 
 def test_with_a_token_or_basic_auth_every_request_needs_it(populated):
     fleet_db, _ = populated
-    with TestClient(create_app(fleet_db.dashboard_url, auth=DashboardAuth(token="s3cret-token"))) as client:
+    with TestClient(create_app(fleet_db.dashboard_url, auth=DashboardAuth(token="s3cret-token"), clock=clock)) as client:
         assert client.get("/").status_code == 401
         assert client.get("/static/dashboard.css").status_code == 401
         assert client.get("/", headers={"Authorization": "Bearer wrong"}).status_code == 401
         assert client.get("/", headers={"Authorization": "Bearer s3cret-token"}).status_code == 200
     basic = DashboardAuth(basic=("qa", "pw"))
-    with TestClient(create_app(fleet_db.dashboard_url, auth=basic)) as client:
+    with TestClient(create_app(fleet_db.dashboard_url, auth=basic, clock=clock)) as client:
         denied = client.get("/")
         assert denied.status_code == 401 and denied.headers["www-authenticate"].startswith("Basic")
         good = base64.b64encode(b"qa:pw").decode()
@@ -93,7 +93,7 @@ def test_serve_refuses_a_remote_bind_without_auth_or_tls(tmp_path, capsys):
 
 
 def test_a_store_that_is_down_is_a_503_page_not_a_traceback(fleet_db, pg_server):
-    client = TestClient(create_app(fleet_db.dashboard_url), raise_server_exceptions=False)
+    client = TestClient(create_app(fleet_db.dashboard_url, clock=clock), raise_server_exceptions=False)
     pg_server.stop()
     try:
         page = client.get("/")

@@ -11,7 +11,7 @@ import threading
 import time
 
 import pytest
-from fleet_runs import days_ago, publication
+from fleet_runs import clock, days_ago, publication
 
 from station.fleet import store
 from station.ui.dashboard.app import create_app
@@ -59,7 +59,7 @@ def served(fleet_db):
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    server = uvicorn.Server(uvicorn.Config(create_app(fleet_db.dashboard_url), host="127.0.0.1", port=port,
+    server = uvicorn.Server(uvicorn.Config(create_app(fleet_db.dashboard_url, clock=clock), host="127.0.0.1", port=port,
                                            log_level="warning"))
     thread = threading.Thread(target=server.run, daemon=True)
     thread.start()

@@ -8,7 +8,7 @@ import csv
 import io
 
 import pytest
-from fleet_runs import days_ago, publication
+from fleet_runs import clock, days_ago, publication
 from starlette.testclient import TestClient
 
 from station.fleet import store
@@ -30,7 +30,7 @@ def fleet(fleet_db):
 
 
 def test_the_fleet_exports_as_csv_and_json_with_units(fleet):
-    with TestClient(create_app(fleet.dashboard_url)) as client:
+    with TestClient(create_app(fleet.dashboard_url, clock=clock)) as client:
         assert 'href="/fleet.csv?' in client.get("/").text
         data = client.get("/fleet.json?cell=cell%20A")
         assert data.status_code == 200 and data.headers["content-type"].startswith("application/json")
@@ -49,7 +49,7 @@ def test_the_fleet_exports_as_csv_and_json_with_units(fleet):
 
 
 def test_a_robots_history_exports_as_csv_and_json(fleet):
-    with TestClient(create_app(fleet.dashboard_url)) as client:
+    with TestClient(create_app(fleet.dashboard_url, clock=clock)) as client:
         page = client.get("/robots/SR-1").text
         assert 'href="/history.csv?robot=SR-1"' in page
         body = client.get("/history.json?robot=SR-1").json()

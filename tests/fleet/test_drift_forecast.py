@@ -4,6 +4,9 @@ upward trend."""
 
 from __future__ import annotations
 
+import math
+from datetime import datetime, timedelta, timezone
+
 import numpy as np
 import pytest
 
@@ -69,8 +72,6 @@ def _run(kind: str, when, drift=None, outcome="SUCCESS", interval=90):
 
 
 def test_the_forecast_sets_due_when_earlier_than_the_interval() -> None:
-    from datetime import datetime, timedelta, timezone
-
     from station.fleet.overview import robot_status
 
     cal_t = datetime(2026, 9, 1, tzinfo=timezone.utc)
@@ -97,7 +98,7 @@ def test_the_forecast_sets_due_when_earlier_than_the_interval() -> None:
 
 
 def test_the_dashboard_shows_the_forecast(fleet_db) -> None:
-    from fleet_runs import days_ago, publication
+    from fleet_runs import clock, days_ago, publication
     from starlette.testclient import TestClient
 
     from station.fleet import store
@@ -109,9 +110,26 @@ def test_the_dashboard_shows_the_forecast(fleet_db) -> None:
     with store.connect(fleet_db.station_url) as c:
         for p in pubs:
             store.insert_publication(c, p)
-    with TestClient(create_app(fleet_db.dashboard_url, interval_days=365)) as client:
+    with TestClient(create_app(fleet_db.dashboard_url, interval_days=365, clock=clock)) as client:
         assert 'class="chip forecast"' in client.get("/").text
         page = client.get("/robots/SR-F").text
         assert "the trend reaches the tolerance on" in page
         row = client.get("/fleet.json").json()["rows"][0]
         assert row["due_from"] == "forecast" and row["drift_crossing_earliest_utc"] <= row["drift_crossing_utc"]
+
+
+@pytest.mark.parametrize("drift, tolerance", [((0.0, 1e308, 1.7e308), 30.0), ((0.0, 1e308, 1.7e308, 1.7e308), 1e308),
+                                              ((0.0, 1e200, 1.7e200, 1.7e200), 1e200)])
+def test_drifts_near_the_largest_double_give_no_forecast_not_nan(drift, tolerance) -> None:
+    """Issue 39's property test: a station may store a drift of 1e308 µm (finite, not negative);
+    the sums of squares overflowed to a NaN crossing, and 'station fleet' ended in an internal
+    error turning it into a date."""
+    from station.fleet.overview import drift_trend, forecast_dates
+
+    t = np.arange(1.0, len(drift) + 1.0)
+    assert forecast_crossing(t, np.array(drift), tolerance) is None
+    cal = datetime(2026, 5, 1, tzinfo=timezone.utc)
+    rechecks = [{"finished_utc": (cal + timedelta(days=d)).isoformat(), "drift_rms_um": v} for d, v in zip(t, drift)]
+    assert forecast_dates(rechecks, cal, {"tolerance_um": tolerance}) is None
+    trend = drift_trend(rechecks)  # NaN before: JSON without a number for it
+    assert trend is None or math.isfinite(trend)

@@ -7,7 +7,7 @@ import json
 from datetime import datetime, timezone
 
 import pytest
-from fleet_runs import EXAMPLE, days_ago, example_config, finished_run, publication
+from fleet_runs import AS_OF, EXAMPLE, days_ago, example_config, finished_run, publication
 
 from station.fleet import store
 from station.fleet.overview import drift_trend, robot_status
@@ -31,7 +31,7 @@ def test_fleet_json_lists_each_robot_with_its_figures_state_and_due_date(fleet_d
              publication("DRIFT-1", "recheck", days_ago(5), drift_um=20.0, tolerance_um=30.0),
              publication("DRIFT-1", "recheck", days_ago(1), drift_um=40.0, tolerance_um=30.0, outcome="DRIFTED"),
              publication("NEW-1", "calibration", days_ago(1), outcome="IDENTIFICATION_FAILED"))
-    assert main(["fleet", "--json"]) == 0
+    assert main(["fleet", "--json", *AS_OF]) == 0
     out = json.loads(capsys.readouterr().out)
     robots = {r["robot_key"]: r for r in out["robots"]}
     assert {k: r["state"] for k, r in robots.items()} == {"OK-1": "ok", "LATE-1": "overdue", "DRIFT-1": "drifted",
@@ -41,14 +41,14 @@ def test_fleet_json_lists_each_robot_with_its_figures_state_and_due_date(fleet_d
     assert ok["next_recheck_due_utc"][:10] == days_ago(3 - 30).strftime("%Y-%m-%d")
     assert robots["DRIFT-1"]["drift_trend_um_per_30d"] == pytest.approx(30 * 30 / 8, rel=0.05)
     assert robots["LATE-1"]["cell"] == "cell B" and out["overdue"] == 3
-    assert main(["fleet", "--overdue"]) == 12
+    assert main(["fleet", "--overdue", *AS_OF]) == 12
     text = capsys.readouterr().out
     assert "LATE-1" in text and "overdue" in text and "4 robot(s), 3 needing" in text
 
 
 def test_overdue_exits_zero_when_every_robot_is_ok(fleet_db, capsys):
     _publish(fleet_db, publication("OK-1", "calibration", days_ago(2)))
-    assert main(["fleet", "--url", fleet_db.dashboard_url, "--overdue"]) == 0
+    assert main(["fleet", "--url", fleet_db.dashboard_url, "--overdue", *AS_OF]) == 0
 
 
 def test_sync_sends_the_queue_and_says_what_it_did(fleet_db, tmp_path, capsys):

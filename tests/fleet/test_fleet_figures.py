@@ -9,7 +9,7 @@ import re
 
 import psycopg
 import pytest
-from fleet_runs import days_ago, publication
+from fleet_runs import AS_OF, clock, days_ago, publication
 from starlette.testclient import TestClient
 
 from station.fleet import store
@@ -53,7 +53,7 @@ def test_a_runs_parameters_are_paired_by_name_with_their_units(fleet_db):
         {"name": "A2.x", "unit": "mm", "nominal": 445.0, "value": 445.0123, "sigma": 0.0021},
         {"name": "A2.yaw", "unit": "rad", "nominal": 0.0, "value": math.radians(0.01), "sigma": math.radians(2 / 3600)}]}}
     _publish(fleet_db, old, new)
-    with TestClient(create_app(fleet_db.dashboard_url)) as client:
+    with TestClient(create_app(fleet_db.dashboard_url, clock=clock)) as client:
         page = client.get(f"/runs/{old['run_uuid']}").text
         cells = dict(re.findall(r"<tr><td>([A-Z0-9]+\.[a-z]+)</td><td class=\"num\">([^<]*)</td>", page))
         assert cells["R.roll"] == f"{math.degrees(0.0005):.5f} °"  # not −97, the vector's 4th value
@@ -70,12 +70,12 @@ def test_simulated_runs_are_marked_everywhere_and_never_make_a_robot_ok(fleet_db
     _publish(fleet_db, rehearsal)
     with psycopg.connect(fleet_db.admin_url) as c:
         assert c.execute("SELECT simulated FROM runs").fetchone() == (True,)  # the store's column
-    assert main(["fleet", "--url", fleet_db.dashboard_url, "--json"]) == 0
+    assert main(["fleet", "--url", fleet_db.dashboard_url, "--json", *AS_OF]) == 0
     (robot,) = json.loads(capsys.readouterr().out)["robots"]
     assert robot["state"] == "uncalibrated" and robot["gain"] is None and robot["last_simulated_utc"]
-    assert main(["fleet", "--url", fleet_db.dashboard_url, "--json", "--include-simulated"]) == 0
+    assert main(["fleet", "--url", fleet_db.dashboard_url, "--json", "--include-simulated", *AS_OF]) == 0
     assert json.loads(capsys.readouterr().out)["robots"][0]["state"] == "ok"  # where the plant asks
-    with TestClient(create_app(fleet_db.dashboard_url)) as client:
+    with TestClient(create_app(fleet_db.dashboard_url, clock=clock)) as client:
         assert 'class="chip sim"' in client.get("/").text
         assert 'id="simulated-banner"' in client.get(f"/runs/{rehearsal['run_uuid']}").text
         assert 'class="chip sim"' in client.get("/robots/SIM-1").text
@@ -87,7 +87,7 @@ def test_the_state_and_figures_are_the_latest_calibration_attempts(fleet_db, cap
     if outcome == "ABORTED":  # an aborted run has no figures
         attempt.update(rms_before_um=None, rms_after_um=None, gain=None, ap_max_um=None)
     _publish(fleet_db, publication("SR-1", "calibration", days_ago(20), after_um=11.0), attempt)
-    assert main(["fleet", "--url", fleet_db.dashboard_url, "--json"]) == 0
+    assert main(["fleet", "--url", fleet_db.dashboard_url, "--json", *AS_OF]) == 0
     (robot,) = json.loads(capsys.readouterr().out)["robots"]
     assert robot["state"] == "failed" and robot["last_calibration_outcome"] == outcome
     assert robot["last_calibration_utc"][:10] == days_ago(1).strftime("%Y-%m-%d")
@@ -108,14 +108,14 @@ def test_impossible_rows_are_refused_on_the_way_in_and_survived_on_the_way_out(p
     with pytest.raises(store.FleetStoreError, match="check constraint|violates"):  # now refused as the station
         with store.connect(db.station_url) as c, store.store_errors(db.station_url):
             _insert_raw_conn(c, publication("BAD-2", "calibration", days_ago(1)), column, value)
-    assert main(["fleet", "--url", db.dashboard_url, "--json"]) == 0
+    assert main(["fleet", "--url", db.dashboard_url, "--json", *AS_OF]) == 0
     robots = {r["robot_key"]: r for r in json.loads(capsys.readouterr().out)["robots"]}
     assert robots["OK-1"]["state"] == "ok"
     if column != "rms_after_um":
         assert robots["BAD-1"]["state"] == "damaged" and column in robots["BAD-1"]["damaged"]
     else:
         assert robots["BAD-1"]["rms_after_um"] is None  # NaN is no figure
-    with TestClient(create_app(db.dashboard_url)) as client:
+    with TestClient(create_app(db.dashboard_url, clock=clock)) as client:
         for path in ("/", "/robots/BAD-1", f"/runs/{bad['run_uuid']}", "/?sort=due", "/?sort=calibrated"):
             assert client.get(path).status_code == 200, path
 
@@ -127,7 +127,7 @@ def test_a_run_whose_detail_is_a_list_is_a_page_not_a_500(pg_server):
     _insert_raw(db.admin_url, bad, "cell", "cell A")
     with db.admin() as c:
         migrate(c)
-    with TestClient(create_app(db.dashboard_url)) as client:
+    with TestClient(create_app(db.dashboard_url, clock=clock)) as client:
         assert client.get(f"/runs/{bad['run_uuid']}").status_code == 200
 
 

@@ -10,7 +10,7 @@ import stat
 from pathlib import Path
 
 import pytest
-from fleet_runs import days_ago, publication
+from fleet_runs import clock, days_ago, publication
 from starlette.testclient import TestClient
 
 from station.errors import ConfigError
@@ -104,7 +104,7 @@ def test_odd_robot_keys_are_a_404_or_a_whole_link(fleet_db):
     odd = "../../runs/x"
     with store.connect(fleet_db.station_url) as c:
         store.insert_publication(c, publication(odd, "calibration", days_ago(3), after_um=12.0))
-    with TestClient(create_app(fleet_db.dashboard_url), raise_server_exceptions=False) as client:
+    with TestClient(create_app(fleet_db.dashboard_url, clock=clock), raise_server_exceptions=False) as client:
         assert client.get("/robots/%00").status_code == 404  # was 503: the store refused the NUL
         assert client.get("/robots/a%01b").status_code == 404
         page = client.get("/").text

@@ -12,10 +12,15 @@ import argparse
 import json
 import os
 import sys
+from datetime import datetime, timezone
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from station.cell.records.summary import RunSummary
 from station.errors import ConfigError, Outcome
+
+if TYPE_CHECKING:
+    from station.fleet.overview import RobotStatus
 
 #: the dashboard's bearer token, where --token-file does not name one
 TOKEN_ENV = "STATION_DASHBOARD_TOKEN"
@@ -100,28 +105,59 @@ def cmd_fleet(args: argparse.Namespace) -> int:
         print(json.dumps({"applied": applied, "version": version}) if args.json
               else f"fleet store at schema version {version}; applied: {applied or 'none'}")
         return 0
+    now = _as_of(getattr(args, "as_of", None))
     with store.store_errors(url), store.connect(url, read_only=True) as conn:
-        robots = fleet_status(conn, default_interval_days=args.interval_days,
+        robots = fleet_status(conn, now, default_interval_days=args.interval_days,
                               include_simulated=bool(getattr(args, "include_simulated", False)))
     overdue = [r for r in robots if r.overdue]
     if args.json:
         print(json.dumps({"robots": [r.to_json() for r in robots], "overdue": len(overdue)}))
     else:
-        print(f"{'robot':<24} {'cell':<22} {'station':<14} {'calibrated':<11} {'gain':>6} {'RMS after':>10} "
-              f"{'AP max':>8} {'recheck':<20} {'drift':>7} {'trend/30d':>9} {'due':<11} state")
-        for r in robots:
-            rec = f"{(r.last_recheck_utc or '')[:10]} {r.last_recheck_verdict or ''}".strip() or "—"
-            print(f"{r.robot_key[:24]:<24} {r.cell[:22]:<22} {r.station[:14]:<14} "
-                  f"{(r.last_calibration_utc or '—')[:10]:<11} {_fmt(r.gain, 1, '×'):>6} "
-                  f"{_fmt(r.rms_after_um, 1, ' µm'):>10} {_fmt(r.ap_max_um, 1, ' µm'):>8} {rec[:20]:<20} "
-                  f"{_fmt(r.drift_rms_um, 1):>7} {_fmt(r.drift_trend_um_per_30d, 2):>9} "
-                  f"{(r.next_recheck_due_utc or '—')[:10]:<11} {r.state}"
-                  + (f" (simulated run {r.last_simulated_utc[:10]}, not counted)" if r.last_simulated_utc else "")
-                  + (f" ({r.damaged})" if r.damaged else ""))
+        _print_fleet(robots)
         print(f"{len(robots)} robot(s), {len(overdue)} needing a recheck or calibration")
     if args.overdue and overdue:
         return int(Outcome.DRIFTED)
     return 0
+
+
+def _as_of(text: str | None) -> datetime | None:
+    """--as-of: a date (its midnight, UTC) or an ISO 8601 time (UTC where it names no zone)."""
+    if text is None:
+        return None
+    try:
+        t = datetime.fromisoformat(text.strip().replace("Z", "+00:00"))
+    except ValueError:
+        raise ConfigError(f"--as-of {text!r}: give a date or an ISO 8601 time, e.g. 2027-01-15 or "
+                          f"2027-01-15T06:00:00Z") from None
+    return t if t.tzinfo else t.replace(tzinfo=timezone.utc)
+
+
+def _forecast(r: RobotStatus) -> str:
+    """When the drift trend crosses the tolerance, with its 95 % interval (the dashboard's forecast)."""
+    if r.drift_crossing_utc is None:
+        return "—"
+    return (f"{r.drift_crossing_utc[:10]} [{(r.drift_crossing_earliest_utc or '?')[:10]} … "
+            f"{(r.drift_crossing_latest_utc or '?')[:10]}]")
+
+
+def _print_fleet(robots: list[RobotStatus]) -> None:
+    """The fleet table as text: the dashboard's columns, its drift forecast included."""
+    print(f"{'robot':<24} {'cell':<22} {'station':<14} {'calibrated':<11} {'gain':>6} {'RMS after':>10} "
+          f"{'AP max':>8} {'recheck':<20} {'drift':>7} {'trend/30d':>9} {'drift reaches tolerance [95 %]':<36} "
+          f"{'due':<21} state")
+    for r in robots:
+        rec = f"{(r.last_recheck_utc or '')[:10]} {r.last_recheck_verdict or ''}".strip() or "—"
+        due = (r.next_recheck_due_utc or "—")[:10] + (" (forecast)" if r.due_from == "forecast" else "")
+        print(f"{r.robot_key[:24]:<24} {r.cell[:22]:<22} {r.station[:14]:<14} "
+              f"{(r.last_calibration_utc or '—')[:10]:<11} {_fmt(r.gain, 1, '×'):>6} "
+              f"{_fmt(r.rms_after_um, 1, ' µm'):>10} {_fmt(r.ap_max_um, 1, ' µm'):>8} {rec[:20]:<20} "
+              f"{_fmt(r.drift_rms_um, 1):>7} {_fmt(r.drift_trend_um_per_30d, 2):>9} {_forecast(r):<36} {due:<21} "
+              f"{r.state}"
+              + (f" (simulated run {r.last_simulated_utc[:10]}, not counted)" if r.last_simulated_utc else "")
+              + (f" ({r.damaged})" if r.damaged else ""))
+    if any(r.due_from == "forecast" for r in robots):
+        print("due (forecast): the drift trend over the rechecks since the calibration (ILAC-G24 control chart) may "
+              "reach the tolerance before the interval ends; due by the earliest date of its 95 % interval")
 
 
 def cmd_serve(args: argparse.Namespace) -> int:

@@ -361,6 +361,8 @@ def _add_fleet(sub) -> None:
     p.add_argument("--migrate", action="store_true", help="the store's administrator: create or update its schema")
     p.add_argument("--include-simulated", action="store_true", help="count simulated runs (rehearsals) as the "
                    "robots' calibrations and rechecks (by default they are marked and never counted)")
+    p.add_argument("--as-of", metavar="DATE", help="the states as of this UTC date or ISO 8601 time instead of now "
+                   "(which robots will be due by a planned stop)")
     p.set_defaults(func="station.ui.cli.commands_fleet:cmd_fleet")
 
     p = sub.add_parser("serve", help="the read-only QA dashboard over the fleet store (localhost by default); "

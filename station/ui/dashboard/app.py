@@ -15,7 +15,7 @@ import queue
 import re
 import threading
 import time
-from collections.abc import AsyncIterator, Iterator
+from collections.abc import AsyncIterator, Callable, Iterator
 from contextlib import asynccontextmanager, contextmanager
 from dataclasses import dataclass, fields
 from datetime import datetime, timezone
@@ -26,6 +26,7 @@ from urllib.parse import quote
 import psycopg
 from jinja2 import Environment, FileSystemLoader, select_autoescape
 from starlette.applications import Starlette
+from starlette.convertors import PathConvertor, register_url_convertor
 from starlette.middleware import Middleware
 from starlette.middleware.base import BaseHTTPMiddleware, RequestResponseEndpoint
 from starlette.requests import Request
@@ -154,14 +155,36 @@ def _download(request: Request, name: str, rows: list[dict[str, Any]], columns: 
                     headers={"Content-Disposition": f'attachment; filename="{name}.{suffix}"'})
 
 
+def _certificate(detail: dict[str, Any], key: str) -> tuple[str, str]:
+    """A stored certificate's id and date; ('—', '') where the detail holds no object under ``key``
+    (a station may store a list or a string there: the page said 500, issue 39's property test)."""
+    cert = detail.get(key)
+    if not isinstance(cert, dict):
+        return "—", ""
+    return str(cert.get("id") or "—"), str(cert.get("date") or "")
+
+
+class _RobotKey(PathConvertor):
+    """A robot key in a path: any text, line breaks included (the path convertor's '.*' stops at
+    one: a key a station stored as "line\nbreak" linked to a 404, issue 39's property test)."""
+
+    regex = r"[\s\S]*"
+
+
+register_url_convertor("robot_key", _RobotKey())
+
+
 def path_segment(key: str) -> str:
     """A robot key as one path segment: every reserved character encoded, '/' and '.' included
     (Jinja's urlencode leaves '/' as is: a serial 'a/../b' linked to a page the browser rewrote
-    to /robots/b). The route takes the key with its '/' decoded ({key:path})."""
+    to /robots/b). The route takes the key with its '/' decoded ({key:robot_key})."""
     return quote(str(key), safe="")
 
 
-def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: int = 30) -> Starlette:
+def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: int = 30,
+               clock: Callable[[], datetime] | None = None) -> Starlette:
+    """The app over the store at ``url``; ``clock``: the time the states and due dates are
+    reckoned at (default now; tests pass a fixed one)."""
     env = Environment(loader=FileSystemLoader(str(_HERE / "templates")), autoescape=select_autoescape(["html"]))
     env.filters["fmt"] = _fmt
     env.filters["date"] = _date
@@ -178,7 +201,7 @@ def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: in
         """All robots, and those the query's cell and state show in its sort order."""
         q = request.query_params
         with pool.connection() as conn:
-            robots = fleet_status(conn, default_interval_days=interval_days)
+            robots = fleet_status(conn, clock() if clock else None, default_interval_days=interval_days)
         cell, state = q.get("cell", ""), q.get("state", "")
         shown = [r for r in robots if (not cell or r.cell == cell) and (not state or r.state == state)]
         sort = q.get("sort", "robot") if q.get("sort", "robot") in SORT_KEYS else "robot"
@@ -207,8 +230,8 @@ def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: in
 
     def history_export(request: Request) -> Response:
         """/history.csv?robot=KEY, /history.json?robot=KEY: a robot's runs, oldest first."""
-        key = request.query_params.get("robot", "")
-        if not key or not key.isprintable():
+        key = request.query_params.get("robot")
+        if key is None or "\x00" in key:  # "" is a key a station may store (the robot page links robot=)
             return render("missing.html", 404, what=f"robot {key!r}")
         with pool.connection() as conn:
             runs = store.robot_history(conn, key)
@@ -219,7 +242,9 @@ def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: in
     def robot_page(request: Request) -> Response:
         started = time.perf_counter()
         key = request.path_params["key"]
-        if not key.isprintable():  # a NUL or another control character: no stored key has one (the store refused it: 503)
+        # a NUL: no stored key has one (no PostgreSQL text holds it; the driver refused the query: 503).
+        # Other control characters are a stored key's own: a station may write "\x1b[31m" (issue 39)
+        if "\x00" in key:
             return render("missing.html", 404, what=f"robot {key!r}")
         with pool.connection() as conn:
             runs = store.robot_history(conn, key)
@@ -248,7 +273,9 @@ def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: in
         params, params_note = parameter_rows(detail)
         return render("run.html", run={**run, "detail": detail}, params=params, params_note=params_note,
                       has_report=has_report, has_certificate=has_certificate,
-                      has_covariance=bool(ident.get("covariance")))
+                      has_covariance=bool(ident.get("covariance")),
+                      head_cert=_certificate(detail, "head_certificate"),
+                      body_cert=_certificate(detail, "body_certificate"))
 
     def report_page(request: Request) -> Response:
         uid = request.path_params["uuid"]
@@ -274,7 +301,7 @@ def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: in
         Route("/", fleet_page),
         Route("/fleet.csv", fleet_export), Route("/fleet.json", fleet_export),
         Route("/history.csv", history_export), Route("/history.json", history_export),
-        Route("/robots/{key:path}", robot_page),
+        Route("/robots/{key:robot_key}", robot_page),
         Route("/runs/{uuid:uuid}", run_page),
         Route("/runs/{uuid:uuid}/report", report_page),
         Route("/runs/{uuid:uuid}/certificate.xml", certificate),
