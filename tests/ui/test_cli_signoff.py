@@ -52,9 +52,9 @@ def test_the_summary_goes_to_stdout_and_the_progress_to_stderr(calibrated):
     assert len(re.findall(r"\d+\.\d", after)) == 4  # RMS, max, AP, RP
 
 
-def test_json_keeps_stdout_for_the_one_object(tmp_path, capsys):
-    code = main(["calibrate", "--simulated", "--db", str(tmp_path / "j.sqlite"), "--no-upload", "--json"])
-    out, err = capsys.readouterr()
+def test_json_keeps_stdout_for_the_one_object(seed1_not_uploaded):
+    """calibrate --simulated --no-upload --json (and --report): the suite's run, tests/conftest.py."""
+    code, out, err = seed1_not_uploaded.code, seed1_not_uploaded.out, seed1_not_uploaded.err
     assert code == 11
     doc = json.loads(out)  # the whole of stdout is one JSON object
     assert doc["outcome"] == "NOT_UPLOADED" and "NOT_UPLOADED (exit code 11)" in err
