@@ -26,7 +26,7 @@ def _calibrate(db: Path, *extra: str) -> subprocess.Popen:
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
 
 
-def _wait_for_steps(proc: subprocess.Popen, n: int, timeout: float = 120.0) -> list[str]:
+def _wait_for_steps(proc: subprocess.Popen, n: int, timeout: float = 540.0) -> list[str]:
     lines = []
     deadline = time.monotonic() + timeout
     assert proc.stderr is not None
@@ -46,7 +46,7 @@ def test_sigterm_stops_at_a_safe_point_and_resume_gives_the_uninterrupted_result
     proc = _calibrate(db)
     seen = _wait_for_steps(proc, 30)
     proc.send_signal(signal.SIGTERM)
-    out, err = proc.communicate(timeout=120)
+    out, err = proc.communicate(timeout=540)
     assert proc.returncode == 6, err[-2000:]
     objects = [json.loads(line) for line in out.splitlines() if line.strip()]
     assert len(objects) == 1  # one JSON object, naming the run
