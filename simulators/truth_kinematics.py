@@ -20,6 +20,7 @@ vector are taken from the robot model: plain data, no computation.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 
 import numpy as np
@@ -29,10 +30,20 @@ __all__ = ["true_forward", "pose_matrix", "matrix_pose", "inverse", "rotation_an
 
 
 def _static(params6: np.ndarray) -> np.ndarray:
-    """One transform's (4, 4) from its x, y, z [mm], roll, pitch, yaw [rad]."""
+    """One transform's (4, 4) from its x, y, z [mm], roll, pitch, yaw [rad] (read-only)."""
+    return _static_of(np.ascontiguousarray(params6, dtype=float).tobytes())
+
+
+@functools.lru_cache(maxsize=256)
+def _static_of(params6: bytes) -> np.ndarray:
+    """The simulated cell asks for the same few fixed links at every probe read (a session: ~10⁴
+    reads), and scipy's rotation costs more than the rest of the chain: each distinct transform is
+    built once, by the same code, so the truth is the same to the last bit."""
+    p = np.frombuffer(params6, dtype=float)
     T = np.eye(4)
-    T[:3, :3] = Rotation.from_euler("xyz", params6[3:6]).as_matrix()
-    T[:3, 3] = params6[:3]
+    T[:3, :3] = Rotation.from_euler("xyz", p[3:6]).as_matrix()
+    T[:3, 3] = p[:3]
+    T.setflags(write=False)
     return T
 
 
@@ -65,8 +76,14 @@ def inverse(T: np.ndarray) -> np.ndarray:
 
 
 def rotation_angle(R: np.ndarray) -> float:
-    """The angle [rad] of the rotation ``(3, 3)``."""
-    return float(Rotation.from_matrix(np.asarray(R, dtype=float)).magnitude())
+    """The angle [rad] of the rotation ``(3, 3)``: atan2(|axial vector of R − Rᵀ| / 2, (tr R − 1) / 2),
+    accurate near 0 and near π alike. The cell asks it at every probe read (is the body's face
+    within the head's capture angle?), where scipy's ``from_matrix`` re-orthogonalises first and
+    costs as much as the kinematic chain; tests/simulators/test_truth_fast_paths.py holds it to
+    scipy's angle within 1e-12 rad."""
+    M = np.asarray(R, dtype=float)
+    axial = np.array([M[2, 1] - M[1, 2], M[0, 2] - M[2, 0], M[1, 0] - M[0, 1]])
+    return float(np.arctan2(np.linalg.norm(axial) / 2.0, (np.trace(M) - 1.0) / 2.0))
 
 
 def _joint(kind: str, q: np.ndarray) -> np.ndarray:

@@ -1,7 +1,8 @@
 """The example cell shipped in examples/scara600 (issue 8's check): a cell that shares nothing with
 the built-in one (its own SCARA robot file, a 7-probe head, a body of other layout), rehearsed in
-simulation from its own files, gains ≥ 20× and ends within 1.2× of the oracle over three seeds; its
-200 mm gripper's own correction is within 1.2× of the gripper's oracle."""
+simulation from its own files, gains ≥ 20× and ends near the oracle (seed 1 here; seeds 1, 2, 3 and
+their median in benchmarks/bench_example_cell.py); its 200 mm gripper's own correction is within
+1.2× of the gripper's oracle."""
 
 from __future__ import annotations
 
@@ -42,15 +43,17 @@ def test_plan_of_the_example_cell(capsys):
     assert p["n_identification"] >= 100 and p["motion_s_estimate"] > 0
 
 
-@pytest.mark.parametrize("seed", [1, 2, 3])
+@pytest.mark.parametrize("seed", [1])
 def test_rehearsal_of_the_example_cell(seed, tmp_path, capsys):
-    """One seed per test, so that the three share the workers. One seed's after/oracle is a random
-    variable, not a property of the code: the simulated noise is keyed to the commanded joints to
-    1e-9 rad (a resumed run repeats its physics), so a last-digit difference of the BLAS kernel
-    (OpenBLAS's Haswell kernels against its Zen ones on the same AMD machine) draws another
-    realisation, and seed 3 then gives 1.23 where it gave 1.10. So each seed is bounded on both
-    sides with room for that scatter (0.7 … 1.3) and "after" in µm; the mean over seeds is the
-    benchmark's (benchmarks/bench_table_design.py)."""
+    """One seed: each costs a whole simulated session of the example cell, and seeds 2 and 3 asserted
+    the same bounds again (issue 42: the suite's time); benchmarks/bench_example_cell.py runs seeds
+    1, 2, 3 and prints each one's gain and after/oracle with their median and worst. One seed's
+    after/oracle is a random variable, not a property of the code: the simulated noise is keyed to
+    the commanded joints to 1e-9 rad (a resumed run repeats its physics), so a last-digit difference
+    of the BLAS kernel (OpenBLAS's Haswell kernels against its Zen ones on the same AMD machine)
+    draws another realisation, and seed 3 then gives 1.23 where it gave 1.10. So the seed is bounded
+    on both sides with room for that scatter (0.7 … 1.3) and "after" in µm; the mean over seeds is
+    the benchmark's (benchmarks/bench_table_design.py)."""
     code = main(["calibrate", "--simulated", str(CELL), "--json", "--seed", str(seed),
                  "--db", str(tmp_path / f"runs-{seed}.sqlite")])
     out = json.loads(capsys.readouterr().out)

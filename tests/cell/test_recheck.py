@@ -209,12 +209,11 @@ def test_remaining_drift_extrapolates_an_exponential_tail():
 
 # ------------------------------------------------------------------ end to end over the transports
 @pytest.mark.slow
-def test_step_on_a_joint_offset_is_detected_end_to_end(tmp_path, capsys):
+def test_step_on_a_joint_offset_is_detected_end_to_end(tmp_path, capsys, seed1_run):
     """calibrate → recheck unchanged (exit 0) → recheck after a 0.05° re-mastering of joint 2
-    (exit DRIFTED, joint 2's offset named) → ``station runs`` shows the rechecks' drift."""
-    db = str(tmp_path / "runs.sqlite")
-    assert main(["calibrate", "--simulated", "--db", db]) == 0
-    capsys.readouterr()
+    (exit DRIFTED, joint 2's offset named) → ``station runs`` shows the rechecks' drift. The
+    calibration is the suite's seed-1 run (the simulated cell's default seed), copied."""
+    db = str(seed1_run.copy_to(tmp_path).db)
     assert main(["recheck", "--simulated", "--db", db, "--json"]) == 0
     same = json.loads(capsys.readouterr().out)
     assert same["outcome"] == "SUCCESS" and same["baseline"]["run_id"] == 1 and same["recheck"]["moved"] == []

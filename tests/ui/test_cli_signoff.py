@@ -28,22 +28,12 @@ from station.ui.cli.main import main
 
 
 @pytest.fixture(scope="module")
-def calibrated(tmp_path_factory):
-    """One simulated calibration of the built-in cell from the command line, its streams apart."""
+def calibrated(tmp_path_factory, seed1_run):
+    """One simulated calibration of the built-in cell from the command line, its streams apart (the
+    suite's seed-1 run, tests/conftest.py; the database copied, since the tests export beside it)."""
     tmp = tmp_path_factory.mktemp("signoff")
-    db = tmp / "cell-a.sqlite"
-    capture = pytest.MonkeyPatch()
-    import io
-    import sys
-
-    out, err = io.StringIO(), io.StringIO()
-    capture.setattr(sys, "stdout", out)
-    capture.setattr(sys, "stderr", err)
-    try:
-        code = main(["calibrate", "--simulated", "--db", str(db)])
-    finally:
-        capture.undo()
-    return SimpleNamespace(code=code, out=out.getvalue(), err=err.getvalue(), db=db, tmp=tmp)
+    run = seed1_run.copy_to(tmp, db_name="cell-a.sqlite")
+    return SimpleNamespace(code=run.code, out=run.out, err=run.err, db=run.db, tmp=tmp)
 
 
 def test_the_summary_goes_to_stdout_and_the_progress_to_stderr(calibrated):
@@ -62,9 +52,9 @@ def test_the_summary_goes_to_stdout_and_the_progress_to_stderr(calibrated):
     assert len(re.findall(r"\d+\.\d", after)) == 4  # RMS, max, AP, RP
 
 
-def test_json_keeps_stdout_for_the_one_object(tmp_path, capsys):
-    code = main(["calibrate", "--simulated", "--db", str(tmp_path / "j.sqlite"), "--no-upload", "--json"])
-    out, err = capsys.readouterr()
+def test_json_keeps_stdout_for_the_one_object(seed1_not_uploaded):
+    """calibrate --simulated --no-upload --json (and --report): the suite's run, tests/conftest.py."""
+    code, out, err = seed1_not_uploaded.code, seed1_not_uploaded.out, seed1_not_uploaded.err
     assert code == 11
     doc = json.loads(out)  # the whole of stdout is one JSON object
     assert doc["outcome"] == "NOT_UPLOADED" and "NOT_UPLOADED (exit code 11)" in err

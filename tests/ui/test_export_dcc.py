@@ -38,10 +38,9 @@ country = "DE"
 
 
 @pytest.fixture(scope="module")
-def certified(tmp_path_factory):
+def certified(tmp_path_factory, seed1_run):
     root = tmp_path_factory.mktemp("dcc")
-    db = root / "runs.sqlite"
-    assert main(["calibrate", "--simulated", "--seed", "1", "--db", str(db), "--report", str(root / "rep")]) == 0
+    db = seed1_run.copy_to(root).db  # calibrate --simulated --seed 1 --report, run once for the suite
     issuer = root / "issuer.toml"
     issuer.write_text(ISSUER)
     out = root / "run1.xml"

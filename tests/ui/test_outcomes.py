@@ -120,10 +120,11 @@ def test_a_bad_report_path_is_refused_before_any_motion(tmp_path, capsys):
     assert not db.exists()  # refused before a run was created, so before anything moved
 
 
-def test_no_upload_with_report_writes_the_report(tmp_path, capsys):
-    code, summary = _run_json(capsys, ["calibrate", "--simulated", "--seed", "3", "--no-upload", "--db",
-                                       str(tmp_path / "r.sqlite"), "--report", str(tmp_path / "rep")])
+def test_no_upload_with_report_writes_the_report(seed1_not_uploaded):
+    """calibrate --simulated --seed 1 --no-upload --json --report: the suite's run (tests/conftest.py)."""
+    (line,) = seed1_not_uploaded.out.strip().splitlines()  # exactly one JSON object
+    code, summary = seed1_not_uploaded.code, json.loads(line)
     assert code == 11 and summary["outcome"] == "NOT_UPLOADED"
     assert summary["upload_skipped"] is True and "after" not in summary
-    text = (tmp_path / "rep" / "report.md").read_text(encoding="utf-8")
+    text = (seed1_not_uploaded.report / "report.md").read_text(encoding="utf-8")
     assert "skipped (--no-upload)" in text

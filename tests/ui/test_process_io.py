@@ -31,6 +31,10 @@ ENV = dict(os.environ, PYTHONPATH=str(ROOT))
 STATION = [sys.executable, "-m", "station.ui.cli.main"]
 SHORT = ["calibrate", "--simulated", "--no-upload", "--json"]  # NOT_UPLOADED (11) when it completes
 ABORTED, CONFIG_ERROR, NOT_UPLOADED = 6, 2, 11
+# a hang guard, not a speed target: a whole simulated session as a subprocess takes ~35 s near idle
+# but 120 s and more beside two CPU hogs on 2 cores (issue 42: the three full-run tests here failed
+# at 120.0 s), so each wait stops just short of pytest's own 600 s guard (pyproject's timeout)
+HANG_S = 540
 
 
 def _popen(args, cwd: Path, **kw) -> subprocess.Popen:
@@ -75,12 +79,12 @@ def test_stdout_and_stderr_into_head_the_run_completes_and_is_stored(tmp_path):
     db = tmp_path / "runs.sqlite"
     script = (f"{' '.join(STATION)} calibrate --simulated --json --db {db} 2>&1 | head -n 3 > head.txt; "
               f"echo ${{PIPESTATUS[0]}} > rc.txt")
-    subprocess.run(["bash", "-c", script], cwd=tmp_path, env=ENV, check=True, timeout=120)
+    subprocess.run(["bash", "-c", script], cwd=tmp_path, env=ENV, check=True, timeout=HANG_S)
     assert (tmp_path / "rc.txt").read_text().strip() == "0"
     assert len((tmp_path / "head.txt").read_text().splitlines()) == 3
     assert _status(db, 1) == "verified"
     runs = subprocess.run([*STATION, "runs", "--db", str(db), "--json"], cwd=tmp_path, env=ENV,
-                          capture_output=True, text=True, timeout=60)
+                          capture_output=True, text=True, timeout=HANG_S)
     assert runs.returncode == 0 and _one_json(runs.stdout)["runs"][0]["outcome"] == "SUCCESS"
     assert not list(tmp_path.glob("station-error-*.log"))
 
@@ -89,7 +93,7 @@ def test_closed_stdout_the_json_is_dropped_and_the_run_stands(tmp_path):
     db = tmp_path / "runs.sqlite"
     p = _popen([*SHORT, "--db", db], tmp_path)
     p.stdout.close()  # nobody reads the JSON: its write meets a broken pipe
-    _, err = p.communicate(timeout=120)
+    _, err = p.communicate(timeout=HANG_S)
     assert p.returncode == NOT_UPLOADED
     assert "run 1: NOT_UPLOADED" in err
     _no_internal_error(tmp_path, err)
@@ -100,7 +104,7 @@ def test_closed_stderr_every_progress_line_is_dropped_and_the_run_completes(tmp_
     db = tmp_path / "runs.sqlite"
     p = _popen([*SHORT, "--db", db], tmp_path)
     p.stderr.close()  # the first progress line already meets a broken pipe
-    out, _ = p.communicate(timeout=120)
+    out, _ = p.communicate(timeout=HANG_S)
     assert p.returncode == NOT_UPLOADED
     assert _one_json(out)["outcome"] == "NOT_UPLOADED"
     assert _status(db, 1) == "identified"
@@ -113,7 +117,7 @@ def test_closed_stderr_in_the_signal_handler_still_aborts_cleanly(tmp_path):
     p.stderr.close()
     _wait_for_run(db, 1, p)
     p.send_signal(signal.SIGTERM)  # the handler's "stopping at the next safe point" is lost
-    out, _ = p.communicate(timeout=60)
+    out, _ = p.communicate(timeout=HANG_S)
     s = _one_json(out)
     assert p.returncode == ABORTED and s["outcome"] == "ABORTED"
     assert _status(db, s["run_id"]) == "aborted"
@@ -145,7 +149,7 @@ def test_every_command_into_a_closed_pipe_exits_with_its_outcome(files, args):
     """``station … | head`` where head has already gone: exit 0, no traceback, no error log."""
     p = _popen(args, files)
     p.stdout.close()
-    _, err = p.communicate(timeout=120)
+    _, err = p.communicate(timeout=HANG_S)
     assert p.returncode == 0, err
     _no_internal_error(files, err)
     assert "Exception ignored" not in err, err  # the interpreter's final flush found /dev/null
@@ -182,7 +186,7 @@ def test_sigterm_from_the_first_moment_the_handlers_exist_is_aborted_with_one_js
     while not _handlers_installed(p.pid) and p.poll() is None:
         time.sleep(0.0005)
     p.send_signal(signal.SIGTERM)
-    out, err = p.communicate(timeout=60)
+    out, err = p.communicate(timeout=HANG_S)
     s = _one_json(out)
     assert p.returncode == ABORTED and s["outcome"] == "ABORTED" and s["exit_code"] == ABORTED, err
     assert s["run_id"] is None  # stopped before the session: nothing was opened or moved
@@ -195,7 +199,7 @@ def test_a_signal_during_the_run_stops_at_a_safe_point(tmp_path, sig):
     p = _popen([*SHORT, "--db", db], tmp_path)
     _wait_for_run(db, 1, p)
     p.send_signal(sig)
-    out, err = p.communicate(timeout=60)
+    out, err = p.communicate(timeout=HANG_S)
     s = _one_json(out)
     assert p.returncode == ABORTED and s["outcome"] == "ABORTED", err
     assert _status(db, s["run_id"]) == "aborted"
@@ -208,13 +212,13 @@ def test_a_second_sigterm_stops_at_once_marks_the_run_aborted_and_it_resumes(tmp
     _wait_for_run(db, 1, p)
     p.send_signal(signal.SIGTERM)
     p.send_signal(signal.SIGTERM)
-    out, err = p.communicate(timeout=60)
+    out, err = p.communicate(timeout=HANG_S)
     s = _one_json(out)
     assert p.returncode == ABORTED and s["outcome"] == "ABORTED", err
     assert _status(db, s["run_id"]) == "aborted"
     _no_internal_error(tmp_path, err)
     again = _popen([*SHORT, "--db", db, "--resume", s["run_id"]], tmp_path)
-    out, err = again.communicate(timeout=120)
+    out, err = again.communicate(timeout=HANG_S)
     assert again.returncode == NOT_UPLOADED and _one_json(out)["run_id"] == s["run_id"], err
     assert _status(db, s["run_id"]) == "identified"
 
@@ -239,7 +243,7 @@ def test_sigterm_at_spread_moments_always_gives_one_outcome(tmp_path):
             while not _handlers_installed(p.pid) and p.poll() is None:
                 time.sleep(0.0005)
         p.send_signal(signal.SIGTERM)
-        out, _ = p.communicate(timeout=120)
+        out, _ = p.communicate(timeout=HANG_S)
         return steps, p.returncode, out, d
 
     with ThreadPoolExecutor(len(moments)) as pool:
@@ -267,7 +271,7 @@ def test_sigterm_at_spread_moments_always_gives_one_outcome(tmp_path):
 ])
 def test_a_usage_error_with_json_prints_one_config_error_object(tmp_path, args, says):
     p = _popen([*args, "--db", tmp_path / "runs.sqlite"] if args[0] != "--json" else args, tmp_path)
-    out, err = p.communicate(timeout=60)
+    out, err = p.communicate(timeout=HANG_S)
     s = _one_json(out)
     assert p.returncode == CONFIG_ERROR and s["outcome"] == "CONFIG_ERROR" and s["exit_code"] == CONFIG_ERROR
     assert says in s["failure"]["message"] and says in err
@@ -278,14 +282,14 @@ def test_a_usage_error_with_json_prints_one_config_error_object(tmp_path, args, 
 def test_time_scale_must_be_zero_or_a_positive_number(tmp_path, value):
     for command in ("calibrate", "recheck"):
         p = _popen([command, "--simulated", "--db", tmp_path / "runs.sqlite", f"--time-scale={value}"], tmp_path)
-        out, err = p.communicate(timeout=60)
+        out, err = p.communicate(timeout=HANG_S)
         assert p.returncode == CONFIG_ERROR and "--time-scale" in err and "positive number" in err, err
         assert out == "" and not (tmp_path / "runs.sqlite").exists()
 
 
 def test_tui_with_a_missing_configuration_says_so_instead_of_opening(tmp_path):
     p = _popen(["tui", "missing.toml", "--db", tmp_path / "runs.sqlite"], tmp_path, stdin=subprocess.DEVNULL)
-    out, err = p.communicate(timeout=60)
+    out, err = p.communicate(timeout=HANG_S)
     assert p.returncode == CONFIG_ERROR and "no such configuration file: missing.toml" in err
     assert "\x1b[" not in out  # the full-screen UI never drew
 
@@ -299,6 +303,6 @@ def test_a_descriptor_closed_before_start_is_not_a_crash(tmp_path):
     assert sh is not None
     for redirect in (">&-", "2>&-", ">&- 2>&-"):
         r = subprocess.run([sh, "-c", f'exec "{sys.executable}" -m station.ui.cli.main --help {redirect}'],
-                           cwd=tmp_path, capture_output=True, text=True, timeout=60)
+                           cwd=tmp_path, capture_output=True, text=True, timeout=HANG_S)
         assert r.returncode == 0, (redirect, r.stderr)
         assert "Traceback" not in r.stderr and not list(tmp_path.glob("station-error-*.log"))

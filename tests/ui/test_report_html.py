@@ -160,11 +160,9 @@ def test_html_without_upload_and_with_reversal(tmp_path):
 
 # ----------------------------------------------------------------------------- a simulated run
 @pytest.fixture(scope="module")
-def simulated_run(tmp_path_factory):
-    root = tmp_path_factory.mktemp("report-run")
-    db = root / "runs.sqlite"
-    assert main(["calibrate", "--simulated", "--seed", "1", "--db", str(db), "--report", str(root / "rep")]) == 0
-    return db, root / "rep"
+def simulated_run(tmp_path_factory, seed1_run):
+    run = seed1_run.copy_to(tmp_path_factory.mktemp("report-run"))  # calibrate --seed 1 --report, once
+    return run.db, run.report
 
 
 def test_simulated_run_report(simulated_run):

@@ -66,10 +66,9 @@ def _derive(src: Path, dst: Path, *, outcome: Outcome, failure: dict | None = No
 
 
 @pytest.fixture(scope="module")
-def runs(tmp_path_factory):
+def runs(tmp_path_factory, seed1_run):
     tmp = tmp_path_factory.mktemp("print")
-    ok = tmp / "success.sqlite"
-    assert main(["calibrate", "--simulated", "--seed", "1", "--db", str(ok)]) == 0
+    ok = seed1_run.copy_to(tmp, db_name="success.sqlite").db  # the suite's seed-1 calibration
     verify = {"where": "kind IN ('verification_before', 'verification_after', 'oracle')"}
     dbs = {
         "success": ok,

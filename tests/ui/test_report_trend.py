@@ -90,12 +90,11 @@ def test_trend_without_figures_has_table_but_no_plot(tmp_path, fast_plots):
 
 # ----------------------------------------------------------------------------- real runs
 @pytest.fixture(scope="module")
-def history(tmp_path_factory):
-    """Run 1: a calibration (uploaded), run 2: a recheck against it, run 3: a calibration without
-    upload whose report is written at its end."""
+def history(tmp_path_factory, seed1_run):
+    """Run 1: a calibration (uploaded; the suite's seed-1 run, copied), run 2: a recheck against it,
+    run 3: a calibration without upload whose report is written at its end."""
     root = tmp_path_factory.mktemp("trend")
-    db = root / "runs.sqlite"
-    assert main(["calibrate", "--simulated", "--seed", "1", "--db", str(db)]) == 0
+    db = seed1_run.copy_to(root, report_name="rep-1").db
     assert main(["recheck", "--simulated", "--seed", "1", "--db", str(db)]) == 0
     assert main(["calibrate", "--simulated", "--seed", "1", "--no-upload", "--db", str(db),
                  "--report", str(root / "rep")]) == 11  # NOT_UPLOADED

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from station.cell.records.rundb import RunDB
 from station.ui.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -25,7 +26,7 @@ def _calibrate(db: Path, *extra: str) -> subprocess.Popen:
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
 
 
-def _wait_for_steps(proc: subprocess.Popen, n: int, timeout: float = 120.0) -> list[str]:
+def _wait_for_steps(proc: subprocess.Popen, n: int, timeout: float = 540.0) -> list[str]:
     lines = []
     deadline = time.monotonic() + timeout
     assert proc.stderr is not None
@@ -40,12 +41,12 @@ def _wait_for_steps(proc: subprocess.Popen, n: int, timeout: float = 120.0) -> l
 
 
 @pytest.mark.slow
-def test_sigterm_stops_at_a_safe_point_and_resume_gives_the_uninterrupted_result(tmp_path):
+def test_sigterm_stops_at_a_safe_point_and_resume_gives_the_uninterrupted_result(tmp_path, seed1_run):
     db = tmp_path / "runs.sqlite"
     proc = _calibrate(db)
     seen = _wait_for_steps(proc, 30)
     proc.send_signal(signal.SIGTERM)
-    out, err = proc.communicate(timeout=120)
+    out, err = proc.communicate(timeout=540)
     assert proc.returncode == 6, err[-2000:]
     objects = [json.loads(line) for line in out.splitlines() if line.strip()]
     assert len(objects) == 1  # one JSON object, naming the run
@@ -58,8 +59,6 @@ def test_sigterm_stops_at_a_safe_point_and_resume_gives_the_uninterrupted_result
     assert "CONFIG" not in stopped["failure"]["hint"]
     progress = [ln for ln in seen if ln.strip().startswith("30/")]
     assert progress and " elapsed" in progress[0] and " left (" in progress[0]  # time on every progress line
-    from station.cell.records.rundb import RunDB
-
     with RunDB(db) as d:  # the stored summary (the report's, 'runs'') says the same
         assert d.load_result(1, "summary")["failure"]["message"] == stopped["failure"]["message"]
 
@@ -68,10 +67,8 @@ def test_sigterm_stops_at_a_safe_point_and_resume_gives_the_uninterrupted_result
                              capture_output=True, timeout=300)
     assert resumed.returncode == 0, resumed.stderr[-2000:]
     done = json.loads(resumed.stdout)
-    whole = subprocess.run([sys.executable, "-m", "station.ui.cli.main", "calibrate", "--simulated", "--seed", "1",
-                            "--db", str(tmp_path / "whole.sqlite"), "--json"], cwd=ROOT, env=ENV, text=True,
-                           capture_output=True, timeout=300)
-    reference = json.loads(whole.stdout)
+    with RunDB(seed1_run.db) as whole:  # the same command, uninterrupted: the suite's seed-1 run
+        reference = whole.load_result(1, "summary")
     for key in ("before", "after", "oracle"):
         assert done[key]["rms_um"] == pytest.approx(reference[key]["rms_um"], rel=1e-9), key
     assert [p["value"] for p in done["identification"]["parameters"]] == pytest.approx(
@@ -81,11 +78,9 @@ def test_sigterm_stops_at_a_safe_point_and_resume_gives_the_uninterrupted_result
     assert main(["runs", "--db", str(db), "--json"]) == 0
 
 
-def test_runs_lists_outcomes_and_what_can_be_resumed(tmp_path, capsys):
-    db = tmp_path / "runs.sqlite"
+def test_runs_lists_outcomes_and_what_can_be_resumed(tmp_path, capsys, seed1_not_uploaded):
+    db = seed1_not_uploaded.copy_to(tmp_path).db  # calibrate --simulated --no-upload: exit 11
     cfg = tmp_path / "bad.toml"
-    assert main(["calibrate", "--simulated", "--seed", "3", "--no-upload", "--db", str(db)]) == 11
-    capsys.readouterr()
     assert main(["runs", "--db", str(db), "--json"]) == 0
     listing = json.loads(capsys.readouterr().out)
     (run,) = listing["runs"]
@@ -101,9 +96,8 @@ def test_runs_lists_outcomes_and_what_can_be_resumed(tmp_path, capsys):
     assert failed["outcome"] == "DATABASE_ERROR" and failed["db"] == str(cfg) and failed["failure"]["hint"]
 
 
-def test_report_rebuilds_a_runs_report(tmp_path, capsys):
-    db = tmp_path / "runs.sqlite"
-    assert main(["calibrate", "--simulated", "--seed", "3", "--no-upload", "--db", str(db)]) == 11
+def test_report_rebuilds_a_runs_report(tmp_path, capsys, seed1_not_uploaded):
+    db = seed1_not_uploaded.copy_to(tmp_path).db  # calibrate --simulated --no-upload: exit 11
     out = tmp_path / "again"
     assert main(["report", "1", "--db", str(db), "-o", str(out)]) == 0
     assert (out / "report.md").exists() and "report of run 1" in capsys.readouterr().out

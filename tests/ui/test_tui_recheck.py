@@ -32,11 +32,10 @@ async def wait_until(pilot, cond, what: str, rounds: int = 12000) -> None:
 
 
 @pytest.fixture(scope="module")
-def calibrated_db(tmp_path_factory) -> str:
-    """A run database holding a calibration of the simulated cell (seed 1): the baseline."""
-    db = str(tmp_path_factory.mktemp("recheck") / "runs.sqlite")
-    assert main(["calibrate", "--simulated", "--seed", "1", "--db", db]) == 0
-    return db
+def calibrated_db(tmp_path_factory, seed1_run) -> str:
+    """A run database holding a calibration of the simulated cell (seed 1): the baseline (a copy of
+    the suite's seed-1 run, since the recheck writes into it)."""
+    return str(seed1_run.copy_to(tmp_path_factory.mktemp("recheck")).db)
 
 
 async def test_simulated_recheck_through_the_ui(calibrated_db):

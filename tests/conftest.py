@@ -1,0 +1,73 @@
+"""Fixtures shared by the whole suite.
+
+A simulated calibration of the built-in cell costs about 16 s of CPU (33 s of wall time beside other
+work on 2 cores), and a dozen modules need one finished run of seed 1 to read, damage, recheck or
+report on. ``seed1_run`` (uploaded) and ``seed1_not_uploaded`` (``--no-upload --json``) run once per
+process (each xdist worker runs one the first time one of its tests asks); a test that writes into
+the run database or the report works on ``run.copy_to(folder)``, never on the original.
+"""
+
+from __future__ import annotations
+
+import io
+import shutil
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+
+@dataclass(frozen=True)
+class FinishedRun:
+    """``station calibrate --simulated --seed 1 --db DB --report REPORT``, finished: its exit code,
+    what it printed on each stream, its run database and its report folder."""
+
+    code: int
+    out: str
+    err: str
+    db: Path
+    report: Path
+
+    def copy_to(self, folder: Path, db_name: str = "runs.sqlite", report_name: str = "rep") -> FinishedRun:
+        """The same run in ``folder`` (the database and the report copied), for a test that writes."""
+        folder.mkdir(parents=True, exist_ok=True)
+        db = folder / db_name
+        shutil.copy(self.db, db)
+        report = folder / report_name
+        shutil.copytree(self.report, report)
+        return FinishedRun(self.code, self.out, self.err, db, report)
+
+
+def _calibrate(root: Path, *options: str) -> FinishedRun:
+    """``station calibrate --simulated --seed 1 --db ROOT/runs.sqlite --report ROOT/rep OPTIONS``
+    in this process, its streams kept (capsys is per test, and these runs serve many tests)."""
+    from station.ui.cli.main import main
+
+    db, report = root / "runs.sqlite", root / "rep"
+    out, err = io.StringIO(), io.StringIO()
+    streams = pytest.MonkeyPatch()
+    streams.setattr(sys, "stdout", out)
+    streams.setattr(sys, "stderr", err)
+    try:
+        code = main(["calibrate", "--simulated", "--seed", "1", "--db", str(db), "--report", str(report), *options])
+    finally:
+        streams.undo()
+    return FinishedRun(code, out.getvalue(), err.getvalue(), db, report)
+
+
+@pytest.fixture(scope="session")
+def seed1_run(tmp_path_factory) -> FinishedRun:
+    """The built-in cell's seed-1 calibration, uploaded and verified (exit 0)."""
+    run = _calibrate(tmp_path_factory.mktemp("seed1-run"))
+    assert run.code == 0, run.err[-3000:]
+    return run
+
+
+@pytest.fixture(scope="session")
+def seed1_not_uploaded(tmp_path_factory) -> FinishedRun:
+    """The same calibration with ``--no-upload --json``: NOT_UPLOADED (exit 11), its one JSON object
+    on stdout and the human summary on stderr, and its report."""
+    run = _calibrate(tmp_path_factory.mktemp("seed1-not-uploaded"), "--no-upload", "--json")
+    assert run.code == 11, run.err[-3000:]
+    return run
