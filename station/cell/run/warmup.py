@@ -25,7 +25,7 @@ from station.cell.plan.steps import PlannedStep
 from station.cell.records.rundb import RunDB
 from station.cell.run.events import Event, Notice, PhaseChanged
 from station.cell.run.recentring import head_as_commanded
-from station.cell.run.runner import Checkpoint, MoveJoints, Procedure, Runner, approach_and_read
+from station.cell.run.runner import Checkpoint, MoveJoints, Procedure, Runner, Travel, approach_and_read
 from station.core.kinematics.transforms import invert
 
 
@@ -60,7 +60,7 @@ def _cycle(cfg: CellConfig, program: Sequence[np.ndarray], reference: PlannedSte
     yield Checkpoint()
     yield MoveJoints(None, "warm-up: retract to travel height")
     for q in program:
-        yield MoveJoints(q, "warm-up motion")
+        yield Travel(q, "warm-up motion")  # lifted over the body between its targets (issue 40)
     return (yield from approach_and_read(cfg, reference.q, reference.direction))
 
 
