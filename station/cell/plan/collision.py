@@ -20,10 +20,13 @@ corners), so a collision of the grown shapes is a clearance under the margin bet
 the refusal reports the true clearance (fcl's distance, negative where they overlap: the depth).
 
 Pairs not checked: a link and its neighbours in the chain (a zero-length link, such as a spherical
-wrist's, joins its neighbours), the pairs the robot file allows, the head and the last link, and the
-head and the cube it touches during that touch (approach, above the point, touch, retract).
+wrist's, joins its neighbours, and so does one shorter than their radii together), the pairs the
+robot file allows, the head and the last link, and the head and the cube it touches during that
+touch (approach, above the point, touch, retract; there its probes' bodies keep TOUCH_MARGIN_MM).
 Paths are sampled in joint space at a step that moves no point of the arm by more than the margin
-(each joint's step times the largest distance from its axis to any shape beyond it).
+(each joint's step times the largest distance from its axis to any point beyond it); stretches the
+distances at their ends prove clear are not sampled (:func:`_check_paths`). Between measurements an
+articulated arm travels through via poses over the body (:mod:`station.cell.plan.vias`).
 """
 
 from __future__ import annotations
@@ -244,6 +247,7 @@ def cell_shapes(cfg: CellConfig) -> tuple[CellShapes, tuple[str, ...]]:
              for s in (*body, *_obstacle_shapes(cfg))]
     chain = [g for g in dict.fromkeys(s.group for s in links)] + ["head"]
     allowed = {frozenset(p) for p in zip(chain, chain[1:])}
+    allowed |= _joined_over_a_short_link(links, chain)
     allowed |= {frozenset(("tip", "head")), frozenset(("tip", chain[-2]))}  # the tips ride on the head
     spec = cfg.robot_collision
     allowed |= {frozenset((f"link:{a}", f"link:{b}")) for a, b in (spec.allowed_pairs if spec is not None else ())}
@@ -251,6 +255,17 @@ def cell_shapes(cfg: CellConfig) -> tuple[CellShapes, tuple[str, ...]]:
     allowed |= {frozenset((base, s.group)) for s in fixed}
     return CellShapes(tuple(links + head), tuple(fixed), frozenset(allowed), _levers(cfg, links + head),
                       cfg.plan.collision_margin_mm), point_cube
+
+
+def _joined_over_a_short_link(links: list[Shape], chain: list[str]) -> set[frozenset[str]]:
+    """The pairs of links two apart in the chain whose capsules meet at the link between them by
+    construction: that link shorter than the two radii together (the IRB 2600's 150 mm shoulder
+    offset between its base and upper arm, each 92 mm thick by default, always overlapped). As a
+    zero-length link joins its neighbours, so does a short one."""
+    length = {g: sum(s.size[1] for s in links if s.group == g) for g in chain}
+    radius = {g: max((s.size[0] for s in links if s.group == g), default=0.0) for g in chain}
+    return {frozenset((a, c)) for a, b, c in zip(chain, chain[1:], chain[2:])
+            if b in length and a in radius and c in radius and length[b] <= radius[a] + radius[c]}
 
 
 def _levers(cfg: CellConfig, moving: list[Shape]) -> np.ndarray:

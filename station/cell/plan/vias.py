@@ -205,7 +205,8 @@ def clear_candidates(cfg: CellConfig, cands: list, orient: list[int]
     """The candidates (:class:`~station.cell.plan.assembly.Target`, with their head orientations
     ``orient``) a run can measure without a collision, and the others (point, configuration code,
     why): a candidate whose touch or pose short of it clashes (the pose design draws only from
-    clear ones), and every candidate of an arm configuration the lifted head cannot travel to from
+    clear ones) or whose lifted via is out of reach or the soft limits, and every candidate of an arm
+    configuration the lifted head cannot travel to from
     the first configuration's (:func:`travel_vias`: the PUMA 560's shoulder-back configuration
     folds the elbow past the shoulder, its head mount through the shoulder's capsule)."""
     from station.cell.plan.articulated import preload_offset, retract_poses
@@ -224,16 +225,25 @@ def clear_candidates(cfg: CellConfig, cands: list, orient: list[int]
             rejected.append((t.point_id, t.elbow, f"{t.point_id} configuration {t.elbow:+d}: collides: {w}"))
         else:
             keep.append(i)
+    back, _ok = retract_poses(cfg, q)
+    up, reached = lifted_many(cfg, back)  # every candidate's depart and arrive: reached, inside the limits
+    lim = cfg.soft_limits
+    inside = reached & np.all((up >= lim[:, 0]) & (up <= lim[:, 1]), axis=1)
+    for i in [i for i in keep if not inside[i]]:
+        t = cands[i]
+        rejected.append((t.point_id, t.elbow, f"{t.point_id} configuration {t.elbow:+d}: the head lifted to "
+                         f"{travel_height_mm(cfg):.0f} mm over the body from its retract pose (the via to and from "
+                         f"it) is {'outside the soft limits' if reached[i] else 'out of reach'}"))
+        keep.remove(i)
     first: dict[int, int] = {}
     for i in keep:
         first.setdefault(cands[i].elbow, i)
     codes = list(first)
     if len(codes) > 1:
-        back, _ok = retract_poses(cfg, q[[first[c] for c in codes]])
         unreachable = {}
-        for c, r in zip(codes[1:], back[1:]):
+        for c in codes[1:]:
             try:
-                travel_vias(cfg, back[0], r)
+                travel_vias(cfg, back[first[codes[0]]], back[first[c]])
             except UnreachableError as exc:
                 unreachable[c] = str(exc)
         for i in list(keep):
