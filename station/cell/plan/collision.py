@@ -8,9 +8,10 @@ Shapes, all in the robot's base frame (docs/collision.md):
   radius the robot file's ``[collision] radius_mm`` states, else :func:`default_radii`;
 * **the probe head**: a capsule per probe from its tip back along its axis by its stroke plus the
   tip's diameter (the probe's body), and the mount from the flange to the head frame;
-* **the body**: every cube (from its measuring points' corner frames and ``[body] cube_edge_mm``), the
-  pillar under it down to the plate, and the plate (the cubes' footprint grown by one edge, one edge
-  thick below z = 0 of the body frame);
+* **the body**: every cube (from its measuring points' corner frames and ``[body] cube_edge_mm``) and
+  the pillar under it down to z = 0 of the body frame. No plate: the body file does not give one, and
+  a guessed plate (the cubes' footprint grown by one edge) refused cells whose upper arm passes over
+  its edge; a plate or a table is an ``[[obstacle]]``;
 * **the cell's fixed obstacles**: ``[[obstacle]]`` boxes and cylinders.
 
 The distances and collisions are python-fcl's (FCL, the Flexible Collision Library: GJK/EPA on the
@@ -86,7 +87,7 @@ class Shape:
     """One collision shape: ``kind`` "capsule" (size = radius, length; axis along local z), "box"
     (edges), "cylinder" (radius, height) or "sphere" (radius); ``local`` (4, 4) its centre in the frame
     it rides on: ``frame`` (an index into the chain's frames; -1: the robot base, fixed); ``group`` what
-    it belongs to ("link:A2", "head", "cube:3", "plate", "obstacle:column"); ``name`` for people."""
+    it belongs to ("link:A2", "head", "cube:3", "obstacle:column"); ``name`` for people."""
 
     name: str
     kind: str
@@ -200,8 +201,7 @@ def head_depth_mm(cfg: CellConfig) -> float:
 
 
 def _body_shapes(cfg: CellConfig) -> tuple[list[Shape], tuple[str, ...]]:
-    """The cubes, their pillars and the plate in the body frame, and each measuring point's cube
-    (its group)."""
+    """The cubes and their pillars in the body frame, and each measuring point's cube (its group)."""
     e = cfg.cube_edge_mm
     centre = np.eye(4)
     centre[:3, 3] = [e / 2, e / 2, -e / 2]  # the cube lies in x, y >= 0, z <= 0 of its corner frame
@@ -212,20 +212,14 @@ def _body_shapes(cfg: CellConfig) -> tuple[list[Shape], tuple[str, ...]]:
         key = tuple(np.round(C[:3, 3], 1))
         cubes.setdefault(key, (C, pid))
         of_point.append(f"cube:{list(cubes).index(key)}")
-    out, lows, highs = [], [], []
+    out = []
     for k, (C, pid) in enumerate(cubes.values()):
         out.append(Shape(f"cube of {pid}", "box", (e, e, e), C, -2, f"cube:{k}"))
         bottom = C[2, 3] - e / 2
-        if bottom > 1e-6:  # a pillar from the plate to the cube's underside
+        if bottom > 1e-6:  # a pillar from z = 0 to the cube's underside
             P = C.copy()
             P[2, 3] = bottom / 2
             out.append(Shape(f"pillar of {pid}", "box", (e, e, bottom), P, -2, f"cube:{k}"))
-        lows.append(C[:2, 3] - e)
-        highs.append(C[:2, 3] + e)
-    lo, hi = np.min(lows, axis=0) - e, np.max(highs, axis=0) + e
-    plate = np.eye(4)
-    plate[:3, 3] = [*((lo + hi) / 2), -e / 2]
-    out.append(Shape("the body's plate", "box", (*(hi - lo), e), plate, -2, "plate"))
     return out, tuple(of_point)
 
 
@@ -247,7 +241,8 @@ def cell_shapes(cfg: CellConfig) -> tuple[CellShapes, tuple[str, ...]]:
              for s in (*body, *_obstacle_shapes(cfg))]
     chain = [g for g in dict.fromkeys(s.group for s in links)] + ["head"]
     allowed = {frozenset(p) for p in zip(chain, chain[1:])}
-    allowed |= _joined_over_a_short_link(links, chain)
+    allowed |= _joined_over_a_short_link(links + head, chain)
+    allowed |= {frozenset(("tip", *(p - {"head"}))) for p in list(allowed) if "head" in p and len(p) == 2}  # the tips ride on the head
     allowed |= {frozenset(("tip", "head")), frozenset(("tip", chain[-2]))}  # the tips ride on the head
     spec = cfg.robot_collision
     allowed |= {frozenset((f"link:{a}", f"link:{b}")) for a, b in (spec.allowed_pairs if spec is not None else ())}
@@ -260,9 +255,10 @@ def cell_shapes(cfg: CellConfig) -> tuple[CellShapes, tuple[str, ...]]:
 def _joined_over_a_short_link(links: list[Shape], chain: list[str]) -> set[frozenset[str]]:
     """The pairs of links two apart in the chain whose capsules meet at the link between them by
     construction: that link shorter than the two radii together (the IRB 2600's 150 mm shoulder
-    offset between its base and upper arm, each 92 mm thick by default, always overlapped). As a
-    zero-length link joins its neighbours, so does a short one."""
-    length = {g: sum(s.size[1] for s in links if s.group == g) for g in chain}
+    offset between its base and upper arm, each 92 mm thick by default, always overlapped; a KR 6's
+    80 mm flange link between its forearm and the head's mount). As a zero-length link joins its
+    neighbours, so does a short one."""
+    length = {g: sum(s.size[1] for s in links if s.group == g and s.kind == "capsule") for g in chain}
     radius = {g: max((s.size[0] for s in links if s.group == g), default=0.0) for g in chain}
     return {frozenset((a, c)) for a, b, c in zip(chain, chain[1:], chain[2:])
             if b in length and a in radius and c in radius and length[b] <= radius[a] + radius[c]}

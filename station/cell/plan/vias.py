@@ -227,8 +227,13 @@ def clear_candidates(cfg: CellConfig, cands: list, orient: list[int]
             keep.append(i)
     back, _ok = retract_poses(cfg, q)
     up, reached = lifted_many(cfg, back)  # every candidate's depart and arrive: reached, inside the limits
+    # as every planned pose, LIMIT_MARGIN_RAD inside the soft limits: a located or corrected target
+    # moves its lift a little (a PUMA-like arm 3 mm off: an arrive 0.97° beyond joint 3's limit)
+    from station.cell.plan.articulated import LIMIT_MARGIN_RAD
+
+    m = LIMIT_MARGIN_RAD * np.array([t == "revolute" for t in cfg.model.joint_types])
     lim = cfg.soft_limits
-    inside = reached & np.all((up >= lim[:, 0]) & (up <= lim[:, 1]), axis=1)
+    inside = reached & np.all((up >= lim[:, 0] + m) & (up <= lim[:, 1] - m), axis=1)
     for i in [i for i in keep if not inside[i]]:
         t = cands[i]
         rejected.append((t.point_id, t.elbow, f"{t.point_id} configuration {t.elbow:+d}: the head lifted to "
