@@ -6,7 +6,8 @@ The checks, in order: the probes' stroke can find the body within the set-up's u
 (:mod:`station.cell.plan.locating`); every ``[[tool]]`` can be corrected on this robot; the plan (every
 (point, elbow) within reach and the soft limits, enough poses for the identifiable set); the
 correction (every verification target inside the table, a table within the controller's
-capacity that meets ``correction.max_interpolation_um``).
+capacity that meets ``correction.max_interpolation_um``); the collision check of every pose and
+path the run commands, vias included (:func:`station.cell.plan.collision.check_plan`, issue 40).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from dataclasses import dataclass
 from station.cell.config.cell_config import CellConfig
 from station.cell.correction.design import check_correction
 from station.cell.correction.robot_tools import check_tools, tool_grid
+from station.cell.plan.collision import CollisionReport, check_plan
 from station.cell.plan.locating import Coverage, check_locating
 from station.cell.plan.measurement_plan import Plan, build_plan
 from station.core.table.design import TableDesign
@@ -32,6 +34,7 @@ class Premotion:
     plan: Plan
     design: TableDesign | None
     locating: Coverage | None = None  # how far the search for the body reaches (issue 37)
+    collision: CollisionReport | None = None  # the plan's collision check (issue 40)
 
 
 def premotion_check(cfg: CellConfig) -> Premotion:
@@ -47,4 +50,5 @@ def premotion_check(cfg: CellConfig) -> Premotion:
                 tool_grid(cfg, t)
             except ConfigError as exc:
                 raise ConfigError(f"tool {t.name!r}: {exc} ([[tool]] x_mm, y_mm, z_mm give its own grid)") from None
-    return Premotion(plan, design, locating)
+    collision = check_plan(cfg, plan)  # refuses a plan that collides, or a check it cannot do
+    return Premotion(plan, design, locating, collision)

@@ -544,6 +544,10 @@ def build_articulated_plan(cfg: CellConfig) -> ArticulatedPlan:
         raise ConfigError("plan.both_directions: the reversal measurement is planned for SCARA robots only; "
                           "set it to false for an articulated arm")
     cands, orient, rejected = articulated_candidates(cfg)
+    from station.cell.plan.vias import clear_candidates  # the collision check (issue 40) imports this module
+
+    cands, orient, clashing = clear_candidates(cfg, cands, orient)
+    rejected = [*rejected, *clashing]
     if not cands:
         raise ConfigError("no measuring point is reachable within the soft limits; check [robot].setup and [limits]")
     nominal = [i for i, k in enumerate(orient) if k == 0]

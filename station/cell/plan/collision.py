@@ -8,9 +8,10 @@ Shapes, all in the robot's base frame (docs/collision.md):
   radius the robot file's ``[collision] radius_mm`` states, else :func:`default_radii`;
 * **the probe head**: a capsule per probe from its tip back along its axis by its stroke plus the
   tip's diameter (the probe's body), and the mount from the flange to the head frame;
-* **the body**: every cube (from its measuring points' corner frames and ``[body] cube_edge_mm``), the
-  pillar under it down to the plate, and the plate (the cubes' footprint grown by one edge, one edge
-  thick below z = 0 of the body frame);
+* **the body**: every cube (from its measuring points' corner frames and ``[body] cube_edge_mm``) and
+  the pillar under it down to z = 0 of the body frame. No plate: the body file does not give one, and
+  a guessed plate (the cubes' footprint grown by one edge) refused cells whose upper arm passes over
+  its edge; a plate or a table is an ``[[obstacle]]``;
 * **the cell's fixed obstacles**: ``[[obstacle]]`` boxes and cylinders.
 
 The distances and collisions are python-fcl's (FCL, the Flexible Collision Library: GJK/EPA on the
@@ -20,15 +21,20 @@ corners), so a collision of the grown shapes is a clearance under the margin bet
 the refusal reports the true clearance (fcl's distance, negative where they overlap: the depth).
 
 Pairs not checked: a link and its neighbours in the chain (a zero-length link, such as a spherical
-wrist's, joins its neighbours), the pairs the robot file allows, the head and the last link, and the
-head and the cube it touches during that touch (approach, above the point, touch, retract).
+wrist's, joins its neighbours, and so does one shorter than their radii together), the pairs the
+robot file allows, the head and the last link, and the head and the cube it touches during that
+touch (approach, above the point, touch, retract; there its probes' bodies keep TOUCH_MARGIN_MM).
 Paths are sampled in joint space at a step that moves no point of the arm by more than the margin
-(each joint's step times the largest distance from its axis to any shape beyond it).
+(each joint's step times the largest distance from its axis to any point beyond it); stretches the
+distances at their ends prove clear are not sampled (:func:`_check_paths`). Between measurements an
+articulated arm travels through via poses over the body (:mod:`station.cell.plan.vias`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -40,13 +46,17 @@ from station.core.kinematics.transforms import invert, pose_to_matrix
 from station.errors import ConfigError
 
 __all__ = ["Shape", "CellShapes", "Clash", "CollisionReport", "cell_shapes", "default_radii", "check_path",
-           "check_plan", "plan_path", "fcl_available", "TOUCH_MARGIN_MM",
+           "check_plan", "plan_path", "moves_clear", "poses_clear", "fcl_available", "TOUCH_MARGIN_MM", "head_shapes",
            "head_depth_mm"]
 
 #: the least clearance [mm] of the probes' bodies (their tips excepted) from the cube they touch,
 #: during that touch (approach, above the point, touch, retract): the tips press on its faces, the
 #: bodies behind them must not (every other move keeps [plan] collision_margin_mm from that cube too)
 TOUCH_MARGIN_MM = 0.5
+
+#: pairs whose bounding spheres come within this [mm] get the tighter bound (a segment in a box): a
+#: loose bound far away would only make the path's bisection halve stretches that are clear
+NEAR_MM = 100.0
 
 #: default link radius as a fraction of the robot's size (the sum of its link offsets): 4 % gives
 #: 58 mm on the PUMA 560's 1.45 m and 57 mm on a 600 mm SCARA with its 820 mm column, about an
@@ -77,7 +87,7 @@ class Shape:
     """One collision shape: ``kind`` "capsule" (size = radius, length; axis along local z), "box"
     (edges), "cylinder" (radius, height) or "sphere" (radius); ``local`` (4, 4) its centre in the frame
     it rides on: ``frame`` (an index into the chain's frames; -1: the robot base, fixed); ``group`` what
-    it belongs to ("link:A2", "head", "cube:3", "plate", "obstacle:column"); ``name`` for people."""
+    it belongs to ("link:A2", "head", "cube:3", "obstacle:column"); ``name`` for people."""
 
     name: str
     kind: str
@@ -147,11 +157,12 @@ def _link_shapes(cfg: CellConfig) -> tuple[list[Shape], list[str]]:
     return [s for s in out if s.kind == "capsule"], names
 
 
-def _head_shapes(cfg: CellConfig) -> list[Shape]:
+def head_shapes(cfg: CellConfig) -> list[Shape]:
     """The probes and the mount, riding on the last frame (the head frame MKKS). Each probe is two
-    capsules of its tip's radius: its tip ("tip", from the free tip, half the stroke beyond the
-    mount point, back to one tip diameter behind it: what presses on the face at a touch) and its
-    body ("head", from there back by the stroke: what must never touch the cube)."""
+    capsules of its tip's radius: its plunger ("tip", from the free tip, half the stroke beyond the
+    mount point, back to the tip pressed fully in, half the stroke behind it: what presses on the
+    face at a touch) and its body ("head", from there back by the stroke: what must never touch the
+    cube)."""
     from station.core.probe.geometry import default_probe_head
 
     head = cfg.head if cfg.head is not None else default_probe_head(cube_edge_mm=cfg.cube_edge_mm)
@@ -160,7 +171,10 @@ def _head_shapes(cfg: CellConfig) -> list[Shape]:
     for i in range(head.n_probes):
         mount, d = head.mount_points[i], head.directions[i]
         r, stroke = float(head.tip_radii[i]), float(head.strokes[i])
-        neck = mount - d * 2 * r
+        # the plunger travels the whole stroke: its tip, pressed fully in, lies half the stroke
+        # behind the mount point, and the body begins there (with the body one tip diameter behind
+        # the mount point, a probe reading 1.4 mm in on a turned head put its body into the cube)
+        neck = mount - d * (stroke / 2 + r)
         out.append(_segment(f"probe {head.label(i)}'s tip", mount + d * stroke / 2, neck, r, last, "tip"))
         out.append(_segment(f"probe {head.label(i)}", neck, neck - d * stroke, r, last, "head"))
     K = pose_to_matrix(cfg.model.nominal.reshape(-1, 6)[-1])
@@ -179,7 +193,7 @@ def head_depth_mm(cfg: CellConfig) -> float:
     M = nominal_contact(cfg)
     up, c = M[:3, 2], M[:3, 3]
     low = 0.0
-    for s in _head_shapes(cfg):
+    for s in head_shapes(cfg):
         half = s.local[:3, 2] * (s.size[1] / 2 if s.kind == "capsule" else 0.0)
         for end in (s.local[:3, 3] + half, s.local[:3, 3] - half):
             low = max(low, float((c - end) @ up) + s.size[0])
@@ -187,8 +201,7 @@ def head_depth_mm(cfg: CellConfig) -> float:
 
 
 def _body_shapes(cfg: CellConfig) -> tuple[list[Shape], tuple[str, ...]]:
-    """The cubes, their pillars and the plate in the body frame, and each measuring point's cube
-    (its group)."""
+    """The cubes and their pillars in the body frame, and each measuring point's cube (its group)."""
     e = cfg.cube_edge_mm
     centre = np.eye(4)
     centre[:3, 3] = [e / 2, e / 2, -e / 2]  # the cube lies in x, y >= 0, z <= 0 of its corner frame
@@ -199,20 +212,14 @@ def _body_shapes(cfg: CellConfig) -> tuple[list[Shape], tuple[str, ...]]:
         key = tuple(np.round(C[:3, 3], 1))
         cubes.setdefault(key, (C, pid))
         of_point.append(f"cube:{list(cubes).index(key)}")
-    out, lows, highs = [], [], []
+    out = []
     for k, (C, pid) in enumerate(cubes.values()):
         out.append(Shape(f"cube of {pid}", "box", (e, e, e), C, -2, f"cube:{k}"))
         bottom = C[2, 3] - e / 2
-        if bottom > 1e-6:  # a pillar from the plate to the cube's underside
+        if bottom > 1e-6:  # a pillar from z = 0 to the cube's underside
             P = C.copy()
             P[2, 3] = bottom / 2
             out.append(Shape(f"pillar of {pid}", "box", (e, e, bottom), P, -2, f"cube:{k}"))
-        lows.append(C[:2, 3] - e)
-        highs.append(C[:2, 3] + e)
-    lo, hi = np.min(lows, axis=0) - e, np.max(highs, axis=0) + e
-    plate = np.eye(4)
-    plate[:3, 3] = [*((lo + hi) / 2), -e / 2]
-    out.append(Shape("the body's plate", "box", (*(hi - lo), e), plate, -2, "plate"))
     return out, tuple(of_point)
 
 
@@ -227,13 +234,15 @@ def cell_shapes(cfg: CellConfig) -> tuple[CellShapes, tuple[str, ...]]:
     """Every shape of the cell (fixed ones placed in the robot's base frame) and each measuring
     point's cube group."""
     links, names = _link_shapes(cfg)
-    head = _head_shapes(cfg)
+    head = head_shapes(cfg)
     body, point_cube = _body_shapes(cfg)
     base_from_body = invert(pose_to_matrix(cfg.model.nominal[:6]))
     fixed = [Shape(s.name, s.kind, s.size, base_from_body @ s.local if s.frame == -2 else s.local, -1, s.group)
              for s in (*body, *_obstacle_shapes(cfg))]
     chain = [g for g in dict.fromkeys(s.group for s in links)] + ["head"]
     allowed = {frozenset(p) for p in zip(chain, chain[1:])}
+    allowed |= _joined_over_a_short_link(links + head, chain)
+    allowed |= {frozenset(("tip", *(p - {"head"}))) for p in list(allowed) if "head" in p and len(p) == 2}  # the tips ride on the head
     allowed |= {frozenset(("tip", "head")), frozenset(("tip", chain[-2]))}  # the tips ride on the head
     spec = cfg.robot_collision
     allowed |= {frozenset((f"link:{a}", f"link:{b}")) for a, b in (spec.allowed_pairs if spec is not None else ())}
@@ -243,15 +252,29 @@ def cell_shapes(cfg: CellConfig) -> tuple[CellShapes, tuple[str, ...]]:
                       cfg.plan.collision_margin_mm), point_cube
 
 
+def _joined_over_a_short_link(links: list[Shape], chain: list[str]) -> set[frozenset[str]]:
+    """The pairs of links two apart in the chain whose capsules meet at the link between them by
+    construction: that link shorter than the two radii together (the IRB 2600's 150 mm shoulder
+    offset between its base and upper arm, each 92 mm thick by default, always overlapped; a KR 6's
+    80 mm flange link between its forearm and the head's mount). As a zero-length link joins its
+    neighbours, so does a short one."""
+    length = {g: sum(s.size[1] for s in links if s.group == g and s.kind == "capsule") for g in chain}
+    radius = {g: max((s.size[0] for s in links if s.group == g), default=0.0) for g in chain}
+    return {frozenset((a, c)) for a, b, c in zip(chain, chain[1:], chain[2:])
+            if b in length and a in radius and c in radius and length[b] <= radius[a] + radius[c]}
+
+
 def _levers(cfg: CellConfig, moving: list[Shape]) -> np.ndarray:
-    """Per joint, an upper bound of how far any moving shape's axis point lies from the joint's
-    axis [mm] (1 for a prismatic joint: a point moves as far as the joint): the length of every
-    link beyond it plus the head's reach from the flange."""
+    """Per joint, an upper bound of how far any point of a moving shape lies from the joint's axis
+    [mm] (1 for a prismatic joint: a point moves as far as the joint): the length of every link
+    beyond it plus the head's reach from the flange plus the largest radius (a capsule's surface
+    lies that far off its axis)."""
     tr = cfg.model.transforms
     p = cfg.model.nominal.reshape(-1, 6)
     seg = np.linalg.norm(p[:, :3], axis=1)
     reach = max((float(np.linalg.norm(s.local[:3, 3])) + s.size[-1] / 2 for s in moving if s.group == "head"),
                 default=0.0)
+    reach += max((s.size[0] for s in moving), default=0.0)
     out, j = [], 0
     for t, spec in enumerate(tr):
         if spec.joint is None:
@@ -274,9 +297,9 @@ def _grown(fcl, s: Shape, grow: float):
 
 class _Checker:
     """The checked pairs, a cheap screen of every sample in numpy (a lower bound of each pair's
-    distance: a moving capsule's segment boxed in a fixed shape's frame, or two bounding spheres),
-    and fcl's exact signed distance of each pair the screen leaves within twice the margin (so the
-    plan's closest approach is reported even where nothing clashes)."""
+    distance: two bounding spheres, then a moving capsule's segment boxed in the other's frame), and
+    fcl's exact distance (the depth where they overlap) of each pair the screen leaves within its
+    watch distance (so the plan's closest approach is reported even where nothing clashes)."""
 
     def __init__(self, cfg: CellConfig, shapes: CellShapes):
         self.fcl = fcl = _fcl()
@@ -296,6 +319,10 @@ class _Checker:
         self.half_box = np.array([np.array(s.size) / 2 if s.kind == "box" else
                                   np.array([s.size[0], s.size[0], s.size[1] / 2]) for s in fx]).reshape(-1, 3)
         self.fixed_inv = np.array([invert(s.local) for s in fx]).reshape(-1, 4, 4)
+        # bounding spheres: a moving shape's about its centre, a fixed one's about its box's
+        self.ball = self.half_len + self.radius
+        self.fixed_centre = np.array([s.local[:3, 3] for s in fx]).reshape(-1, 3)
+        self.fixed_ball = np.linalg.norm(self.half_box, axis=1)
         self.objs = {id(s): fcl.CollisionObject(_grown(fcl, s, 0.0), _tf(fcl, s.local)) for s in (*mv, *fx)}
 
     def placed(self, frames: np.ndarray) -> np.ndarray:
@@ -304,35 +331,49 @@ class _Checker:
         return np.stack([frames[:, s.frame] @ s.local if s.frame >= 0 else np.broadcast_to(s.local, (n, 4, 4))
                          for s in self.shapes.moving], axis=1)
 
-    def screen(self, W: np.ndarray, watch: float) -> tuple[np.ndarray, np.ndarray]:
-        """Per sample, which moving-moving and moving-fixed pairs may lie within ``watch`` [mm]:
-        boolean (n, pairs) each, never False for a pair that does. The first of a pair is a segment
-        grown by its radius, the second is boxed in its own frame (a capsule or cylinder in its
-        bounding box: the bound stays a lower one)."""
+    def bounds(self, W: np.ndarray, near: float) -> tuple[np.ndarray, np.ndarray]:
+        """Per sample, a lower bound [mm] of every moving-moving and moving-fixed pair's distance:
+        (n, pairs) each. Two bounding spheres' gap first; where that comes within ``near``, the first
+        of the pair as a segment grown by its radius and the second boxed in its own frame (a capsule
+        or cylinder in its bounding box: the bound stays a lower one)."""
         c, z = W[..., :3, 3], W[..., :3, 2]
-        ends = [c + s * self.half_len[:, None] * z for s in (1.0, -1.0)]  # (n, moving, 3) each
         i, j = self.mm.T
-        Rt = W[:, j, :3, :3]  # into the second capsule's frame: x_box = Rᵀ (x - c)
-        local = [(np.swapaxes(Rt, -1, -2) @ (e[:, i] - c[:, j])[..., None])[..., 0] for e in ends]
-        box = np.stack([self.radius[j], self.radius[j], self.radius[j] + self.half_len[j]], axis=-1)
-        near_mm = _box_gap(local[0], local[1], box) - self.radius[i] < watch
+        gap_mm = np.linalg.norm(c[:, i] - c[:, j], axis=-1) - self.ball[i] - self.ball[j]
+        k, p = np.nonzero(gap_mm < near)
+        if k.size:
+            a, b = i[p], j[p]
+            Rt = W[k, b, :3, :3]  # into the second capsule's frame: x_box = Rᵀ (x - c)
+            ends = [c[k, a] + sgn * self.half_len[a, None] * z[k, a] for sgn in (1.0, -1.0)]
+            local = [(np.swapaxes(Rt, -1, -2) @ (e - c[k, b])[..., None])[..., 0] for e in ends]
+            box = np.stack([self.radius[b], self.radius[b], self.radius[b] + self.half_len[b]], axis=-1)
+            gap_mm[k, p] = np.maximum(gap_mm[k, p], _box_gap(local[0], local[1], box) - self.radius[a])
         i, f = self.mf.T
-        gaps = np.empty((len(W), len(self.mf)))
-        for g in np.unique(f):  # each fixed shape: every moving segment's ends in its frame at once
-            k = np.flatnonzero(f == g)
+        gaps = np.linalg.norm(c[:, i] - self.fixed_centre[f], axis=-1) - self.ball[i] - self.fixed_ball[f]
+        k, p = np.nonzero(gaps < near)
+        if k.size:
+            a, g = i[p], f[p]
             R, t = self.fixed_inv[g, :3, :3], self.fixed_inv[g, :3, 3]
-            p0, p1 = (e[:, i[k]] @ R.T + t for e in ends)
-            gaps[:, k] = _box_gap(p0, p1, self.half_box[g]) - self.radius[i[k]]
-        return near_mm, gaps < watch
+            ends = [c[k, a] + sgn * self.half_len[a, None] * z[k, a] for sgn in (1.0, -1.0)]
+            p0, p1 = ((R @ e[..., None])[..., 0] + t for e in ends)
+            gaps[k, p] = np.maximum(gaps[k, p], _box_gap(p0, p1, self.half_box[g]) - self.radius[a])
+        return gap_mm, gaps
 
-    def clearance(self, a: Shape, b: Shape, Wa: np.ndarray, Wb: np.ndarray) -> float:
-        """The true distance [mm] between ``a`` and ``b`` placed at ``Wa``, ``Wb``; negative: the depth
-        by which they overlap."""
+    def clearance(self, a: Shape, b: Shape, Wa: np.ndarray, Wb: np.ndarray | None) -> float:
+        """The true distance [mm] between ``a`` and ``b`` placed at ``Wa``, ``Wb`` (None: a fixed shape,
+        placed once); negative: the depth by which they overlap (the deepest contact fcl's collision
+        finds). Not fcl's signed distance: its penetration solver never returned for a capsule deep in
+        a cylinder (the PUMA's forearm through a column), where the collision's contacts take 0.1 ms."""
         fcl = self.fcl
         oa, ob = self.objs[id(a)], self.objs[id(b)]
         oa.setTransform(_tf(fcl, Wa))
-        ob.setTransform(_tf(fcl, Wb))
-        return float(fcl.distance(oa, ob, fcl.DistanceRequest(enable_signed_distance=True), fcl.DistanceResult()))
+        if Wb is not None:
+            ob.setTransform(_tf(fcl, Wb))
+        d = float(fcl.distance(oa, ob, fcl.DistanceRequest(), fcl.DistanceResult()))
+        if d > 0.0:
+            return d
+        res = fcl.CollisionResult()
+        fcl.collide(oa, ob, fcl.CollisionRequest(num_max_contacts=8, enable_contact=True), res)
+        return -max((float(c.penetration_depth) for c in res.contacts), default=0.0)
 
 
 def _box_gap(p0: np.ndarray, p1: np.ndarray, half: np.ndarray) -> np.ndarray:
@@ -378,13 +419,29 @@ class CollisionReport:
     closest: Clash | None = None
     closest_touch: Clash | None = None
     seconds: float = field(compare=False, default=0.0)
+    #: the samples evaluated (of ``samples`` at the margin's step: the rest lie on stretches proven clear)
+    evaluated: int = 0
+    #: how many poses and moves clash (the first is ``clash``)
+    clashing_moves: int = 0
+    #: the via poses among ``poses`` (:mod:`station.cell.plan.vias`)
+    vias: int = 0
+
+    def to_json(self) -> dict:
+        """What ``station plan --json`` says (clearances in mm, time in s)."""
+        def pair(c: Clash | None):
+            return None if c is None else {"a": c.a, "b": c.b, "where": c.where, "clearance_mm": round(c.clearance_mm, 3),
+                                           "limit_mm": c.limit_mm}
+        return {"poses": self.poses, "vias": self.vias, "samples": self.samples, "evaluated": self.evaluated,
+                "margin_mm": self.margin_mm, "clash": pair(self.clash), "closest": pair(self.closest),
+                "closest_touch": pair(self.closest_touch), "seconds": round(self.seconds, 3)}
 
     def lines(self) -> list[str]:
         """What ``station plan`` prints."""
-        head = (f"collision check: {self.poses} poses and the paths between them ({self.samples} samples), "
-                f"margin {self.margin_mm:g} mm, {self.seconds:.1f} s")
+        head = (f"collision check: {self.poses} poses ({self.vias} of them vias over the body) and the paths "
+                f"between them ({self.samples} samples at the margin's step, {self.evaluated} evaluated), margin "
+                f"{self.margin_mm:g} mm, {self.seconds:.1f} s")
         if self.clash is not None:
-            return [head, f"  CLASH: {self.clash.describe()}"]
+            return [head, f"  CLASH ({self.clashing_moves} poses or moves): {self.clash.describe()}"]
         out = [head, "  least clearance: " + (f"over {2 * self.margin_mm:g} mm" if self.closest is None else
                                               self.closest.describe())]
         if self.closest_touch is not None:
@@ -393,17 +450,45 @@ class CollisionReport:
 
 
 def plan_path(cfg: CellConfig, plan: Plan, with_upload: bool = True) -> list[tuple[np.ndarray, str, int]]:
-    """Every pose a run commands, in order: (joints, what it is, the measuring point it touches). The
-    first move, from wherever the robot stands to the first approach, is not known before the run."""
-    from station.cell.plan.measurement_plan import all_motion_poses, retracted
+    """Every pose a run commands, in order: (joints, what it is, the measuring point it touches),
+    the via poses between two measurements included (:func:`station.cell.plan.vias.travel_vias`: a
+    depart and the stages of a long move belong to the measurement the head leaves, an arrive to the
+    one it comes to). The first move, from wherever the robot stands to the first approach, is not
+    known before the run."""
+    from station.cell.plan.measurement_plan import all_motion_poses, retract_offset, retracted
+    from station.cell.plan.vias import lifted_many, travel_vias
 
-    out = []
-    for s in plan.run_steps(cfg.plan.verification_cycles, with_oracle=False, with_upload=with_upload):
+    steps = plan.run_steps(cfg.plan.verification_cycles, with_oracle=False, with_upload=with_upload)
+    if not steps:
+        return []
+    lifts: list = [None] * len(steps)
+    back = None
+    if not cfg.model.is_scara:  # the retract poses (each step's approach and retract) and their lifts at once
+        from station.cell.plan.articulated import retract_poses
+
+        back, _ok = retract_poses(cfg, np.array([s.q for s in steps]))
+        up, reached = lifted_many(cfg, back)
+        lifts = [u if r else None for u, r in zip(up, reached)]
+    out: list[tuple[np.ndarray, str, int]] = []
+    last = None  # the previous step's label, point and lift
+    for k, s in enumerate(steps):
         q = s.q
-        names = ("approach", "above the point", "touch")
-        for name, qq in zip(names, all_motion_poses(cfg, q, s.direction)):
-            out.append((np.asarray(qq, dtype=float), f"step {s.index + 1} ({s.label}): {name}", s.point))
-        out.append((np.asarray(retracted(cfg, q), dtype=float), f"step {s.index + 1} ({s.label}): retract", s.point))
+        name = f"step {s.index + 1} ({s.label})"
+        if back is None:
+            moves = all_motion_poses(cfg, q, s.direction)
+            leave = retracted(cfg, q)
+        else:  # an arm's approach and retract are both its retract pose (all_motion_poses, retracted)
+            moves, leave = [back[k], q + retract_offset(cfg), q], back[k]
+        if last is not None:
+            for v, what in travel_vias(cfg, out[-1][0], moves[0], None if cfg.model.is_scara else (last[2], lifts[k])):
+                if what == "arrive":  # the descent to the approach is part of the next touch
+                    out.append((v, f"{name}: {what}", s.point))
+                else:  # the depart and the stages of a long move, away from any cube
+                    out.append((v, f"{last[0]}: {what}", last[1] if what == "depart" else -1))
+        for what, qq in zip(("approach", "above the point", "touch"), moves):
+            out.append((np.asarray(qq, dtype=float), f"{name}: {what}", s.point))
+        out.append((np.asarray(leave, dtype=float), f"{name}: retract", s.point))
+        last = (name, s.point, lifts[k])
     return out
 
 
@@ -417,85 +502,202 @@ def _where(poses: list[tuple[np.ndarray, str, int]], i: int, on_path: bool) -> s
     return (f"on the move from {label} to {nxt.split(': ', 1)[-1]}" + ("" if same else f" ({nxt.split(':')[0]})"))
 
 
-def _samples(shapes: CellShapes, poses: list[tuple[np.ndarray, str, int]], point_cube: tuple[str, ...]):
-    """The joints of every pose and of the path to the next one, at a step that moves no point of
-    the arm by more than the margin; per sample its pose's index and whether it lies on the path
-    from it, and per pose and path the cube the head may touch there (None: none)."""
-    qs, owner, on_path, touch = [], [], [], []
-    for i, (q, label, point) in enumerate(poses):
+def _touch_status(poses: list[tuple[np.ndarray, str, int]], point_cube: tuple[str, ...]) -> list[tuple]:
+    """Per pose, the cube the head may touch at the pose and on the move from it (None: none). The
+    touch is its approach, the pose above the point, the touch and the retract, and the moves
+    between them; the retract pose itself starts the next travel move."""
+    out = []
+    for i, (_q, label, point) in enumerate(poses):
         nxt = poses[i + 1] if i + 1 < len(poses) else None
-        step = label.split(":")[0]
-        same = nxt is not None and nxt[1].split(":")[0] == step  # within one touch: the head meets its cube
+        same = nxt is not None and nxt[1].split(":")[0] == label.split(":")[0]
         cube = point_cube[point] if point >= 0 else None
-        qs.append(q[None])
-        owner.append(i)
-        on_path.append(False)
-        # the touch is its approach, the pose above the point, the touch and the retract, and the
-        # moves between them; the retract pose itself starts the next travel move
-        touch.append((cube if label.endswith(("touch", "above the point")) or same else None, cube if same else None))
-        if nxt is None:
+        out.append((cube if label.endswith(("touch", "above the point")) or same else None, cube if same else None))
+    return out
+
+
+@dataclass
+class _Found:
+    """Every exact distance under its pair's watch distance (the limit plus the margin): (path
+    order key, pose index, on the path, clearance, moving shape, other shape, limit)."""
+
+    hits: list = field(default_factory=list)
+    evaluated: int = 0
+
+
+class _Evaluator:
+    """Evaluate samples: the lower bounds of every checked pair, fcl's exact distance where the
+    bound comes within the pair's watch distance, and per sample the least slack (distance less
+    watch) of the moving-fixed and of the moving-moving pairs: what a path interval may lose."""
+
+    def __init__(self, cfg: CellConfig, checker: _Checker):
+        self.cfg, self.c = cfg, checker
+        sh = checker.shapes
+        codes = {g: k for k, g in enumerate(dict.fromkeys(s.group for s in sh.fixed))}
+        self.codes = codes
+        i, j = checker.mf.T
+        self.fixed_code = np.array([codes[sh.fixed[k].group] for k in j], dtype=int)
+        self.is_tip = np.array([sh.moving[k].group == "tip" for k in i], dtype=bool)
+        self.is_head = np.array([sh.moving[k].group == "head" for k in i], dtype=bool)
+
+    def __call__(self, Q: np.ndarray, cube: np.ndarray, key: np.ndarray, owner: np.ndarray, on_path: bool,
+                 found: _Found) -> tuple[np.ndarray, np.ndarray]:
+        c, margin = self.c, self.c.shapes.margin_mm
+        mv, fx = c.shapes.moving, c.shapes.fixed
+        found.evaluated += len(Q)
+        W = c.placed(chain_frames(self.cfg.model, Q, setup=False))
+        d_mm, d_mf = c.bounds(W, NEAR_MM)
+        touched = self.fixed_code[None, :] == cube[:, None]  # (n, mf): the pair's fixed shape is the touched cube
+        limit = np.where(touched & self.is_head, TOUCH_MARGIN_MM, margin)
+        limit = np.where(touched & self.is_tip, -np.inf, limit)  # the tips press on the cube they touch
+        for k, p in zip(*np.nonzero(d_mm < 2 * margin)):
+            a, b = c.mm[p]
+            d_mm[k, p] = d = c.clearance(mv[a], mv[b], W[k, a], W[k, b])
+            if d < 2 * margin:
+                found.hits.append((key[k], int(owner[k]), on_path, d, mv[a], mv[b], margin))
+        for k, p in zip(*np.nonzero(d_mf < limit + margin)):
+            a, b = c.mf[p]
+            d_mf[k, p] = d = c.clearance(mv[a], fx[b], W[k, a], None)
+            if d < limit[k, p] + margin:
+                found.hits.append((key[k], int(owner[k]), on_path, d, mv[a], fx[b], float(limit[k, p])))
+        slack_mm = np.min(d_mm - 2 * margin, axis=1, initial=np.inf)
+        slack_mf = np.min(np.where(np.isfinite(limit), d_mf - limit - margin, np.inf), axis=1, initial=np.inf)
+        return slack_mf, slack_mm
+
+
+def _check_paths(ev: _Evaluator, poses: list, touch: list, cube_code, found: _Found, first_clash: bool = False) -> int:
+    """Every path between consecutive poses, bisected from its ends: an interval whose ends' slacks
+    exceed what any point of the arm can move along it (the joints' steps times their levers) is
+    clear, every pair farther than its watch distance all along; the others are halved down to
+    the step that moves no point by more than the margin, and those samples are evaluated. The
+    result is that of checking every sample at that step (``first_clash``: it stops at a clash).
+    Returns the number of such samples."""
+    shapes = ev.c.shapes
+    q = np.array([p[0] for p in poses])
+    reach = np.abs(np.diff(q, axis=0)) @ shapes.levers  # (moves,): how far any point moves [mm]
+    n = np.maximum(1, np.ceil(reach / shapes.margin_mm)).astype(int)
+    moves = np.flatnonzero(n > 1)
+    if moves.size == 0:
+        return len(poses)
+    code = np.array([cube_code(touch[i][1]) for i in moves])
+    m = len(moves)
+    ends = np.concatenate([q[moves], q[moves + 1]])
+    keys = np.concatenate([moves + 0.25, moves + 0.75])  # pose i < the path from it < pose i + 1
+    s_mf, s_mm = ev(ends, np.concatenate([code, code]), keys, np.concatenate([moves, moves]), True, found)
+    move, lo, hi = np.arange(m), np.zeros(m, dtype=int), n[moves].copy()
+    lo_s = np.stack([s_mf[:m], s_mm[:m]], axis=1)
+    hi_s = np.stack([s_mf[m:], s_mm[m:]], axis=1)
+    while move.size:
+        if first_clash and any(h[3] < h[6] for h in found.hits):
             break
-        n = int(np.ceil(np.sum(np.abs(nxt[0] - q) * shapes.levers) / shapes.margin_mm))
-        if n > 1:
-            qs.append(q + (nxt[0] - q) * (np.arange(1, n) / n)[:, None])
-            owner.extend([i] * (n - 1))
-            on_path.extend([True] * (n - 1))
-    return np.concatenate(qs), np.array(owner), np.array(on_path), touch
+        i = moves[move]
+        span = reach[i] * (hi - lo) / n[i]
+        open_ = np.any(lo_s + hi_s <= span[:, None], axis=1) & (hi - lo > 1)
+        move, lo, hi, lo_s, hi_s, i = move[open_], lo[open_], hi[open_], lo_s[open_], hi_s[open_], i[open_]
+        if not move.size:
+            break
+        mid = (lo + hi) // 2
+        t = mid / n[i]
+        Q = q[i] + (q[i + 1] - q[i]) * t[:, None]
+        mf, mm = ev(Q, code[move], i + 0.25 + 0.5 * t, i, True, found)
+        mid_s = np.stack([mf, mm], axis=1)
+        move, lo, hi = np.concatenate([move, move]), np.concatenate([lo, mid]), np.concatenate([mid, hi])
+        lo_s, hi_s = np.concatenate([lo_s, mid_s]), np.concatenate([mid_s, hi_s])
+    return int(len(poses) + np.sum(n[moves] - 1))
 
 
-def check_path(cfg: CellConfig, poses: list[tuple[np.ndarray, str, int]], chunk: int = 4096) -> CollisionReport:
-    """Check every pose of ``poses`` and every path between consecutive ones (joint-space samples);
-    stops at the first clash, else reports the closest approach."""
+# One evaluator per configuration object (weak keys: the entry goes with the configuration): the
+# travel vias ask about single moves (station/cell/plan/vias.py), during planning and in the runner.
+_EVALUATORS: weakref.WeakKeyDictionary[CellConfig, tuple] = weakref.WeakKeyDictionary()
+
+
+def _evaluator(cfg: CellConfig) -> tuple[_Evaluator, tuple[str, ...]]:
+    hit = _EVALUATORS.get(cfg)
+    if hit is None:
+        shapes, point_cube = cell_shapes(cfg)
+        hit = _EVALUATORS[cfg] = (_Evaluator(cfg, _Checker(cfg, shapes)), point_cube)
+    return hit
+
+
+def moves_clear(cfg: CellConfig, qs: list[np.ndarray]) -> bool:
+    """Whether the travel through the joints ``qs`` (poses and the joint-space paths between them,
+    away from every measuring point: the full margin from every shape) is clear."""
+    ev, _ = _evaluator(cfg)
+    poses = [(np.asarray(q, dtype=float), f"via {k}: travel", -1) for k, q in enumerate(qs)]
+    touch = [(None, None)] * len(poses)
+    found = _Found()
+    ix = np.arange(len(poses))
+    ev(np.array([p[0] for p in poses]), np.full(len(poses), -1), ix.astype(float), ix, False, found)
+    if len(poses) > 1 and not any(h[3] < h[6] for h in found.hits):
+        _check_paths(ev, poses, touch, lambda g: -1, found, first_clash=True)
+    return not any(h[3] < h[6] for h in found.hits)
+
+
+def poses_clear(cfg: CellConfig, Q: np.ndarray, points: np.ndarray) -> list[str | None]:
+    """Per row of ``Q (n, g)``: None when the pose is clear, with the head touching measuring point
+    ``points[k]`` (its cube's tips may press; -1: none), else the clash named (pair and clearance)."""
+    ev, point_cube = _evaluator(cfg)
+    code = np.array([-1 if p < 0 else ev.codes.get(point_cube[p], -1) for p in points], dtype=int)
+    found = _Found()
+    ix = np.arange(len(Q))
+    ev(np.asarray(Q, dtype=float).reshape(len(ix), -1), code, ix.astype(float), ix, False, found)
+    out: list[str | None] = [None] * len(Q)
+    for _key, i, _on, d, a, b, limit in sorted(found.hits, key=lambda h: h[3]):
+        if d < limit and out[i] is None:
+            out[i] = f"{a.name} and {b.name} come within {d:.1f} mm of each other (the margin: {limit:g} mm)"
+    return out
+
+
+def check_path(cfg: CellConfig, poses: list[tuple[np.ndarray, str, int]]) -> CollisionReport:
+    """Check every pose of ``poses`` and every path between consecutive ones (joint space, at a step
+    that moves no point of the arm by more than the margin; :func:`_check_paths` skips the stretches
+    the distances at their ends prove clear): the first clash in the order of motion (None: clear),
+    the closest approach of the pairs held to the margin and of a probe's body to the cube it touches."""
     t0 = time.perf_counter()
-    shapes, point_cube = cell_shapes(cfg)
-    checker = _Checker(cfg, shapes)
-    Q, owner, on_path, touch = _samples(shapes, poses, point_cube)
-    clash = None
-    best: dict[bool, tuple] = {}  # a touch pair or not: (clearance, a, b, sample, limit)
-    mv, fx, margin = shapes.moving, shapes.fixed, shapes.margin_mm
-    for start in range(0, len(Q), chunk):
-        W = checker.placed(chain_frames(cfg.model, Q[start:start + chunk], setup=False))
-        near_mm, near_mf = checker.screen(W, 2 * margin)
-        for k in np.flatnonzero(near_mm.any(axis=1) | near_mf.any(axis=1)):
-            n = start + k
-            touched = touch[owner[n]][int(on_path[n])]
-            todo = [(mv[i], mv[j], W[k, i], W[k, j]) for i, j in checker.mm[near_mm[k]]]
-            todo += [(mv[i], fx[j], W[k, i], fx[j].local) for i, j in checker.mf[near_mf[k]]]
-            for a, b, Wa, Wb in todo:
-                limit = margin
-                if touched is not None and b.group == touched:
-                    if a.group == "tip":
-                        continue  # the tips press on the cube they touch
-                    if a.group == "head":
-                        limit = TOUCH_MARGIN_MM
-                d = checker.clearance(a, b, Wa, Wb)
-                key = limit != margin
-                if d < 2 * margin and (key not in best or d < best[key][0]):  # beyond: unmeasured
-                    best[key] = (d, a, b, n, limit)
-                if d < limit:
-                    clash = best[key]
-                    break
-            if clash is not None:
-                break
-        if clash is not None:
-            break
+    ev, point_cube = _evaluator(cfg)
+    shapes = ev.c.shapes
+    touch = _touch_status(poses, point_cube)
+
+    def cube_code(group: str | None) -> int:
+        return -1 if group is None else ev.codes.get(group, -1)
+
+    found = _Found()
+    if poses:
+        ix = np.arange(len(poses))
+        ev(np.array([p[0] for p in poses]), np.array([cube_code(t[0]) for t in touch]), ix.astype(float), ix,
+           False, found)
+    fine = _check_paths(ev, poses, touch, cube_code, found) if len(poses) > 1 else len(poses)
+    clashes = sorted((h for h in found.hits if h[3] < h[6]), key=lambda h: h[0])
 
     def named(hit) -> Clash | None:
         if hit is None:
             return None
-        d, a, b, n, limit = hit
-        return Clash(a.name, b.name, _where(poses, int(owner[n]), bool(on_path[n])), d, limit)
+        _key, i, on_path, d, a, b, limit = hit
+        return Clash(a.name, b.name, _where(poses, i, on_path), d, limit)
 
-    return CollisionReport(len(poses), len(Q), named(clash), shapes.margin_mm, named(best.get(False)),
-                           named(best.get(True)), time.perf_counter() - t0)
+    margin = shapes.margin_mm
+    normal = [h for h in found.hits if h[6] == margin]
+    at_touch = [h for h in found.hits if h[6] != margin]
+    return CollisionReport(len(poses), fine, named(clashes[0] if clashes else None), margin,
+                           named(min(normal, key=lambda h: h[3], default=None)),
+                           named(min(at_touch, key=lambda h: h[3], default=None)), time.perf_counter() - t0,
+                           evaluated=found.evaluated, clashing_moves=len({(h[1], h[2]) for h in clashes}))
+
+
+#: the labels of the via poses (station/cell/plan/vias.py)
+_VIA_NAMES = ("depart", "arrive", "arm upright", "turned upright", "first")
 
 
 def check_plan(cfg: CellConfig, plan: Plan, with_upload: bool = True) -> CollisionReport:
     """Refuse (ConfigError, exit 2) a plan any of whose poses or paths collides, naming the pair, the
-    step and the clearance; the report of a clear plan."""
-    report = check_path(cfg, plan_path(cfg, plan, with_upload))
+    step and the clearance; the report of a clear plan. Without python-fcl it refuses too (the
+    station does not skip the check)."""
+    _fcl()
+    poses = plan_path(cfg, plan, with_upload)
+    report = check_path(cfg, poses)
+    report = dataclasses.replace(report, vias=sum(1 for p in poses if p[1].endswith(_VIA_NAMES)))
     if report.clash is not None:
-        raise ConfigError(f"the plan collides: {report.clash.describe()}; nothing was moved. "
-                          f"Move the obstacle or the body, change [limits] or [plan], or state the robot's link "
-                          f"radii in its file's [collision] table (docs/collision.md)")
+        raise ConfigError(f"the plan collides: {report.clash.describe()} ({report.clashing_moves} poses or moves "
+                          f"collide in all); nothing was moved. Move the obstacle or the body, change [limits] or "
+                          f"[plan], or state the robot's link radii in its file's [collision] table "
+                          f"(docs/collision.md)")
     return report

@@ -25,6 +25,7 @@ from station.cell.config.cell_config import CellConfig
 from station.cell.limits.motion_guard import MotionGuard
 from station.cell.plan.measurement_plan import above_offset, approach_pose, retracted
 from station.cell.plan.steps import PlannedStep, StepKind
+from station.cell.plan.vias import travel_vias
 from station.cell.records.rundb import RunDB
 from station.cell.run.devices import CellController, ProbeHead, Snapshot
 from station.cell.run.events import DeviceSnapshot, Event, MeasurementRecorded, Notice, StepMeasured, StepStarted
@@ -50,6 +51,14 @@ class Checkpoint:
 class MoveJoints:
     q: np.ndarray | None  # None: retract to travel height from where the robot stands
     why: str
+
+
+@dataclass(frozen=True)
+class Travel(MoveJoints):
+    """Travel to ``q`` through the via poses from where the robot stands: an articulated arm's head
+    lifted to the travel height and lowered over the next target
+    (:func:`station.cell.plan.vias.travel_vias`, the ones the plan's collision check checked). A
+    move: an executor that knows no vias (a test's) moves straight to ``q``."""
 
 
 @dataclass(frozen=True)
@@ -281,7 +290,8 @@ def _touch(cfg: CellConfig, visit: _Visit, direction: int, cycle: int,
     r = above_offset(cfg, cycle, visit.remeasured)
     yield Checkpoint()
     yield MoveJoints(None, "retract to travel height")
-    yield MoveJoints(approach_pose(cfg, q, direction, cycle, visit.remeasured), "approach")
+    approach = approach_pose(cfg, q, direction, cycle, visit.remeasured)
+    yield Travel(approach, "approach")
     if pose_cmd is None or cartesian is None:
         yield MoveJoints(q + r, "above the point")
         yield MoveJoints(q, "touch")
@@ -550,6 +560,12 @@ class Runner:
             self._last_q = q
             self._report_devices(q)
             return q
+        if isinstance(msg, Travel):  # the vias depend on where the robot stands: the last command, else read
+            here = self._last_q if self._last_q is not None else np.asarray(self.controller.read_joints(), dtype=float)
+            target = np.asarray(msg.q, dtype=float)
+            for q, name in travel_vias(cfg, here, target):
+                self._do(MoveJoints(q, f"{msg.why}: {name}"), index)
+            return self._do(MoveJoints(target, msg.why), index)
         if isinstance(msg, MoveJoints):
             if msg.q is None:  # retract: lift the quill to travel height from where the robot stands
                 q = retracted(cfg, np.asarray(self.controller.read_joints(), dtype=float))

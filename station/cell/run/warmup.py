@@ -25,7 +25,8 @@ from station.cell.plan.steps import PlannedStep
 from station.cell.records.rundb import RunDB
 from station.cell.run.events import Event, Notice, PhaseChanged
 from station.cell.run.recentring import head_as_commanded
-from station.cell.run.runner import Checkpoint, MoveJoints, Procedure, Runner, TouchInserted, approach_and_read
+from station.cell.run.runner import (Checkpoint, MoveJoints, Procedure, Runner, TouchInserted, Travel,
+                                     approach_and_read)
 from station.core.kinematics.transforms import invert
 
 
@@ -60,7 +61,7 @@ def _cycle(cfg: CellConfig, program: Sequence[np.ndarray], reference: PlannedSte
     yield Checkpoint()
     yield MoveJoints(None, "warm-up: retract to travel height")
     for q in program:
-        yield MoveJoints(q, "warm-up motion")
+        yield Travel(q, "warm-up motion")  # lifted over the body between its targets (issue 40)
     reading = yield from approach_and_read(cfg, reference.q, reference.direction)
     yield TouchInserted(f"warm-up: {reference.label}")  # a touch beyond the plan: counted in the run's progress
     return reading

@@ -335,6 +335,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     pre = premotion_check(cfg)  # what 'calibrate' refuses before moving, refused here the same way (exit 2)
     design = pre.design
     locating = [] if pre.locating is None else [f"  locating: {pre.locating.describe()}"]  # the run's first motions
+    collision = [] if pre.collision is None else [f"  {ln}" for ln in pre.collision.lines()]  # issue 40
     p = preview(cfg, with_upload=not args.no_upload)
     head = check_head(cfg.head)  # the probe head's arrangement and sensitivity (docs/probe-head.md)
     warnings = plan_warnings(p, cfg)
@@ -347,14 +348,15 @@ def cmd_plan(args: argparse.Namespace) -> int:
             "max_interpolation_um": design.limit_um, "designed": not cfg.correction.explicit, "grid_point": GRID_POINT}
         print(json.dumps({"outcome": "SUCCESS", "exit_code": 0, **p.to_json(), "head": head.to_json(),
                           "warnings": warnings, "correction": correction,
-                          "locating": None if pre.locating is None else pre.locating.describe()}))
+                          "locating": None if pre.locating is None else pre.locating.describe(),
+                          "collision": None if pre.collision is None else pre.collision.to_json()}))
     else:
         lines = describe(p)
         at = next((i + 1 for i, ln in enumerate(lines) if ln.lstrip().startswith("predicted accuracy")), len(lines))
         table = [] if design is None else [
             f"  correction table ({'configured' if cfg.correction.explicit else 'designed by the station'}): "
             f"{design.describe()}", f"  the grid's x, y, z and yaw are {GRID_POINT}"]
-        print("\n".join([*lines[:at], *table, *locating, *(f"  warning: {w}" for w in warnings), *lines[at:],
+        print("\n".join([*lines[:at], *table, *locating, *collision, *(f"  warning: {w}" for w in warnings), *lines[at:],
                           *head.lines()]))
     return 0
 
