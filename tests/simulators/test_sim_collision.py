@@ -187,11 +187,20 @@ def test_a_plan_the_stations_check_clears_is_not_refused():
 
 
 @pytest.mark.parametrize("cell", [PUMA, SCARA], ids=["puma560_obstacles", "scara600_column"])
-def test_todays_plan_collides_in_the_simulators_check(cell):
-    """Every measuring pose of today's plan is clear of everything, but the joint-space paths
-    between them run into the cell's obstacles: the check the simulated controller runs refuses it."""
+def test_the_plan_without_its_vias_collides_in_the_simulators_check(cell, monkeypatch):
+    """Every measuring pose of the plan is clear of everything, but without its via poses (the plan
+    before issue 40: direct joint moves between the measurements) the joint-space paths run into the
+    cell's obstacles: the check the simulated controller runs refuses it. With the vias, it clears
+    every move (the station's own check and the simulator's agree)."""
+    import station.cell.plan.vias as vias
+
     cfg = load_config(cell)
+    cc = CellCollision.from_config(cfg)
+    planned = _commanded(cfg)
+    assert all(cc.check_move(planned[i - 1], planned[i]) is None for i in range(1, len(planned)))
+    monkeypatch.setattr(vias, "travel_vias", lambda *a, **k: [])
     poses = _commanded(cfg)
+    assert len(poses) < len(planned)
     cc = CellCollision.from_config(cfg)
     assert cc.check_joints(np.array(poses)) is None  # no pose itself collides
     names = {f"obstacle {o.name!r}" for o in cfg.obstacles}
@@ -245,7 +254,6 @@ def test_a_clear_cell_rehearses_to_success_with_the_check_on(tmp_path, capsys, m
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(reason="needs issue 40's via poses (branch h40a)", strict=False)
 @pytest.mark.parametrize("cell", [PUMA, SCARA], ids=["puma560_obstacles", "scara600_column"])
 def test_the_example_rehearses_to_success_without_a_collision(cell, tmp_path, capsys, monkeypatch):
     code, summary, controller = _rehearse(cell, tmp_path, capsys, monkeypatch)

@@ -2,8 +2,10 @@
 measuring point straight up to a travel height, moves there in joint space, and comes straight down
 over the next, so that no joint move between two targets drags the head through a cube.
 
-A SCARA needs none: its quill already rises to the travel height before every lateral move
-(:func:`station.cell.plan.measurement_plan.retracted`). An articulated arm's retract only backs the
+A SCARA needs no lift: its quill already rises to the travel height before every lateral move
+(:func:`station.cell.plan.measurement_plan.retracted`). Where an obstacle stands taller than that
+height (a column in the workspace), its lateral move goes around it: one arm joint first, then the
+other (:func:`_scara_around`). An articulated arm's retract only backs the
 head off its corner by ``[plan] clearance_mm``; a joint-space move from there to the next corner
 passed the head through the neighbouring cubes (the PUMA 560 example: 195 moves, up to 87 mm deep).
 
@@ -174,16 +176,46 @@ def _staged(cfg: CellConfig, a: np.ndarray, b: np.ndarray) -> list[tuple[np.ndar
                            f"commanded. Move the obstacle or the body, or leave out that arm configuration ([limits])")
 
 
+def _scara_around(cfg: CellConfig, a: np.ndarray, b: np.ndarray) -> list[tuple[np.ndarray, str]]:
+    """The vias of a SCARA's lateral move at the travel height from ``a`` to ``b``: none when the
+    direct joint move is clear, else the first clear of joint 1 first, joint 2 first, or the swing
+    with the elbow at another angle (a fixed order, so the plan and the runner choose the same).
+    Raises :class:`UnreachableError` when neither is clear."""
+    from station.cell.plan.collision import check_path, moves_clear
+
+    if np.allclose(a, b, atol=1e-9, rtol=0) or moves_clear(cfg, [a, b]):
+        return []
+    for j in (0, 1):
+        v = a.copy()
+        v[j] = b[j]
+        if moves_clear(cfg, [a, v, b]):
+            return [(v, f"joint {j + 1} first")]
+    # the reach changed for the swing: the elbow (joint 2) folded or opened to another angle, joint 1
+    # turned there, the elbow back (the head passes inside or outside the obstacle), nearest first
+    lo, hi = cfg.soft_limits[1] + np.array([1.0, -1.0]) * np.deg2rad(3.0)
+    for e in sorted(np.arange(lo, hi + 1e-9, np.deg2rad(10.0)), key=lambda x: abs(x - a[1])):
+        v1, v2 = a.copy(), b.copy()
+        v1[1] = v2[1] = e
+        if moves_clear(cfg, [a, v1, v2, b]):
+            return [(v1, "elbow to swing"), (v2, "swung")]
+    clash = check_path(cfg, [(a, "travel", -1), (b, "travel", -1)]).clash
+    why = "" if clash is None else f" (straight: {clash.describe()})"
+    raise UnreachableError(f"no collision-free way found at the travel height from joints "
+                           f"{np.round(np.degrees(a), 1).tolist()} to {np.round(np.degrees(b), 1).tolist()} "
+                           f"(straight, joint 1 first, joint 2 first, or the elbow at another angle every 10°){why}; the motion was not commanded. Move "
+                           f"the obstacle or the body, or leave out that arm configuration ([limits])")
+
+
 def travel_vias(cfg: CellConfig, q_from: np.ndarray, q_to: np.ndarray,
                 lifts: tuple[np.ndarray | None, np.ndarray | None] | None = None) -> list[tuple[np.ndarray, str]]:
     """The via poses (joints, what it is) of the move from ``q_from`` to ``q_to`` (both the head's
-    poses off a measuring point: a retract and the next approach): none for a SCARA or within one
-    corner, else depart, the stages of a long move (:func:`_staged`) and arrive. Raises
+    poses off a measuring point: a retract and the next approach): for a SCARA those around an
+    obstacle (:func:`_scara_around`), none within one corner, else depart, the stages of a long move (:func:`_staged`) and arrive. Raises
     :class:`UnreachableError` when a via is out of reach or a long move finds no clear way.
     ``lifts``: :func:`lifted` of both, when known (the plan computes them all at once)."""
-    if cfg.model.is_scara:
-        return []
     q_from, q_to = np.asarray(q_from, dtype=float), np.asarray(q_to, dtype=float)
+    if cfg.model.is_scara:
+        return _scara_around(cfg, q_from, q_to)
     if float(np.linalg.norm(_contact_mm(cfg, q_from) - _contact_mm(cfg, q_to))) <= 2 * cfg.plan.clearance_mm:
         return []
     ends = []
