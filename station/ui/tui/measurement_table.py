@@ -22,12 +22,14 @@ _MIN_NOTE = 12  # narrower than this, a note says nothing: the table scrolls sid
 
 
 def shorten_middle(text: str, width: int) -> str:
-    """``text`` in at most ``width`` characters: its start and its end with "…" between."""
+    """``text`` in at most ``width`` characters: its start and its end with "…" between, two thirds
+    of the room to the start (it names what refused the reading: "probe 4 over range" stays whole
+    at 80 columns) and one third to the end (the figure that decides)."""
     if len(text) <= width:
         return text
     if width <= 1:
         return "…"[:max(width, 0)]
-    head = width // 2  # the start gets the odd character: it names what refused the reading
+    head = (2 * (width - 1) + 2) // 3
     return text[:head] + "…" + text[len(text) - (width - 1 - head):]
 
 
