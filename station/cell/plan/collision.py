@@ -205,15 +205,22 @@ def _body_shapes(cfg: CellConfig) -> tuple[list[Shape], tuple[str, ...]]:
     e = cfg.cube_edge_mm
     centre = np.eye(4)
     centre[:3, 3] = [e / 2, e / 2, -e / 2]  # the cube lies in x, y >= 0, z <= 0 of its corner frame
-    cubes: dict[tuple, tuple[np.ndarray, str]] = {}
+    # the corners of one cube give its centre only to within the CMM's and the file's rounding (init's
+    # template: 0.1 mm apart; an edge stated 0.5 mm off: 0.7 mm), so a centre within a quarter edge of
+    # a known one is that cube (two cubes' centres are at least an edge apart, or they overlap); a
+    # rounded key split one cube in two, and the touch of one corner then clashed with the "other"
+    tol = 0.25 * e
+    cubes: list[tuple[np.ndarray, str]] = []
     of_point = []
     for pid, M in zip(cfg.point_ids, cfg.body_points):
         C = M @ centre
-        key = tuple(np.round(C[:3, 3], 1))
-        cubes.setdefault(key, (C, pid))
-        of_point.append(f"cube:{list(cubes).index(key)}")
+        k = next((i for i, (D, _) in enumerate(cubes) if np.linalg.norm(D[:3, 3] - C[:3, 3]) <= tol), None)
+        if k is None:
+            cubes.append((C, pid))
+            k = len(cubes) - 1
+        of_point.append(f"cube:{k}")
     out = []
-    for k, (C, pid) in enumerate(cubes.values()):
+    for k, (C, pid) in enumerate(cubes):
         out.append(Shape(f"cube of {pid}", "box", (e, e, e), C, -2, f"cube:{k}"))
         bottom = C[2, 3] - e / 2
         if bottom > 1e-6:  # a pillar from z = 0 to the cube's underside
