@@ -52,6 +52,7 @@ def test_the_text_table_shows_the_forecast_and_due_from_it(drifting, capsys):
     assert main(["fleet", "--url", drifting.dashboard_url, "--as-of", as_of]) == 0
     out = capsys.readouterr().out
     assert "drift reaches tolerance [95 %]" in out.splitlines()[0]
+    assert "drift µm" in out.splitlines()[0] and "trend µm/30 d" in out.splitlines()[0]  # columns say their units
     line = _line(out, "SR-F")
     assert f"{_day(f.crossing)} [{_day(f.earliest)} … {_day(f.latest)}]" in line
     assert f"{_day(f.earliest)} (forecast)" in line and line.rstrip().endswith("ok")

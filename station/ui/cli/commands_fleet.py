@@ -143,7 +143,7 @@ def _forecast(r: RobotStatus) -> str:
 def _print_fleet(robots: list[RobotStatus]) -> None:
     """The fleet table as text: the dashboard's columns, its drift forecast included."""
     print(f"{'robot':<24} {'cell':<22} {'station':<14} {'calibrated':<11} {'gain':>6} {'RMS after':>10} "
-          f"{'AP max':>8} {'recheck':<20} {'drift':>7} {'trend/30d':>9} {'drift reaches tolerance [95 %]':<36} "
+          f"{'AP max':>8} {'recheck':<20} {'drift µm':>9} {'trend µm/30 d':>13} {'drift reaches tolerance [95 %]':<36} "
           f"{'due':<21} state")
     for r in robots:
         rec = f"{(r.last_recheck_utc or '')[:10]} {r.last_recheck_verdict or ''}".strip() or "—"
@@ -151,7 +151,7 @@ def _print_fleet(robots: list[RobotStatus]) -> None:
         print(f"{r.robot_key[:24]:<24} {r.cell[:22]:<22} {r.station[:14]:<14} "
               f"{(r.last_calibration_utc or '—')[:10]:<11} {_fmt(r.gain, 1, '×'):>6} "
               f"{_fmt(r.rms_after_um, 1, ' µm'):>10} {_fmt(r.ap_max_um, 1, ' µm'):>8} {rec[:20]:<20} "
-              f"{_fmt(r.drift_rms_um, 1):>7} {_fmt(r.drift_trend_um_per_30d, 2):>9} {_forecast(r):<36} {due:<21} "
+              f"{_fmt(r.drift_rms_um, 1):>9} {_fmt(r.drift_trend_um_per_30d, 2):>13} {_forecast(r):<36} {due:<21} "
               f"{r.state}"
               + (f" (simulated run {r.last_simulated_utc[:10]}, not counted)" if r.last_simulated_utc else "")
               + (f" ({r.damaged})" if r.damaged else ""))
