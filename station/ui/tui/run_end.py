@@ -77,6 +77,8 @@ class RunEnd(SideActions):
                 panel.update(summary_markup(self.summary, self.step_index, self.cell, width, self.phase))
                 if width is None:  # not laid out yet: once it is
                     self.call_after_refresh(self._show_result)
+                else:  # the frame says "more" after the text laid out at its width, not before
+                    self.call_after_refresh(self._mark_more)
 
     def _mark_more(self) -> None:
         # what does not fit says so on the frame (the first rows hold what matters)
