@@ -1,8 +1,8 @@
 """Sending a run's Digital Calibration Certificate (as ``station export-dcc`` recorded it in the run
 database, :mod:`station.cell.records.certificates`) to the fleet store, after the run itself.
 
-A certificate goes with the run's latest publication (its UUID in the queue) once that is in the
-store; until then, or while the store is unreachable, it stays marked unsent and ``station
+A certificate goes with the publication of the ending it was made from (its UUID in the queue)
+once that is in the store; until then, or while the store is unreachable, it stays marked unsent and ``station
 sync`` sends it. Never raises for the network or the store.
 """
 
@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from station.cell.records.certificates import ensure_certificate_table
 from station.cell.records.run_records import utc_now
 
 __all__ = ["CertificateSync", "send_certificates"]
@@ -31,8 +32,11 @@ class CertificateSync:
         return self.failed == 0
 
 
+# the publication of the ending the certificate was made from, once that is in the store (NULL
+# until then: the certificate waits); a row from before summary_utc: the run's latest ending
 _TODO = """SELECT c.run_id, c.sha256, c.schema_version, c.xml,
-                  (SELECT o.run_uuid FROM fleet_outbox o WHERE o.run_id = c.run_id AND o.sent_utc IS NOT NULL
+                  (SELECT CASE WHEN o.sent_utc IS NOT NULL THEN o.run_uuid END FROM fleet_outbox o
+                    WHERE o.run_id = c.run_id AND (c.summary_utc IS NULL OR o.summary_utc = c.summary_utc)
                     ORDER BY o.summary_utc DESC LIMIT 1)
              FROM certificates c WHERE c.fleet_sent_utc IS NULL {only} ORDER BY c.run_id"""
 
@@ -43,6 +47,7 @@ def _todo(db_path: str | Path, only_run: int | None) -> list[tuple[Any, ...]]:
         tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
         if not {"certificates", "fleet_outbox"} <= tables:
             return []
+        ensure_certificate_table(conn)  # a database from before summary_utc
         only = "" if only_run is None else "AND c.run_id = ?"
         return list(conn.execute(_TODO.format(only=only), () if only_run is None else (only_run,)))
     finally:

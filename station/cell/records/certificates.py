@@ -6,6 +6,11 @@ A certificate is not rebuilt where it is offered: it is made from the issuer fil
 customer, approver), which no cell file holds, and from the run's whole record, which the fleet
 store does not keep. One certificate per run: exporting again (another issuer or operator)
 replaces it, and the new one is sent to the fleet again.
+
+A certificate certifies the ending it was made from: ``summary_utc`` is the stored summary's time
+when it was written, and it goes to the fleet with that ending's publication. A run resumed after
+the export ends again as a new publication (a new UUID), which carries no certificate until one is
+exported for it; the earlier one stays with the ending it describes.
 """
 
 from __future__ import annotations
@@ -17,7 +22,8 @@ from pathlib import Path
 
 from station.cell.records.run_records import utc_now
 
-__all__ = ["CERTIFICATE_TABLE", "StoredCertificate", "record_certificate", "stored_certificate"]
+__all__ = ["CERTIFICATE_TABLE", "StoredCertificate", "ensure_certificate_table", "record_certificate",
+           "stored_certificate"]
 
 CERTIFICATE_TABLE = """CREATE TABLE IF NOT EXISTS certificates (
     run_id          INTEGER PRIMARY KEY REFERENCES runs(id) ON DELETE CASCADE,
@@ -25,7 +31,8 @@ CERTIFICATE_TABLE = """CREATE TABLE IF NOT EXISTS certificates (
     sha256          TEXT NOT NULL,          -- of xml, hex
     xml             BLOB NOT NULL,          -- the certificate as written, byte for byte
     written_utc     TEXT NOT NULL,
-    fleet_sent_utc  TEXT                    -- NULL: not yet in the fleet store
+    fleet_sent_utc  TEXT,                   -- NULL: not yet in the fleet store
+    summary_utc     TEXT                    -- the ending it certifies (results.t_utc of 'summary')
 )"""
 
 
@@ -46,20 +53,33 @@ def _open(db_path: str | Path) -> sqlite3.Connection:
     return conn
 
 
+def ensure_certificate_table(conn: sqlite3.Connection) -> None:
+    """The table, with ``summary_utc`` added to one written before it existed (such a row is sent
+    with the run's latest ending, as it was then)."""
+    conn.execute(CERTIFICATE_TABLE)
+    columns = {r[1] for r in conn.execute("PRAGMA table_info(certificates)")}
+    if "summary_utc" not in columns:
+        conn.execute("ALTER TABLE certificates ADD COLUMN summary_utc TEXT")
+
+
 def record_certificate(db_path: str | Path, run_id: int, xml: bytes, schema_version: str) -> StoredCertificate:
-    """Keep ``xml`` as run ``run_id``'s certificate (replacing an earlier one; the same bytes
-    again change nothing, so a repeated export is not sent twice)."""
+    """Keep ``xml`` as run ``run_id``'s certificate, of the run's ending stored now (replacing an
+    earlier one; the same bytes for the same ending again change nothing, so a repeated export is
+    not sent twice)."""
     digest = hashlib.sha256(xml).hexdigest()
     conn = _open(db_path)
     try:
-        conn.execute(CERTIFICATE_TABLE)
+        ensure_certificate_table(conn)
         with conn:
             conn.execute("BEGIN IMMEDIATE")
-            old = conn.execute("SELECT sha256 FROM certificates WHERE run_id = ?", (run_id,)).fetchone()
-            if old is None or old[0] != digest:
+            ending = conn.execute("SELECT t_utc FROM results WHERE run_id = ? AND key = 'summary'",
+                                  (run_id,)).fetchone()
+            summary_utc = None if ending is None else str(ending[0])
+            old = conn.execute("SELECT sha256, summary_utc FROM certificates WHERE run_id = ?", (run_id,)).fetchone()
+            if old is None or tuple(old) != (digest, summary_utc):
                 conn.execute("INSERT OR REPLACE INTO certificates (run_id, schema_version, sha256, xml, written_utc, "
-                             "fleet_sent_utc) VALUES (?, ?, ?, ?, ?, NULL)",
-                             (run_id, schema_version, digest, xml, utc_now()))
+                             "fleet_sent_utc, summary_utc) VALUES (?, ?, ?, ?, ?, NULL, ?)",
+                             (run_id, schema_version, digest, xml, utc_now(), summary_utc))
     finally:
         conn.close()
     found = stored_certificate(db_path, run_id)
