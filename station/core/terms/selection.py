@@ -22,7 +22,9 @@ model, :data:`N_BOOT` seeded resamples of the poses; issue 38: a rank test count
 missed a term that cuts the error of the few poses it loads) gives p < :data:`ALPHA` divided by the
 number of evidence tiers times the number of candidates of that step (Bonferroni: picking among
 many, or going on to the next tier after a miss, would otherwise keep a term by luck); compliance,
-tried alone and first on physics, is held to :data:`ALPHA_PHYSICS` (family-wise 0.05 in all) on the σ-normalised squared held-out residuals of all the pose's rows (with pose data they hold the orientation, where wrist errors show first), their
+tried alone and first on physics, is held to :data:`ALPHA_PHYSICS` (family-wise 0.05 in all), and
+so is the fitted torque shape (``mass_shape``, :mod:`station.core.terms.mass_shape`) that follows it
+where the robot file gives no masses, on the σ-normalised squared held-out residuals of all the pose's rows (with pose data they hold the orientation, where wrist errors show first), their
 mean is lower than the current model's, the CV position RMS (what the table reports) is below
 the geometric model's, and no compliance came out below zero by more than :data:`IMPLAUSIBLE_SIGMAS`
 σ (physically impossible: the joint would give against gravity). The step keeps the passing candidate with the lowest normalised CV error;
@@ -197,6 +199,8 @@ def all_terms_basis(model: RobotModel, data: MeasurementSet, rows: TermRows | No
     geometry ``params`` (the geometric fit's: the identified model that will carry the terms, whose
     tool may lie far from the robot file's; default the nominal)."""
     fams = [f.replace("cyclic.", "cyclic2.") for f in available_families(model, rows)]
+    if spec.gravity.lumped:  # no masses in the robot file: the torque shape may be fitted (issue 38)
+        fams.insert(fams.index("compliance") + 1, "mass_shape")
     return term_basis(model, data.joints, TermSpec(tuple(fams), spec.gravity, spec.ratios), rows, params=params)
 
 
@@ -299,7 +303,7 @@ def expand_families(model: RobotModel, names: tuple[str, ...], rows: TermRows | 
                               "same in every row), so the lost motion merges with the joint zeros and cannot be "
                               "fitted; measure the poses from both sides, or leave backlash out")
         else:
-            known = set(available_families(model, rows)) | {"backlash"}
+            known = set(available_families(model, rows)) | {"backlash", "mass_shape"}
             known |= {f.replace("cyclic.", "cyclic2.") for f in known if f.startswith("cyclic.")}
             if n not in known:
                 raise ConfigError(f"unknown error term {n!r}; terms are geometric, auto, compliance, cyclic, cyclic2, "
@@ -333,14 +337,16 @@ def select_model(model: RobotModel, data: MeasurementSet, rows: TermRows | None 
             table.append(CandidateScore(fams, fit.n_parameters, _rms(e), 100 * (_rms(e) - geo_rms) / geo_rms,
                                         _paired_p(cv_errors(fit, folds, weighted=True), base_w), (), True))
         return Selection(fams, fit, geo, tuple(table), cv_name, alpha, forced=True)
-    tiers = candidate_tiers(model, data.joints, rows, spec.ratios)
+    tiers = candidate_tiers(model, data.joints, rows, spec.ratios, lumped=spec.gravity.lumped)
+    physics = (("compliance",), ("mass_shape",))
     current: tuple[str, ...] = ()
     cur_fit, cur_w = base_fit, base_w
     tier = 0
     for _ in range(max_steps):
         if tier >= len(tiers):
             break
-        cands = [f for f in tiers[tier] if f not in current]
+        # the fitted torque shape refines a compliance already kept (alone, it is compliance and more)
+        cands = [f for f in tiers[tier] if f not in current and (f != "mass_shape" or "compliance" in current)]
         if any(f.startswith("cyclic.") for f in tiers[tier]):
             cands += [f"cyclic2.{f.split('.', 1)[1]}" for f in current if f.startswith("cyclic.")]
         scored = []
@@ -354,8 +360,8 @@ def select_model(model: RobotModel, data: MeasurementSet, rows: TermRows | None 
                 continue  # the family added nothing the data can tell from what is there
             e, ew = cv_errors(fit, folds), cv_errors(fit, folds, weighted=True)
             scored.append((fams, fit, e, ew, _paired_p(ew, cur_w), _plausible(fit)))
-        evidence = sum(1 for t in tiers if t != ("compliance",))
-        level = (alpha_physics if tiers[tier] == ("compliance",) else
+        evidence = sum(1 for t in tiers if t not in physics)
+        level = (alpha_physics if tiers[tier] in physics else
                  alpha / (max(1, evidence) * max(1, len(scored))))  # Bonferroni over the tiers and candidates
         passing = [sc for sc in scored
                    if sc[4] < level and sc[5] and np.mean(sc[3]) < np.mean(cur_w) and _rms(sc[2]) < geo_rms]
