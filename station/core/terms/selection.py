@@ -50,6 +50,7 @@ from station.core.measurement.measurements import MeasurementSet
 from station.core.terms.error_model import TermBasis, TermRows, TermSpec, available_families, term_basis
 from station.core.terms.fit import TermFit, fit_terms
 from station.core.terms.physics_order import candidate_tiers
+from station.core.terms.term_size import RobotClass, TermSize, robot_class, term_sizes
 from station.core.units import UM
 from station.errors import ConfigError, IdentificationError
 
@@ -119,12 +120,24 @@ class Selection:
     alpha: float
     forced: bool = False
     alpha_physics: float = ALPHA_PHYSICS
+    #: the payload the robot file gives [kg] (None: none), for the robot's class (term_size)
+    payload_kg: float | None = None
+
+    @property
+    def robot_class(self) -> RobotClass:
+        return robot_class(self.fit.model, self.payload_kg)
+
+    @property
+    def sizes(self) -> tuple[TermSize, ...]:
+        """The physical size of every kept joint term with σ, judged against the robot's class
+        (:mod:`station.core.terms.term_size`)."""
+        return term_sizes(self.fit, self.robot_class) if self.fit.basis.size else ()
 
     @property
     def summary(self) -> str:
         if self.forced:
             return ("model forced: geometric" if not self.chosen else
-                    f"model forced: geometric + {' + '.join(self.chosen)}")
+                    f"model forced: geometric + {' + '.join(self.chosen)}" + self.sizes_text)
         if not self.chosen:
             near = self.closest
             why = "" if near is None else (
@@ -135,7 +148,17 @@ class Selection:
         geo = self.table[0].cv_rms_mm
         best = next(r for r in self.table if r.families == self.chosen and r.kept).cv_rms_mm
         return (f"kept {' + '.join(self.chosen)}: {self.cv} RMS {best / UM:.1f} µm against the geometric "
-                f"{geo / UM:.1f} µm ({100 * (best - geo) / geo:+.0f} %)")
+                f"{geo / UM:.1f} µm ({100 * (best - geo) / geo:+.0f} %)" + self.sizes_text)
+
+    @property
+    def sizes_text(self) -> str:
+        """'; sizes (…): joint 2 gravity sag: up to …' of the kept joint terms ('' without)."""
+        sizes = self.sizes
+        if not sizes:
+            return ""
+        rc = self.robot_class
+        return (f"; sizes ({rc.name} arm, reach {rc.reach_mm / 1000:.2f} m): "
+                + "; ".join(z.describe() for z in sizes))
 
     @property
     def step_candidates(self) -> int:
@@ -167,6 +190,7 @@ class Selection:
                         "their mean lower, the CV position RMS below the geometric model's, and no compliance "
                         f"below zero by more than {IMPLAUSIBLE_SIGMAS:g} σ",
                 "table": [r.to_dict() for r in self.table], "terms": self.fit.terms_dict(),
+                "robot_class": self.robot_class.to_dict(), "term_sizes": [z.to_dict() for z in self.sizes],
                 "dropped_terms": list(self.fit.dropped),
                 "identifiability": [t.to_dict() for t in self.fit.identifiability],
                 "units": {"cv_rms_um": "µm", "change_pct": "%", "value": "as each term's unit",
@@ -320,6 +344,7 @@ def select_model(model: RobotModel, data: MeasurementSet, rows: TermRows | None 
     the geometric fit of the same data (default: :func:`identify` with its defaults); ``rows``: per
     row time and approach signs; ``spec``: gravity and gear ratios."""
     spec = TermSpec() if spec is None else spec
+    payload = float(spec.gravity.payload_kg) or None
     if data.kind == "distance":
         raise ConfigError("model selection needs pose or position data; distances are fitted geometric only")
     geo = identify(model, data) if geometric is None else geometric
@@ -336,7 +361,7 @@ def select_model(model: RobotModel, data: MeasurementSet, rows: TermRows | None 
         if fams:
             table.append(CandidateScore(fams, fit.n_parameters, _rms(e), 100 * (_rms(e) - geo_rms) / geo_rms,
                                         _paired_p(cv_errors(fit, folds, weighted=True), base_w), (), True))
-        return Selection(fams, fit, geo, tuple(table), cv_name, alpha, forced=True)
+        return Selection(fams, fit, geo, tuple(table), cv_name, alpha, forced=True, payload_kg=payload)
     tiers = candidate_tiers(model, data.joints, rows, spec.ratios, lumped=spec.gravity.lumped)
     physics = (("compliance",), ("mass_shape",))
     current: tuple[str, ...] = ()
@@ -375,7 +400,8 @@ def select_model(model: RobotModel, data: MeasurementSet, rows: TermRows | None 
         table = [CandidateScore(r.families, r.n_parameters, r.cv_rms_mm, r.change_pct, r.p_value, r.base,
                                 r.kept or r.families == fams, r.level, r.plausible) for r in table]
         current, cur_fit, cur_w = fams, fit, ew
-    return Selection(current, cur_fit, geo, tuple(table), cv_name, alpha, alpha_physics=alpha_physics)
+    return Selection(current, cur_fit, geo, tuple(table), cv_name, alpha, alpha_physics=alpha_physics,
+                     payload_kg=payload)
 
 
 @dataclass(frozen=True)
