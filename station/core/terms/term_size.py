@@ -140,8 +140,8 @@ def term_sizes(fit: TermFit, rclass: RobotClass) -> tuple[TermSize, ...]:
         kind = _kind(n)
         if kind is None:
             continue  # drift moves the instrument's point, not a joint
-        for j in np.nonzero(np.any(B[:, :, k] != 0.0, axis=0))[0]:
-            groups.setdefault((int(j), kind), []).append(k)
+        for jj in np.nonzero(np.any(B[:, :, k] != 0.0, axis=0))[0].tolist():
+            groups.setdefault((int(jj), kind), []).append(k)
     out = []
     for (j, kind), cols in sorted(groups.items()):
         b = B[:, j, cols]  # (n, c) joint change per unit term value
