@@ -70,3 +70,29 @@ def test_a_gear_error_no_reducer_has_is_implausible():
     model, data = _data(JointErrors(cyclic=((0.0, 0.0), (small, 0.0), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))))
     sel = select_model(model, data, geometric=identify(model, data), force=("cyclic.q2",))
     assert all(z.plausible for z in sel.sizes) and "IMPLAUSIBLE" not in sel.summary
+
+
+def test_identify_json_gives_the_class_and_the_sizes_with_units(tmp_path, capsys):
+    import json
+
+    from station.core.terms.error_model import apply_terms, term_basis
+    from station.io.datafile import write_csv
+    from station.io.robot_files import load_robot
+    from station.ui.cli.main import main
+
+    arm = load_robot("irb2600")
+    rng = np.random.default_rng(38)
+    q = spread_joints(arm, 60, rng)
+    basis = term_basis(arm, q, TermSpec(("compliance",)))
+    pts = apply_terms(arm, q, arm.nominal, basis, np.array([3e-5, 4e-5]))[:, :3, 3]
+    d = MeasurementSet("position", q, pts, np.array([0.015] * 3))
+    f = tmp_path / "cal.csv"
+    write_csv(f, [f"q{i} [deg]" for i in range(1, 7)] + ["x [mm]", "y [mm]", "z [mm]"],
+              np.column_stack([np.degrees(q), add_noise(d, pts, rng)]))
+    assert main(["identify", str(f), "--robot", "irb2600", "--model", "compliance", "--json"]) == 0
+    em = json.loads(capsys.readouterr().out)["error_model"]
+    assert em["robot_class"]["class"] == "medium" and em["robot_class"]["units"]["reach_mm"] == "mm"
+    sizes = {z["joint"]: z for z in em["term_sizes"]}
+    assert set(sizes) == {2, 3} and all(z["kind"] == "gravity sag" and z["plausible"] for z in sizes.values())
+    assert all(z["sigma_arcsec"] > 0 and z["units"]["tool_mm"] == "mm" for z in sizes.values())
+    assert "sizes (medium arm" in em["summary"]
