@@ -24,8 +24,8 @@ The limits and why (docs/error-terms.md, "Term sizes"):
   10⁶–5·10⁷ N·m/rad.
 
 A size is implausible when it exceeds its limit by more than 2 σ. The robot's class comes from the
-robot file: its reach (the sum of its link lengths from joint 2 to the tool, an upper bound of the
-reach) and its payload where its ``[gravity]`` gives one.
+robot file: its reach (the tool point's largest distance from joint 1's axis over the joint ranges)
+and its payload where its ``[gravity]`` gives one.
 """
 
 from __future__ import annotations
@@ -55,8 +55,8 @@ _ARCSEC = float(np.radians(1.0 / 3600.0))
 
 @dataclass(frozen=True)
 class RobotClass:
-    """The class a robot's term sizes are judged in: ``name``, ``reach_mm`` (sum of the link lengths
-    from joint 2 to the tool), ``payload_kg`` (None: the robot file gives none), ``stiffness`` the
+    """The class a robot's term sizes are judged in: ``name``, ``reach_mm`` (the tool point's
+    largest distance from joint 1's axis), ``payload_kg`` (None: the robot file gives none), ``stiffness`` the
     plausible joint stiffness range [N·m/rad]."""
 
     name: str
@@ -70,13 +70,25 @@ class RobotClass:
                                                                         "stiffness_nm_per_rad": "N·m/rad"}}
 
 
+#: poses (seeded) over the joint ranges at which the reach is taken
+REACH_POSES = 256
+
+
 def robot_class(model: RobotModel, payload_kg: float | None = None) -> RobotClass:
-    """The class of ``model`` by its reach (the module says how), with the payload the robot file
-    gives (None: none)."""
-    p = np.asarray(model.nominal, dtype=float).reshape(-1, 6)
-    joint_t = model.joint_transforms
-    first = joint_t[1] if len(joint_t) > 1 else 0  # joint 2's transform: the base height is no reach
-    reach = float(np.sum(np.linalg.norm(p[first:, :3], axis=1)))
+    """The class of ``model`` by its reach, with the payload the robot file gives (None: none). The
+    reach: the largest distance of the tool point from joint 1's axis at :data:`REACH_POSES` seeded
+    poses over the joint ranges of the nominal geometry (a data sheet's reach is the wrist centre's
+    or the flange's; the tool point is within a tool length of it)."""
+    from station.core.kinematics.forward import _chain
+    from station.core.kinematics.poses import spread_joints
+
+    q = spread_joints(model, REACH_POSES, np.random.default_rng(38))
+    T, pres, consts, _ = _chain(model, q, None, setup=False, keep_frames=True)
+    axis = pres[model.joint_transforms[0]] @ consts[model.joint_transforms[0]]
+    d = T[:, :3, 3] - axis[..., :3, 3]
+    z = np.broadcast_to(axis[..., :3, 2], d.shape)
+    radial = d - np.sum(d * z, axis=1, keepdims=True) * z
+    reach = float(np.max(np.linalg.norm(radial, axis=1)))
     name, _, _, stiff = next(c for c in CLASSES if c[1] <= reach < c[2])
     return RobotClass(name, reach, payload_kg if payload_kg else None, stiff)
 
