@@ -185,7 +185,7 @@ class Selection:
                 "alpha_physics": self.alpha_physics, "closest": None if near is None else {
                     **near.to_dict(), "level_needed": self.level_of(near)},
                 "test": f"one-sided bootstrap ({N_BOOT} seeded resamples of the poses) of the mean paired difference of "
-                        "the per-pose sums of σ-normalised squared held-out residuals against the model extended; kept: p below the row's level (compliance, tried first on physics: alpha_physics; the "
+                        "the per-pose sums of σ-normalised squared held-out residuals against the model extended; kept: p below the row's level (compliance and its fitted torque shape, tried first on physics: alpha_physics; the "
                         "other terms: alpha over their tiers and the step's candidates), "
                         "their mean lower, the CV position RMS below the geometric model's, and no compliance "
                         f"below zero by more than {IMPLAUSIBLE_SIGMAS:g} σ",
@@ -330,7 +330,7 @@ def expand_families(model: RobotModel, names: tuple[str, ...], rows: TermRows | 
             known = set(available_families(model, rows)) | {"backlash", "mass_shape"}
             known |= {f.replace("cyclic.", "cyclic2.") for f in known if f.startswith("cyclic.")}
             if n not in known:
-                raise ConfigError(f"unknown error term {n!r}; terms are geometric, auto, compliance, cyclic, cyclic2, "
+                raise ConfigError(f"unknown error term {n!r}; terms are geometric, auto, compliance, mass_shape, cyclic, cyclic2, "
                                   f"cyclic.q<j> / cyclic2.q<j> of a revolute joint, drift, backlash")
             out.append(n)
     return tuple(dict.fromkeys(out))
