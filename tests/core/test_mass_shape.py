@@ -84,3 +84,26 @@ def test_a_robot_file_with_masses_has_no_shape_to_fit():
     q = spread_joints(truth.model, 5, np.random.default_rng(0))
     with pytest.raises(ConfigError, match="gives the masses"):
         term_basis(truth.model, q, spec)
+
+
+def test_a_fitted_shape_is_written_with_the_model_and_read_back(tmp_path, capsys):
+    """identify -o keeps the fitted shape's terms; validate predicts with them as the fit did."""
+    import json
+
+    from station.io.datafile import write_csv
+    from station.ui.cli.main import main
+
+    model, data, _ = _measure(HEAVY, 3, 60)
+    f = tmp_path / "cal.csv"
+    write_csv(f, [f"q{i} [deg]" for i in range(1, 7)] + ["x [mm]", "y [mm]", "z [mm]"],
+              np.column_stack([np.degrees(data.joints), data.measured]))
+    out = tmp_path / "model.toml"
+    assert main(["identify", str(f), "--robot", "irb2600", "--model", "compliance+mass_shape", "-o", str(out),
+                 "--json"]) == 0
+    em = json.loads(capsys.readouterr().out)["error_model"]
+    assert any(t["name"].startswith("mass_shape.q2.") for t in em["terms"])
+    assert '"mass_shape"' in out.read_text()
+    assert main(["validate", str(out), str(f), "--json"]) == 0
+    rms = json.loads(capsys.readouterr().out)["model_errors"]["rms_position_um"]
+    lumped = select_model(model, data, geometric=identify(model, data), force=("compliance",))
+    assert rms < 0.5 * lumped.fit.rms_position_mm() * 1e3  # the shape's fit, not the lumped one's
