@@ -18,6 +18,9 @@ Families (:data:`FAMILIES`):
   product of the unknown masses and the joint's compliance. Joints whose torque hardly varies over
   the data (a vertical axis 1: none; under :data:`LOADED_SHARE` of the most loaded joint's) get
   no term. Gravity is −z of the robot base frame unless the :class:`GravityModel` says otherwise.
+* ``mass_shape`` — where the robot file gives no masses, the lumped torque's shape fitted: per
+  loaded joint, one parameter per lumped point it carries (the joint's compliance times the mass
+  there), :mod:`station.core.terms.mass_shape`.
 * ``cyclic.q<j>`` — the first harmonic of joint j's angle: ``Δq_j = a·cos(r_j q_j) + b·sin(r_j q_j)``
   [rad] (a gear's eccentricity, an encoder's once-per-turn error), ``r_j`` the gear ratio of the
   angle the error cycles with (1: the joint angle; the motor angle where the robot gives ratios).
@@ -100,7 +103,7 @@ class TermSpec:
 
 
 #: the family kinds; ``cyclic`` and ``cyclic2`` are per joint (``cyclic.q3``)
-FAMILIES = ("compliance", "cyclic", "cyclic2", "drift", "backlash")
+FAMILIES = ("compliance", "mass_shape", "cyclic", "cyclic2", "drift", "backlash")
 
 
 @dataclass(frozen=True)
@@ -235,12 +238,15 @@ def term_basis(model: RobotModel, joints: np.ndarray, spec: TermSpec, rows: Term
     ratios = np.ones(g) if spec.ratios is None else np.asarray(spec.ratios, dtype=float)
     for fam in dict.fromkeys(spec.families):  # in the given order, once each
         head, _, joint = fam.partition(".")
-        if fam == "compliance":
+        if fam in ("compliance", "mass_shape"):
             tau = gravity_torques(model, q, spec.gravity, params, rows.payload_kg)
             rms = np.sqrt(np.mean(tau**2, axis=0))
             unit = "rad/(N·m)" if not spec.gravity.lumped else "rad per N·m of the lumped term"
             if loaded is None:
                 loaded = tuple(np.nonzero(rms >= LOADED_SHARE * rms.max())[0].tolist() if rms.max() > 0 else [])
+            if fam == "mass_shape":
+                _add_mass_shape(model, q, spec.gravity, params, loaded, add)
+                continue
             for jl in loaded:
                 b = np.zeros((n, g))
                 b[:, jl] = tau[:, jl]
@@ -273,11 +279,29 @@ def term_basis(model: RobotModel, joints: np.ndarray, spec: TermSpec, rows: Term
                 b[:, j] = 0.5 * np.sign(s[:, j])
                 add(f"backlash.q{j + 1}", "rad" if model.joint_types[j] == "revolute" else "mm", b)
         else:
-            raise ConfigError(f"unknown error term {fam!r}; terms are compliance, cyclic.q<j>, cyclic2.q<j>, "
-                              f"drift, backlash")
+            raise ConfigError(f"unknown error term {fam!r}; terms are compliance, mass_shape, cyclic.q<j>, "
+                              f"cyclic2.q<j>, drift, backlash")
     B = np.stack(Bcols, axis=-1) if Bcols else np.zeros((n, g, 0))
     D = np.stack(Dcols, axis=-1) if Dcols else np.zeros((n, 3, 0))
     return TermBasis(tuple(names), tuple(units), B, D)
+
+
+def _add_mass_shape(model: RobotModel, q: np.ndarray, gravity: GravityModel, params, loaded: tuple[int, ...],
+                    add) -> None:
+    """The ``mass_shape`` columns (:mod:`station.core.terms.mass_shape`): per loaded joint, the
+    torque of 1 kg at every lumped point it carries. Only where the robot file gives no masses."""
+    from station.core.terms.mass_shape import FAMILY, UNIT, lumped_points, point_torques
+
+    if not gravity.lumped:
+        raise ConfigError("mass_shape: the robot file gives the masses; the compliance term takes its torque shape "
+                          "from them (the shape is fitted only where a file has none)")
+    tau_b = point_torques(model, q, gravity.gravity, params)
+    for jl in loaded:
+        for b, label in enumerate(lumped_points(model)):
+            if np.any(tau_b[b, :, jl] != 0.0):
+                col = np.zeros(q.shape)
+                col[:, jl] = tau_b[b, :, jl]
+                add(f"{FAMILY}.q{jl + 1}.{label}", UNIT, col)
 
 
 def apply_terms(model: RobotModel, joints: np.ndarray, params, basis: TermBasis, x, setup: bool = True) -> np.ndarray:
@@ -299,7 +323,8 @@ def prediction_basis(model: RobotModel, joints: np.ndarray, families: tuple[str,
     not the robot) and backlash (the approach direction of new joints is not known: the middle of
     the lost motion). Unknown names raise :class:`ConfigError`."""
     q = model.check_joints(joints)
-    loaded = tuple(int(n.split(".q")[1]) - 1 for n in names if n.startswith("compliance.q"))
+    loaded = tuple(dict.fromkeys(int(n.split(".q")[1].split(".")[0]) - 1 for n in names
+                                 if n.startswith(("compliance.q", "mass_shape.q"))))
     kept = tuple(f for f in families if f not in ("drift", "backlash"))
     b = term_basis(model, q, TermSpec(kept, gravity or GravityModel(), ratios), loaded=loaded)
     zeros = tuple(n for n in names if family_of(n) in ("drift", "backlash"))

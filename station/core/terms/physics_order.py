@@ -4,7 +4,9 @@ evidence. Pure functions of the model and the data's joints and rows.
 A robot engineer who finds a model's error above the noise tries, in this order:
 
 1. **gravity compliance** — every serial arm bends under its own weight; its shape (the gravity
-   torques) comes from the robot file's masses, or the lumped shape where the file has none;
+   torques) comes from the robot file's masses, or the lumped shape where the file has none, and
+   then the shape fitted to the arm's mass distribution (``mass_shape``,
+   :mod:`station.core.terms.mass_shape`) once compliance is in;
 2. **backlash and drift** — only where the data carry what tells them apart: the side each joint
    arrived from (backlash), a time of every row (drift: a row number is not a time, and a drift over
    row order is a set-up that moved, which the geometry's set-up already takes);
@@ -51,8 +53,9 @@ def cycle_span(model: RobotModel, joints: np.ndarray, ratios: tuple[float, ...] 
 
 
 def candidate_tiers(model: RobotModel, joints: np.ndarray, rows: TermRows | None = None,
-                    ratios: tuple[float, ...] | None = None) -> tuple[tuple[str, ...], ...]:
-    """The families ``--model auto`` tries, tier by tier (see the module): compliance; backlash
+                    ratios: tuple[float, ...] | None = None, lumped: bool = False) -> tuple[tuple[str, ...], ...]:
+    """The families ``--model auto`` tries, tier by tier (see the module): compliance; its torque
+    shape fitted (``mass_shape``) where ``lumped`` (the robot file gives no masses); backlash
     where the rows carry approach signs and drift where they carry a time; the first harmonic of
     each joint whose cycle angle spans at least :data:`HARMONIC_MIN_SPAN`."""
     avail = available_families(model, rows)
@@ -60,6 +63,7 @@ def candidate_tiers(model: RobotModel, joints: np.ndarray, rows: TermRows | None
     timed = rows is not None and rows.order is not None
     tiers = (
         tuple(f for f in avail if f == "compliance"),
+        ("mass_shape",) if lumped and "compliance" in avail else (),
         tuple(f for f in avail if f == "backlash" or (f == "drift" and timed)),
         tuple(f for f in avail if f.startswith("cyclic.q") and span[int(f[8:]) - 1] >= HARMONIC_MIN_SPAN),
     )

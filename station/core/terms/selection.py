@@ -22,7 +22,9 @@ model, :data:`N_BOOT` seeded resamples of the poses; issue 38: a rank test count
 missed a term that cuts the error of the few poses it loads) gives p < :data:`ALPHA` divided by the
 number of evidence tiers times the number of candidates of that step (Bonferroni: picking among
 many, or going on to the next tier after a miss, would otherwise keep a term by luck); compliance,
-tried alone and first on physics, is held to :data:`ALPHA_PHYSICS` (family-wise 0.05 in all) on the σ-normalised squared held-out residuals of all the pose's rows (with pose data they hold the orientation, where wrist errors show first), their
+tried alone and first on physics, is held to :data:`ALPHA_PHYSICS` (family-wise 0.05 in all), and
+so is the fitted torque shape (``mass_shape``, :mod:`station.core.terms.mass_shape`) that follows it
+where the robot file gives no masses, on the σ-normalised squared held-out residuals of all the pose's rows (with pose data they hold the orientation, where wrist errors show first), their
 mean is lower than the current model's, the CV position RMS (what the table reports) is below
 the geometric model's, and no compliance came out below zero by more than :data:`IMPLAUSIBLE_SIGMAS`
 σ (physically impossible: the joint would give against gravity). The step keeps the passing candidate with the lowest normalised CV error;
@@ -48,6 +50,7 @@ from station.core.measurement.measurements import MeasurementSet
 from station.core.terms.error_model import TermBasis, TermRows, TermSpec, available_families, term_basis
 from station.core.terms.fit import TermFit, fit_terms
 from station.core.terms.physics_order import candidate_tiers
+from station.core.terms.term_size import RobotClass, TermSize, robot_class, term_sizes
 from station.core.units import UM
 from station.errors import ConfigError, IdentificationError
 
@@ -117,12 +120,24 @@ class Selection:
     alpha: float
     forced: bool = False
     alpha_physics: float = ALPHA_PHYSICS
+    #: the payload the robot file gives [kg] (None: none), for the robot's class (term_size)
+    payload_kg: float | None = None
+
+    @property
+    def robot_class(self) -> RobotClass:
+        return robot_class(self.fit.model, self.payload_kg)
+
+    @property
+    def sizes(self) -> tuple[TermSize, ...]:
+        """The physical size of every kept joint term with σ, judged against the robot's class
+        (:mod:`station.core.terms.term_size`)."""
+        return term_sizes(self.fit, self.robot_class) if self.fit.basis.size else ()
 
     @property
     def summary(self) -> str:
         if self.forced:
             return ("model forced: geometric" if not self.chosen else
-                    f"model forced: geometric + {' + '.join(self.chosen)}")
+                    f"model forced: geometric + {' + '.join(self.chosen)}" + self.sizes_text)
         if not self.chosen:
             near = self.closest
             why = "" if near is None else (
@@ -133,7 +148,17 @@ class Selection:
         geo = self.table[0].cv_rms_mm
         best = next(r for r in self.table if r.families == self.chosen and r.kept).cv_rms_mm
         return (f"kept {' + '.join(self.chosen)}: {self.cv} RMS {best / UM:.1f} µm against the geometric "
-                f"{geo / UM:.1f} µm ({100 * (best - geo) / geo:+.0f} %)")
+                f"{geo / UM:.1f} µm ({100 * (best - geo) / geo:+.0f} %)" + self.sizes_text)
+
+    @property
+    def sizes_text(self) -> str:
+        """'; sizes (…): joint 2 gravity sag: up to …' of the kept joint terms ('' without)."""
+        sizes = self.sizes
+        if not sizes:
+            return ""
+        rc = self.robot_class
+        return (f"; sizes ({rc.name} arm, reach {rc.reach_mm / 1000:.2f} m): "
+                + "; ".join(z.describe() for z in sizes))
 
     @property
     def step_candidates(self) -> int:
@@ -160,11 +185,12 @@ class Selection:
                 "alpha_physics": self.alpha_physics, "closest": None if near is None else {
                     **near.to_dict(), "level_needed": self.level_of(near)},
                 "test": f"one-sided bootstrap ({N_BOOT} seeded resamples of the poses) of the mean paired difference of "
-                        "the per-pose sums of σ-normalised squared held-out residuals against the model extended; kept: p below the row's level (compliance, tried first on physics: alpha_physics; the "
+                        "the per-pose sums of σ-normalised squared held-out residuals against the model extended; kept: p below the row's level (compliance and its fitted torque shape, tried first on physics: alpha_physics; the "
                         "other terms: alpha over their tiers and the step's candidates), "
                         "their mean lower, the CV position RMS below the geometric model's, and no compliance "
                         f"below zero by more than {IMPLAUSIBLE_SIGMAS:g} σ",
                 "table": [r.to_dict() for r in self.table], "terms": self.fit.terms_dict(),
+                "robot_class": self.robot_class.to_dict(), "term_sizes": [z.to_dict() for z in self.sizes],
                 "dropped_terms": list(self.fit.dropped),
                 "identifiability": [t.to_dict() for t in self.fit.identifiability],
                 "units": {"cv_rms_um": "µm", "change_pct": "%", "value": "as each term's unit",
@@ -197,6 +223,8 @@ def all_terms_basis(model: RobotModel, data: MeasurementSet, rows: TermRows | No
     geometry ``params`` (the geometric fit's: the identified model that will carry the terms, whose
     tool may lie far from the robot file's; default the nominal)."""
     fams = [f.replace("cyclic.", "cyclic2.") for f in available_families(model, rows)]
+    if spec.gravity.lumped:  # no masses in the robot file: the torque shape may be fitted (issue 38)
+        fams.insert(fams.index("compliance") + 1, "mass_shape")
     return term_basis(model, data.joints, TermSpec(tuple(fams), spec.gravity, spec.ratios), rows, params=params)
 
 
@@ -299,10 +327,10 @@ def expand_families(model: RobotModel, names: tuple[str, ...], rows: TermRows | 
                               "same in every row), so the lost motion merges with the joint zeros and cannot be "
                               "fitted; measure the poses from both sides, or leave backlash out")
         else:
-            known = set(available_families(model, rows)) | {"backlash"}
+            known = set(available_families(model, rows)) | {"backlash", "mass_shape"}
             known |= {f.replace("cyclic.", "cyclic2.") for f in known if f.startswith("cyclic.")}
             if n not in known:
-                raise ConfigError(f"unknown error term {n!r}; terms are geometric, auto, compliance, cyclic, cyclic2, "
+                raise ConfigError(f"unknown error term {n!r}; terms are geometric, auto, compliance, mass_shape, cyclic, cyclic2, "
                                   f"cyclic.q<j> / cyclic2.q<j> of a revolute joint, drift, backlash")
             out.append(n)
     return tuple(dict.fromkeys(out))
@@ -316,6 +344,7 @@ def select_model(model: RobotModel, data: MeasurementSet, rows: TermRows | None 
     the geometric fit of the same data (default: :func:`identify` with its defaults); ``rows``: per
     row time and approach signs; ``spec``: gravity and gear ratios."""
     spec = TermSpec() if spec is None else spec
+    payload = float(spec.gravity.payload_kg) or None
     if data.kind == "distance":
         raise ConfigError("model selection needs pose or position data; distances are fitted geometric only")
     geo = identify(model, data) if geometric is None else geometric
@@ -332,15 +361,17 @@ def select_model(model: RobotModel, data: MeasurementSet, rows: TermRows | None 
         if fams:
             table.append(CandidateScore(fams, fit.n_parameters, _rms(e), 100 * (_rms(e) - geo_rms) / geo_rms,
                                         _paired_p(cv_errors(fit, folds, weighted=True), base_w), (), True))
-        return Selection(fams, fit, geo, tuple(table), cv_name, alpha, forced=True)
-    tiers = candidate_tiers(model, data.joints, rows, spec.ratios)
+        return Selection(fams, fit, geo, tuple(table), cv_name, alpha, forced=True, payload_kg=payload)
+    tiers = candidate_tiers(model, data.joints, rows, spec.ratios, lumped=spec.gravity.lumped)
+    physics = (("compliance",), ("mass_shape",))
     current: tuple[str, ...] = ()
     cur_fit, cur_w = base_fit, base_w
     tier = 0
     for _ in range(max_steps):
         if tier >= len(tiers):
             break
-        cands = [f for f in tiers[tier] if f not in current]
+        # the fitted torque shape refines a compliance already kept (alone, it is compliance and more)
+        cands = [f for f in tiers[tier] if f not in current and (f != "mass_shape" or "compliance" in current)]
         if any(f.startswith("cyclic.") for f in tiers[tier]):
             cands += [f"cyclic2.{f.split('.', 1)[1]}" for f in current if f.startswith("cyclic.")]
         scored = []
@@ -354,8 +385,8 @@ def select_model(model: RobotModel, data: MeasurementSet, rows: TermRows | None 
                 continue  # the family added nothing the data can tell from what is there
             e, ew = cv_errors(fit, folds), cv_errors(fit, folds, weighted=True)
             scored.append((fams, fit, e, ew, _paired_p(ew, cur_w), _plausible(fit)))
-        evidence = sum(1 for t in tiers if t != ("compliance",))
-        level = (alpha_physics if tiers[tier] == ("compliance",) else
+        evidence = sum(1 for t in tiers if t not in physics)
+        level = (alpha_physics if tiers[tier] in physics else
                  alpha / (max(1, evidence) * max(1, len(scored))))  # Bonferroni over the tiers and candidates
         passing = [sc for sc in scored
                    if sc[4] < level and sc[5] and np.mean(sc[3]) < np.mean(cur_w) and _rms(sc[2]) < geo_rms]
@@ -369,7 +400,8 @@ def select_model(model: RobotModel, data: MeasurementSet, rows: TermRows | None 
         table = [CandidateScore(r.families, r.n_parameters, r.cv_rms_mm, r.change_pct, r.p_value, r.base,
                                 r.kept or r.families == fams, r.level, r.plausible) for r in table]
         current, cur_fit, cur_w = fams, fit, ew
-    return Selection(current, cur_fit, geo, tuple(table), cv_name, alpha, alpha_physics=alpha_physics)
+    return Selection(current, cur_fit, geo, tuple(table), cv_name, alpha, alpha_physics=alpha_physics,
+                     payload_kg=payload)
 
 
 @dataclass(frozen=True)
