@@ -75,3 +75,23 @@ def test_at_the_fold_no_choice_of_the_other_joints_is_clear(cell):
     # a little way off the fold the same draws are mostly clear: the check does not refuse everything
     Q[:, 2] = fold - np.deg2rad(60.0)
     assert sum(w is None for w in poses_clear(cell, Q, np.full(n, -1))) > n // 4
+
+
+def test_the_plan_says_why_the_shoulder_back_configuration_goes(cell):
+    from station.cell.plan.measurement_plan import build_plan
+    from station.cell.plan.vias import fold_note
+
+    why = [r[2] for r in build_plan(cell).rejected if r[1] == 7 and "cannot be reached" in r[2]]
+    assert why and all("turns joint 3 through 92.7°" in w and "1.7 mm from joint 2's axis" in w
+                       and "not the stretched arm (-87°)" in w and "limits in the robot file" in w for w in why)
+    cands, _orient, _ = articulated_candidates(cell)
+    front = [np.asarray(t.joints) for t in cands if t.elbow == 1]
+    back = [np.asarray(t.joints) for t in cands if t.elbow == 7]
+    assert fold_note(cell, front[0], back[0]).startswith(". Every way")
+    assert fold_note(cell, front[0], front[-1]) == ""  # both on one side of the fold
+    # the obstacles example's file has the PUMA 560's own joint-3 range: its change goes over the stretch
+    other = load_config(PUMA.parents[1] / "puma560_obstacles" / "cell.toml")
+    cands, _orient, _ = articulated_candidates(other)
+    a = next(np.asarray(t.joints) for t in cands if t.elbow == 1)
+    b = next(np.asarray(t.joints) for t in cands if t.elbow == 7)
+    assert fold_note(other, a, b) == ""
