@@ -55,3 +55,18 @@ def test_the_obstacles_cost_no_identifiability():
     assert abs(with_them.condition / without.condition - 1.0) <= 0.10, (with_them.condition, without.condition)
     # the σ in the robot's base frame is that of the two-configuration plan, not one's (~46 µm)
     assert with_them.sigma_position_um[2] < 1.1 * without.sigma_position_um[2]
+
+
+def test_plan_says_a_point_the_design_left_out_is_not_out_of_reach(capsys):
+    """The P2 cube is reachable in configuration +1 (no 'NOT measured' line there), but with two
+    configurations the I-optimal design meets its noise rule without it: the warning says so, and
+    does not send the user to the set-up or the limits."""
+    from station.ui.cli.main import main
+
+    assert main(["plan", str(CELL)]) == 0
+    said = capsys.readouterr()
+    out = said.out + said.err
+    assert not any(line.strip().startswith("NOT measured: P2a configuration +1") for line in out.splitlines())
+    warning = next(line for line in out.splitlines() if "measured in no pose" in line)
+    assert "P2a, P2b, P2c, P2d (each has poses the plan could measure" in warning, warning
+    assert "chose none of them" in warning and "check [robot].setup" not in warning
