@@ -93,9 +93,10 @@ def test_plan_without_speeds_says_where_to_put_them(tmp_path, capsys, monkeypatc
 
 @pytest.mark.slow
 @pytest.mark.timeout(600)  # a hang guard: init, plan and an 826-step simulated run, 3 min on a loaded 2-core machine
-@pytest.mark.xfail(strict=True, reason="issue 40: 'station init' places the robot without the collision shapes; the "
-                   "plan's collision-free pose design then leaves points of this KR 6 cell unmeasured (its links "
-                   "or head meet cubes at every candidate of them)")
+@pytest.mark.xfail(strict=True, reason="issue 40: 'station init' scores its placements by the collision-free "
+                   "candidates now, and none of them (distances 0.2-0.8 of the reach, heights 0-1.0) reaches more "
+                   "than 18 of this KR 6 cell's 24 points: configuration +1 has joint 4 at 180°, past init's soft "
+                   "limits of ±177.6°, and +3 reaches the far cubes K7, K8 only with the upper arm through K3's")
 def test_init_plan_and_calibrate_a_six_axis_cell_at_the_first_try(tmp_path, capsys, monkeypatch):
     """init → plan (exit 0, every point measured, a motion time) → calibrate --simulated SUCCESS."""
     monkeypatch.chdir(tmp_path)

@@ -32,7 +32,7 @@ from station.core.kinematics.forward import forward
 from station.core.kinematics.transforms import invert, pose_to_matrix
 from station.errors import UnreachableError
 
-__all__ = ["travel_vias", "travel_height_mm", "head_low_mm", "lifted", "lifted_many", "clear_candidates", "LONG_MOVE_RAD"]
+__all__ = ["travel_vias", "travel_height_mm", "head_low_mm", "lifted", "lifted_many", "clear_candidates", "fold_note", "LONG_MOVE_RAD"]
 
 # Computed once per configuration object (weak keys: the entry goes with the configuration).
 _HEIGHT: weakref.WeakKeyDictionary[CellConfig, float] = weakref.WeakKeyDictionary()
@@ -176,6 +176,45 @@ def _staged(cfg: CellConfig, a: np.ndarray, b: np.ndarray) -> list[tuple[np.ndar
                            f"commanded. Move the obstacle or the body, or leave out that arm configuration ([limits])")
 
 
+def fold_note(cfg: CellConfig, a: np.ndarray, b: np.ndarray) -> str:
+    """Why no way from joints ``a`` to ``b`` can be clear, where that is the arm's geometry: joint 3
+    must turn through the fold (the wrist, the frame after the fourth joint, nearest joint 2's axis,
+    on a 0.1° grid over joint 3's soft range) and the wrist lies there inside the upper arm's
+    capsule. "" otherwise. The PUMA 560 example's file admits the fold and not the stretched arm: its
+    shoulder-back configuration cannot be reached whatever the vias (tests/cell/test_puma_fold.py)."""
+    from station.cell.plan.collision import default_radii
+    from station.core.kinematics.forward import chain_frames
+
+    model = cfg.model
+    if model.n_joints < 4 or not all(t == "revolute" for t in model.joint_types[:3]):
+        return ""
+    lo, hi = cfg.soft_limits[2]
+    q3 = np.arange(lo, hi + 1e-12, np.deg2rad(0.1))
+    Q = np.repeat(np.asarray(a, dtype=float)[None], q3.size, axis=0)
+    Q[:, 2] = q3
+    joints = [t for t, spec in enumerate(model.transforms) if spec.joint is not None]
+    F = chain_frames(model, Q, setup=False)
+    axis, origin, wrist = F[:, joints[1], :3, 2], F[:, joints[1], :3, 3], F[:, joints[3], :3, 3]
+    d = np.linalg.norm(np.cross(wrist - origin, axis), axis=1)
+    k = int(np.argmin(d))
+    spec = cfg.robot_collision
+    radii = spec.radius_mm if spec is not None and spec.radius_mm is not None else default_radii(cfg)
+    if d[k] >= radii[2] or (a[2] - q3[k]) * (b[2] - q3[k]) > 0:
+        return ""  # the wrist clears the shoulder at the fold, or the move does not pass it
+    circle = np.deg2rad(np.arange(-180.0, 180.0, 0.1))  # the stretched arm: the wrist farthest from the axis
+    Q = np.repeat(Q[:1], circle.size, axis=0)
+    Q[:, 2] = circle
+    F = chain_frames(model, Q, setup=False)
+    far = float(circle[int(np.argmax(np.linalg.norm(np.cross(F[:, joints[3], :3, 3] - F[:, joints[1], :3, 3],
+                                                               F[:, joints[1], :3, 2]), axis=1)))])
+    inside = any(lo <= far + t <= hi for t in (-2 * np.pi, 0.0, 2 * np.pi))
+    return (f". Every way from one to the other turns joint 3 through {np.rad2deg(q3[k]):.1f}°, where the forearm "
+            f"folds back onto the upper arm and the wrist lies {d[k]:.1f} mm from joint 2's axis, inside the "
+            f"shoulder: no via clears it. Joint 3's soft range [{np.rad2deg(lo):.0f}°, {np.rad2deg(hi):.0f}°] holds "
+            f"the fold{'' if inside else f' and not the stretched arm ({np.rad2deg(far):.0f}°)'}, where a real "
+            f"arm's range leaves out the fold: check joint 3's limits in the robot file against the data sheet")
+
+
 def _scara_around(cfg: CellConfig, a: np.ndarray, b: np.ndarray) -> list[tuple[np.ndarray, str]]:
     """The vias of a SCARA's lateral move at the travel height from ``a`` to ``b``: none when the
     direct joint move is clear, else the first clear of joint 1 first, joint 2 first, or the swing
@@ -279,7 +318,7 @@ def clear_candidates(cfg: CellConfig, cands: list, orient: list[int]
             try:
                 travel_vias(cfg, back[first[codes[0]]], back[first[c]])
             except UnreachableError as exc:
-                unreachable[c] = str(exc)
+                unreachable[c] = str(exc) + fold_note(cfg, back[first[codes[0]]], back[first[c]])
         for i in list(keep):
             c = cands[i].elbow
             if c in unreachable:

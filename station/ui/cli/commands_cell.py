@@ -384,15 +384,33 @@ def plan_warnings(p, cfg) -> list[str]:
 
 def _unmeasured_points(p, cfg) -> list[str]:
     """The body's points that no step measures (out of reach or the soft limits in every pose),
-    named: a plan that leaves a third of the body out is no plan to run unseen (issue 37)."""
+    named: a plan that leaves a third of the body out is no plan to run unseen (issue 37). A point
+    with no 'NOT measured' line in a configuration the plan measures in had poses there that the
+    pose design chose none of (it met its noise rule or [plan] select without them): said apart, as
+    no setup or limit is to blame (the PUMA 560 examples' P2 cube, reachable in configuration +1)."""
     used = {s.step.point_id for s in p.steps}
     left = [pid for pid in cfg.point_ids if pid not in used]
     if not left:
         return []
-    return [f"{len(left)} of {len(cfg.point_ids)} measuring points are measured in no pose: "
-            f"{', '.join(left[:12])}{', …' if len(left) > 12 else ''} (the 'NOT measured' lines say why: out "
-            f"of reach or the soft limits in every {'elbow' if cfg.model.is_scara else 'configuration'}); check "
-            f"[robot].setup and the body's points"]
+    confs = {s.step.elbow for s in p.steps}
+    refused = {(pid, c) for pid, c, _ in p.rejected}
+    unchosen = [pid for pid in left if any((pid, c) not in refused for c in confs)]
+    word = "elbow" if cfg.model.is_scara else "configuration"
+
+    def names(pids: list[str]) -> str:
+        return f"{', '.join(pids[:12])}{', …' if len(pids) > 12 else ''}"
+
+    blocked = [pid for pid in left if pid not in unchosen]
+    out = f"{len(left)} of {len(cfg.point_ids)} measuring points are measured in no pose: {names(left)}"
+    if blocked:
+        out += (f" (the 'NOT measured' lines say why{f' for {names(blocked)}' if unchosen else ''}: out of reach "
+                f"or the soft limits in every {word}); check [robot].setup and the body's points")
+    if unchosen:
+        who = (f"; {names(unchosen)} {'has' if len(unchosen) == 1 else 'have'}" if blocked else
+               f" ({'it has' if len(unchosen) == 1 else 'each has'}")
+        out += (f"{who} poses the plan could measure, with no 'NOT measured' line in one of its {word}s, but the "
+                f"pose design (its noise rule, or [plan] select) chose none of them{'' if blocked else ')'}")
+    return [out]
 
 
 def existing_db(path: str) -> str:
