@@ -6,7 +6,7 @@ with a *lumped* torque: 1 kg at every later joint's origin and at the tool point
 carries most of its weight at the elbow and the wrist (the simulated IRB 2600 class of
 :mod:`simulators.joint_errors`: 60 kg at joint 3, 25 kg at joint 5, 5 kg at the tool), and the
 lumped shape then misses: on that arm, noise-free, the geometry with lumped compliance and the
-true harmonics misses the truth by 4.6-5.0 µm RMS, with the true masses by 0.8 µm
+true harmonics misses the simulated arm by 4.6-5.0 µm RMS, with the true masses by 0.8 µm
 (``benchmarks/bench_six_axis.py --terms``).
 
 A joint's deflection under gravity is ``Δq_i = c_i τ_i = c_i Σ_b m_b τ_i^b(q)``, with ``τ_i^b`` the

@@ -181,27 +181,32 @@ def path_segment(key: str) -> str:
     return quote(str(key), safe="")
 
 
-def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: int = 30,
-               clock: Callable[[], datetime] | None = None) -> Starlette:
-    """The app over the store at ``url``; ``clock``: the time the states and due dates are
-    reckoned at (default now; tests pass a fixed one)."""
-    env = Environment(loader=FileSystemLoader(str(_HERE / "templates")), autoescape=select_autoescape(["html"]))
-    env.filters["fmt"] = _fmt
-    env.filters["date"] = _date
-    env.filters["segment"] = path_segment
-    pool = _Pool(url)
+class _Pages:
+    """The dashboard's pages over one store, each a Starlette endpoint: the fleet, a robot, a run,
+    its report and certificate, and the exports (``clock``: when states and due dates are
+    reckoned)."""
 
-    def render(name: str, status: int = 200, **ctx: Any) -> HTMLResponse:
+    def __init__(self, url: str, interval_days: int, clock: Callable[[], datetime] | None) -> None:
+        self.env = Environment(loader=FileSystemLoader(str(_HERE / "templates")),
+                               autoescape=select_autoescape(["html"]))
+        self.env.filters["fmt"] = _fmt
+        self.env.filters["date"] = _date
+        self.env.filters["segment"] = path_segment
+        self.pool = _Pool(url)
+        self.interval_days = interval_days
+        self.clock = clock
+
+    def render(self, name: str, status: int = 200, **ctx: Any) -> HTMLResponse:
         started = ctx.pop("_started", None)
-        html = env.get_template(name).render(**ctx)
+        html = self.env.get_template(name).render(**ctx)
         headers = {} if started is None else {"Server-Timing": f"app;dur={(time.perf_counter() - started) * 1e3:.1f}"}
         return HTMLResponse(html, status_code=status, headers=headers)
 
-    def fleet_rows(request: Request) -> tuple[list[Any], list[Any], str, str, str, bool]:
+    def fleet_rows(self, request: Request) -> tuple[list[Any], list[Any], str, str, str, bool]:
         """All robots, and those the query's cell and state show in its sort order."""
         q = request.query_params
-        with pool.connection() as conn:
-            robots = fleet_status(conn, clock() if clock else None, default_interval_days=interval_days)
+        with self.pool.connection() as conn:
+            robots = fleet_status(conn, self.clock() if self.clock else None, default_interval_days=self.interval_days)
         cell, state = q.get("cell", ""), q.get("state", "")
         shown = [r for r in robots if (not cell or r.cell == cell) and (not state or r.state == state)]
         sort = q.get("sort", "robot") if q.get("sort", "robot") in SORT_KEYS else "robot"
@@ -212,111 +217,118 @@ def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: in
         present.sort(key=lambda r: getattr(r, attr), reverse=desc)
         return robots, present + missing, cell, state, sort, desc
 
-    def fleet_page(request: Request) -> Response:
+    def fleet_page(self, request: Request) -> Response:
         started = time.perf_counter()
-        robots, shown, cell, state, sort, desc = fleet_rows(request)
+        robots, shown, cell, state, sort, desc = self.fleet_rows(request)
         counts = {s: sum(1 for r in robots if r.state == s) for s in STATES}
-        return render("fleet.html", robots=shown, cells=sorted({r.cell for r in robots}), states=STATES, cell=cell,
+        return self.render("fleet.html", robots=shown, cells=sorted({r.cell for r in robots}), states=STATES, cell=cell,
                       state=state, sort=sort, desc=desc, counts=counts, total=len(robots),
                       query=request.url.query, _started=started)
 
-    def fleet_export(request: Request) -> Response:
+    def fleet_export(self, request: Request) -> Response:
         """/fleet.csv, /fleet.json: the table as shown (the same cell, state and sort)."""
-        _, shown, cell, state, _, _ = fleet_rows(request)
+        _, shown, cell, state, _, _ = self.fleet_rows(request)
         rows = [r.to_json() for r in shown]
         columns = [f.name for f in fields(RobotStatus)] + ["overdue"]
         return _download(request, "fleet", rows, columns, what="the fleet table", cell=cell or None,
                          state=state or None)
 
-    def history_export(request: Request) -> Response:
+    def history_export(self, request: Request) -> Response:
         """/history.csv?robot=KEY, /history.json?robot=KEY: a robot's runs, oldest first."""
         key = request.query_params.get("robot")
         if key is None or "\x00" in key:  # "" is a key a station may store (the robot page links robot=)
-            return render("missing.html", 404, what=f"robot {key!r}")
-        with pool.connection() as conn:
+            return self.render("missing.html", 404, what=f"robot {key!r}")
+        with self.pool.connection() as conn:
             runs = store.robot_history(conn, key)
         if not runs:
-            return render("missing.html", 404, what=f"robot {key}")
+            return self.render("missing.html", 404, what=f"robot {key}")
         return _download(request, "history", runs, list(runs[0]), what="a robot's runs, oldest first", robot=key)
 
-    def robot_page(request: Request) -> Response:
+    def robot_page(self, request: Request) -> Response:
         started = time.perf_counter()
         key = request.path_params["key"]
         # a NUL: no stored key has one (no PostgreSQL text holds it; the driver refused the query: 503).
         # Other control characters are a stored key's own: a station may write "\x1b[31m" (issue 39)
         if "\x00" in key:
-            return render("missing.html", 404, what=f"robot {key!r}")
-        with pool.connection() as conn:
+            return self.render("missing.html", 404, what=f"robot {key!r}")
+        with self.pool.connection() as conn:
             runs = store.robot_history(conn, key)
         if not runs:
-            return render("missing.html", 404, what=f"robot {key}")
+            return self.render("missing.html", 404, what=f"robot {key}")
         # the plots show the robot's own history: neither rehearsals nor rows without a readable date
         accuracy, drift = history_svg([r for r in runs if not r.get("simulated") and r.get("finished_utc")])
-        return render("robot.html", key=key, runs=list(reversed(runs)), latest=runs[-1], accuracy_svg=accuracy,
+        return self.render("robot.html", key=key, runs=list(reversed(runs)), latest=runs[-1], accuracy_svg=accuracy,
                       forecast=history_forecast(runs),
                       drift_svg=drift, n_cal=sum(r["kind"] == "calibration" for r in runs),
                       n_rec=sum(r["kind"] == "recheck" for r in runs), n_sim=sum(bool(r.get("simulated")) for r in runs),
                       _started=started)
 
-    def run_page(request: Request) -> Response:
+    def run_page(self, request: Request) -> Response:
         uid = request.path_params["uuid"]
-        with pool.connection() as conn:
+        with self.pool.connection() as conn:
             run = store.run_detail(conn, str(uid))
             has_report = run is not None and store.report_html(conn, str(uid)) is not None
             has_certificate = run is not None and store.certificate_xml(conn, str(uid)) is not None
         if run is None:
-            return render("missing.html", 404, what=f"run {uid}")
+            return self.render("missing.html", 404, what=f"run {uid}")
         stored = run.get("detail")
         detail: dict[str, Any] = stored if isinstance(stored, dict) else {}  # a stored list: no 500
         ident = detail.get("identification")
         ident = ident if isinstance(ident, dict) else {}
         params, params_note = parameter_rows(detail)
-        return render("run.html", run={**run, "detail": detail}, params=params, params_note=params_note,
+        return self.render("run.html", run={**run, "detail": detail}, params=params, params_note=params_note,
                       has_report=has_report, has_certificate=has_certificate,
                       has_covariance=bool(ident.get("covariance")),
                       head_cert=_certificate(detail, "head_certificate"),
                       body_cert=_certificate(detail, "body_certificate"))
 
-    def report_page(request: Request) -> Response:
+    def report_page(self, request: Request) -> Response:
         uid = request.path_params["uuid"]
-        with pool.connection() as conn:
+        with self.pool.connection() as conn:
             html = store.report_html(conn, str(uid))
         if html is None:
-            return render("missing.html", 404, what=f"a report of run {uid}")
+            return self.render("missing.html", 404, what=f"a report of run {uid}")
         return HTMLResponse(html, headers={"Content-Security-Policy": _REPORT_CSP})
 
-    def certificate(request: Request) -> Response:
+    def certificate(self, request: Request) -> Response:
         """The run's Digital Calibration Certificate: the bytes 'station export-dcc' wrote (issue 41)."""
         uid = request.path_params["uuid"]
-        with pool.connection() as conn:
+        with self.pool.connection() as conn:
             run = store.run_detail(conn, str(uid))
             xml = store.certificate_xml(conn, str(uid)) if run is not None else None
         if run is None or xml is None:
-            return render("missing.html", 404, what=f"a calibration certificate of run {uid}")
+            return self.render("missing.html", 404, what=f"a calibration certificate of run {uid}")
         name = re.sub(r"[^A-Za-z0-9._-]", "_", f"certificate-{run['robot_key']}-run-{run['local_run_id']}.xml")
         return Response(xml, media_type="application/xml",
                         headers={"Content-Disposition": f'attachment; filename="{name}"'})
 
+
+def create_app(url: str, *, auth: DashboardAuth | None = None, interval_days: int = 30,
+               clock: Callable[[], datetime] | None = None) -> Starlette:
+    """The app over the store at ``url``; ``clock``: the time the states and due dates are
+    reckoned at (default now; tests pass a fixed one)."""
+    pages = _Pages(url, interval_days, clock)
     routes = [
-        Route("/", fleet_page),
-        Route("/fleet.csv", fleet_export), Route("/fleet.json", fleet_export),
-        Route("/history.csv", history_export), Route("/history.json", history_export),
-        Route("/robots/{key:robot_key}", robot_page),
-        Route("/runs/{uuid:uuid}", run_page),
-        Route("/runs/{uuid:uuid}/report", report_page),
-        Route("/runs/{uuid:uuid}/certificate.xml", certificate),
+        Route("/", pages.fleet_page),
+        Route("/fleet.csv", pages.fleet_export), Route("/fleet.json", pages.fleet_export),
+        Route("/history.csv", pages.history_export), Route("/history.json", pages.history_export),
+        Route("/robots/{key:robot_key}", pages.robot_page),
+        Route("/runs/{uuid:uuid}", pages.run_page),
+        Route("/runs/{uuid:uuid}/report", pages.report_page),
+        Route("/runs/{uuid:uuid}/certificate.xml", pages.certificate),
         Mount("/static", app=StaticFiles(directory=str(_HERE / "static")), name="static"),
     ]
     middleware = [Middleware(_AuthMiddleware, auth=auth or DashboardAuth())]
+
     @asynccontextmanager
     async def lifespan(app: Starlette) -> AsyncIterator[None]:
         yield
-        pool.close()
+        pages.pool.close()
 
     async def unavailable(request: Request, exc: Exception) -> Response:
         """The store is down or refused: a page that says so (503), never a traceback."""
         what = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        html = env.get_template("missing.html").render(what=f"answer now: the fleet store is unavailable ({what})")
+        html = pages.env.get_template("missing.html").render(what=f"answer now: the fleet store is unavailable ({what})")
         return HTMLResponse(html, status_code=503)
 
     handlers: dict[Any, Any] = {psycopg.Error: unavailable, store.FleetStoreError: unavailable}
