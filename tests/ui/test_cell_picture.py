@@ -179,3 +179,25 @@ def test_a_file_for_the_folder_is_refused_before_planning(tmp_path, capsys):
     assert main(["plan", str(EXAMPLES["scara600_column"]), "--out", str(blocker)]) == 2
     err = capsys.readouterr().err
     assert "that is a file; give a folder" in err and "Traceback" not in err
+
+
+def test_the_run_report_shows_the_cell_with_the_runs_steps(seed1_run):
+    """The report of the built-in cell's seed-1 calibration embeds the picture (an SVG data URI in the
+    'cell' section): one marker per step of the stored plan in each view, the simulation's reference
+    verification left out (the collision check's plan has none)."""
+    import base64
+
+    from station.cell.records.rundb import RunDB
+    from station.cell.records.stored_config import stored_plan
+
+    html = (seed1_run.report / "report.html").read_text(encoding="utf-8")
+    section = html[html.index('<section id="cell">'):]
+    uri = re.search(r'src="data:image/svg\+xml;base64,([^"]+)"', section[:section.index("</section>")]).group(1)
+    root = ET.fromstring(base64.b64decode(uri))
+    with RunDB(seed1_run.db) as db:
+        steps = [s for s in stored_plan(db, 1) if s.kind is not StepKind.REFERENCE]
+    families = Counter(s.elbow for s in steps)
+    assert len(steps) > 100 and len(families) == 2
+    for view in ("top", "side"):
+        for code, n in families.items():
+            assert _markers(root, f"{view}-touches-{family_id(code)}") == n

@@ -52,9 +52,10 @@ VIA_NAMES = ("depart", "arrive", "arm upright", "turned upright", "first")
 #: the figure's fixed parts [in]: per line of the title above the top view (and the view's own
 #: title), between the views (the top view's X label, the side view's title), the legend below
 #: (with the side view's X label), the Y / Z labels on the left
-LINE_IN, GAP_IN, LEGEND_IN, LEFT_IN, RIGHT_IN = 0.16, 0.75, 1.2, 0.75, 0.15
-#: the tallest figure [in]: one A4 page of the report (297 mm less its margins and running lines)
-MAX_HEIGHT_IN = 10.0
+LINE_IN, GAP_IN, LEGEND_IN, LEFT_IN, RIGHT_IN = 0.17, 0.7, 1.05, 0.75, 0.15
+#: the tallest figure [in]: what an A4 page of the report leaves under the section's heading and
+#: above the sign-off (170 mm), so that it prints at its own size and no text under 8 pt (issue 29)
+MAX_HEIGHT_IN = 6.6
 #: the views' margin around what they show [mm]
 PAD_MM = 40.0
 _FAMILY_COLOURS = ("tab:blue", "tab:red", "tab:green", "tab:purple", "tab:brown", "tab:pink", "tab:olive",
@@ -279,7 +280,8 @@ def _legend(ax: Any, fig: Any) -> None:
     seen: dict[str, Any] = {}
     for h, lab in zip(handles, labels):
         seen.setdefault(lab, h)
-    fig.legend(list(seen.values()), list(seen.keys()), loc="lower center", ncol=3, fontsize=7.5, frameon=False)
+    fig.legend(list(seen.values()), list(seen.keys()), loc="lower center", ncol=3, fontsize=8.0, frameon=False,
+               borderaxespad=0.2)
 
 
 def _caption(report: CollisionReport | None, least: Clash | None) -> str:
@@ -314,7 +316,7 @@ def cell_picture(cfg: CellConfig, steps: Sequence[PlannedStep], poses: Sequence[
         title = f"{cfg.name}: the plan's poses in the robot's base frame\n{_caption(report, least)}"
         _place_views(fig, top, side, title.count("\n") + 1)
         _legend(top, fig)
-        fig.suptitle(title, fontsize=8.5, gid="least-clearance", y=1.0 - 0.05 / fig.get_figheight(), va="top")
+        fig.suptitle(title, fontsize=8.0, gid="least-clearance", y=1.0 - 0.05 / fig.get_figheight(), va="top")
         buf = io.StringIO()
         fig.savefig(buf, format="svg", metadata={"Date": None})
         out = None
