@@ -201,3 +201,21 @@ def test_the_run_report_shows_the_cell_with_the_runs_steps(seed1_run):
     for view in ("top", "side"):
         for code, n in families.items():
             assert _markers(root, f"{view}-touches-{family_id(code)}") == n
+
+
+def test_a_picture_that_cannot_be_drawn_is_a_note_not_a_lost_report(seed1_run, monkeypatch):
+    """The rest of the report stands: the notes say why there is no picture, the section is left out."""
+    from station.cell.records.rundb import RunDB
+    from station.ui.report import run as report_run
+    from station.ui.report.html_page import render_html
+
+    def broken(cfg, steps):
+        raise ValueError("no shapes for this cell")
+
+    monkeypatch.setattr(report_run, "run_picture", broken)
+    with RunDB(seed1_run.db) as db:
+        data = report_run.report_data_for_run(db, 1)
+    assert data.cell_svg is None
+    assert "no picture of the cell (ValueError: no shapes for this cell)" in data.notes
+    html = render_html(data)
+    assert '<section id="cell">' not in html and "no picture of the cell" in html

@@ -450,8 +450,8 @@ def _cell_svg(cfg: CellConfig, steps: Sequence[PlannedStep], notes: list[str]) -
     cannot be drawn (a collision check the station cannot make: the shapes or python-fcl)."""
     try:
         return run_picture(cfg, steps).svg
-    except StationError as exc:
-        notes.append(f"no picture of the cell: {exc}")
+    except Exception as exc:  # noqa: BLE001 - the rest of the report stands; the gap is stated in the notes
+        notes.append(f"no picture of the cell ({type(exc).__name__}: {exc})")
         return None
 
 
