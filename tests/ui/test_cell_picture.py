@@ -159,6 +159,12 @@ def test_the_least_clearance_is_annotated_with_its_pair(planned):
         assert closest["a"] in title and closest["b"] in title
         for view in ("top", "side"):
             assert _markers(root, f"{view}-least") == 1
+            # the pair's closest points, joined: no farther apart in the view (mm, by the ticks) than
+            # the clearance the check reports (a projection is no longer than the segment; the picture
+            # samples the move more finely than the check, so it may find them a little closer)
+            axes = _group(root, f"{view}-view")
+            ends = [np.array(_to_mm(axes, *p)) for p in _path_points(_group(axes, f"{view}-least-pair"))]
+            assert len(ends) == 2 and np.linalg.norm(ends[1] - ends[0]) <= closest["clearance_mm"] + 0.05
 
 
 def test_the_stored_plan_draws_the_same_picture_byte_for_byte(planned):

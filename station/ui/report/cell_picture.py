@@ -29,7 +29,15 @@ import numpy as np
 
 from station.cell.config.cell_config import CellConfig
 from station.cell.plan.assembly import Plan, nominal_contact
-from station.cell.plan.collision import Clash, CollisionReport, Shape, cell_shapes, check_path, plan_path
+from station.cell.plan.collision import (
+    CellShapes,
+    Clash,
+    CollisionReport,
+    Shape,
+    cell_shapes,
+    check_path,
+    plan_path,
+)
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.core.kinematics.forward import chain_frames
 from station.errors import ConfigError
@@ -47,12 +55,14 @@ PNG_DPI = 110
 #: per sample (a touch's short moves stay one straight segment; a swing of 90° gets 9 samples)
 TRACK_STEP_RAD = np.radians(10.0)
 MAX_TRACK_SAMPLES = 24
+#: samples of the move that holds the least clearance, to show where along it the pair comes closest
+CLOSEST_SAMPLES = 64
 #: the via poses' labels (station/cell/plan/collision.py's _VIA_NAMES: vias.py names them)
 VIA_NAMES = ("depart", "arrive", "arm upright", "turned upright", "first")
 #: the figure's fixed parts [in]: per line of the title above the top view (and the view's own
 #: title), between the views (the top view's X label, the side view's title), the legend below
 #: (with the side view's X label), the Y / Z labels on the left
-LINE_IN, GAP_IN, LEGEND_IN, LEFT_IN, RIGHT_IN = 0.17, 0.7, 1.05, 0.75, 0.15
+LINE_IN, GAP_IN, LEGEND_IN, LEFT_IN, RIGHT_IN = 0.17, 0.7, 1.25, 0.7, 0.15
 #: the tallest figure [in]: what an A4 page of the report leaves under the section's heading and
 #: above the sign-off (170 mm), so that it prints at its own size and no text under 8 pt (issue 29)
 MAX_HEIGHT_IN = 6.6
@@ -127,6 +137,48 @@ def _pose_of(where: str, poses: Sequence[tuple[np.ndarray, str, int]]) -> int | 
     return None
 
 
+def _closest(cfg: CellConfig, shapes: CellShapes, poses: Sequence[tuple[np.ndarray, str, int]],
+             least: Clash) -> tuple[np.ndarray, np.ndarray] | None:
+    """Where the pair that sets the least clearance comes closest: the joints and the two closest
+    points (2, 3) [mm], fcl's (the check's library), over :data:`CLOSEST_SAMPLES` samples of the move
+    the check names (its samples at the margin's step need not hit the closest one), or at the pose.
+    None where the pose or a shape is not found by its name."""
+    import fcl
+
+    i = _pose_of(least.where, poses)
+    named = {s.name: s for s in (*shapes.moving, *shapes.fixed)}
+    if i is None or least.a not in named or least.b not in named:
+        return None
+    pair = (named[least.a], named[least.b])
+    on_move = least.where.startswith("on the move from ") and i + 1 < len(poses)
+    t = np.linspace(0.0, 1.0, CLOSEST_SAMPLES) if on_move else np.zeros(1)
+    Q = poses[i][0] + t[:, None] * ((poses[i + 1][0] - poses[i][0]) if on_move else 0.0)
+    F = chain_frames(cfg.model, Q, setup=False)
+    objs = [fcl.CollisionObject(_fcl_shape(fcl, s), fcl.Transform()) for s in pair]
+    best: tuple[float, int, np.ndarray] | None = None
+    for k in range(len(Q)):
+        for o, s in zip(objs, pair):
+            W = s.local if s.frame < 0 else F[k, s.frame] @ s.local
+            o.setTransform(fcl.Transform(np.ascontiguousarray(W[:3, :3]), np.ascontiguousarray(W[:3, 3])))
+        res = fcl.DistanceResult()
+        d = float(fcl.distance(objs[0], objs[1], fcl.DistanceRequest(enable_nearest_points=True), res))
+        if best is None or d < best[0]:
+            best = (d, k, np.array(res.nearest_points, dtype=float))
+    assert best is not None
+    return Q[best[1]], best[2]
+
+
+def _fcl_shape(fcl: Any, s: Shape) -> Any:
+    r = s.size
+    if s.kind == "capsule":
+        return fcl.Capsule(r[0], r[1])
+    if s.kind == "sphere":
+        return fcl.Sphere(r[0])
+    if s.kind == "cylinder":
+        return fcl.Cylinder(r[0], r[1])
+    return fcl.Box(*r)
+
+
 def _family_name(cfg: CellConfig, code: int) -> str:
     return f"elbow {code:+d}" if cfg.model.is_scara else f"configuration {code:+d}"
 
@@ -142,7 +194,7 @@ class _Scene:
     vias: np.ndarray  # (v, 3)
     track_direct: np.ndarray  # (m, 3), NaN rows between moves
     track_via: np.ndarray
-    least_at: np.ndarray | None  # (3,) the contact point at the pose of the least clearance
+    least_pair: np.ndarray | None  # (2, 3) the closest points of the pair that sets the least clearance
 
 
 def _track(cfg: CellConfig, Q: np.ndarray, contact: np.ndarray, moves: np.ndarray) -> np.ndarray:
@@ -178,19 +230,20 @@ def _scene(cfg: CellConfig, steps: Sequence[PlannedStep], poses: Sequence[tuple[
     touches = {int(c): point[is_touch & (family == c)] for c in sorted(set(family[is_touch].tolist()))}
     moves = np.arange(len(poses) - 1)
     through_via = is_via[:-1] | is_via[1:]
-    at = None if least is None else _pose_of(least.where, poses)
-    chosen: list[tuple[str, int | None, int]] = []
+    chosen: list[tuple[str, int | None, np.ndarray]] = []
     for c in touches:  # the arm at the first touch of each family
         first = int(np.flatnonzero(is_touch & (family == c))[0])
-        chosen.append((f"arm at the first touch, {_family_name(cfg, c)}", c, first))
-    if at is not None:
-        chosen.append(("arm at the least clearance", None, at))
-    arms = tuple((what, code, [(s, frames[i, s.frame] @ s.local) for s in shapes.moving if s.frame >= 0])
-                 for what, code, i in chosen)
+        chosen.append((f"arm at the first touch ({c:+d})", c, Q[first]))
+    closest = None if least is None else _closest(cfg, shapes, poses, least)
+    if closest is not None:
+        chosen.append(("arm at the least clearance", None, closest[0]))
+    at = chain_frames(cfg.model, np.array([q for *_, q in chosen]).reshape(-1, Q.shape[1]), setup=False)
+    arms = tuple((what, code, [(s, at[k, s.frame] @ s.local) for s in shapes.moving if s.frame >= 0])
+                 for k, (what, code, _q) in enumerate(chosen))
     base = [s for s in shapes.moving if s.frame < 0]
     return _Scene(tuple(base) + shapes.fixed, arms, touches, point[is_via],
                   _track(cfg, Q, contact, moves[~through_via]), _track(cfg, Q, contact, moves[through_via]),
-                  None if at is None else point[at])
+                  None if closest is None else closest[1])
 
 
 def family_id(code: int) -> str:
@@ -209,7 +262,7 @@ def _draw_view(ax: Any, scene: _Scene, view: str, axes: tuple[int, int], cfg: Ce
     ax.set_gid(f"{view}-view")
     for k, s in enumerate(scene.fixed):  # the body, the obstacles, the robot's base
         what = s.group.split(":")[0]
-        face, edge, label = {"cube": ("#c9c9c9", "#555555", "body: cubes and pillars"),
+        face, edge, label = {"cube": ("#c9c9c9", "#555555", "cubes and pillars"),
                              "obstacle": ("#f2c6a0", "#a0522d", "obstacles"),
                              "link": ("#7f7f7f", "#333333", "robot base")}[what]
         patch = Polygon(_outline(s, s.local, axes), closed=True, facecolor=face, edgecolor=edge, lw=0.6,
@@ -229,8 +282,8 @@ def _draw_view(ax: Any, scene: _Scene, view: str, axes: tuple[int, int], cfg: Ce
     for tr, style, gid in ((scene.track_direct, dict(color="0.55", lw=0.4), "travel"),
                            (scene.track_via, dict(color="tab:orange", lw=0.6, ls="--"), "travel-via")):
         if len(tr):
-            (line,) = ax.plot(tr[:, a], tr[:, b], zorder=4, label="travel through vias" if "via" in gid
-                              else "travel and touch moves", **style)
+            (line,) = ax.plot(tr[:, a], tr[:, b], zorder=4, label="moves from or to a via" if "via" in gid
+                              else "moves", **style)
             line.set_gid(f"{view}-{gid}")
     if len(scene.vias):
         (line,) = ax.plot(scene.vias[:, a], scene.vias[:, b], "v", ms=3.5, mfc="none", mec="tab:orange", mew=0.6,
@@ -242,9 +295,13 @@ def _draw_view(ax: Any, scene: _Scene, view: str, axes: tuple[int, int], cfg: Ce
                           mec="white" if filled else colour[code], mew=0.3 if filled else 0.7, zorder=6 - 0.1 * k,
                           label=f"touches, {_family_name(cfg, code)}")
         line.set_gid(_gid(view, "touches", family_id(code)))
-    if scene.least_at is not None:
-        (line,) = ax.plot([scene.least_at[a]], [scene.least_at[b]], "*", ms=9, color="tab:red", mec="black",
-                          mew=0.5, zorder=7, label="least clearance")
+    if scene.least_pair is not None:  # the pair's closest points, joined, and a star between them
+        pts = scene.least_pair
+        (line,) = ax.plot(pts[:, a], pts[:, b], "-", color="tab:red", lw=1.2, zorder=7)
+        line.set_gid(f"{view}-least-pair")
+        mid = pts.mean(axis=0)
+        (line,) = ax.plot([mid[a]], [mid[b]], "*", ms=9, color="tab:red", mec="black", mew=0.5, zorder=7,
+                          label="least clearance")
         line.set_gid(f"{view}-least")
     ax.set_xlabel(f"{names[a]} [mm]")
     ax.set_ylabel(f"{names[b]} [mm]")
@@ -253,22 +310,35 @@ def _draw_view(ax: Any, scene: _Scene, view: str, axes: tuple[int, int], cfg: Ce
 
 
 def _place_views(fig: Any, top: Any, side: Any, title_lines: int) -> None:
-    """One scale [mm per inch] for both views and one X range, so that the side view stands under the
-    top view as a drawing's views do; the figure as tall as that makes it (at most one page). Fixed
-    boxes, no layout engine: it took half the drawing's time."""
+    """One scale [mm per inch] for both views and one X range: the side view under the top view, as a
+    drawing's views stand, or beside it where that draws the cell larger (a cell taller or deeper than
+    it is wide); the figure as tall as that makes it (at most :data:`MAX_HEIGHT_IN`). Fixed boxes, no
+    layout engine: it took half the drawing's time."""
     (x0, y0), (x1, y1) = top.dataLim.get_points()
     (u0, z0), (u1, z1) = side.dataLim.get_points()
     x0, x1 = min(x0, u0) - PAD_MM, max(x1, u1) + PAD_MM
     y0, y1, z0, z1 = y0 - PAD_MM, y1 + PAD_MM, z0 - PAD_MM, z1 + PAD_MM
-    fixed = (title_lines + 2) * LINE_IN + GAP_IN + LEGEND_IN
-    per_in = max((x1 - x0) / (WIDTH_IN - LEFT_IN - RIGHT_IN), (y1 - y0 + z1 - z0) / (MAX_HEIGHT_IN - fixed))
-    w, h_top, h_side = (x1 - x0) / per_in, (y1 - y0) / per_in, (z1 - z0) / per_in
-    height = fixed + h_top + h_side
+    xs, ys, zs = x1 - x0, y1 - y0, z1 - z0
+    head = (title_lines + 2) * LINE_IN
+    stacked = min((WIDTH_IN - LEFT_IN - RIGHT_IN) / xs, (MAX_HEIGHT_IN - head - GAP_IN - LEGEND_IN) / (ys + zs))
+    beside = min((WIDTH_IN - 2 * LEFT_IN - RIGHT_IN) / (2 * xs), (MAX_HEIGHT_IN - head - LEGEND_IN) / max(ys, zs))
+    scale = max(stacked, beside)  # [in / mm]
+    w, h_top, h_side = xs * scale, ys * scale, zs * scale
+    if stacked >= beside:
+        height = head + h_top + GAP_IN + h_side + LEGEND_IN
+        left = (LEFT_IN + (WIDTH_IN - LEFT_IN - RIGHT_IN - w) / 2) / WIDTH_IN
+        boxes = ((left, (LEGEND_IN + h_side + GAP_IN) / height, w / WIDTH_IN, h_top / height),
+                 (left, LEGEND_IN / height, w / WIDTH_IN, h_side / height))
+    else:
+        band = max(h_top, h_side)
+        height = head + band + LEGEND_IN
+        start = (WIDTH_IN - 2 * (LEFT_IN + w) - RIGHT_IN) / 2 + LEFT_IN
+        boxes = ((start / WIDTH_IN, (LEGEND_IN + band - h_top) / height, w / WIDTH_IN, h_top / height),
+                 ((start + w + LEFT_IN) / WIDTH_IN, (LEGEND_IN + band - h_side) / height, w / WIDTH_IN,
+                  h_side / height))
     fig.set_size_inches(WIDTH_IN, height)
-    left = (LEFT_IN + (WIDTH_IN - LEFT_IN - RIGHT_IN - w) / 2) / WIDTH_IN
-    top.set_position((left, (LEGEND_IN + h_side + GAP_IN) / height, w / WIDTH_IN, h_top / height))
-    side.set_position((left, LEGEND_IN / height, w / WIDTH_IN, h_side / height))
-    for ax, (lo, hi) in ((top, (y0, y1)), (side, (z0, z1))):
+    for ax, box, (lo, hi) in ((top, boxes[0], (y0, y1)), (side, boxes[1], (z0, z1))):
+        ax.set_position(box)
         ax.set_xlim(x0, x1)
         ax.set_ylim(lo, hi)
         ax.set_aspect("equal", adjustable="box")
