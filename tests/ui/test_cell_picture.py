@@ -225,3 +225,17 @@ def test_a_picture_that_cannot_be_drawn_is_a_note_not_a_lost_report(seed1_run, m
     assert "no picture of the cell (ValueError: no shapes for this cell)" in data.notes
     html = render_html(data)
     assert '<section id="cell">' not in html and "no picture of the cell" in html
+
+
+def test_the_plan_without_the_upload_draws_its_own_steps(tmp_path, capsys):
+    """``--no-upload``: the picture holds that plan's steps (no verification after the correction)
+    and the least clearance of those poses, checked for them."""
+    assert main(["plan", str(EXAMPLES["scara600_column"]), "--no-upload", "--out", str(tmp_path), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert not any(s["kind"] == StepKind.VERIFY_AFTER.value for s in doc["steps"])
+    root = ET.parse(tmp_path / SVG_NAME).getroot()
+    for code, n in Counter(s["elbow"] for s in doc["steps"]).items():
+        assert _markers(root, f"top-touches-{family_id(code)}") == n
+    title = " ".join("".join(t.itertext()) for t in _group(root, "least-clearance").iter(f"{SVG}text"))
+    poses = int(re.search(r"(\d+) poses and the paths", title).group(1)) if "everywhere" in title else None
+    assert poses is None or poses < doc["collision"]["poses"]  # fewer poses than the run with the upload
