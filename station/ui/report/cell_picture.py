@@ -3,11 +3,12 @@ above (X–Y) and from the side (X–Z), in the robot's base frame, mm.
 
 It shows what the collision check knows (:mod:`station.cell.plan.collision`, the same shapes): the
 body's cubes and their pillars, the cell's ``[[obstacle]]`` boxes and cylinders, the robot's base
-link, the arm (links and probe head) at one pose of each pose family and at the pose of the plan's
-least clearance, every touch of the plan (the head's nominal contact point, one marker per step,
-coloured by its family: a SCARA's elbow, an arm's configuration code), the travel between
-consecutive poses (the contact point's track along the joint-space move; the moves through via
-poses apart) and the via poses, and the least clearance with the pair that sets it.
+link, the arm (links and probe head) at the first touch of each pose family, every touch of the
+plan (the head's nominal contact point, one marker per step, coloured by its family: a SCARA's
+elbow, an arm's configuration code), the moves between consecutive poses (the contact point's track
+along the joint-space move; the moves from or to a via pose apart) and the via poses, and the least
+clearance: the pair's closest points where they come closest, the arm there, the figure and the
+pair in the title. The views share one scale (docs/collision.md, "The picture of the cell").
 
 ``station plan CONFIG --out DIR`` writes it as ``cell.svg`` and ``cell.png``; the run's report embeds
 the SVG. Explicit ``Figure`` objects on matplotlib's Agg canvas (no pyplot, no global backend). The
@@ -57,7 +58,8 @@ TRACK_STEP_RAD = np.radians(10.0)
 MAX_TRACK_SAMPLES = 24
 #: samples of the move that holds the least clearance, to show where along it the pair comes closest
 CLOSEST_SAMPLES = 64
-#: the via poses' labels (station/cell/plan/collision.py's _VIA_NAMES: vias.py names them)
+#: the via poses' labels (station/cell/plan/collision.py's _VIA_NAMES: vias.py names them; the tests
+#: compare the vias drawn with the check's count)
 VIA_NAMES = ("depart", "arrive", "arm upright", "turned upright", "first")
 #: the figure's fixed parts [in]: per line of the title above the top view (and the view's own
 #: title), between the views (the top view's X label, the side view's title), the legend below
