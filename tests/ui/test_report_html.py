@@ -86,9 +86,10 @@ class Page(HTMLParser):
 def assert_self_contained(page: Page) -> None:
     assert "script" not in page.tags and "link" not in page.tags and "iframe" not in page.tags
     images = [v for tag, key, v in page.links if tag == "img"]
-    assert images and all(v.startswith("data:image/png;base64,") for v in images)
-    for v in images:
-        assert base64.b64decode(v.split(",", 1)[1])[:8] == b"\x89PNG\r\n\x1a\n"
+    assert images and all(v.startswith(("data:image/png;base64,", "data:image/svg+xml;base64,")) for v in images)
+    for v in images:  # the plots as PNG, the cell's picture as SVG (issue 40)
+        data = base64.b64decode(v.split(",", 1)[1])
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" if v.startswith("data:image/png") else b"<svg" in data[:400]
     others = [v for tag, key, v in page.links if tag != "img"]
     assert all(v.startswith("#") for v in others), others  # only links within the page
     assert not any("http:" in v or "https:" in v or "file:" in v for _, _, v in page.links)
@@ -171,10 +172,10 @@ def test_simulated_run_report(simulated_run):
     assert html.is_file() and (rep / "report.md").is_file()
     page = Page(html.read_text(encoding="utf-8"))
     # a simulated run's judge adds its Simulation section before the sign-off (issue 42); a real run's
-    # report has none (test above)
-    assert page.sections == [*SECTIONS[:-1], "simulation", "signoff"]
+    # report has none (test above); a stored run's plan gets the cell's picture (issue 40)
+    assert page.sections == [*SECTIONS[:-1], "simulation", "cell", "signoff"]
     assert_self_contained(page)
-    assert len([v for tag, _, v in page.links if tag == "img"]) == 5
+    assert len([v for tag, _, v in page.links if tag == "img"]) == 6
     with RunDB(db) as d:
         judged = report_data_for_run(d, 1).summary.simulation
     assert judged and [r[0] for r in page.tables["simulation-table"][1:]] == [f.name for f in judged]

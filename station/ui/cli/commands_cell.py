@@ -330,9 +330,14 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from station.cell.correction.design import GRID_POINT
     from station.cell.pipeline.premotion import premotion_check
     from station.cell.pipeline.preview import describe, preview
+    from station.ui.report.cell_picture import check_picture_dir, plan_picture, write_cell_picture
 
     cfg = load_config(args.config)
+    if args.out:
+        check_picture_dir(Path(args.out))  # before the planning: a bad folder is refused at once
     pre = premotion_check(cfg)  # what 'calibrate' refuses before moving, refused here the same way (exit 2)
+    picture = [] if not args.out else write_cell_picture(Path(args.out), plan_picture(
+        cfg, pre.plan, pre.collision, with_upload=not args.no_upload))  # the cell's picture (issue 40)
     design = pre.design
     locating = [] if pre.locating is None else [f"  locating: {pre.locating.describe()}"]  # the run's first motions
     collision = [] if pre.collision is None else [f"  {ln}" for ln in pre.collision.lines()]  # issue 40
@@ -349,15 +354,17 @@ def cmd_plan(args: argparse.Namespace) -> int:
         print(json.dumps({"outcome": "SUCCESS", "exit_code": 0, **p.to_json(), "head": head.to_json(),
                           "warnings": warnings, "correction": correction,
                           "locating": None if pre.locating is None else pre.locating.describe(),
-                          "collision": None if pre.collision is None else pre.collision.to_json()}))
+                          "collision": None if pre.collision is None else pre.collision.to_json(),
+                          "picture": {f.suffix[1:]: str(f) for f in picture} or None}))
     else:
         lines = describe(p)
         at = next((i + 1 for i, ln in enumerate(lines) if ln.lstrip().startswith("predicted accuracy")), len(lines))
         table = [] if design is None else [
             f"  correction table ({'configured' if cfg.correction.explicit else 'designed by the station'}): "
             f"{design.describe()}", f"  the grid's x, y, z and yaw are {GRID_POINT}"]
-        print("\n".join([*lines[:at], *table, *locating, *collision, *(f"  warning: {w}" for w in warnings), *lines[at:],
-                          *head.lines()]))
+        drawn = [f"  picture of the cell (from above and from the side): {', '.join(map(str, picture))}"] if picture else []
+        print("\n".join([*lines[:at], *table, *locating, *collision, *drawn, *(f"  warning: {w}" for w in warnings),
+                          *lines[at:], *head.lines()]))
     return 0
 
 

@@ -285,6 +285,8 @@ def _add_cell_commands(sub) -> None:
     p = sub.add_parser("plan", help="preview a calibration's plan: steps, margins, expected accuracy (nothing moves)")
     p.add_argument("config")
     p.add_argument("--no-upload", action="store_true", help="the plan of a run without the upload")
+    p.add_argument("--out", metavar="DIR", help="write the plan's files here: cell.svg and cell.png, the cell from "
+                   "above and from the side with the plan's poses (docs/collision.md)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func="station.ui.cli.commands_cell:cmd_plan")
 

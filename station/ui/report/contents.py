@@ -265,6 +265,9 @@ class ReportData:
     #: how far the run got, for a run that did not finish ("" : it finished): the report says it
     #: first, and the sections the run did not reach say so instead of their tables
     progress: str = ""
+    #: the cell from above and from the side with the run's planned poses (SVG text, issue 40:
+    #: :mod:`station.ui.report.cell_picture`); None: not drawn (the notes say why)
+    cell_svg: str | None = None
 
     def __post_init__(self) -> None:
         names = tuple(str(n) for n in self.param_names)

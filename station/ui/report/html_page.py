@@ -61,6 +61,9 @@ table.signature { width: 100%; margin-top: 10px; }
 table.signature td { height: 16mm; } table.signature td:first-child { width: 18%; font-weight: 600; }
 table.signature th:nth-child(2), table.signature th:nth-child(4) { width: 30%; }
 section#signoff { break-inside: avoid; page-break-inside: avoid; }
+/* the cell's picture (issue 40) opens a page, its heading never orphaned at the foot of the one before,
+   and leaves room for the sign-off under it */
+@media print { section#cell { break-before: page; page-break-before: always; } #cell-picture img { max-height: 170mm; } }
 @media print {
   @page { size: A4; margin: 12mm; }
   body { max-width: none; padding: 0; font-size: 10pt; }
@@ -131,6 +134,7 @@ SECTIONS = (
     ("tools", "Tools after the head"),
     ("simulation", "Simulation"),
     ("trend", "Trend: this robot's calibrations and rechecks"),
+    ("cell", "The cell and the plan's poses"),
     ("signoff", "Sign-off"),
 )
 
@@ -435,6 +439,16 @@ def _trend(d: ReportData) -> str:
                    "One column per run, oldest first; a recheck's red dash is its tolerance."))
 
 
+def _cell(d: ReportData) -> str:
+    data = base64.b64encode((d.cell_svg or "").encode("utf-8")).decode("ascii")
+    return ('<p class="note">The cell seen from above and from the side in the robot\'s base frame (mm), as the '
+            "collision check sees it: the body's cubes, the obstacles, the arm at the first touch of each pose "
+            "family and at the plan's least clearance, every touch of the plan and the travel between the "
+            "poses.</p>"
+            f'<figure id="cell-picture"><img alt="the cell and the plan\'s poses" '
+            f'src="data:image/svg+xml;base64,{data}"></figure>')
+
+
 def _guarded(key: str, build: Callable[[ReportData], str], d: ReportData) -> str:
     """A section's HTML; a section that cannot be drawn from what the run stored says so and why
     instead of failing the whole report (every run that ends gets one)."""
@@ -457,6 +471,8 @@ def render_html(d: ReportData) -> str:
         builders.append(("simulation", _simulation))
     if t.has_trend(d):  # one run has no history: no section
         builders.append(("trend", _trend))
+    if d.cell_svg is not None:  # the cell's picture (issue 40)
+        builders.append(("cell", _cell))
     builders.append(("signoff", _signoff))
     parts = [(key, _guarded(key, build, d)) for key, build in builders]
     shown = {k for k, _ in parts}
