@@ -7,8 +7,15 @@ from __future__ import annotations
 
 import itertools
 import os
+import shutil
+import socket
+import threading
+import time
 import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import Any
 
 import psycopg
 import pytest
@@ -92,3 +99,56 @@ def new_database(server: PgServer, target: int | None = None) -> FleetDB:
 def fleet_db(pg_server) -> FleetDB:
     """A fresh, migrated fleet store in the throwaway server."""
     return new_database(pg_server)
+
+
+@contextmanager
+def serve_dashboard(app: Any) -> Iterator[str]:
+    """The dashboard ``app`` on a free local port (uvicorn in a thread) until the block ends; yields
+    its base URL."""
+    import uvicorn
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning"))
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    for _ in range(200):
+        if server.started:
+            break
+        time.sleep(0.05)
+    assert server.started, "the dashboard did not start"
+    try:
+        yield f"http://127.0.0.1:{port}"
+    finally:
+        server.should_exit = True
+        thread.join(10)
+
+
+#: the distribution's headless Chromium for the browser tests (nothing downloads a browser)
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+CHROMEDRIVER = shutil.which("chromedriver")
+
+
+@pytest.fixture
+def browser(tmp_path):
+    if not (CHROMIUM and CHROMEDRIVER):
+        why = "needs Debian's chromium and chromium-driver (apt-get install, as .ci/run does)"
+        if _in_ci():
+            pytest.fail(f"CI=true: {why}")
+        pytest.skip(why)
+    webdriver = pytest.importorskip("selenium.webdriver")
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = CHROMIUM
+    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
+                "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                "--no-first-run", f"--user-data-dir={tmp_path / 'chromium-profile'}"):
+        options.add_argument(arg)
+    driver = webdriver.Chrome(options=options, service=Service(executable_path=CHROMEDRIVER))
+    driver.set_page_load_timeout(60)
+    try:
+        yield driver
+    finally:
+        driver.quit()

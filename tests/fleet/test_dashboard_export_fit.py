@@ -13,7 +13,7 @@ from starlette.testclient import TestClient
 
 from station.fleet import store
 from station.ui.dashboard.app import create_app
-from tests.fleet.test_dashboard_browser import browser, served  # noqa: F401 - the browser fixtures
+from tests.fleet.test_dashboard_browser import served  # noqa: F401 - the dashboard of the browser tests
 
 HOSTILE = "=HYPERLINK(\"http://x\")"
 
@@ -80,7 +80,7 @@ def wide_fleet(fleet_db, served):  # noqa: F811 - served: the dashboard of fleet
     return served
 
 
-def test_the_fleet_table_fits_1366_px_in_chromium(browser, wide_fleet):  # noqa: F811
+def test_the_fleet_table_fits_1366_px_in_chromium(browser, wide_fleet):
     from selenium.webdriver.common.by import By
 
     browser.set_window_size(1366, 768)

@@ -7,11 +7,7 @@ Chromium follows the run page's link and saves the same bytes."""
 from __future__ import annotations
 
 import json
-import socket
-import threading
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 
 import httpx
 import psycopg
@@ -23,35 +19,16 @@ from station.fleet import store
 from station.ui.cli.main import main
 from station.ui.dashboard.app import DashboardAuth, create_app
 from station.ui.report.dcc import validate_dcc
-from tests.fleet.test_dashboard_browser import browser  # noqa: F401 - headless Chromium, as the browser tests have it
+from tests.fleet.conftest import serve_dashboard
 from tests.ui.test_export_dcc import ISSUER
 
 TOKEN = "qa-token-41"
 WITH_TOKEN = DashboardAuth(token=TOKEN)
 
 
-@contextmanager
-def _served(url: str, auth: DashboardAuth | None = WITH_TOKEN) -> Iterator[str]:
-    """The dashboard on a free local port (uvicorn in a thread), by default with a bearer token."""
-    import uvicorn
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    server = uvicorn.Server(uvicorn.Config(create_app(url, auth=auth), host="127.0.0.1",
-                                           port=port, log_level="warning"))
-    thread = threading.Thread(target=server.run, daemon=True)
-    thread.start()
-    for _ in range(200):
-        if server.started:
-            break
-        time.sleep(0.05)
-    assert server.started, "the dashboard did not start"
-    try:
-        yield f"http://127.0.0.1:{port}"
-    finally:
-        server.should_exit = True
-        thread.join(10)
+def _served(url: str, auth: DashboardAuth | None = WITH_TOKEN):
+    """The dashboard on a free local port (conftest's serve_dashboard), by default with a bearer token."""
+    return serve_dashboard(create_app(url, auth=auth))
 
 
 def _fetch(base: str, run_uuid: str) -> httpx.Response:
@@ -122,7 +99,7 @@ def test_no_certificate_is_a_404_and_the_store_checks_its_digest(fleet_db):
 
 
 
-def test_chromium_downloads_the_certificate_from_the_run_page(fleet_db, browser, tmp_path):  # noqa: F811
+def test_chromium_downloads_the_certificate_from_the_run_page(fleet_db, browser, tmp_path):
     """The run page's link, followed in the distribution's headless Chromium (the browser tests'
     fixture): the file it saves is the stored certificate, byte for byte."""
     from selenium.webdriver.common.by import By

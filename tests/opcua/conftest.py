@@ -10,6 +10,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -67,13 +68,12 @@ class Served:
     db: Path
 
 
-@pytest.fixture(scope="module")
-def served(pki: Pki, tmp_path_factory) -> Iterator[Served]:
-    """``station serve --opcua CONFIG --simulated`` in its own process, until the module's end."""
-    work = tmp_path_factory.mktemp("serve")
+@contextmanager
+def serving(pki: Pki, work: Path, db: Path) -> Iterator[Served]:
+    """``station serve --opcua CONFIG --simulated`` on run database ``db`` in its own process
+    (working in ``work``), until the block ends."""
     port = free_port()
     log = work / "serve.log"
-    db = work / "runs.sqlite"
     cmd = [sys.executable, "-m", "station.ui.cli.main", "serve", "--opcua", str(CONFIG), "--simulated",
            "--pki", str(pki.root / "server"), "--users", str(pki.users), "--host", "127.0.0.1", "--port", str(port),
            "--db", str(db)]
@@ -95,3 +95,11 @@ def served(pki: Pki, tmp_path_factory) -> Iterator[Served]:
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
+
+
+@pytest.fixture(scope="module")
+def served(pki: Pki, tmp_path_factory) -> Iterator[Served]:
+    """``station serve --opcua CONFIG --simulated`` in its own process, until the module's end."""
+    work = tmp_path_factory.mktemp("serve")
+    with serving(pki, work, work / "runs.sqlite") as s:
+        yield s

@@ -7,10 +7,6 @@ against the kept DCC schema."""
 from __future__ import annotations
 
 import json
-import signal
-import subprocess
-import sys
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -20,7 +16,7 @@ from asyncua import ua
 from station.ui.cli.main import main
 from station.ui.report.dcc import validate_dcc
 from tests.opcua.clients import CONFIG, PASSWORDS, connected, station
-from tests.opcua.conftest import Pki, Served, free_port
+from tests.opcua.conftest import Pki, Served, serving
 from tests.ui.test_export_dcc import ISSUER
 
 RESULT_NS = "http://opcfoundation.org/UA/Machinery/Result/"
@@ -35,26 +31,8 @@ def certified_server(pki: Pki, tmp_path_factory) -> Iterator[tuple[Served, Path]
     assert main(["calibrate", str(CONFIG), "--simulated", "--seed", "1", "--db", str(db)]) == 0
     issuer.write_text(ISSUER)
     assert main(["export-dcc", "1", "--db", str(db), "--issuer", str(issuer), "-o", str(out)]) == 0
-    port, log = free_port(), work / "serve.log"
-    cmd = [sys.executable, "-m", "station.ui.cli.main", "serve", "--opcua", str(CONFIG), "--simulated",
-           "--pki", str(pki.root / "server"), "--users", str(pki.users), "--host", "127.0.0.1", "--port", str(port),
-           "--db", str(db)]
-    with log.open("w") as f:
-        proc = subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT, cwd=work)
-    try:
-        deadline = time.monotonic() + 90
-        while "OPC UA server on" not in log.read_text():
-            if proc.poll() is not None or time.monotonic() > deadline:
-                pytest.fail(f"station serve --opcua did not come up:\n{log.read_text()}")
-            time.sleep(0.1)
-        yield Served(f"opc.tcp://127.0.0.1:{port}/station/", proc, log, db), out
-    finally:
-        proc.send_signal(signal.SIGTERM)
-        try:
-            proc.wait(30)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+    with serving(pki, work, db) as served:
+        yield served, out
 
 
 @pytest.mark.slow

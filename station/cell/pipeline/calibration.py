@@ -48,7 +48,7 @@ from station.cell.records.fingerprint import check_same_cell, current_like, fing
 from station.cell.records.judge import RunJudge
 from station.cell.records.run_records import MeasurementRecord
 from station.cell.records.rundb import RunDB
-from station.cell.records.stored_config import POSTPROCESSED_CONFIG, config_source, stored_config, stored_plan
+from station.cell.records.stored_config import config_source, stored_config, stored_plan
 from station.cell.records.summary import (
     CorrectionSummary,
     ErrorStats,
@@ -59,12 +59,15 @@ from station.cell.records.summary import (
 )
 from station.cell.run.devices import CellController, ProbeHead
 from station.cell.run.events import (
+    CellChanged,
     Event,
     Identified,
     Notice,
     PhaseChanged,
     RunFinished,
+    RunPlanned,
     RunStarted,
+    StatusChanged,
     TableDesigned,
     Uploaded,
     Verified,
@@ -74,6 +77,7 @@ from station.cell.run.questions import Confirm, KeepCorrection, UploadProposal
 from station.cell.run.recentring import recentring_stats, stored_recentring
 from station.cell.run.runcontrol import RunControl
 from station.cell.run.runner import Procedure, Runner, approach_and_read
+from station.cell.run.writer import RunWriter
 from station.core.identification.identify import BODY_NOTE_PREFIX, IdentificationResult
 from station.core.kinematics.transforms import invert, matrix_to_pose, pose_to_matrix
 from station.errors import ConfigError, IdentificationError, Outcome, RunAborted
@@ -171,14 +175,19 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
     control = control or RunControl()
     pre = premotion_check(cfg)  # tools, plan, correction: what 'station plan' checks, before anything moves
     runner = Runner(cfg, probe, controller, emit, control)
+    # the run database's writer, first for the whole run: the pipeline emits its facts, the writer
+    # stores each before a view hears of it, and a failed write stops the run (station/cell/run/writer.py)
+    writer = RunWriter(db, resume_run)
+    runner.stream.subscribe(writer, first=True)
+    emit = runner.stream
     with_oracle = options.judge is not None and options.upload
     reused: tuple[str, ...] = ()  # a resume: the post-processing sections changed since
     if resume_run is None:
         emit(PhaseChanged("plan"))
         steps = pre.plan.run_steps(cfg.plan.verification_cycles, with_oracle, options.upload)
-        run_id = db.create_run(cfg.source_text, [st.to_record() for st in steps], seed=seed)
-        db.save_result(run_id, "config_source", config_source(cfg))
-        db.save_result(run_id, "fingerprint", fingerprint(cfg))
+        emit(RunPlanned(cfg.source_text, tuple(st.to_record() for st in steps), seed, config_source(cfg),
+                        fingerprint(cfg)))
+        run_id = writer.run_id  # the run database's number of the run it created
         resumed = 0
     else:
         run_id = resume_run
@@ -190,9 +199,7 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
         moved = config_source(cfg) != db.load_result(run_id, "config_source", default=None)
         if reused or moved:  # the measurements are kept; the table, the figures and the report follow this
             # text, and its files are read where they lie now (a cell folder moved or copied: issue 37)
-            db.save_result(run_id, POSTPROCESSED_CONFIG, cfg.source_text)
-            db.save_result(run_id, "config_source", config_source(cfg))
-            db.save_result(run_id, "fingerprint", fingerprint(cfg))
+            emit(CellChanged(run_id, cfg.source_text, config_source(cfg), fingerprint(cfg)))
         db.measurements(run_id)  # what is on disk must belong to that plan (record_checks.py), else exit 5
         planned_upload = any(st.kind is StepKind.VERIFY_AFTER for st in steps)
         if planned_upload != options.upload:
@@ -200,15 +207,13 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
                               f"resume it {'without' if planned_upload else 'with'} --no-upload as it started, "
                               f"or start a new run")
         resumed = len(db.completed_steps(run_id, ok_only=True))
-    if devices_info:  # the devices of the latest attempt, for the report
-        db.save_result(run_id, "devices", devices_info)
-    emit(RunStarted(run_id, len(steps), resumed))
+    emit(RunStarted(run_id, len(steps), resumed, resume=resume_run is not None,
+                    devices=tuple((devices_info or {}).items())))  # the latest attempt's devices, for the report
     runner.progress.start(len(steps), resumed)  # k of n from here on (station/cell/run/progress.py)
     design = None if pre.design is None else f"correction table designed: {pre.design.describe()}"
     for note in (resume_note(reused), design):
         if note:
             emit(Notice("info", note))
-    db.log(run_id, "info", f"run {'resumed' if resume_run else 'started'}: {len(steps)} steps, {resumed} on disk")
     summary = RunSummary(outcome=Outcome.SUCCESS, run_id=run_id, cell=cfg.name, robot=cfg.model.name)
     start = table_at_start(controller, db, run_id, emit)  # before anything changes the controller's tables
     try:
@@ -226,13 +231,11 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
     except Exception as exc:  # station and driver errors alike: log, mark the run, re-raise
         note = restore_after_failure(controller, start, emit)
         exc.add_note(note)
-        db.log(run_id, "error", f"{type(exc).__name__}: {exc}")
-        db.log(run_id, "info", note)
-        db.set_status(run_id, "aborted" if isinstance(exc, RunAborted) else "failed")
+        emit(StatusChanged("aborted" if isinstance(exc, RunAborted) else "failed", f"{type(exc).__name__}: {exc}",
+                           note))
         raise
-    db.save_result(run_id, "summary", summary.to_json())
     runner.progress.finish()  # the steps a run without its upload does not measure: not left to do
-    emit(RunFinished(summary))
+    emit(RunFinished(summary))  # stored by the writer (result 'summary'), then the views
     return summary
 
 
@@ -276,6 +279,15 @@ def _scara_terms(cfg: CellConfig, db: RunDB, run_id: int, terms: Any, summary: R
     # the geometry fitted with what was kept (backlash folded into its zeros, drift alone included), as
     # the recheck and the report read it back
     return summary, (np.asarray(terms.fit.params, dtype=float) if terms.chosen else res.params), delta
+
+
+def _frozen(a: Any) -> Any:
+    """An array as nested tuples of floats (an event's figures cannot change under its subscribers);
+    None stays None."""
+    def tuples(v: Any) -> Any:
+        return tuple(tuples(x) for x in v) if isinstance(v, list) else v
+
+    return None if a is None else tuples(np.asarray(a, dtype=float).tolist())
 
 
 def _identification_summary(res: IdentificationResult) -> IdentificationSummary:
@@ -365,7 +377,7 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
         summary = _reference_check(run, cfg, table, used, summary)
     outcome, missed = verified_outcome(cfg, summary, options.min_gain)
     summary = summary.replace(notes=(*summary.notes, *missed), missed=missed_limits(cfg, summary, options.min_gain))
-    db.set_status(run_id, "verified")
+    emit(StatusChanged("verified"))
     return _kept_or_restored(run, table, summary, outcome)
 
 
@@ -379,12 +391,12 @@ def _measure_identification(run: _Run, cfg: CellConfig, summary: RunSummary):
         from station.cell.run.warmup import run_warmup
 
         run_warmup(cfg, run.runner, db, run_id, run.steps[0], emit)
-    db.set_status(run_id, "measuring")
+    emit(StatusChanged("measuring"))
     rejudge(cfg, db, run_id, emit)  # a resume after [plan] max_residual_um changed: judged, not measured, again
     located = locate_body(cfg, run.runner, db, run_id, run.steps, emit)  # the body is found, not assumed (issue 37)
     emit(PhaseChanged("measure", "identification poses"))
     run.measure(cfg, {StepKind.IDENTIFICATION, StepKind.REVERSAL}, None, located)
-    db.set_status(run_id, "measured")
+    emit(StatusChanged("measured"))
     if located is not None:  # the identification starts from the located set-up, and the set-up parameters
         # it cannot tell from the arm's (its minimal set) stay there: the verification's base frame is the body's
         cfg = dataclasses.replace(cfg, model=cfg.model.with_setup(located))
@@ -401,7 +413,7 @@ def _measure_identification(run: _Run, cfg: CellConfig, summary: RunSummary):
 def _identify_recorded(run: _Run, cfg: CellConfig, records, summary: RunSummary):
     """The identification of the stored poses, refused where too few are valid, where it did not
     converge or where its robot is implausible; stored and streamed."""
-    db, run_id, emit = run.db, run.run_id, run.emit
+    emit = run.emit
     emit(PhaseChanged("identify"))
     n_planned = sum(1 for st in run.steps if st.kind is StepKind.IDENTIFICATION)
     n_valid = sum(1 for r in records if r.ok and r.pose is not None)
@@ -414,15 +426,10 @@ def _identify_recorded(run: _Run, cfg: CellConfig, records, summary: RunSummary)
     res = identify_run(cfg, records)
     check_identification(res)
     check_plausible(cfg, records, res)
-    db.save_result(run_id, "identification", {
-        "params": res.params, "chosen": list(res.chosen), "sigma": res.uncertainty.sigma,
-        "covariance": res.uncertainty.covariance,  # of the chosen parameters, [mm, rad]² (the fleet store's)
-        "rms_normalized": res.rms_normalized, "outliers": list(res.outliers),
-        "residuals": res.residuals})
-    db.set_status(run_id, "identified")
     identified = _identification_summary(res)
     summary = summary.replace(identification=identified)
-    emit(Identified(identified, tuple(float(v) for v in res.params)))  # the figures stored
+    emit(Identified(identified, tuple(float(v) for v in res.params), _frozen(res.uncertainty.covariance),
+                    _frozen(res.residuals)))  # stored by the writer (result 'identification'), then shown
     for note in (n for n in res.notes if n.startswith(BODY_NOTE_PREFIX)):  # the body's CMM σ is in the fit
         summary = summary.replace(notes=(*summary.notes, note))
         emit(Notice("info", note))
@@ -441,11 +448,9 @@ def _designed_table(run: _Run, cfg: CellConfig, params: np.ndarray, delta, pre: 
         n_values=int(table.data.n_values), interpolation_bound_um=bound, crc32=f"{table.data.crc32():08x}",
         predicted_bound_um=pre.design.predicted_bound_um, grid_shape=tuple(int(n) for n in used.counts),
         refined=used.counts != pre.design.counts, limit_um=float(cfg.correction.max_interpolation_um))))
-    run.emit(TableDesigned(designed))  # the one bound the run judges, stores and shows
-    run.db.save_result(run.run_id, "correction_grid", {**grid_to_json(used.grid), "bound_um": bound,
-                                                       "predicted_bound_um": pre.design.predicted_bound_um,
-                                                       "sampled_bounds_um": list(pre.design.bounds_um),
-                                                       "error_terms": table.with_terms})  # its nodes carry the terms
+    # the one bound the run judges, stores (result 'correction_grid', by the writer) and shows
+    run.emit(TableDesigned(designed, grid_to_json(used.grid), tuple(float(b) for b in pre.design.bounds_um),
+                           bool(table.with_terms)))  # its nodes carry the terms
     if used.counts != pre.design.counts:
         run.emit(Notice("info", f"the correction grid was refined for the identified robot: {used.describe()}"))
     return table, used, bound, summary
@@ -475,9 +480,9 @@ def _upload_and_verify(run: _Run, cfg: CellConfig, table, R_after: np.ndarray, s
     emit = run.emit
     upload = verified_upload(run.runner.controller, table.data, emit)
     run.runner.guard.table = table.data  # Cartesian moves are now corrected by this table
-    run.db.set_status(run.run_id, "uploaded")
     summary = summary.replace(upload=(uploaded := UploadSummary(crc32=f"{upload.crc32:08x}", seconds=upload.total_s)))
     emit(Uploaded(uploaded, *(f"{c:08x}" if c else "none" for c in (upload.active_crc32, upload.previous_crc32))))
+    # (the writer stores the status 'uploaded' from it)
     emit(PhaseChanged("verify", "after correction"))
     run.measure(cfg, {StepKind.VERIFY_AFTER}, R_after)
     summary = summary.replace(after=run.stats(cfg, StepKind.VERIFY_AFTER))

@@ -23,12 +23,12 @@ from station.cell.run.stream import RunStream
 from station.cell.session.calibrate import (
     CellLoader,
     CellRequest,
+    FailureRecorder,
     LoadedCell,
     RunTracker,
     describe_devices,
     load_cell,
     open_cell,
-    store_failure,
 )
 
 
@@ -41,6 +41,7 @@ def run_recheck_session(request: CellRequest, emit: Callable[[Event], None], con
     ``RunFailed`` and returned as a :class:`RunSummary`.
     ``on_cell``: called with the loaded cell (a test reaches the simulator's state through it)."""
     stream = RunStream(emit)  # the caller's views first, then the fleet outbox (a recheck's end is published)
+    stream.subscribe(FailureRecorder(request.db, "recheck"), RunFailed, first=True)  # stored before it is told
     tracker = RunTracker(stream)
     cell_name = robot = ""
 
@@ -70,7 +71,5 @@ def run_recheck_session(request: CellRequest, emit: Callable[[Event], None], con
             failed = failed.replace(failure=failed.failure.__class__(
                 failed.failure.error_type, failed.failure.message,
                 failed.failure.hint.replace("station calibrate", "station recheck"), failed.failure.log_file))
-        if tracker.run_id is not None:
-            store_failure(request.db, tracker.run_id, {**failed.to_json(), "kind": "recheck"})
-        stream(RunFailed(failed))  # stored first: the fleet outbox publishes the failure as stored
+        stream(RunFailed(failed))  # stored first (FailureRecorder): the fleet outbox publishes it as stored
         return failed

@@ -10,6 +10,7 @@ Units as in the summary: µm for errors and bounds, mm and rad for parameters, s
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -35,12 +36,52 @@ class PhaseChanged(Event):
     detail: str = ""
 
 
+@dataclass(frozen=True, eq=False)
+class RunPlanned(Event):
+    """A new run, planned and checked before anything moves: the configuration's text, one record
+    per planned step (``PlannedStep.to_record``), a simulated cell's seed, where the configuration's
+    files lie (``config_source``) and the cell's fingerprint. The run database's writer
+    (:class:`station.cell.run.writer.RunWriter`) creates the run from it; its number is the
+    database's, and :class:`RunStarted` carries it."""
+
+    config_toml: str
+    plan: tuple[Mapping[str, Any], ...]
+    seed: int | None
+    config_source: str  # where the configuration was read, absolute (resolves its files)
+    fingerprint: Mapping[str, Any]
+
+
+@dataclass(frozen=True, eq=False)
+class CellChanged(Event):
+    """A resumed run whose cell changed where the measurements stay valid (post-processing
+    sections, the files moved): the table, the figures and the report follow this text from now on."""
+
+    run_id: int
+    config_toml: str
+    config_source: str  # where the configuration was read, absolute (resolves its files)
+    fingerprint: Mapping[str, Any]
+
+
 @dataclass(frozen=True)
 class RunStarted(Event):
     run_id: int
     n_steps: int
     resumed_from: int = 0  # steps already on disk from an earlier attempt
     kind: Literal["calibration", "recheck"] = "calibration"  # which session's run
+    resume: bool = False  # an attempt of a run that was started before (resumed_from may be 0)
+    devices: tuple[tuple[str, str], ...] = ()  # what the devices said they are (for the report)
+
+
+@dataclass(frozen=True)
+class StatusChanged(Event):
+    """The run's status (one of the run database's ``RUN_STATUSES``) where no figure event says it:
+    measuring, measured, verified, and failed or aborted with what stopped it (``error``) and what
+    was done about the controller's tables (``note``). :class:`Identified` says 'identified' and
+    :class:`Uploaded` 'uploaded'."""
+
+    status: str
+    error: str = ""
+    note: str = ""
 
 
 @dataclass(frozen=True)
@@ -135,21 +176,30 @@ class Resumed(Event):
 
 @dataclass(frozen=True)
 class Identified(Event):
-    """The identification the run accepted (converged, plausible, stored): the summary's figures
-    (each chosen parameter with its σ [mm | rad], the residual RMS [µm]) and the whole model's
-    parameter vector [mm | rad] (set-up first), as stored in the run database's ``identification``."""
+    """The identification the run accepted (converged, plausible): the summary's figures (each
+    chosen parameter with its σ [mm | rad], the residual RMS [µm]) and the whole model's parameter
+    vector [mm | rad] (set-up first); with the chosen parameters' covariance [(mm | rad)²] and the
+    fit's residual rows, all the run database's ``identification`` holds (its writer stores it
+    from this event)."""
 
     identification: IdentificationSummary
     params: tuple[float, ...]
+    covariance: tuple[tuple[float, ...], ...] | None = None
+    residuals: tuple[Any, ...] | None = None  # the fit's residual rows, nested tuples of floats
 
 
 @dataclass(frozen=True)
 class TableDesigned(Event):
     """The correction table built for the identified robot: its grid's node counts, its values,
     its CRC-32 and its interpolation bound [µm], the one stored value the run judges against
-    ``limit_um`` (``correction.interpolation_bound_um`` of the summary)."""
+    ``limit_um`` (``correction.interpolation_bound_um`` of the summary). With the grid it was built
+    on (``grid_to_json``), the bounds sampled before motion [µm] and whether its nodes carry error
+    terms: the run database's ``correction_grid``, which its writer stores from this event."""
 
     correction: CorrectionSummary
+    grid: Mapping[str, Any] | None = None
+    sampled_bounds_um: tuple[float, ...] = ()
+    error_terms: bool = False
 
 
 @dataclass(frozen=True)

@@ -45,7 +45,7 @@ from station.io.robot_program import ur_program_needs
 log = logging.getLogger(__name__)
 
 __all__ = ["CellRequest", "CellLoader", "Devices", "LoadedCell", "open_cell", "open_probe", "open_controller", "load_cell", "check_cell", "CheckReport",
-           "run_calibration_session", "reset_controller", "RunTracker", "store_failure"]
+           "run_calibration_session", "reset_controller", "RunTracker", "store_failure", "FailureRecorder"]
 
 
 @dataclass(frozen=True)
@@ -229,6 +229,7 @@ def run_calibration_session(request: CellRequest, emit: Callable[[Event], None],
     once the cell is loaded (:class:`~station.cell.publication.subscriber.FleetOutbox`).
     """
     stream = RunStream(emit)  # the caller's views first, then the fleet outbox
+    stream.subscribe(FailureRecorder(request.db), RunFailed, first=True)  # a failure stored before it is told
     tracker = RunTracker(stream)
     cell_name = robot = ""
 
@@ -259,9 +260,7 @@ def run_calibration_session(request: CellRequest, emit: Callable[[Event], None],
     except Exception as exc:  # every failure becomes an outcome; nothing escapes as a traceback
         summary = failure_summary(exc, run_id=tracker.run_id, log_dir=Path(request.db).resolve().parent,
                                   cell=cell_name, robot=robot, db=request.db)
-        if tracker.run_id is not None:  # 'station runs' shows why it stopped
-            store_failure(request.db, tracker.run_id, summary.to_json())
-        stream(RunFailed(summary))  # stored first: the fleet outbox publishes the failure as stored
+        stream(RunFailed(summary))  # stored first (FailureRecorder): the fleet outbox publishes it as stored
         return summary
 
 
@@ -274,6 +273,21 @@ def store_failure(db_path: str, run_id: int, record: dict[str, Any]) -> None:
             db.save_result(run_id, "summary", record)
     except Exception as exc:  # noqa: BLE001 - see above
         log.warning("run %s: the failure summary could not be stored in %s: %s", run_id, db_path, exc)
+
+
+class FailureRecorder:
+    """The run database's writer of a failed run's end, a subscriber of the session's stream (issue
+    42): the :class:`RunFailed` summary of a run that has a number is stored (:func:`store_failure`,
+    ``kind``: the record's ``kind`` where it is not a calibration's), so that 'station runs' shows
+    why it stopped. Subscribed first, it stores before the views and the fleet outbox hear of it."""
+
+    def __init__(self, db_path: str, kind: str | None = None) -> None:
+        self.db_path, self.kind = db_path, kind
+
+    def __call__(self, e: RunFailed) -> None:
+        if e.summary.run_id is not None:
+            kind = {"kind": self.kind} if self.kind else {}
+            store_failure(self.db_path, e.summary.run_id, {**e.summary.to_json(), **kind})
 
 
 def reset_controller(cfg: CellConfig, confirm: Callable[[str], bool]) -> tuple[str, ...]:

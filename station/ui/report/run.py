@@ -44,6 +44,7 @@ from station.ui.report.cell_picture import run_picture
 from station.ui.report.contents import Acceptance, IsoPose, ReportData, TestConditions, Traceability, TrendRun
 from station.ui.report.progress import document_id, partial_report_data, run_progress
 from station.ui.report.provenance import software_rows
+from station.ui.report.stored_fit import with_stored_figures
 from station.ui.report.writer import write_report
 
 __all__ = ["report_data_for_run", "report_for_run", "correlation_from_covariance", "check_operator"]
@@ -399,6 +400,8 @@ def report_data_for_run(db: RunDB, run_id: int, *, operator: str | None = None) 
         return _partial_report(db, run_id, cfg, steps, summary, str(exc), operator)
     # which directions are the set-up's and what the base frame is tied to (issue 36)
     notes: list[str] = [n for n in res.notes if n.startswith(BASE_FRAME_NOTE_PREFIX)]
+    # the figures the run identified, streamed and stored, not computed again (issue 42)
+    res = with_stored_figures(res, db.load_result(run_id, "identification", default=None), notes)
     table = None
     if cfg.model.is_scara and not _reached(db, run_id, summary, "correction"):
         notes.append("the run did not reach its correction table: none is shown (none is rebuilt from its "
