@@ -72,28 +72,89 @@ def _joint_matrix(kind: str, q: np.ndarray) -> np.ndarray:
     return T
 
 
-def _chain(model: RobotModel, joints, params, setup: bool, keep_frames: bool):
-    """Compose the chain; optionally keep the frame in front of every transform."""
+def _after_constant(T: np.ndarray | None, C: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """``T @ C`` for frames ``T`` ``(..., n, 4, 4)`` (None: the identity, so the first transform
+    costs no product) and a transform's constant part ``C`` ``(..., 1, 4, 4)``. The stacked matmul
+    stays: numpy's own loop for 4 × 4 blocks; one ``(4n, 4) @ (4, 4)`` BLAS product was 20× slower
+    on a loaded two-core machine (OpenBLAS's threads wait for busy cores)."""
+    if T is None:
+        return np.broadcast_to(C, shape)
+    return T @ C
+
+
+def _after_joint(T: np.ndarray, kind: str, q: np.ndarray) -> np.ndarray:
+    """``T @ Rz(q)`` (revolute) or ``T @ Trans(0, 0, q)`` (prismatic) written out: the motion
+    changes two columns (one), so no 4 × 4 joint matrix is built and multiplied."""
+    out = np.array(T, copy=True)
+    if kind == "revolute":
+        c, s = np.cos(q)[..., None], np.sin(q)[..., None]
+        x, y = T[..., :, 0], T[..., :, 1]
+        out[..., :, 0] = x * c + y * s
+        out[..., :, 1] = y * c - x * s
+    else:
+        out[..., :, 3] = T[..., :, 3] + T[..., :, 2] * q[..., None]
+    return out
+
+
+_EYE = np.eye(4)
+_EYE.setflags(write=False)
+
+
+def _constant_parts(model: RobotModel, params, p: np.ndarray) -> np.ndarray:
+    """Every transform's constant part ``(..., nt, 4, 4)``; for the nominal parameters (``params``
+    None: the plan's collision checks and the controller-side IK call the chain thousands of times
+    with them) the model's own, computed once (its ``nominal`` is read-only)."""
+    if params is None:
+        return model.nominal_matrices
+    return pose_to_matrix(p.reshape(p.shape[:-1] + (len(model.transforms), 6)))
+
+
+@dataclass(frozen=True)
+class _Frames:
+    """The composed chain: ``T`` world←tool; ``pres[t]`` the frame in front of transform t;
+    ``axes[k]`` joint k's frame (its z axis the joint axis: after the constant part, before the
+    motion); ``consts[t]`` transform t's constant part; ``p`` the parameters."""
+
+    T: np.ndarray
+    pres: list
+    axes: list
+    consts: list
+    p: np.ndarray
+
+
+def _compose(model: RobotModel, joints, params, setup: bool, keep_frames: bool) -> _Frames:
     q = np.asarray(joints, dtype=float)
     p = _params(model, params)
     batch = np.broadcast_shapes(q.shape[:-2], p.shape[:-1])
     n = q.shape[-2]
-    T = np.broadcast_to(np.eye(4), batch + (n, 4, 4))
-    pres, consts = [], []
+    shape = batch + (n, 4, 4)
+    T: np.ndarray | None = None
+    pres: list = []
+    axes: list = []
+    consts: list = []
     j = 0
-    Cs = pose_to_matrix(p.reshape(p.shape[:-1] + (len(model.transforms), 6)))  # (..., nt, 4, 4) at once
+    Cs = _constant_parts(model, params, p)
     for t, spec in enumerate(model.transforms):
         C = Cs[..., t, None, :, :]  # (..., 1, 4, 4)
         if keep_frames:
-            pres.append(T)
+            pres.append(np.broadcast_to(_EYE, shape) if T is None else T)
             consts.append(C)
         if t == 0 and not setup:
             continue
-        T = T @ C
+        T = _after_constant(T, C, shape)
         if spec.joint is not None:
-            T = T @ _joint_matrix(spec.joint, q[..., j])
+            if keep_frames:
+                axes.append(T)
+            T = _after_joint(T, spec.joint, q[..., j])
             j += 1
-    return T, pres, consts, p
+    assert T is not None  # a model has at least the tool transform
+    return _Frames(T, pres, axes, consts, p)
+
+
+def _chain(model: RobotModel, joints, params, setup: bool, keep_frames: bool):
+    """Compose the chain; optionally keep the frame in front of every transform."""
+    f = _compose(model, joints, params, setup, keep_frames)
+    return f.T, f.pres, f.consts, f.p
 
 
 def forward(model: RobotModel, joints, params=None, setup: bool = True) -> np.ndarray:
@@ -144,19 +205,21 @@ def forward_with_jacobian(model: RobotModel, joints, params=None, setup: bool = 
 
 
 def joint_jacobian(model: RobotModel, joints, params=None, setup: bool = True) -> KinematicsResult:
-    """Forward kinematics and the geometric Jacobian ``(..., n, 6, g)`` with respect to the joints."""
-    T, pres, consts, p = _chain(model, joints, params, setup, keep_frames=True)
+    """Forward kinematics and the geometric Jacobian ``(..., n, 6, g)`` with respect to the joints:
+    column k is ``z_k × (p_tool − o_k)`` over ``z_k`` for a revolute joint, ``z_k`` over 0 for a
+    prismatic one (``z_k``, ``o_k``: joint k's axis and origin, kept while composing the chain)."""
+    f = _compose(model, joints, params, setup, keep_frames=True)
+    T = f.T
     p_tool = T[..., :3, 3]
-    cols = []
-    for t in model.joint_transforms:
-        F = pres[t] @ consts[t]  # frame whose z axis is the joint axis
-        axis = np.broadcast_to(F[..., :3, 2], p_tool.shape)
-        if model.transforms[t].joint == "revolute":
-            lever = p_tool - F[..., :3, 3]
-            cols.append(np.concatenate([_cross(axis, lever), axis], axis=-1))
+    J = np.zeros(T.shape[:-2] + (6, model.n_joints))
+    for k, (F, kind) in enumerate(zip(f.axes, model.joint_types)):
+        axis = F[..., :3, 2]
+        if kind == "revolute":
+            J[..., :3, k] = _cross(axis, p_tool - F[..., :3, 3])
+            J[..., 3:, k] = axis
         else:
-            cols.append(np.concatenate([axis, np.zeros(p_tool.shape)], axis=-1))
-    return KinematicsResult(T, np.stack(cols, axis=-1))
+            J[..., :3, k] = axis
+    return KinematicsResult(T, J)
 
 
 # --- inverse kinematics -------------------------------------------------------------------
