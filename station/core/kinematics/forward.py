@@ -59,41 +59,18 @@ def _params(model: RobotModel, params) -> np.ndarray:
     return p
 
 
-def _joint_matrix(kind: str, q: np.ndarray) -> np.ndarray:
-    T = np.zeros(q.shape + (4, 4))
-    T[..., 3, 3] = 1.0
-    if kind == "revolute":
-        c, s = np.cos(q), np.sin(q)
-        T[..., 0, 0], T[..., 0, 1], T[..., 1, 0], T[..., 1, 1] = c, -s, s, c
-        T[..., 2, 2] = 1.0
-    else:
-        T[..., 0, 0] = T[..., 1, 1] = T[..., 2, 2] = 1.0
-        T[..., 2, 3] = q
-    return T
-
-
-def _after_constant(T: np.ndarray | None, C: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
-    """``T @ C`` for frames ``T`` ``(..., n, 4, 4)`` (None: the identity, so the first transform
-    costs no product) and a transform's constant part ``C`` ``(..., 1, 4, 4)``. The stacked matmul
-    stays: numpy's own loop for 4 × 4 blocks; one ``(4n, 4) @ (4, 4)`` BLAS product was 20× slower
-    on a loaded two-core machine (OpenBLAS's threads wait for busy cores)."""
-    if T is None:
-        return np.broadcast_to(C, shape)
-    return T @ C
-
-
-def _after_joint(T: np.ndarray, kind: str, q: np.ndarray) -> np.ndarray:
-    """``T @ Rz(q)`` (revolute) or ``T @ Trans(0, 0, q)`` (prismatic) written out: the motion
-    changes two columns (one), so no 4 × 4 joint matrix is built and multiplied."""
-    out = np.array(T, copy=True)
+def _turn(T: np.ndarray, kind: str, q: np.ndarray) -> None:
+    """``T ← T @ Rz(q)`` (revolute) or ``T ← T @ Trans(0, 0, q)`` (prismatic) in place, written
+    out: the motion changes two columns of T (one), so no 4 × 4 joint matrix is built and
+    multiplied, and the frame's memory is reused (fresh pages for every intermediate frame of
+    ~17 000 poses cost as much as the arithmetic)."""
     if kind == "revolute":
         c, s = np.cos(q)[..., None], np.sin(q)[..., None]
-        x, y = T[..., :, 0], T[..., :, 1]
-        out[..., :, 0] = x * c + y * s
-        out[..., :, 1] = y * c - x * s
+        x, y = T[..., :, 0].copy(), T[..., :, 1]
+        T[..., :, 0] = x * c + y * s
+        T[..., :, 1] = y * c - x * s
     else:
-        out[..., :, 3] = T[..., :, 3] + T[..., :, 2] * q[..., None]
-    return out
+        T[..., :, 3] += T[..., :, 2] * q[..., None]
 
 
 _EYE = np.eye(4)
@@ -111,9 +88,10 @@ def _constant_parts(model: RobotModel, params, p: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class _Frames:
-    """The composed chain: ``T`` world←tool; ``pres[t]`` the frame in front of transform t;
-    ``axes[k]`` joint k's frame (its z axis the joint axis: after the constant part, before the
-    motion); ``consts[t]`` transform t's constant part; ``p`` the parameters."""
+    """The composed chain: ``T`` world←tool; ``pres[t]`` the frame in front of transform t (kept
+    on request); ``axes[k]`` joint k's axis direction and a point on it ``(..., n, 3, 2)`` (columns
+    z and origin of its frame; the joint's own motion leaves both in place); ``consts[t]``
+    transform t's constant part; ``p`` the parameters."""
 
     T: np.ndarray
     pres: list
@@ -123,12 +101,14 @@ class _Frames:
 
 
 def _compose(model: RobotModel, joints, params, setup: bool, keep_frames: bool) -> _Frames:
+    """Compose the chain ``R · A1(q1) · … · K`` over poses and parameter sets; every product
+    ``T @ C`` is a fresh array that the joint's motion then turns in place. The stacked matmul
+    stays: numpy's own loop for 4 × 4 blocks (one ``(4n, 4) @ (4, 4)`` BLAS product was 20×
+    slower on a loaded two-core machine: OpenBLAS's threads wait for busy cores)."""
     q = np.asarray(joints, dtype=float)
     p = _params(model, params)
-    batch = np.broadcast_shapes(q.shape[:-2], p.shape[:-1])
-    n = q.shape[-2]
-    shape = batch + (n, 4, 4)
-    T: np.ndarray | None = None
+    shape = np.broadcast_shapes(q.shape[:-2], p.shape[:-1]) + (q.shape[-2], 4, 4)
+    T: np.ndarray | None = None  # None: the identity (the first transform costs no product)
     pres: list = []
     axes: list = []
     consts: list = []
@@ -141,13 +121,13 @@ def _compose(model: RobotModel, joints, params, setup: bool, keep_frames: bool) 
             consts.append(C)
         if t == 0 and not setup:
             continue
-        T = _after_constant(T, C, shape)
+        T = np.array(np.broadcast_to(C, shape)) if T is None else T @ C
         if spec.joint is not None:
-            if keep_frames:
-                axes.append(T)
-            T = _after_joint(T, spec.joint, q[..., j])
+            axes.append(T[..., :3, 2:4].copy())
+            _turn(T, spec.joint, q[..., j])
             j += 1
-    assert T is not None  # a model has at least the tool transform
+    if T is None:  # only the set-up transform, left out
+        T = np.array(np.broadcast_to(_EYE, shape))
     return _Frames(T, pres, axes, consts, p)
 
 
@@ -213,9 +193,9 @@ def joint_jacobian(model: RobotModel, joints, params=None, setup: bool = True) -
     p_tool = T[..., :3, 3]
     J = np.zeros(T.shape[:-2] + (6, model.n_joints))
     for k, (F, kind) in enumerate(zip(f.axes, model.joint_types)):
-        axis = F[..., :3, 2]
+        axis = F[..., 0]
         if kind == "revolute":
-            J[..., :3, k] = _cross(axis, p_tool - F[..., :3, 3])
+            J[..., :3, k] = _cross(axis, p_tool - F[..., 1])
             J[..., 3:, k] = axis
         else:
             J[..., :3, k] = axis
