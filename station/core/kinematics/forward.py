@@ -100,7 +100,8 @@ class _Frames:
     p: np.ndarray
 
 
-def _compose(model: RobotModel, joints, params, setup: bool, keep_frames: bool) -> _Frames:
+def _compose(model: RobotModel, joints, params, setup: bool, keep_frames: bool,
+             keep_axes: bool = False) -> _Frames:
     """Compose the chain ``R · A1(q1) · … · K`` over poses and parameter sets; every product
     ``T @ C`` is a fresh array that the joint's motion then turns in place. The stacked matmul
     stays: numpy's own loop for 4 × 4 blocks (one ``(4n, 4) @ (4, 4)`` BLAS product was 20×
@@ -123,7 +124,8 @@ def _compose(model: RobotModel, joints, params, setup: bool, keep_frames: bool) 
             continue
         T = np.array(np.broadcast_to(C, shape)) if T is None else T @ C
         if spec.joint is not None:
-            axes.append(T[..., :3, 2:4].copy())
+            if keep_axes:
+                axes.append(T[..., :3, 2:4].copy())
             _turn(T, spec.joint, q[..., j])
             j += 1
     if T is None:  # only the set-up transform, left out
@@ -188,7 +190,7 @@ def joint_jacobian(model: RobotModel, joints, params=None, setup: bool = True) -
     """Forward kinematics and the geometric Jacobian ``(..., n, 6, g)`` with respect to the joints:
     column k is ``z_k × (p_tool − o_k)`` over ``z_k`` for a revolute joint, ``z_k`` over 0 for a
     prismatic one (``z_k``, ``o_k``: joint k's axis and origin, kept while composing the chain)."""
-    f = _compose(model, joints, params, setup, keep_frames=True)
+    f = _compose(model, joints, params, setup, keep_frames=False, keep_axes=True)
     T = f.T
     p_tool = T[..., :3, 3]
     J = np.zeros(T.shape[:-2] + (6, model.n_joints))
