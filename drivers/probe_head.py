@@ -38,7 +38,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, fields
-from typing import Protocol
+from typing import Protocol, cast
 
 import numpy as np
 import serial
@@ -119,6 +119,14 @@ class SerialLike(Protocol):
     def read_until(self, expected: bytes = ..., size: int | None = ...) -> bytes: ...
     def reset_input_buffer(self) -> None: ...
     def close(self) -> None: ...
+
+
+class _BufferedPort(SerialLike, Protocol):
+    """A port that tells how many bytes it holds and reads several at once (pyserial's)."""
+
+    in_waiting: int
+
+    def read(self, size: int = ...) -> bytes: ...
 
 
 @dataclass(frozen=True, eq=False)
@@ -344,9 +352,9 @@ class ProbeHead:
         in one simulated calibration). Bytes after the line wait in ``_rx`` for the next line, or
         :meth:`_flush` counts and discards them with the port's. A port without ``in_waiting`` and
         ``read`` (a scripted fake) is read with its own read_until."""
-        port = self._port
-        if not isinstance(getattr(port, "in_waiting", None), int) or not hasattr(port, "read"):
-            return port.read_until(REPLY_TERMINATOR, _MAX_REPLY_BYTES)
+        if not hasattr(self._port, "read") or not isinstance(getattr(self._port, "in_waiting", None), int):
+            return self._port.read_until(REPLY_TERMINATOR, _MAX_REPLY_BYTES)
+        port = cast(_BufferedPort, self._port)  # pyserial's: SerialLike does not promise these
         buf, self._rx = self._rx, b""
         limit = getattr(port, "timeout", None)
         deadline = time.monotonic() + (self._timeout if limit is None else limit)
