@@ -49,16 +49,18 @@ MUTANTS = (
     # subtle: the fit absorbs it into the joint offsets, so only a truth that does not share the
     # station's kinematics (the oracle, the after/oracle lower bound) can show it
     ("every revolute joint 1 mrad off (a fit absorbs it)", KINEMATICS,
-     (("        c, s = np.cos(q), np.sin(q)", "        c, s = np.cos(q + 1e-3), np.sin(q + 1e-3)"),), DEFAULT_TESTS),
+     (("        c, s = np.cos(q)[..., None], np.sin(q)[..., None]",
+       "        c, s = np.cos(q + 1e-3)[..., None], np.sin(q + 1e-3)[..., None]"),), DEFAULT_TESTS),
     # gross: the plan's reachability checks already refuse the cell before any motion
     ("joint 2 turns the other way", KINEMATICS,
-     (("            T = T @ _joint_matrix(spec.joint, q[..., j])",
-       "            T = T @ _joint_matrix(spec.joint, -q[..., j] if j == 1 else q[..., j])"),), DEFAULT_TESTS),
+     (("            _turn(T, spec.joint, q[..., j])",
+       "            _turn(T, spec.joint, -q[..., j] if j == 1 else q[..., j])"),), DEFAULT_TESTS),
     ("a prismatic joint moves along -z", KINEMATICS,
-     (("        T[..., 2, 3] = q", "        T[..., 2, 3] = -q"),), DEFAULT_TESTS),
+     (("        T[..., :, 3] += T[..., :, 2] * q[..., None]", "        T[..., :, 3] -= T[..., :, 2] * q[..., None]"),),
+     DEFAULT_TESTS),
     ("a revolute joint's sine flipped (a mirrored rotation)", KINEMATICS,
-     (("        T[..., 0, 0], T[..., 0, 1], T[..., 1, 0], T[..., 1, 1] = c, -s, s, c",
-       "        T[..., 0, 0], T[..., 0, 1], T[..., 1, 0], T[..., 1, 1] = c, s, -s, c"),), DEFAULT_TESTS),
+     (("        T[..., :, 0] = x * c + y * s", "        T[..., :, 0] = x * c - y * s"),
+      ("        T[..., :, 1] = y * c - x * s", "        T[..., :, 1] = y * c + x * s")), DEFAULT_TESTS),
     # symmetric slips that a simulator sharing the station's or the driver's code would have made
     # too, so that they cancelled: the simulated head now touches the cube with its own physics
     # (simulators/probe_contact.py), the simulated program reads words with its own code

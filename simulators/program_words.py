@@ -139,7 +139,9 @@ def words_from_counts(counts, order: WordOrder) -> list[int]:
 def crc32_of_counts(counts) -> int:
     """The whole-table CRC-32: zlib / ISO-HDLC over the counts as big-endian 32-bit two's
     complement bytes, C order (independent of the link's word order)."""
-    data = b"".join((int(c) % (1 << 32)).to_bytes(4, "big") for c in np.asarray(counts, dtype=np.int64).ravel())
+    # the same bytes as int.to_bytes(4, "big") of each count mod 2**32, written by numpy in one go
+    # (the per-count Python join was ~1.5 s of the simulated controller's CPU in one calibration)
+    data = (np.asarray(counts, dtype=np.int64).ravel() % (1 << 32)).astype(">u4").tobytes()
     return zlib.crc32(data) & 0xFFFFFFFF
 
 

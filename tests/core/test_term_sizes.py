@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from station.core.accuracy.studies import StudyInputs, perturbed
 from station.core.identification.identify import identify
@@ -33,7 +34,9 @@ def test_compliance_in_microradians_per_newton_metre_and_its_largest_turn():
     terms = {t["name"]: t for t in json.loads(json.dumps(sel.fit.terms_dict()))}
     c2 = terms["compliance.q2"]
     assert c2["unit"] == "rad/(N·m)" and c2["readable"]["unit"] == "µrad/(N·m)"
-    assert c2["readable"]["value"] == c2["value"] * 1e6 and c2["readable"]["sigma"] == c2["sigma"] * 1e6
+    # the station divides by 1e-6: the same as × 1e6 to the last bit for most values, not all
+    assert c2["readable"]["value"] == pytest.approx(c2["value"] * 1e6, rel=1e-15)
+    assert c2["readable"]["sigma"] == pytest.approx(c2["sigma"] * 1e6, rel=1e-15)
     assert abs(c2["readable"]["value"] - 2.0) < 4 * c2["readable"]["sigma"]  # the true 2 µrad/(N·m)
     tau = np.abs(gravity_torques(ARM, q, GRAVITY, sel.geometric.params)[:, 1]).max()  # at the fitted geometry
     assert abs(c2["largest_joint_turn"]["value"] - tau * abs(c2["value"]) / ARCSEC) < 1e-9 * tau

@@ -6,14 +6,13 @@ foreign tool) is a :class:`DamagedRecordError` (exit 5) that names the run and t
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, TypeVar
 
 import numpy as np
 
-from station.cell.records.run_records import MeasurementRecord, RunDatabaseError, RunRecord, _from_json_value
+from station.cell.records.run_records import MeasurementRecord, RunDatabaseError, RunRecord, _loads
 
 T = TypeVar("T")
 
@@ -70,7 +69,7 @@ def parse_json(text: object, run_id: int | None, record: str) -> Any:
     if not isinstance(text, str):
         raise damaged(run_id, record, f"a {type(text).__name__} where JSON text belongs")
     try:
-        return _from_json_value(json.loads(text))
+        return _loads(text)
     except (ValueError, RecursionError) as exc:  # JSONDecodeError is a ValueError
         raise damaged(run_id, record, f"not JSON: {str(exc)[:80]}") from None
     except (KeyError, TypeError) as exc:  # a malformed {"__float__": ...} tag

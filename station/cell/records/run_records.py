@@ -252,13 +252,12 @@ def _to_json_value(obj: Any, where: str = "value") -> Any:
                            f"to dicts, lists, numbers, strings or numpy arrays first")
 
 
-def _from_json_value(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        if len(obj) == 1 and _FLOAT_TAG in obj:
-            return _NONFINITE[obj[_FLOAT_TAG]]
-        return {k: _from_json_value(v) for k, v in obj.items()}
-    if isinstance(obj, list):
-        return [_from_json_value(v) for v in obj]
+def _restore_tag(obj: dict) -> Any:
+    """``json.loads``'s object hook: a ``{"__float__": ...}`` tag back to its float (the decoder
+    calls it for every object, innermost first, so no second walk over the parsed value is needed:
+    that walk was 1.6 M Python calls in one simulated calibration)."""
+    if len(obj) == 1 and _FLOAT_TAG in obj:
+        return _NONFINITE[obj[_FLOAT_TAG]]
     return obj
 
 
@@ -267,7 +266,8 @@ def _dumps(obj: Any, where: str) -> str:
 
 
 def _loads(text: str) -> Any:
-    return _from_json_value(json.loads(text))
+    """A stored JSON text, NaN/±inf tags restored (KeyError/TypeError for a malformed tag)."""
+    return json.loads(text, object_hook=_restore_tag)
 
 
 def _num(v: float | None) -> str:

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import _minpack
 
-from station.core.kinematics.forward import _joint_matrix
+from station.core.kinematics.forward import _turn
 from station.core.kinematics.model import RobotModel
 from station.core.kinematics.transforms import pose_error, pose_to_matrix
 from station.core.measurement.measurements import MeasurementSet
@@ -35,13 +35,14 @@ class FixedJointsChain:
         self.n = q.shape[0]
         self.nt = len(model.transforms)
         self.setup = setup
-        motions: list[np.ndarray | None] = []
+        # each transform's joint motion (kind, values) or None, applied as the forward chain applies it
+        motions: list[tuple[str, np.ndarray] | None] = []
         j = 0
         for spec in model.transforms:
             if spec.joint is None:
                 motions.append(None)
             else:
-                motions.append(_joint_matrix(spec.joint, q[:, j]))
+                motions.append((spec.joint, q[:, j].copy()))
                 j += 1
         self._motions = motions
         self._eye = np.ascontiguousarray(np.broadcast_to(np.eye(4), (self.n, 4, 4)))
@@ -61,7 +62,7 @@ class FixedJointsChain:
             T = (T.reshape(4 * n, 4) @ C[t]).reshape(n, 4, 4)
             m = self._motions[t]
             if m is not None:
-                T = T @ m
+                _turn(T, *m)
         return T, P
 
     def tool(self, p: np.ndarray, setup: bool) -> np.ndarray:
@@ -74,7 +75,7 @@ class FixedJointsChain:
             T = (T.reshape(4 * n, 4) @ C[t]).reshape(n, 4, 4)
             m = self._motions[t]
             if m is not None:
-                T = T @ m
+                _turn(T, *m)
         return T
 
     def jacobian(self, T: np.ndarray, P: np.ndarray, p: np.ndarray) -> np.ndarray:

@@ -59,41 +59,84 @@ def _params(model: RobotModel, params) -> np.ndarray:
     return p
 
 
-def _joint_matrix(kind: str, q: np.ndarray) -> np.ndarray:
-    T = np.zeros(q.shape + (4, 4))
-    T[..., 3, 3] = 1.0
+def _turn(T: np.ndarray, kind: str, q: np.ndarray) -> None:
+    """``T ← T @ Rz(q)`` (revolute) or ``T ← T @ Trans(0, 0, q)`` (prismatic) in place, written
+    out: the motion changes two columns of T (one), so no 4 × 4 joint matrix is built and
+    multiplied, and the frame's memory is reused (fresh pages for every intermediate frame of
+    ~17 000 poses cost as much as the arithmetic)."""
     if kind == "revolute":
-        c, s = np.cos(q), np.sin(q)
-        T[..., 0, 0], T[..., 0, 1], T[..., 1, 0], T[..., 1, 1] = c, -s, s, c
-        T[..., 2, 2] = 1.0
+        c, s = np.cos(q)[..., None], np.sin(q)[..., None]
+        x, y = T[..., :, 0].copy(), T[..., :, 1]
+        T[..., :, 0] = x * c + y * s
+        T[..., :, 1] = y * c - x * s
     else:
-        T[..., 0, 0] = T[..., 1, 1] = T[..., 2, 2] = 1.0
-        T[..., 2, 3] = q
-    return T
+        T[..., :, 3] += T[..., :, 2] * q[..., None]
+
+
+_EYE = np.eye(4)
+_EYE.setflags(write=False)
+
+
+def _constant_parts(model: RobotModel, params, p: np.ndarray) -> np.ndarray:
+    """Every transform's constant part ``(..., nt, 4, 4)``; for the nominal parameters (``params``
+    None: the plan's collision checks and the controller-side IK call the chain thousands of times
+    with them) the model's own, computed once (its ``nominal`` is read-only)."""
+    if params is None:
+        return model.nominal_matrices
+    return pose_to_matrix(p.reshape(p.shape[:-1] + (len(model.transforms), 6)))
+
+
+@dataclass(frozen=True)
+class _Frames:
+    """The composed chain: ``T`` world←tool; ``pres[t]`` the frame in front of transform t (kept
+    on request); ``axes[k]`` joint k's axis direction and a point on it ``(..., n, 3, 2)`` (columns
+    z and origin of its frame; the joint's own motion leaves both in place); ``consts[t]``
+    transform t's constant part; ``p`` the parameters."""
+
+    T: np.ndarray
+    pres: list
+    axes: list
+    consts: list
+    p: np.ndarray
+
+
+def _compose(model: RobotModel, joints, params, setup: bool, keep_frames: bool,
+             keep_axes: bool = False) -> _Frames:
+    """Compose the chain ``R · A1(q1) · … · K`` over poses and parameter sets; every product
+    ``T @ C`` is a fresh array that the joint's motion then turns in place. The stacked matmul
+    stays: numpy's own loop for 4 × 4 blocks (one ``(4n, 4) @ (4, 4)`` BLAS product was 20×
+    slower on a loaded two-core machine: OpenBLAS's threads wait for busy cores)."""
+    q = np.asarray(joints, dtype=float)
+    p = _params(model, params)
+    shape = np.broadcast_shapes(q.shape[:-2], p.shape[:-1]) + (q.shape[-2], 4, 4)
+    T: np.ndarray | None = None  # None: the identity (the first transform costs no product)
+    pres: list = []
+    axes: list = []
+    consts: list = []
+    j = 0
+    Cs = _constant_parts(model, params, p)
+    for t, spec in enumerate(model.transforms):
+        C = Cs[..., t, None, :, :]  # (..., 1, 4, 4)
+        if keep_frames:
+            pres.append(np.broadcast_to(_EYE, shape) if T is None else T)
+            consts.append(C)
+        if t == 0 and not setup:
+            continue
+        T = np.array(np.broadcast_to(C, shape)) if T is None else T @ C
+        if spec.joint is not None:
+            if keep_axes:
+                axes.append(T[..., :3, 2:4].copy())
+            _turn(T, spec.joint, q[..., j])
+            j += 1
+    if T is None:  # only the set-up transform, left out
+        T = np.array(np.broadcast_to(_EYE, shape))
+    return _Frames(T, pres, axes, consts, p)
 
 
 def _chain(model: RobotModel, joints, params, setup: bool, keep_frames: bool):
     """Compose the chain; optionally keep the frame in front of every transform."""
-    q = np.asarray(joints, dtype=float)
-    p = _params(model, params)
-    batch = np.broadcast_shapes(q.shape[:-2], p.shape[:-1])
-    n = q.shape[-2]
-    T = np.broadcast_to(np.eye(4), batch + (n, 4, 4))
-    pres, consts = [], []
-    j = 0
-    Cs = pose_to_matrix(p.reshape(p.shape[:-1] + (len(model.transforms), 6)))  # (..., nt, 4, 4) at once
-    for t, spec in enumerate(model.transforms):
-        C = Cs[..., t, None, :, :]  # (..., 1, 4, 4)
-        if keep_frames:
-            pres.append(T)
-            consts.append(C)
-        if t == 0 and not setup:
-            continue
-        T = T @ C
-        if spec.joint is not None:
-            T = T @ _joint_matrix(spec.joint, q[..., j])
-            j += 1
-    return T, pres, consts, p
+    f = _compose(model, joints, params, setup, keep_frames)
+    return f.T, f.pres, f.consts, f.p
 
 
 def forward(model: RobotModel, joints, params=None, setup: bool = True) -> np.ndarray:
@@ -144,19 +187,21 @@ def forward_with_jacobian(model: RobotModel, joints, params=None, setup: bool = 
 
 
 def joint_jacobian(model: RobotModel, joints, params=None, setup: bool = True) -> KinematicsResult:
-    """Forward kinematics and the geometric Jacobian ``(..., n, 6, g)`` with respect to the joints."""
-    T, pres, consts, p = _chain(model, joints, params, setup, keep_frames=True)
+    """Forward kinematics and the geometric Jacobian ``(..., n, 6, g)`` with respect to the joints:
+    column k is ``z_k × (p_tool − o_k)`` over ``z_k`` for a revolute joint, ``z_k`` over 0 for a
+    prismatic one (``z_k``, ``o_k``: joint k's axis and origin, kept while composing the chain)."""
+    f = _compose(model, joints, params, setup, keep_frames=False, keep_axes=True)
+    T = f.T
     p_tool = T[..., :3, 3]
-    cols = []
-    for t in model.joint_transforms:
-        F = pres[t] @ consts[t]  # frame whose z axis is the joint axis
-        axis = np.broadcast_to(F[..., :3, 2], p_tool.shape)
-        if model.transforms[t].joint == "revolute":
-            lever = p_tool - F[..., :3, 3]
-            cols.append(np.concatenate([_cross(axis, lever), axis], axis=-1))
+    J = np.zeros(T.shape[:-2] + (6, model.n_joints))
+    for k, (F, kind) in enumerate(zip(f.axes, model.joint_types)):
+        axis = F[..., 0]
+        if kind == "revolute":
+            J[..., :3, k] = _cross(axis, p_tool - F[..., 1])
+            J[..., 3:, k] = axis
         else:
-            cols.append(np.concatenate([axis, np.zeros(p_tool.shape)], axis=-1))
-    return KinematicsResult(T, np.stack(cols, axis=-1))
+            J[..., :3, k] = axis
+    return KinematicsResult(T, J)
 
 
 # --- inverse kinematics -------------------------------------------------------------------

@@ -24,6 +24,7 @@ from typing import Literal
 
 import numpy as np
 
+from station.core.kinematics.transforms import pose_to_matrix
 from station.errors import ConfigError
 
 JointType = Literal["revolute", "prismatic"]
@@ -115,6 +116,13 @@ class RobotModel:
     @functools.cached_property  # derived from frozen fields; the hot loops read it often
     def n_joints(self) -> int:
         return sum(t.joint is not None for t in self.transforms)
+
+    @functools.cached_property  # derived from the read-only nominal; every nominal forward chain reads it
+    def nominal_matrices(self) -> np.ndarray:
+        """``(n_transforms, 4, 4)`` each transform's constant part at the nominal parameters (read-only)."""
+        m = pose_to_matrix(self.nominal.reshape(len(self.transforms), 6))
+        m.setflags(write=False)
+        return m
 
     @property
     def n_params(self) -> int:

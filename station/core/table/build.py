@@ -28,7 +28,10 @@ without the set-up R: ``forward(..., setup=False)``); the table never uses R.
 
 from __future__ import annotations
 
+import hashlib
 import math
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -52,6 +55,10 @@ __all__ = [
 
 #: an IK solution must reproduce the target position to this [mm] to count as reached
 _IK_CHECK_MM = 1e-6
+#: IK results kept (the largest, a curvature lattice's ~17 500 targets, ~0.6 MB each)
+_IK_CACHE_SIZE = 48
+_IK_CACHE: OrderedDict[bytes, tuple[np.ndarray, np.ndarray]] = OrderedDict()
+_IK_LOCK = threading.Lock()
 
 
 def _targets(points: np.ndarray) -> np.ndarray:
@@ -62,12 +69,43 @@ def _targets(points: np.ndarray) -> np.ndarray:
     return pose_to_matrix(pose)
 
 
+def _ik_key(model: RobotModel, params: np.ndarray, T: np.ndarray, elbow: int) -> bytes:
+    """Digest of everything :func:`_solve_masked` reads: the chain's structure, the parameters,
+    the targets and the elbow (not the limits: they are not applied)."""
+    h = hashlib.blake2b(digest_size=32)
+    h.update(repr((model.transforms, int(elbow), T.shape, params.shape)).encode())
+    h.update(np.ascontiguousarray(params, dtype=float).tobytes())
+    h.update(np.ascontiguousarray(T, dtype=float).tobytes())
+    return h.digest()
+
+
 def _ik_masked(model: RobotModel, params: np.ndarray, T: np.ndarray, elbow: int):
     """SCARA IK per target: ``(q (m, g) with NaN where unreachable, ok (m,) bool)``.
 
     Joint limits are NOT applied (a table value beyond a limit is the smooth continuation the
     interpolation needs; the controller checks the limits of what it commands). A target counts
-    as unreachable where the closed form has no solution or Newton does not reproduce it."""
+    as unreachable where the closed form has no solution or Newton does not reproduce it.
+
+    Results are kept for the last :data:`_IK_CACHE_SIZE` inputs: a design builds the table of
+    every sampled robot on one grid, and each build solved the nominal model at the same nodes,
+    edge midpoints and seeded check points again (identical inputs: the key is their digest)."""
+    key = _ik_key(model, params, T, elbow)
+    with _IK_LOCK:
+        hit = _IK_CACHE.get(key)
+        if hit is not None:
+            _IK_CACHE.move_to_end(key)
+    if hit is None:
+        hit = _solve_masked(model, params, T, elbow)
+        for a in hit:
+            a.setflags(write=False)
+        with _IK_LOCK:
+            _IK_CACHE[key] = hit
+            while len(_IK_CACHE) > _IK_CACHE_SIZE:
+                _IK_CACHE.popitem(last=False)
+    return hit[0].copy(), hit[1].copy()
+
+
+def _solve_masked(model: RobotModel, params: np.ndarray, T: np.ndarray, elbow: int):
     m = T.shape[0]
     q = np.full((m, model.n_joints), np.nan)
     ok = np.zeros(m, dtype=bool)
