@@ -17,6 +17,9 @@ from pathlib import Path
 
 import pytest
 
+# a test whose report cannot be made fails alone instead of ending the run in INTERNALERROR (issue 42)
+from tests.report_guard import pytest_runtest_makereport  # noqa: F401
+
 
 @dataclass(frozen=True)
 class FinishedRun:

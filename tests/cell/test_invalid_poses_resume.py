@@ -33,8 +33,10 @@ def _cell(tmp_path: Path, bound: float = 0.8) -> Path:
     head.write_text(re.sub(r"(?m)^reading_sigma_um = 0\.5", "reading_sigma_um = 4.0", head.read_text()))
     cfg = tmp_path / "cell.toml"
     text = cfg.read_text()
+    # one verification cycle: the refusal and the resume's outcome are what is compared, and five
+    # cycles of the verification cost the resume most of its CPU (issue 42)
     text = re.sub(r"(?m)^verification_cycles = 5$",
-                  f"verification_cycles = 5\nmax_residual_um = {bound:g}\nmax_spread_um = 50.0", text, count=1)
+                  f"verification_cycles = 1\nmax_residual_um = {bound:g}\nmax_spread_um = 50.0", text, count=1)
     text = re.sub(r"(?m)^seed = 1$", "seed = 1\nprobe_noise_um = 4.0", text, count=1)
     assert "max_residual_um" in text and "probe_noise_um" in text
     cfg.write_text(text)

@@ -82,7 +82,9 @@ class ModbusTcpRelay:
 def test_a_second_station_is_refused_before_any_command_and_the_first_ends_success(tmp_path):
     with start_simulated_cell(seed=1) as sim:
         cfg = tmp_path / "cell.toml"
-        cfg.write_text(cell_config_text(sim, 1).replace("repeats = 4", "repeats = 1"))
+        # one verification cycle: the claim and the first run's outcome are compared, not its accuracy (42)
+        cfg.write_text(cell_config_text(sim, 1).replace("repeats = 4", "repeats = 1")
+                       .replace("verification_cycles = 5", "verification_cycles = 1"))
         ctrl = sim.controller_server
         second: dict = {}
 

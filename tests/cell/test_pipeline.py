@@ -46,14 +46,28 @@ class Cell:
         self.stack.close()
 
 
+#: one visit per identification pose and one verification cycle: the faults, stops, resumes and
+#: questions below are about what the run does, not its accuracy, and the whole plan would cost
+#: about three times the CPU for each (issue 42); the accuracy targets keep the example's plan
+SHORT = {"repeats = 4": "repeats = 1", "verification_cycles = 5": "verification_cycles = 1"}
+
+
 @pytest.fixture
 def cell(tmp_path):
+    c = Cell(tmp_path, **SHORT)
+    yield c
+    c.close()
+
+
+@pytest.fixture
+def full_cell(tmp_path):
     c = Cell(tmp_path)
     yield c
     c.close()
 
 
-def test_simulated_calibration_meets_the_targets(cell):
+def test_simulated_calibration_meets_the_targets(full_cell):
+    cell = full_cell
     summary = cell.run(options=Options(judge=CellJudge(cell.srv.cell.truth)))
     assert summary.outcome is Outcome.SUCCESS and summary.exit_code == 0
     assert summary.identification.n_parameters == 20
@@ -362,7 +376,7 @@ def test_runs_reproduce_and_a_late_probe_reply_is_logged_not_taken(tmp_path):
     step's readings are fresh ones (the reason a repeat would differ)."""
     results = []
     for attempt in ("a", "b", "late"):
-        c = Cell(tmp_path / attempt, seed=1, **{"repeats = 4": "repeats = 1"})
+        c = Cell(tmp_path / attempt, seed=1, **SHORT)
         try:
             if attempt == "late":
                 emit = _after_n_measurements(c, 10, lambda c=c: c.srv.probe_server.faults.inject_delay(2.5))

@@ -1,5 +1,6 @@
-"""Kill the station at random points of a simulated run and resume each time: nothing committed
-is lost or duplicated, and the identified parameters equal an uninterrupted run's."""
+"""Kill the station (SIGKILL) at spread points of a simulated run, synced on its run database, and
+resume each time: nothing committed is lost or duplicated, and the identified parameters equal an
+uninterrupted run's. benchmarks/bench_kill_resume.py does the same at many random points."""
 
 from __future__ import annotations
 
@@ -71,41 +72,48 @@ def reference(tmp_path):
         sim.stop()
 
 
+def _committed(db_path: Path) -> list[int]:
+    """The steps of run 1 committed so far ([] while the run is not created yet)."""
+    if not db_path.exists():
+        return []
+    try:
+        with RunDB(db_path) as db:
+            run = db.latest_run()
+            return sorted(db.completed_steps(run.id)) if run is not None else []
+    except Exception:  # noqa: BLE001 - the station is still creating it
+        return []
+
+
+#: where the kills land, as fractions of the plan's steps committed: early in the measuring, past
+#: the identification poses, and among the last verification poses (after the upload). A kill on a
+#: wall-clock timer (0.5-1.5 s after start, as this test had) never reached the run: every process
+#: designs the cell's table before it creates the run (7 s of CPU), so all twenty landed in
+#: start-up. benchmarks/bench_kill_resume.py kills at any number of random moments (issue 42).
+KILL_AT = (0.02, 0.5, 0.93)
+
+
 @pytest.mark.timeout(400)
-def test_twenty_kills_and_resumes_reproduce_the_uninterrupted_run(tmp_path, reference):
+def test_kills_mid_run_and_resumes_reproduce_the_uninterrupted_run(tmp_path, reference):
     ref_params, n_steps = reference
     sim = Simulator(SEED)
-    rng = np.random.default_rng(20261121)
     db_path = tmp_path / "crash.sqlite"
     try:
         cfg = sim.config(tmp_path / "cell.toml", SEED)
-        kills, attempts, seen = 0, 0, []
-        while True:
-            attempts += 1
-            assert attempts < 60, "the run never finished"
-            has_run = db_path.exists() and RunDB(db_path).latest_run() is not None
-            p = _station("calibrate", cfg, "--db", db_path, *(["--resume", 1] if has_run else []))
-            if kills < 20:
-                # Kill at a random moment: start-up, measuring, identifying, uploading, verifying.
-                deadline = time.monotonic() + rng.uniform(0.5, 1.5)
-                while p.poll() is None and time.monotonic() < deadline:
-                    time.sleep(0.02)
-                if p.poll() is None:
-                    p.send_signal(signal.SIGKILL)
-                    p.wait()
-                    kills += 1
-                    with RunDB(db_path) as db:
-                        run = db.latest_run()
-                        if run is not None:
-                            done = sorted(db.completed_steps(run.id))
-                            # what was committed before stays committed
-                            assert set(seen) <= set(done)
-                            seen = done
-                    continue
-            _, err = p.communicate(timeout=120)
-            assert p.returncode == 0, err
-            break
-        assert kills == 20
+        seen: list[int] = []
+        for fraction in KILL_AT:
+            p = _station("calibrate", cfg, "--db", db_path, *(["--resume", 1] if _committed(db_path) else []))
+            target = max(len(seen) + 1, int(fraction * n_steps))
+            while p.poll() is None and len(_committed(db_path)) < target:
+                time.sleep(0.02)  # synced on the run database, never on a clock
+            assert p.poll() is None, f"the run ended before {target} committed steps: {p.communicate()[1][-2000:]}"
+            p.send_signal(signal.SIGKILL)
+            p.wait()
+            done = _committed(db_path)
+            assert set(seen) <= set(done) and len(done) >= target  # what was committed stays committed
+            seen = done
+        p = _station("calibrate", cfg, "--db", db_path, "--resume", 1)
+        _, err = p.communicate(timeout=300)
+        assert p.returncode == 0, err
         with RunDB(db_path) as db:
             recs = db.measurements(1)
             idx = [r.step_index for r in recs]
