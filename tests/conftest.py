@@ -10,8 +10,10 @@ the run database or the report works on ``run.copy_to(folder)``, never on the or
 from __future__ import annotations
 
 import io
+import os
 import shutil
 import sys
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,6 +21,28 @@ import pytest
 
 # a test whose report cannot be made fails alone instead of ending the run in INTERNALERROR (issue 42)
 from tests.report_guard import pytest_runtest_makereport  # noqa: F401
+
+DESIGN_CACHE_ENV = "STATION_DESIGN_CACHE"  # station.cell.correction.design_cache.CACHE_ENV
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """One correction-design cache for this test session, shared by its workers and every station
+    process they start (a cell is designed once per session, not once per process: ~7 s of CPU
+    each), fresh for each session (never the user's own ~/.cache), removed at its end."""
+    if os.environ.get(DESIGN_CACHE_ENV) is None and not hasattr(config, "workerinput"):
+        folder = tempfile.mkdtemp(prefix="station-design-cache-")
+        os.environ[DESIGN_CACHE_ENV] = folder
+        config.stash[_OWN_CACHE] = folder
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    folder = config.stash.get(_OWN_CACHE, None)
+    if folder is not None:
+        shutil.rmtree(folder, ignore_errors=True)
+        os.environ.pop(DESIGN_CACHE_ENV, None)
+
+
+_OWN_CACHE = pytest.StashKey[str]()
 
 
 @dataclass(frozen=True)

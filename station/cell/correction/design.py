@@ -32,6 +32,7 @@ import numpy as np
 
 from drivers.controller_map import MAX_TABLE_VALUES
 from station.cell.config.cell_config import DEFAULT_YAW_STEP_DEG, CellConfig
+from station.cell.correction.design_cache import key_digest, load_design, store_design
 from station.core.kinematics.tool_frame import nominal_head_in_flange
 from station.core.kinematics.transforms import invert, pose_to_matrix
 from station.core.table.build import CorrectionTable
@@ -172,7 +173,8 @@ def _prior(cfg: CellConfig, plan: Any = None, n: int = DRAWS) -> list[np.ndarray
 
 
 #: designs made in this process, by everything they depend on (a rehearsal or the suite starts
-#: the same cell again and again; a design takes a few seconds)
+#: the same cell again and again; a design takes a few seconds); across processes they are kept
+#: on disk by the same inputs and the code (:mod:`station.cell.correction.design_cache`)
 _DESIGNS: dict[tuple[Any, ...], TableDesign] = {}
 
 
@@ -197,9 +199,16 @@ def design_for(cfg: CellConfig, plan: Any = None, capacity: int | None = None) -
                                               "tilt_sigma_arcsec")), cfg.identification,
            np.array([s.q for s in plan.identification]).tobytes())
     if key not in _DESIGNS:
-        robots = _prior(cfg, plan, PREDICT_DRAWS)
-        _DESIGNS[key] = design_table(m, robots[:DRAWS], region, float(cfg.correction.max_interpolation_um),
-                                     capacity=cap, counts=counts, fixed=fixed, more=robots[DRAWS:])
+        # on disk, the model's whole structure names it (two files may share a robot's name)
+        digest = key_digest(key + (m.transforms, np.asarray(m.joint_limits, dtype=float).tobytes(),
+                                   tuple(s.kind.value for s in plan.identification)))
+        kept = load_design(digest)
+        if kept is None:
+            robots = _prior(cfg, plan, PREDICT_DRAWS)
+            kept = design_table(m, robots[:DRAWS], region, float(cfg.correction.max_interpolation_um),
+                                capacity=cap, counts=counts, fixed=fixed, more=robots[DRAWS:])
+            store_design(digest, kept)
+        _DESIGNS[key] = kept
     return _DESIGNS[key]
 
 
