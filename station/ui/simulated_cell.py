@@ -87,7 +87,7 @@ def _load_simulated(request: CellRequest, stack: ExitStack) -> LoadedCell:
         return LoadedCell(rehearsal.cfg, _judge(rehearsal.servers.cell), rehearsal.endpoints())
     sim = simulation_settings(text, str(request.config)) if request.config else {}
     given = sim.pop("seed", None)
-    if sim.pop("collision_check", False):  # the controller's check needs the cell's own files (issue 40)
+    if sim.pop("collision_check", None):  # the controller's check needs the cell's own files (issue 40)
         raise ConfigError(f"{request.config}: [simulation] collision_check = true checks the motions against the "
                           f"cell's robot, head, body and [[obstacle]] files; the built-in simulated cell has none of "
                           f"its own: add [robot] and [body] (e.g. examples/scara600_column/cell.toml), or remove the key")

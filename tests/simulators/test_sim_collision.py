@@ -109,14 +109,17 @@ def test_the_driver_types_the_collision_code():
     assert isinstance(err, MotionCollision) and err.seq == 7 and "nothing moved" in str(err)
 
 
-def test_the_switch_is_off_by_default_and_on_in_the_examples(scara):
+def test_the_switch_is_on_by_default_and_off_only_when_the_file_says_so(scara):
+    """A cell with its own files is checked unless its [simulation] says false (issue 40: a
+    planning slip fails the rehearsal); the key absent is None, not true, so that the built-in cell
+    (no files to check against) is not refused for a key nobody wrote."""
     from simulators.from_config import simulate_config
 
-    plain = (EXAMPLES / "scara600" / "cell.toml")
-    assert load_config(plain).simulation.collision_check is False
+    plain = load_config(EXAMPLES / "scara600" / "cell.toml")
+    assert plain.simulation.collision_check is None
     assert scara.simulation.collision_check is True
-    with simulate_config(scara, seed=1, source=SCARA) as on:
-        assert isinstance(on.servers.controller_server.collision, CellCollision)
+    with simulate_config(plain, seed=1, source=EXAMPLES / "scara600" / "cell.toml") as default:
+        assert isinstance(default.servers.controller_server.collision, CellCollision)
     text = SCARA.read_text().replace("collision_check = true", "collision_check = false")
     with simulate_config(parse_text(text, str(SCARA)), seed=1, source=SCARA) as off:
         assert off.servers.controller_server.collision is None
