@@ -33,6 +33,7 @@ articulated arm travels through via poses over the body (:mod:`station.cell.plan
 from __future__ import annotations
 
 import dataclasses
+import re
 import time
 import weakref
 from dataclasses import dataclass, field
@@ -432,6 +433,10 @@ class CollisionReport:
     clashing_moves: int = 0
     #: the via poses among ``poses`` (:mod:`station.cell.plan.vias`)
     vias: int = 0
+    #: per plan step (its index) the closest approach of a pair held to the full margin on that step's
+    #: moves (the travel to it, its approach, touch and retract; :func:`_step_moves`), None where no
+    #: pair came within twice the margin: what the TUI shows as the next move's clearance
+    by_step: tuple[tuple[int, Clash | None], ...] = field(default=(), compare=False)
 
     def to_json(self) -> dict:
         """What ``station plan --json`` says (clearances in mm, time in s)."""
@@ -553,8 +558,10 @@ class _Evaluator:
         found.evaluated += len(Q)
         W = c.placed(chain_frames(self.cfg.model, Q, setup=False))
         d_mm, d_mf = c.bounds(W, NEAR_MM)
+        free = cube >= _FREE  # a search touch's cube: its probes and their bodies are not held to it
+        cube = np.where(free, cube - _FREE, cube)
         touched = self.fixed_code[None, :] == cube[:, None]  # (n, mf): the pair's fixed shape is the touched cube
-        limit = np.where(touched & self.is_head, TOUCH_MARGIN_MM, margin)
+        limit = np.where(touched & self.is_head, np.where(free, -np.inf, TOUCH_MARGIN_MM)[:, None], margin)
         limit = np.where(touched & self.is_tip, -np.inf, limit)  # the tips press on the cube they touch
         for k, p in zip(*np.nonzero(d_mm < 2 * margin)):
             a, b = c.mm[p]
@@ -654,18 +661,28 @@ def poses_clear(cfg: CellConfig, Q: np.ndarray, points: np.ndarray) -> list[str 
     return out
 
 
-def check_path(cfg: CellConfig, poses: list[tuple[np.ndarray, str, int]]) -> CollisionReport:
+#: added to a touched cube's code: the head's pairs with that cube are not checked (a search touch of
+#: locating the body, :mod:`station.cell.plan.first_moves`)
+_FREE = 1 << 20
+
+
+def check_path(cfg: CellConfig, poses: list[tuple[np.ndarray, str, int]], free_touch: bool = False) -> CollisionReport:
     """Check every pose of ``poses`` and every path between consecutive ones (joint space, at a step
     that moves no point of the arm by more than the margin; :func:`_check_paths` skips the stretches
     the distances at their ends prove clear): the first clash in the order of motion (None: clear),
-    the closest approach of the pairs held to the margin and of a probe's body to the cube it touches."""
+    the closest approach of the pairs held to the margin and of a probe's body to the cube it touches.
+    ``free_touch``: the head's probes and their bodies are not held to the cube a pose touches (a
+    search touch, :func:`station.cell.plan.first_moves.check_locating_moves` says why)."""
     t0 = time.perf_counter()
     ev, point_cube = _evaluator(cfg)
     shapes = ev.c.shapes
     touch = _touch_status(poses, point_cube)
+    if free_touch:  # a search: the touched cube is its every pose's and move's (first_moves.py says why)
+        touch = [(c, c) for c in (point_cube[p] if p >= 0 else None for _q, _label, p in poses)]
 
     def cube_code(group: str | None) -> int:
-        return -1 if group is None else ev.codes.get(group, -1)
+        code = -1 if group is None else ev.codes.get(group, -1)
+        return code + _FREE if free_touch and code >= 0 else code
 
     found = _Found()
     if poses:
@@ -684,10 +701,37 @@ def check_path(cfg: CellConfig, poses: list[tuple[np.ndarray, str, int]]) -> Col
     margin = shapes.margin_mm
     normal = [h for h in found.hits if h[6] == margin]
     at_touch = [h for h in found.hits if h[6] != margin]
+    owner = _step_moves(poses)
+    least: dict[int, tuple | None] = {k: None for k in owner if k >= 0}
+    for h in normal:  # the pose's step, or the step the move from pose i leads to (pose i + 1's)
+        k = owner[h[1] + 1] if h[2] else owner[h[1]]
+        held = least.get(k)
+        if k >= 0 and (held is None or h[3] < held[3]):
+            least[k] = h
     return CollisionReport(len(poses), fine, named(clashes[0] if clashes else None), margin,
                            named(min(normal, key=lambda h: h[3], default=None)),
                            named(min(at_touch, key=lambda h: h[3], default=None)), time.perf_counter() - t0,
-                           evaluated=found.evaluated, clashing_moves=len({(h[1], h[2]) for h in clashes}))
+                           evaluated=found.evaluated, clashing_moves=len({(h[1], h[2]) for h in clashes}),
+                           by_step=tuple((k, named(h)) for k, h in sorted(least.items())))
+
+
+def _step_moves(poses: list[tuple[np.ndarray, str, int]]) -> list[int]:
+    """Per pose, the plan step (its index; -1: none) whose moves reach it: a retract pose its own
+    step's, every other pose (a depart or a stage of the travel, labelled with the step the head
+    leaves, an arrive, the approach, the pose above the point, the touch) the step of the next
+    touch. Labels as :func:`plan_path` writes them ("step N (…): what")."""
+    out, nxt = [-1] * len(poses), -1
+    for i in range(len(poses) - 1, -1, -1):
+        label = poses[i][1]
+        m = _STEP.match(label)
+        own = int(m.group(1)) - 1 if m else -1
+        if label.endswith(": touch"):
+            nxt = own
+        out[i] = own if label.endswith(": retract") else nxt
+    return out
+
+
+_STEP = re.compile(r"step (\d+) \(")
 
 
 #: the labels of the via poses (station/cell/plan/vias.py)
