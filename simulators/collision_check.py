@@ -25,8 +25,9 @@ difference, while a real crash (a head through a cube, a wrist through a column)
   its job, so it is never checked against them) and its housing (behind the plunger's travel, by
   half the stroke); the mount from the flange to the head frame (radius a fifth of the probes'
   farthest mount point; the station takes a quarter);
-* body: every cube (from its measuring points' corner frames and the cube edge), the pillar under
-  it down to the plate, the plate (the cubes' footprint grown by half an edge, one edge thick);
+* body: every cube (from its measuring points' corner frames and the cube edge) and the pillar
+  under it down to z = 0 of the body frame; no plate, as the body file gives none (the station's
+  model has none either: a plate or a table is an ``[[obstacle]]`` of the cell file);
 * obstacles: ``[[obstacle]]`` boxes and cylinders (axis along their z) in the body or base frame.
 
 Never checked: a link and its neighbour in the chain (zero-length links skipped), the pairs the
@@ -66,7 +67,7 @@ class Part:
     """One shape: ``kind`` "capsule" (radius, length; axis along local z), "sphere" (radius), "box"
     (edges) or "cylinder" (radius, height); ``local`` (4, 4) its centre in the frame it rides on,
     ``frame`` (the chain's frame after transform ``frame``; -1: fixed in the robot base frame);
-    ``group`` what it belongs to ("link:A2", "plunger", "head", "cube", "plate", "obstacle:NAME")."""
+    ``group`` what it belongs to ("link:A2", "plunger", "head", "cube", "obstacle:NAME")."""
 
     name: str
     kind: str
@@ -186,6 +187,7 @@ class CellCollision:
             fixed.append(Part(f"obstacle {o.name!r}", o.shape, tuple(float(v) for v in o.size), local, -1,
                               f"obstacle:{o.name}"))
         skip = {frozenset(pair) for pair in zip(groups, groups[1:])}  # neighbours in the chain
+        skip |= _two_apart([*groups, "head"])
         skip |= {frozenset((groups[-1], "head")), frozenset((groups[-1], "plunger")), frozenset(("head", "plunger")),
                  frozenset(("plunger", "cube"))}  # the plungers touch the cubes: that is their job
         skip |= {frozenset((f"link:{a}", f"link:{b}")) for a, b in (getattr(spec, "allowed_pairs", None) or ())}
@@ -364,6 +366,15 @@ class CellCollision:
         return None
 
 
+def _two_apart(chain: list[str]) -> set[frozenset[str]]:
+    """The pairs of links two apart in the chain (joined over one link). A safety controller's cell
+    model checks the arm against the cell and the tool against the arm's far links; capsules along
+    the link offsets are too crude across one joint: the IRB 2600's base and upper arm, 150 mm apart
+    over its shoulder offset, met at a shoulder of -59° (the station leaves such pairs out where the
+    link between is shorter than its own, fatter capsules' radii together)."""
+    return {frozenset((a, c)) for a, c in zip(chain, chain[2:])}
+
+
 def _box_gap(p0: np.ndarray, p1: np.ndarray, half: np.ndarray) -> np.ndarray:
     """A lower bound [mm] of the distance from the segments ``p0``-``p1`` (..., 3) to the centred box
     of ``half`` extents: how far the segment's bounding box lies from it."""
@@ -418,7 +429,9 @@ def _head_parts(head: Any, K: np.ndarray, frame: int) -> list[Part]:
 
 def _body_parts(points: np.ndarray, edge: float, base_from_body: np.ndarray) -> list[Part]:
     """The cubes (one per distinct cube among the measuring points' corner frames; the cube lies in
-    x, y >= 0, z <= 0 of a corner's frame), their pillars down to z = 0 and the plate, in the base."""
+    x, y >= 0, z <= 0 of a corner's frame) and their pillars down to z = 0, in the base. No plate:
+    the body file gives none (a guessed one, the cubes' footprint grown by half an edge, refused the
+    PUMA 560 example's robot where it stood at q = 0, 254 mm through it); a plate is an [[obstacle]]."""
     centre = np.eye(4)
     centre[:3, 3] = [edge / 2, edge / 2, -edge / 2]
     cubes: dict[tuple[float, ...], np.ndarray] = {}
@@ -433,9 +446,4 @@ def _body_parts(points: np.ndarray, edge: float, base_from_body: np.ndarray) -> 
             P = C.copy()
             P[2, 3] = bottom / 2
             parts.append(_box(f"the pillar of cube {k + 1}", base_from_body @ P, (edge, edge, bottom), "cube"))
-    xy = np.array([C[:2, 3] for C in cubes.values()])
-    lo, hi = xy.min(axis=0) - edge, xy.max(axis=0) + edge
-    plate = np.eye(4)
-    plate[:3, 3] = [*((lo + hi) / 2), -edge / 2]
-    parts.append(_box("the body's plate", base_from_body @ plate, (*(hi - lo), edge), "plate"))
     return parts

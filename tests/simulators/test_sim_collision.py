@@ -137,15 +137,18 @@ def test_the_builtin_cell_refuses_the_switch(tmp_path, capsys):
 
 
 def test_a_robot_that_would_start_inside_something_is_refused():
-    """At q = 0 the PUMA's forearm hangs through the body's plate: without [conformance]
-    park_joints the simulated controller could check no motion from there, and says so."""
+    """At q = 0 the PUMA's forearm hangs down through where a table under the body stands (an
+    [[obstacle]]): without [conformance] park_joints the simulated controller could check no motion
+    from there, and says so."""
     from simulators.from_config import simulate_config
     from station.errors import ConfigError
 
+    table = ('\n[[obstacle]]\nname = "table"\nshape = "box"\nframe = "body"\n'
+             'pose = [0.0, 0.0, -40.0, 0.0, 0.0, 0.0]\nsize_mm = [1200.0, 1200.0, 60.0]\n')
     text = PUMA.read_text()
-    text = text[:text.index("[conformance]")] + text[text.index("[identification]"):]
-    with pytest.raises(ConfigError, match=r"start where link .* the body's plate overlap .*park_joints"):
-        simulate_config(parse_text(text, str(PUMA)), seed=1, source=PUMA)
+    unparked = text[:text.index("[conformance]")] + text[text.index("[identification]"):]
+    with pytest.raises(ConfigError, match=r"start where link .* obstacle 'table' overlap .*park_joints"):
+        simulate_config(parse_text(unparked + table, str(PUMA)), seed=1, source=PUMA)
 
 
 def test_the_plungers_may_press_on_a_cube_the_housings_may_not(scara):
