@@ -558,10 +558,8 @@ class _Evaluator:
         found.evaluated += len(Q)
         W = c.placed(chain_frames(self.cfg.model, Q, setup=False))
         d_mm, d_mf = c.bounds(W, NEAR_MM)
-        free = cube >= _FREE  # a search touch's cube: its probes and their bodies are not held to it
-        cube = np.where(free, cube - _FREE, cube)
         touched = self.fixed_code[None, :] == cube[:, None]  # (n, mf): the pair's fixed shape is the touched cube
-        limit = np.where(touched & self.is_head, np.where(free, -np.inf, TOUCH_MARGIN_MM)[:, None], margin)
+        limit = np.where(touched & self.is_head, TOUCH_MARGIN_MM, margin)
         limit = np.where(touched & self.is_tip, -np.inf, limit)  # the tips press on the cube they touch
         for k, p in zip(*np.nonzero(d_mm < 2 * margin)):
             a, b = c.mm[p]
@@ -661,28 +659,18 @@ def poses_clear(cfg: CellConfig, Q: np.ndarray, points: np.ndarray) -> list[str 
     return out
 
 
-#: added to a touched cube's code: the head's pairs with that cube are not checked (a search touch of
-#: locating the body, :mod:`station.cell.plan.first_moves`)
-_FREE = 1 << 20
-
-
-def check_path(cfg: CellConfig, poses: list[tuple[np.ndarray, str, int]], free_touch: bool = False) -> CollisionReport:
+def check_path(cfg: CellConfig, poses: list[tuple[np.ndarray, str, int]]) -> CollisionReport:
     """Check every pose of ``poses`` and every path between consecutive ones (joint space, at a step
     that moves no point of the arm by more than the margin; :func:`_check_paths` skips the stretches
     the distances at their ends prove clear): the first clash in the order of motion (None: clear),
-    the closest approach of the pairs held to the margin and of a probe's body to the cube it touches.
-    ``free_touch``: the head's probes and their bodies are not held to the cube a pose touches (a
-    search touch, :func:`station.cell.plan.first_moves.check_locating_moves` says why)."""
+    the closest approach of the pairs held to the margin and of a probe's body to the cube it touches."""
     t0 = time.perf_counter()
     ev, point_cube = _evaluator(cfg)
     shapes = ev.c.shapes
     touch = _touch_status(poses, point_cube)
-    if free_touch:  # a search: the touched cube is its every pose's and move's (first_moves.py says why)
-        touch = [(c, c) for c in (point_cube[p] if p >= 0 else None for _q, _label, p in poses)]
 
     def cube_code(group: str | None) -> int:
-        code = -1 if group is None else ev.codes.get(group, -1)
-        return code + _FREE if free_touch and code >= 0 else code
+        return -1 if group is None else ev.codes.get(group, -1)
 
     found = _Found()
     if poses:
