@@ -11,8 +11,8 @@ configuration the station itself reads (``station.cell.config.cell_config.CellCo
 * the probe head: the configured head (``cfg.head``), else the default 3-2-1 head for the cube edge;
   its reading noise ``[simulation].probe_noise_um`` when the file sets it, else the head's stated
   ``reading_sigma_mm`` (its certificate), else 0.5 µm;
-* the controller: the configured word order, and ``[limits]`` as its soft limits; with
-  ``[simulation] collision_check = true`` its own collision check of every motion
+* the controller: the configured word order, and ``[limits]`` as its soft limits; unless
+  ``[simulation] collision_check = false``, its own collision check of every motion
   (:mod:`simulators.collision_check`);
 * drift (thermal model, step change) from the ``[simulation]`` keys of :mod:`simulators.thermal`.
 
@@ -251,9 +251,10 @@ def _joint_errors(settings: Mapping[str, Any], model: Any, seed: int):
 
 
 def _collision(cfg: Any, settings: Mapping[str, Any], cell: SimulatedCell):
-    """``[simulation] collision_check``: the controller's own collision check of the cell (None: off).
-    A robot that would start inside something is refused: no motion from there could be checked."""
-    if not settings.get("collision_check"):
+    """``[simulation] collision_check``: the controller's own collision check of the cell (None: off),
+    on unless the key says false (issue 40: a planning slip fails the rehearsal). A robot that would
+    start inside something is refused: no motion from there could be checked."""
+    if settings.get("collision_check") is False:
         return None
     from simulators.collision_check import CellCollision
     from station.errors import ConfigError

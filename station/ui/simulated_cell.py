@@ -87,7 +87,7 @@ def _load_simulated(request: CellRequest, stack: ExitStack) -> LoadedCell:
         return LoadedCell(rehearsal.cfg, _judge(rehearsal.servers.cell), rehearsal.endpoints())
     sim = simulation_settings(text, str(request.config)) if request.config else {}
     given = sim.pop("seed", None)
-    if sim.pop("collision_check", False):  # the controller's check needs the cell's own files (issue 40)
+    if sim.pop("collision_check", None):  # the controller's check needs the cell's own files (issue 40)
         raise ConfigError(f"{request.config}: [simulation] collision_check = true checks the motions against the "
                           f"cell's robot, head, body and [[obstacle]] files; the built-in simulated cell has none of "
                           f"its own: add [robot] and [body] (e.g. examples/scara600_column/cell.toml), or remove the key")
@@ -146,10 +146,14 @@ def _load_builtin_robot_cell(request: CellRequest, stack: ExitStack) -> LoadedCe
     if request.config:
         raise ConfigError(f"--robot {request.robot} starts a built-in simulated cell; give either it or a CONFIG "
                           f"to rehearse, not both")
+    from simulators.collision_check import CellCollision
     from simulators.six_axis_cell import six_axis_config_text, start_six_axis_cell
 
     seed = 1 if request.seed is None else request.seed
     servers = start_six_axis_cell(seed=seed, time_scale=request.time_scale)
     stack.callback(servers.stop)
     cfg = parse_text(six_axis_config_text(servers, seed), "<simulated six-axis cell>")
+    # its controller checks every motion against the cell this configuration describes, in its own
+    # model (issue 40: a planning slip of a six-axis plan fails the rehearsal), before any motion
+    servers.controller_server.collision = CellCollision.from_config(cfg)
     return LoadedCell(cfg, _judge(servers.cell), servers.endpoints())

@@ -109,14 +109,17 @@ def test_the_driver_types_the_collision_code():
     assert isinstance(err, MotionCollision) and err.seq == 7 and "nothing moved" in str(err)
 
 
-def test_the_switch_is_off_by_default_and_on_in_the_examples(scara):
+def test_the_switch_is_on_by_default_and_off_only_when_the_file_says_so(scara):
+    """A cell with its own files is checked unless its [simulation] says false (issue 40: a
+    planning slip fails the rehearsal); the key absent is None, not true, so that the built-in cell
+    (no files to check against) is not refused for a key nobody wrote."""
     from simulators.from_config import simulate_config
 
-    plain = (EXAMPLES / "scara600" / "cell.toml")
-    assert load_config(plain).simulation.collision_check is False
+    plain = load_config(EXAMPLES / "scara600" / "cell.toml")
+    assert plain.simulation.collision_check is None
     assert scara.simulation.collision_check is True
-    with simulate_config(scara, seed=1, source=SCARA) as on:
-        assert isinstance(on.servers.controller_server.collision, CellCollision)
+    with simulate_config(plain, seed=1, source=EXAMPLES / "scara600" / "cell.toml") as default:
+        assert isinstance(default.servers.controller_server.collision, CellCollision)
     text = SCARA.read_text().replace("collision_check = true", "collision_check = false")
     with simulate_config(parse_text(text, str(SCARA)), seed=1, source=SCARA) as off:
         assert off.servers.controller_server.collision is None
@@ -134,15 +137,18 @@ def test_the_builtin_cell_refuses_the_switch(tmp_path, capsys):
 
 
 def test_a_robot_that_would_start_inside_something_is_refused():
-    """At q = 0 the PUMA's forearm hangs through the body's plate: without [conformance]
-    park_joints the simulated controller could check no motion from there, and says so."""
+    """At q = 0 the PUMA's forearm hangs down through where a table under the body stands (an
+    [[obstacle]]): without [conformance] park_joints the simulated controller could check no motion
+    from there, and says so."""
     from simulators.from_config import simulate_config
     from station.errors import ConfigError
 
+    table = ('\n[[obstacle]]\nname = "table"\nshape = "box"\nframe = "body"\n'
+             'pose = [0.0, 0.0, -40.0, 0.0, 0.0, 0.0]\nsize_mm = [1200.0, 1200.0, 60.0]\n')
     text = PUMA.read_text()
-    text = text[:text.index("[conformance]")] + text[text.index("[identification]"):]
-    with pytest.raises(ConfigError, match=r"start where link .* the body's plate overlap .*park_joints"):
-        simulate_config(parse_text(text, str(PUMA)), seed=1, source=PUMA)
+    unparked = text[:text.index("[conformance]")] + text[text.index("[identification]"):]
+    with pytest.raises(ConfigError, match=r"start where link .* obstacle 'table' overlap .*park_joints"):
+        simulate_config(parse_text(unparked + table, str(PUMA)), seed=1, source=PUMA)
 
 
 def test_the_plungers_may_press_on_a_cube_the_housings_may_not(scara):

@@ -357,11 +357,14 @@ class _Simulation(_Section):
         "none", description='"six-axis": the joints bend under gravity and err once per turn (a 1.6 m arm\'s '
         'values, docs/error-terms.md); "scara": a SCARA\'s joints 1, 2, 4 err once per turn; "none": a rigid robot')
     joint_errors_scale: float = _num(1.0, ge=0.0, le=10.0, what="factor on every joint error of joint_errors")
-    # the simulated controller's own collision check (issue 40, simulators/collision_check.py): off by
-    # default until the station's plans carry their via poses
-    collision_check: bool = Field(False, description="true: the simulated controller refuses (error COLLISION) a "
-                                  "motion whose target or joint-space path collides in its own model of the cell "
-                                  "(links, head, body, [[obstacle]]); false: it checks nothing")
+    # the simulated controller's own collision check (issue 40, simulators/collision_check.py): on by
+    # default wherever the simulator has the cell's files, so that a planning slip fails a rehearsal
+    # and the end-to-end tests; None (the key absent) is that default, which the built-in cell (no
+    # files of its own to check against) leaves off, while its explicit true is refused
+    collision_check: bool | None = Field(None, description="true (the default for a cell with its robot and body "
+                                         "files): the simulated controller refuses (error COLLISION) a motion whose "
+                                         "target or joint-space path collides in its own model of the cell (links, "
+                                         "head, body, [[obstacle]]); false: it checks nothing")
 
 
 class _Verification(_Section):

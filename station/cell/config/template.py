@@ -26,6 +26,8 @@ class _Form(str):
 
 
 _SHOWN_DEFAULT["setup_error"] = _Form("{ z_mm = 1.5, yaw_deg = 0.3 }")
+# absent means on where the simulator has the cell's files (the built-in cell has none: off)
+_SHOWN_DEFAULT["collision_check"] = True
 
 
 def _toml_value(v: Any) -> str:

@@ -30,7 +30,7 @@ from station.cell.correction.upload import verified_upload
 from station.cell.pipeline.articulated import articulated_correction, articulated_targets
 from station.cell.pipeline.invalid_poses import invalid_advice, rejudge
 from station.cell.pipeline.judging import judged
-from station.cell.pipeline.premotion import Premotion, premotion_check
+from station.cell.pipeline.premotion import Premotion, check_first_motion, premotion_check
 from station.cell.pipeline.results import (
     build_table_for,
     grid_for,
@@ -73,6 +73,7 @@ from station.cell.run.events import (
     Verified,
 )
 from station.cell.run.locate import locate_body, located_joints
+from station.cell.run.next_move import next_moves
 from station.cell.run.questions import Confirm, KeepCorrection, UploadProposal
 from station.cell.run.recentring import recentring_stats, stored_recentring
 from station.cell.run.runcontrol import RunControl
@@ -207,6 +208,8 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
                               f"resume it {'without' if planned_upload else 'with'} --no-upload as it started, "
                               f"or start a new run")
         resumed = len(db.completed_steps(run_id, ok_only=True))
+    checked = pre.plan.run_steps(cfg.plan.verification_cycles, False)  # the steps the collision check saw
+    runner.next_moves = next_moves(pre.collision, checked, steps)  # each step's clearance, for the views
     emit(RunStarted(run_id, len(steps), resumed, resume=resume_run is not None,
                     devices=tuple((devices_info or {}).items())))  # the latest attempt's devices, for the report
     runner.progress.start(len(steps), resumed)  # k of n from here on (station/cell/run/progress.py)
@@ -216,7 +219,8 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
             emit(Notice("info", note))
     summary = RunSummary(outcome=Outcome.SUCCESS, run_id=run_id, cell=cfg.name, robot=cfg.model.name)
     start = table_at_start(controller, db, run_id, emit)  # before anything changes the controller's tables
-    try:
+    try:  # the first move, from where the robot stands, is checked as the plan's moves are (issue 40)
+        check_first_motion(cfg, controller.read_joints(), steps, db.completed_steps(run_id, ok_only=True))
         summary = _pipeline(cfg, runner, db, run_id, steps, emit, options, with_oracle, summary, pre)
         if options.judge is not None:  # a simulated cell: its judge's figures (station/cell/pipeline/judging.py)
             summary = judged(cfg, options.judge, db, run_id, summary, emit)

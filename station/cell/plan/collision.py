@@ -33,6 +33,7 @@ articulated arm travels through via poses over the body (:mod:`station.cell.plan
 from __future__ import annotations
 
 import dataclasses
+import re
 import time
 import weakref
 from dataclasses import dataclass, field
@@ -432,6 +433,10 @@ class CollisionReport:
     clashing_moves: int = 0
     #: the via poses among ``poses`` (:mod:`station.cell.plan.vias`)
     vias: int = 0
+    #: per plan step (its index) the closest approach of a pair held to the full margin on that step's
+    #: moves (the travel to it, its approach, touch and retract; :func:`_step_moves`), None where no
+    #: pair came within twice the margin: what the TUI shows as the next move's clearance
+    by_step: tuple[tuple[int, Clash | None], ...] = field(default=(), compare=False)
 
     def to_json(self) -> dict:
         """What ``station plan --json`` says (clearances in mm, time in s)."""
@@ -684,10 +689,37 @@ def check_path(cfg: CellConfig, poses: list[tuple[np.ndarray, str, int]]) -> Col
     margin = shapes.margin_mm
     normal = [h for h in found.hits if h[6] == margin]
     at_touch = [h for h in found.hits if h[6] != margin]
+    owner = _step_moves(poses)
+    least: dict[int, tuple | None] = {k: None for k in owner if k >= 0}
+    for h in normal:  # the pose's step, or the step the move from pose i leads to (pose i + 1's)
+        k = owner[h[1] + 1] if h[2] else owner[h[1]]
+        held = least.get(k)
+        if k >= 0 and (held is None or h[3] < held[3]):
+            least[k] = h
     return CollisionReport(len(poses), fine, named(clashes[0] if clashes else None), margin,
                            named(min(normal, key=lambda h: h[3], default=None)),
                            named(min(at_touch, key=lambda h: h[3], default=None)), time.perf_counter() - t0,
-                           evaluated=found.evaluated, clashing_moves=len({(h[1], h[2]) for h in clashes}))
+                           evaluated=found.evaluated, clashing_moves=len({(h[1], h[2]) for h in clashes}),
+                           by_step=tuple((k, named(h)) for k, h in sorted(least.items())))
+
+
+def _step_moves(poses: list[tuple[np.ndarray, str, int]]) -> list[int]:
+    """Per pose, the plan step (its index; -1: none) whose moves reach it: a retract pose its own
+    step's, every other pose (a depart or a stage of the travel, labelled with the step the head
+    leaves, an arrive, the approach, the pose above the point, the touch) the step of the next
+    touch. Labels as :func:`plan_path` writes them ("step N (…): what")."""
+    out, nxt = [-1] * len(poses), -1
+    for i in range(len(poses) - 1, -1, -1):
+        label = poses[i][1]
+        m = _STEP.match(label)
+        own = int(m.group(1)) - 1 if m else -1
+        if label.endswith(": touch"):
+            nxt = own
+        out[i] = own if label.endswith(": retract") else nxt
+    return out
+
+
+_STEP = re.compile(r"step (\d+) \(")
 
 
 #: the labels of the via poses (station/cell/plan/vias.py)

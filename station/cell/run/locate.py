@@ -26,6 +26,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from station.cell.config.cell_config import CellConfig
+from station.cell.plan.first_moves import N_LOCATE, face_directions, locate_steps
 from station.cell.plan.locating import FACE_NAMES, Coverage, coverage
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.rundb import RunDB
@@ -39,8 +40,6 @@ from station.errors import MeasurementFault, UnreachableError
 __all__ = ["N_LOCATE", "RESULT_KEY", "SearchLog", "search_and_read", "located_joints", "locate_body",
            "stored_located_setup", "located_config"]
 
-#: measuring points touched to locate the body (each gives the whole set-up; three average it)
-N_LOCATE = 3
 #: the run database's result with the located set-up (units in its keys)
 RESULT_KEY = "located_setup"
 
@@ -54,16 +53,9 @@ class SearchLog:
 
 
 def _face_directions(cfg: CellConfig) -> np.ndarray:
-    """``(3, 3)`` per face (top, x, y) the mean direction of its probes in MKKS (unit; zero for a
-    face without probes)."""
-    g = head_of(cfg)
-    out = np.zeros((3, 3))
-    for f in range(3):
-        d = np.asarray(g.directions)[np.asarray(g.faces) == f]
-        if len(d):
-            v = d.mean(axis=0)
-            out[f] = v / np.linalg.norm(v)
-    return out
+    """``(3, 3)`` per face (top, x, y) the mean direction of its probes in MKKS: the normals the plan's
+    check moved the head along (:func:`station.cell.plan.first_moves.face_directions`)."""
+    return face_directions(cfg)
 
 
 def _face_moves(cfg: CellConfig, reading: Reading) -> np.ndarray:
@@ -178,17 +170,9 @@ def located_config(cfg: CellConfig, db: RunDB, run_id: int) -> CellConfig:
 
 
 def _locate_steps(cfg: CellConfig, steps: Sequence[PlannedStep]) -> list[PlannedStep]:
-    """:data:`N_LOCATE` identification steps of the first pass: the plan's first, then each time
-    the one farthest from those chosen (spread points give the yaw by their positions)."""
-    first = [st for st in steps if st.kind is StepKind.IDENTIFICATION and st.cycle == 0]
-    out = first[:1]
-    xy = cfg.body_points[:, :2, 3]
-    while first and len(out) < min(N_LOCATE, len(first)):
-        far = max(first, key=lambda st: min(float(np.linalg.norm(xy[st.point] - xy[o.point])) for o in out))
-        if far in out:
-            break
-        out.append(far)
-    return out
+    """The steps that locate the body: the ones whose search touches the plan's check checked
+    (:func:`station.cell.plan.first_moves.locate_steps`)."""
+    return locate_steps(cfg, steps)
 
 
 def locate_body(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: Sequence[PlannedStep],

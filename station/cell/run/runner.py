@@ -532,6 +532,9 @@ class Runner:
         # Where the wall time goes: waiting for motions, settling, sampling the probes, and the
         # rest (the station's own computation and bookkeeping). benchmarks/ reads this.
         self.timing = {"motion": 0.0, "settle": 0.0, "sampling": 0.0}
+        #: per plan step, its moves' clearance as the plan's collision check found it, streamed when
+        #: the step starts (station/cell/run/next_move.py; none: the views show none)
+        self.next_moves: Mapping[int, Event] = {}
 
     def execute(self, proc: Procedure, index: int = 0) -> Reading:
         """Run one procedure to its end and return its result."""
@@ -663,6 +666,8 @@ class Runner:
                 if st.kind not in kinds or st.index in valid:
                     continue
                 self.emit(StepStarted(st.index, total, f"{st.kind.caption}: {st.label}"))
+                if st.index in self.next_moves:
+                    self.emit(self.next_moves[st.index])
                 reading = self.execute(make_proc(st), st.index)
                 self._measured(run_id, st, reading, total, replace=st.index in stored)
                 n += 1

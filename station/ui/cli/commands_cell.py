@@ -328,7 +328,7 @@ def _check_report_dir(path: Path) -> None:
 def cmd_plan(args: argparse.Namespace) -> int:
     """The plan preview: nothing moves."""
     from station.cell.correction.design import GRID_POINT
-    from station.cell.pipeline.premotion import premotion_check
+    from station.cell.pipeline.premotion import moves_json, moves_lines, premotion_check
     from station.cell.pipeline.preview import describe, preview
     from station.ui.report.cell_picture import check_picture_dir, plan_picture, write_cell_picture
 
@@ -341,6 +341,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     design = pre.design
     locating = [] if pre.locating is None else [f"  locating: {pre.locating.describe()}"]  # the run's first motions
     collision = [] if pre.collision is None else [f"  {ln}" for ln in pre.collision.lines()]  # issue 40
+    collision += moves_lines(pre)  # the search touches and the first move, checked the same way
     p = preview(cfg, with_upload=not args.no_upload)
     head = check_head(cfg.head)  # the probe head's arrangement and sensitivity (docs/probe-head.md)
     warnings = plan_warnings(p, cfg)
@@ -355,7 +356,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
                           "warnings": warnings, "correction": correction,
                           "locating": None if pre.locating is None else pre.locating.describe(),
                           "collision": None if pre.collision is None else pre.collision.to_json(),
-                          "picture": {f.suffix[1:]: str(f) for f in picture} or None}))
+                          "picture": {f.suffix[1:]: str(f) for f in picture} or None,
+                          **moves_json(pre)}))
     else:
         lines = describe(p)
         at = next((i + 1 for i, ln in enumerate(lines) if ln.lstrip().startswith("predicted accuracy")), len(lines))

@@ -58,6 +58,7 @@ from station.cell.run.events import (
     RunStarted,
     StepStarted,
 )
+from station.cell.run.next_move import NextMove
 from station.cell.run.runcontrol import RunControl
 from station.ui.report.writer import ReportData
 from station.ui.tui.actions import EventMessage, QuestionMessage
@@ -223,6 +224,7 @@ class StationApp(RunEnd):
         yield Static(phase_markup(None, set()), id="phases")
         yield Static("", id="phase-detail")
         yield Static("step —", id="step")
+        yield Static("", id="next-move")  # the plan's clearance of the step's moves (NextMove)
         yield ProgressBar(total=1, show_eta=False, id="progress")  # no pulsing bar: snapshots stay still
         table = MeasurementTable(id="measurements", zebra_stripes=True, cursor_type="row")
         table.border_title = "Measurements"
@@ -353,6 +355,7 @@ class StationApp(RunEnd):
         self._show_phases(None)
         self._show_activity("", end=None)
         self.query_one("#step", Static).update("step —")
+        self._show_next_move(None)
         self.query_one("#summary", Static).update("")
         self.query_one("#summary", Static).remove_class("-ok", "-failed")
         box = self.query_one("#summary-box")
@@ -485,6 +488,9 @@ class StationApp(RunEnd):
                 self.on_event_message(EventMessage(self._before_upload))
             self.step_index = ev.index
             self.query_one("#step", Static).update(f"plan step [b]{ev.index + 1}[/]: {esc(ev.label)}")  # the table's row
+            self._show_next_move(None)  # until the step's own clearance comes: none the check did not see
+        elif isinstance(ev, NextMove):
+            self._show_next_move(ev if ev.index == self.step_index else None)
         elif isinstance(ev, Progress):  # the run's k of n (station/cell/run/progress.py), not the plan's index
             self.query_one("#progress", ProgressBar).update(total=ev.total, progress=ev.done)
             self.eta.update(ev.done, ev.total)
@@ -511,6 +517,13 @@ class StationApp(RunEnd):
             self._note(fact)
         elif isinstance(ev, (RunFinished, RunFailed)) and not self._settled:
             self._show_summary(ev.summary)
+
+    def _show_next_move(self, ev: NextMove | None) -> None:
+        """The next move's clearance as the plan's collision check found it (the event carries the
+        figure and the pair; nothing is computed here), or no line."""
+        line = self.query_one("#next-move", Static)
+        line.update("" if ev is None else esc(ev.text()))
+        line.set_class(ev is not None, "-shown")
 
     def _add_measurement(self, ev: MeasurementRecorded) -> None:
         table = self.query_one("#measurements", MeasurementTable)

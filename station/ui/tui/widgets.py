@@ -47,6 +47,10 @@ APP_CSS = """
     #phases { height: 1; padding: 0 0 0 1; }
     #phase-detail { height: 1; padding: 0 1; color: $text-muted; }
     #step { height: 1; padding: 0 1; }
+    /* the next move's clearance (issue 40): a line of its own while a run streams one */
+    #next-move { height: 1; padding: 0 1; color: $text-muted; display: none; }
+    #next-move.-shown { display: block; }
+    .-ended #next-move { display: none; }
     #progress { padding: 0 1; height: 1; }
     #progress Bar { width: 1fr; }
     #measurements { height: 1fr; min-height: 5; border: round $primary; }
