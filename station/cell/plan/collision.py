@@ -497,7 +497,12 @@ def plan_path(cfg: CellConfig, plan: Plan, with_upload: bool = True) -> list[tup
                     out.append((v, f"{name}: {what}", s.point))
                 else:  # the depart and the stages of a long move, away from any cube
                     out.append((v, f"{last[0]}: {what}", last[1] if what == "depart" else -1))
-        for what, qq in zip(("approach", "above the point", "touch"), moves):
+        names = ("approach", "above the point", "touch")
+        if back is None and s.kind.is_verification:
+            # a SCARA's verification touch is a Cartesian target the controller reaches straight
+            # from the approach (station/cell/run/runner.py _touch): no pose above the point
+            moves, names = [moves[0], moves[2]], ("approach", "touch")
+        for what, qq in zip(names, moves):
             out.append((np.asarray(qq, dtype=float), f"{name}: {what}", s.point))
         out.append((np.asarray(leave, dtype=float), f"{name}: retract", s.point))
         last = (name, s.point, lifts[k])
