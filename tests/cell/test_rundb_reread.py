@@ -121,3 +121,20 @@ def test_a_plan_edited_after_a_good_read_checks_the_records_again(run):
         c.execute("UPDATE runs SET plan_json = ? WHERE id = ?", (__import__("json").dumps(edited), rid))
     with pytest.raises(DamagedRecordError, match="point_id"):
         db.measurements(rid)
+
+
+def test_only_the_runs_read_last_are_kept(tmp_path, monkeypatch):
+    from station.cell.records.measurement_cache import MAX_RUNS
+
+    with RunDB(tmp_path / "runs.db") as db:
+        rids = [db.create_run(CONFIG, plan(2)) for _ in range(MAX_RUNS + 1)]
+        for rid in rids:
+            db.record_measurement(rid, 0, **fields(0))
+        parsed = _count_parses(monkeypatch)
+        for rid in rids:  # the first run drops out when the last is read
+            db.measurements(rid)
+        parsed.clear()
+        db.measurements(rids[-1])
+        assert parsed == []
+        db.measurements(rids[0])
+        assert parsed == [0]

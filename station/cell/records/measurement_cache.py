@@ -22,6 +22,10 @@ from station.cell.records.run_records import MeasurementRecord
 
 __all__ = ["MeasurementCache"]
 
+#: the runs kept, the most recently read (a served RunDB, the dashboard's or OPC UA's, reads many runs
+#: over its life; a calibration and its report read one): the simulated SCARA run's 305 rows hold 0.28 MB of text and bytes, its records as much again
+MAX_RUNS = 4
+
 #: per step: the row as read and its record
 _Steps = dict[int, tuple[tuple, MeasurementRecord]]
 
@@ -58,4 +62,7 @@ class MeasurementCache:
         """Remember the run's checked records beside their rows (only the steps stored now)."""
         steps = {row[1]: (row, rec) for row, rec in zip(rows, records)}
         with self._lock:
+            self._runs.pop(run_id, None)  # re-inserted last: the dict's order is the order of reading
             self._runs[run_id] = (plan_text, steps)
+            while len(self._runs) > MAX_RUNS:
+                del self._runs[next(iter(self._runs))]
