@@ -23,7 +23,8 @@ from station.cell.records.run_records import MeasurementRecord
 __all__ = ["MeasurementCache"]
 
 #: the runs kept, the most recently read (a served RunDB, the dashboard's or OPC UA's, reads many runs
-#: over its life; a calibration and its report read one): the simulated SCARA run's 305 rows hold 0.28 MB of text and bytes, its records as much again
+#: over its life; a calibration and its report read one): the simulated SCARA run's 305 rows hold
+#: 0.28 MB of text and bytes, its records as much again
 MAX_RUNS = 4
 
 #: per step: the row as read and its record
