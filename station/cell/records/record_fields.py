@@ -133,9 +133,15 @@ def check_measurements(records: Sequence[MeasurementRecord], plan: Sequence[Mapp
                        ctx: RunContext | None) -> None:
     """Every measurement of a run (each against its planned step), and the run's channel count: one
     head, one count, whatever the configuration says."""
-    counts: dict[int, int] = {}
     for m in records:
         check_measurement(m, plan[m.step_index] if 0 <= m.step_index < len(plan) else None, ctx)
+    check_channel_count(records)
+
+
+def check_channel_count(records: Sequence[MeasurementRecord]) -> None:
+    """One head, one channel count: over all of a run's records (also those checked before)."""
+    counts: dict[int, int] = {}
+    for m in records:
         if m.readings_mm is not None:
             counts.setdefault(m.readings_mm.size, m.step_index)
     if len(counts) > 1:

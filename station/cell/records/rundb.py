@@ -39,6 +39,7 @@ from station.cell.plan.steps import MEASUREMENT_KINDS
 from station.cell.records import record_checks as rc
 from station.cell.records import record_fields as rf
 from station.cell.records import run_lock
+from station.cell.records.measurement_cache import MeasurementCache
 from station.cell.records.record_checks import check_against_plan
 from station.cell.records.run_lock import LockHolder
 from station.cell.records.run_records import (
@@ -82,6 +83,8 @@ class RunDB:
         self._conn: sqlite3.Connection | None = None
         self._contexts: dict[int, rf.RunContext | None] = {}  # per run: what the checks of its records know
         self._checked: set[str] = set()  # the whole-file checks done once
+        self._parsed = MeasurementCache()  # records already checked, while their rows are unchanged
+        self._runs_read: dict[int, tuple[tuple, RunRecord]] = {}  # run id -> its row and record, as last read
         if self.path.is_dir():
             raise RunDatabaseError(f"{self.path}: is a directory; give the path of a run database "
                                    f"file (it is created if it does not exist)")
@@ -248,6 +251,15 @@ class RunDB:
         return tuple(row)
 
     _run_from_row = staticmethod(rc.run_record)
+
+    def _run_checked(self, row: tuple[Any, ...]) -> RunRecord:
+        """The run's row as a record, for this class's own reading: an unchanged row is not parsed
+        and checked again (record_measurement reads the run at every step; its plan is ~2 ms)."""
+        hit = self._runs_read.get(row[0])
+        if hit is None or hit[0] != row:
+            hit = (row, self._run_from_row(row))
+            self._runs_read[row[0]] = hit
+        return hit[1]
 
     # -- run locks (station.cell.records.run_lock) ---------------------------------------------------
 
@@ -419,7 +431,7 @@ class RunDB:
                None if ps is None else json.dumps(ps, allow_nan=False),
                res, 1 if ok else 0, str(message), t)
         with self._lock:
-            run = self._run_from_row(self._require_run(run_id))
+            run = self._run_checked(self._require_run(run_id))
             if not 0 <= step_index < run.n_steps:
                 raise RunDatabaseError(
                     f"run {run_id}: step {step_index} is outside its plan of {run.n_steps} steps "
@@ -464,13 +476,16 @@ class RunDB:
                "raw_frames, readings_mm, channel_status, pose, pose_residual_um, ok, message, "
                "t_utc FROM measurements WHERE run_id = ? ORDER BY step_index")
         with self._lock:
-            self._require_run(run_id)
+            run_row = self._require_run(run_id)
             rows = self._c().execute(sql, (int(run_id),)).fetchall()
             self._check_orphans()
-        records = [self._measurement_from_row(r) for r in rows]
-        plan = self.run(run_id).plan
+            plan = self._run_checked(run_row).plan
+        plan_text = run_row[5]  # plan_json: the checks read the plan, so a changed plan checks anew
+        records, fresh = self._parsed.records(int(run_id), plan_text, rows, self._measurement_from_row)
         check_against_plan(records, plan, run_id)
-        rf.check_measurements(records, plan, self._context(int(run_id)))  # every field (record_fields.py)
+        rf.check_measurements(fresh, plan, self._context(int(run_id)))  # every new field (record_fields.py)
+        rf.check_channel_count(records)
+        self._parsed.keep(int(run_id), plan_text, rows, records)
         if kind is not None:
             records = [r for r in records if r.kind == kind]
         return records
