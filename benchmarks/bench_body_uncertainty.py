@@ -23,7 +23,7 @@ from station.core.kinematics.poses import spread_joints  # noqa: E402
 from station.core.measurement.measurements import add_body_error, add_noise, residuals_and_jacobian, synthetic_set  # noqa: E402
 from station.core.measurement.uncertainty import body_sandwich, linear_uncertainty  # noqa: E402
 from station.core.units import ARCSEC, UM  # noqa: E402
-from station.io.robot_files import load_robot  # noqa: E402
+from station.io.robot.files import load_robot  # noqa: E402
 
 
 def main(argv=None) -> int:

@@ -45,8 +45,8 @@ from station.core.kinematics.poses import spread_joints  # noqa: E402
 from station.core.kinematics.transforms import matrix_to_pose  # noqa: E402
 from station.core.measurement.measurements import synthetic_set  # noqa: E402
 from station.core.measurement.uncertainty import monte_carlo  # noqa: E402
-from station.io.robot_export import export_model  # noqa: E402
-from station.io.robot_files import load_robot  # noqa: E402
+from station.io.export.model_files import export_model  # noqa: E402
+from station.io.robot.files import load_robot  # noqa: E402
 
 #: fit sizes [poses] and their targets [s]: ≥ 50× FIGAROH's at 25 and 100 poses, ≤ 50 ms at 1000
 FIT_TARGETS = {25: 0.0014, 100: 0.005, 1000: 0.050}

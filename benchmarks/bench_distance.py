@@ -29,7 +29,7 @@ from station.core.kinematics.forward import forward  # noqa: E402
 from station.core.kinematics.poses import spread_joints  # noqa: E402
 from station.core.measurement.distance_pairs import DEFAULT_STRATEGY, STRATEGIES, distances, make_pairs  # noqa: E402
 from station.core.measurement.measurements import MeasurementSet  # noqa: E402
-from station.io.robot_files import load_robot  # noqa: E402
+from station.io.robot.files import load_robot  # noqa: E402
 
 TIME_TARGET_S = 2.0
 MEMORY_TARGET_MB = 300.0

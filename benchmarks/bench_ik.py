@@ -25,7 +25,7 @@ from station.core.kinematics.forward import forward  # noqa: E402
 from station.core.kinematics.ik import ArmConfig, solve_ik  # noqa: E402
 from station.core.kinematics.joint_offsets import fit_joint_offsets  # noqa: E402
 from station.core.kinematics.poses import spread_joints  # noqa: E402
-from station.io.robot_files import load_robot  # noqa: E402
+from station.io.robot.files import load_robot  # noqa: E402
 
 
 def main(argv=None) -> int:

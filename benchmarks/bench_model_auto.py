@@ -35,7 +35,7 @@ from station.core.measurement.measurements import MeasurementSet, add_noise  # n
 from station.core.terms.error_model import TermSpec, apply_terms, term_basis  # noqa: E402
 from station.core.terms.selection import select_model  # noqa: E402
 from station.io.datafile import write_csv  # noqa: E402
-from station.io.robot_files import load_robot  # noqa: E402
+from station.io.robot.files import load_robot  # noqa: E402
 
 TARGET_S = 0.5
 

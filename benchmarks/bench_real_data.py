@@ -53,7 +53,7 @@ from station.core.measurement.measurements import MeasurementSet  # noqa: E402
 from station.core.terms.selection import nested_cv, select_model  # noqa: E402
 from station.core.units import ARCSEC, UM  # noqa: E402
 from station.io.datafile import read_measurement_file  # noqa: E402
-from station.io.robot_import import read_dh_file  # noqa: E402
+from station.io.robot.formats import read_dh_file  # noqa: E402
 
 DATA = Path(__file__).with_name("data")
 NEST_HEADER = ("q1 [deg],q2 [deg],q3 [deg],q4 [deg],q5 [deg],q6 [deg],x1 [mm],y1 [mm],z1 [mm],x2 [mm],y2 [mm],"

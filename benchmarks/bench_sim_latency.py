@@ -51,7 +51,7 @@ def _numerics() -> Callable[[], None]:
     from station.core.identification.identify import identify
     from station.core.kinematics.poses import spread_joints
     from station.core.measurement.measurements import synthetic_set
-    from station.io.robot_files import load_robot
+    from station.io.robot.files import load_robot
 
     model = load_robot("sr800")
     rng = np.random.default_rng(0)

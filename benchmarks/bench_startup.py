@@ -27,7 +27,7 @@ from station.core.accuracy.studies import StudyInputs, perturbed  # noqa: E402
 from station.core.kinematics.poses import spread_joints  # noqa: E402
 from station.core.measurement.measurements import synthetic_set  # noqa: E402
 from station.io.datafile import write_csv  # noqa: E402
-from station.io.robot_files import load_robot  # noqa: E402
+from station.io.robot.files import load_robot  # noqa: E402
 
 SIGMA_MM = 0.010
 

@@ -30,7 +30,7 @@ import numpy as np
 from simulators.truth_kinematics import inverse, matrix_pose, pose_matrix, rotation_angle, true_forward
 from station.core.kinematics.model import RobotModel
 from station.core.units import ARCMIN, ARCSEC
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 __all__ = ["CellTruth", "CubeSpec", "CalibrationBody", "SimulatedCell", "DEFAULT_SETUP",
            "ARCMIN", "ARCSEC"]

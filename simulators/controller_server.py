@@ -69,7 +69,7 @@ from simulators.controller_tables import TableSlots, serve_transfer
 from simulators.program_words import OutsideTable, ProgramTable, get_value, put_value
 from simulators.truth_kinematics import matrix_pose, pose_matrix
 from station.core.kinematics.model import RobotModel
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 if TYPE_CHECKING:
     from simulators.cell import SimulatedCell

@@ -30,7 +30,7 @@ from simulators import SimulatedCellServers, start_simulated_cell
 from simulators.cell import CalibrationBody, CellTruth, CubeSpec, SimulatedCell
 from simulators.reference_cell import CellEndpoints, body_and_devices_toml
 from station.core.kinematics.model import RobotModel
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 __all__ = ["SIX_AXIS_ROBOT", "SIX_AXIS_SETUP", "SIX_AXIS_CUBES", "SIX_AXIS_HOME", "SIX_AXIS_LIMITS_DEG",
            "six_axis_truth", "six_axis_body", "six_axis_cell", "start_six_axis_cell", "six_axis_config_text"]

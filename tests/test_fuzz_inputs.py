@@ -281,7 +281,7 @@ def _pose_file_text() -> str:
     from station.core.kinematics.poses import spread_joints
     from station.core.kinematics.transforms import matrix_to_pose
     from station.core.measurement.measurements import synthetic_set
-    from station.io.robot_files import load_robot
+    from station.io.robot.files import load_robot
 
     model = load_robot("sr800")
     rng = np.random.default_rng(7)
@@ -390,7 +390,7 @@ def check_config_dict(data: dict, d: Path) -> str:
 
 
 def check_robot_file(case: tuple[str, bytes], d: Path) -> str:
-    from station.io.robot_files import load_robot
+    from station.io.robot.files import load_robot
 
     p = _write(d, *case)
     return call_typed(lambda: load_robot(p))
@@ -407,7 +407,7 @@ def check_config_file(case: tuple[str, bytes], d: Path) -> str:
 
 def check_data_file(content: bytes, d: Path) -> str:
     from station.io.datafile import read_measurements
-    from station.io.robot_files import load_robot
+    from station.io.robot.files import load_robot
 
     p = _write(d, "data.csv", content)
     return call_typed(lambda: read_measurements(p, load_robot("sr800")))

@@ -199,7 +199,7 @@ def test_dh_rows_with_nan_are_refused_by_the_importer_itself():
     import math
 
     from station.errors import ConfigError
-    from station.io.robot_import import robot_from_dh
+    from station.io.robot.formats import robot_from_dh
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

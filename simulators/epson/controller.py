@@ -99,7 +99,7 @@ class Arm:
 
     def __init__(self, q0, model_name: str = "sr800"):
         from simulators.arm_kinematics import ArmKinematics
-        from station.io.robot_files import load_robot
+        from station.io.robot.files import load_robot
 
         self.model = load_robot(model_name)
         self.kin = ArmKinematics([t.joint for t in self.model.transforms], self.model.nominal)

@@ -120,7 +120,7 @@ class Arm:
     @property
     def model(self):
         if self._model is None:
-            from station.io.robot_files import load_robot
+            from station.io.robot.files import load_robot
 
             self._model = load_robot(self._model_name)
         return self._model

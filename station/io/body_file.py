@@ -20,7 +20,7 @@ are ignored, except two optional ones the report's traceability names: ``# certi
 and ``# certificate_date: YYYY-MM-DD`` (``=`` may stand for ``:``), each at most once.
 
 The file is read only if it is a regular file of a sane size
-(:func:`station.io.robot_files.read_user_text`). Anything malformed — a missing or unknown
+(:func:`station.io.robot.files.read_user_text`). Anything malformed — a missing or unknown
 column, a column without unit, a row of the wrong length, a value that is not a finite number,
 a value out of bounds, an id given twice — is a :class:`~station.errors.ConfigError` naming the
 file, the line and the column, and saying what to write instead.
@@ -40,7 +40,7 @@ from station.core.kinematics.transforms import pose_to_matrix
 from station.core.units import ARCSEC, DEG, UM
 from station.errors import ConfigError
 from station.io.certificate import Certificate, check_certificate_date, check_certificate_id
-from station.io.robot_files import read_user_text
+from station.io.robot.files import read_user_text
 
 #: a body report larger than this is refused before it is read (5 000 points are ~0.5 MB)
 MAX_BODY_FILE_BYTES = 4 * 1024 * 1024

@@ -28,7 +28,7 @@ from station.core.probe.geometry import ProbeHeadGeometry
 from station.core.units import DEG
 from station.errors import ConfigError
 from station.io.certificate import Certificate, check_certificate_date, check_certificate_id
-from station.io.robot_files import read_user_text
+from station.io.robot.files import read_user_text
 
 __all__ = ["HeadFile", "load_head", "parse_head", "MAX_HEAD_BYTES", "FACES", "head_to_toml"]
 

@@ -25,7 +25,7 @@ from station.cell.config.cell_config import MAX_CONFIG_BYTES, parse_text, simula
 from station.cell.session import calibrate as session
 from station.cell.session.calibrate import CellRequest, LoadedCell
 from station.errors import ConfigError
-from station.io.robot_files import read_user_text
+from station.io.robot.files import read_user_text
 
 __all__ = ["BUILTIN_ROBOT_CELLS", "load_cell"]
 

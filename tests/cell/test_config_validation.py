@@ -20,7 +20,7 @@ from station.cell.config.template import TEMPLATE
 from station.cell.records.run_export import csv_text, export_csv
 from station.cell.records.rundb import RunDB
 from station.errors import ConfigError
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 DH_HEADER = "type,theta [deg],d [mm],a [mm],alpha [deg],lower [deg|mm],upper [deg|mm]\n"
 DH_ROWS = ["revolute,0,0,445,0,-130,130", "revolute,0,0,355,0,-140,140",

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from station.errors import ConfigError
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 from station.ui.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -21,7 +21,7 @@ from station.core.kinematics.poses import spread_joints
 from station.core.kinematics.transforms import invert, rotation_log
 from station.core.measurement.measurements import synthetic_set
 from station.core.probe.geometry import default_probe_head, readings_from_pose
-from station.io.robot_files import builtin_robots, load_robot
+from station.io.robot.files import builtin_robots, load_robot
 
 
 class _Servers:

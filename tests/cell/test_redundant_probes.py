@@ -30,7 +30,7 @@ from station.core.kinematics.transforms import pose_to_matrix
 from station.core.probe.geometry import FACE_NORMALS, ProbeHeadGeometry
 from station.errors import ConfigError, MeasurementFault
 from station.io.head_file import head_to_toml, load_head
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 SEVEN = Path(__file__).resolve().parents[2] / "examples" / "heads" / "seven-probe.toml"
 SEED = 1

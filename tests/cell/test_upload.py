@@ -14,7 +14,7 @@ from station.cell.run.events import Event, Notice, PhaseChanged
 from station.core.table.build import build_correction_table
 from station.core.table.grid import GridSpec
 from station.core.table.values import CorrectionTableData, TableAxis
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 # --------------------------------------------------------------------------
 

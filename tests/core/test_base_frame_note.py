@@ -10,7 +10,7 @@ from station.core.identification.identifiability import analyze
 from station.core.identification.identify import identify
 from station.core.kinematics.poses import spread_joints
 from station.core.measurement.measurements import random_pairs, synthetic_set
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 SCARA = load_robot("examples/scara600/robot.toml")
 ARM = load_robot("examples/puma560/puma560.mdh.csv")

@@ -28,7 +28,7 @@ from station.core.measurement.measurements import (
 from station.core.measurement.uncertainty import linear_uncertainty, monte_carlo
 from station.core.units import ARCSEC, UM
 from station.errors import ConfigError
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 ARM6 = Path(__file__).parent / "data" / "arm6_fixture.dh.csv"
 DRAWS = 200

@@ -18,7 +18,7 @@ from station.core.table.grid import GridSpec
 from station.core.table.values import TableRangeError, interpolate_table
 from station.core.units import ARCSEC, wrap_angle
 from station.errors import ConfigError
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 ARCMIN = math.pi / (180 * 60)
 

@@ -22,7 +22,7 @@ from station.core.terms.error_model import (
 from station.core.terms.fit import fit_terms
 from station.core.terms.selection import N_BOOT, fit_model, nested_cv, select_model
 from station.errors import ConfigError
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 ARM = load_robot("irb2600")
 SIGMA = np.array([0.015] * 3)
@@ -196,7 +196,7 @@ def test_real_camera_data_of_a_ur10e_keeps_the_geometric_model():
     from pathlib import Path
 
     from station.io.datafile import read_measurement_file
-    from station.io.robot_import import read_dh_file
+    from station.io.robot.formats import read_dh_file
 
     data_dir = Path(__file__).resolve().parents[2] / "benchmarks" / "data"
     model, jmap = read_dh_file(data_dir / "ur10e.dh.csv")

@@ -19,7 +19,7 @@ from station.core.kinematics.poses import spread_joints
 from station.core.measurement.measurements import MeasurementSet, synthetic_set
 from station.core.units import DEG
 from station.errors import IdentificationError
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 from station.ui.cli.main import main
 
 IRB = load_robot("irb2600")

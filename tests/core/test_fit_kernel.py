@@ -17,7 +17,7 @@ from station.core.identification.identify import identify
 from station.core.identification.registration import _first_equal_row
 from station.core.kinematics.poses import spread_joints
 from station.core.measurement.measurements import Kind, random_pairs, residuals_and_jacobian, synthetic_set
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 ROBOTS = {"sr800": load_robot("sr800"), "irb2600": load_robot("irb2600")}
 KINDS: tuple[Kind, ...] = ("pose", "position", "distance")
@@ -242,7 +242,7 @@ def test_the_point_spread_of_pose_data_is_the_spread_of_their_positions():
     # rotation's first row, about 1 "mm" whatever the robot's reach)
     from station.core.identification.registration import data_information
     from station.core.kinematics.forward import forward
-    from station.io.robot_files import load_robot
+    from station.io.robot.files import load_robot
 
     model = load_robot("sr800")
     q = np.random.default_rng(3).uniform(model.joint_limits[:, 0], model.joint_limits[:, 1], (30, model.n_joints))

@@ -9,7 +9,7 @@ import pytest
 from station.core.identification.identifiability import analyze
 from station.core.kinematics.poses import spread_joints
 from station.core.measurement.measurements import random_pairs, synthetic_set
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 SR800 = load_robot("sr800")
 

@@ -12,7 +12,7 @@ from station.core.kinematics.poses import spread_joints
 from station.core.kinematics.transforms import pose_error, pose_to_matrix
 from station.core.measurement.measurements import MeasurementSet, random_pairs, residuals_and_jacobian, synthetic_set
 from station.errors import ConfigError, IdentificationError
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 SR800 = load_robot("sr800")
 DEG = np.pi / 180

@@ -13,8 +13,8 @@ from station.core.kinematics.model import RobotModel
 from station.core.kinematics.poses import spread_joints
 from station.core.kinematics.transforms import pose_error, pose_to_matrix
 from station.errors import ConfigError, UnreachableError
-from station.io.robot_files import load_robot
-from station.io.robot_import import robot_from_dh
+from station.io.robot.files import load_robot
+from station.io.robot.formats import robot_from_dh
 
 ARM = load_robot("irb2600")
 SR800 = load_robot("sr800")

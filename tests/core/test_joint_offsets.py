@@ -10,7 +10,7 @@ from station.core.kinematics.forward import forward
 from station.core.kinematics.joint_offsets import apply_joint_offsets, fit_joint_offsets, offset_accuracy, offset_joints
 from station.core.kinematics.poses import spread_joints
 from station.core.kinematics.transforms import pose_error
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 ROBOTS = {"irb2600": load_robot("irb2600"), "sr800": load_robot("sr800")}
 

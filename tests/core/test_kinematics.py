@@ -10,8 +10,8 @@ import pytest
 from station.core.kinematics.forward import forward, forward_with_jacobian, inverse_kinematics, joint_jacobian, scara_ik
 from station.core.kinematics.transforms import pose_error, pose_to_matrix
 from station.errors import UnreachableError
-from station.io.robot_files import load_robot
-from station.io.robot_import import robot_from_dh
+from station.io.robot.files import load_robot
+from station.io.robot.formats import robot_from_dh
 
 SR800 = load_robot("sr800")
 DEG = math.pi / 180

@@ -21,7 +21,7 @@ from station.core.kinematics.forward import (
 from station.core.kinematics.model import RobotModel
 from station.core.kinematics.poses import spread_joints
 from station.core.kinematics.transforms import pose_error, pose_to_matrix
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 ROOT = Path(__file__).resolve().parents[2]
 ROBOTS = {

@@ -16,8 +16,8 @@ import pytest
 from station.core.kinematics.forward import forward
 from station.core.kinematics.model import robot_from_dict, robot_to_toml
 from station.errors import ConfigError
-from station.io.robot_files import load_robot
-from station.io.robot_import import robot_from_dh, robot_from_urdf
+from station.io.robot.files import load_robot
+from station.io.robot.formats import robot_from_dh, robot_from_urdf
 
 DEG = math.pi / 180
 

@@ -12,7 +12,7 @@ from station.core.kinematics.poses import spread_joints
 from station.core.measurement import uncertainty as unc
 from station.core.measurement.measurements import random_pairs, synthetic_set
 from station.core.measurement.uncertainty import monte_carlo
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 SR800 = load_robot("sr800")
 INPUTS = StudyInputs()

@@ -12,7 +12,7 @@ from station.core.measurement.measurements import MeasurementSet, add_noise
 from station.core.terms.error_model import TermRows, TermSpec, apply_terms, term_basis
 from station.core.terms.physics_order import HARMONIC_MIN_SPAN, candidate_tiers, cycle_span
 from station.core.terms.selection import ALPHA_PHYSICS, select_model
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 ARM = load_robot("irb2600")
 

@@ -26,7 +26,7 @@ from station.core.kinematics.transforms import matrix_to_pose, pose_to_matrix
 from station.core.measurement.measurements import MeasurementSet, synthetic_set
 from station.errors import IdentificationError
 from station.io.datafile import read_measurement_file
-from station.io.robot_import import read_dh_file
+from station.io.robot.formats import read_dh_file
 
 ROOT = Path(__file__).resolve().parents[2]
 ARM6 = Path(__file__).parent / "data" / "arm6_fixture.dh.csv"

@@ -76,7 +76,7 @@ def test_reference_file_is_exactly_the_built_in_head():
     assert g.probe_ids == d.probe_ids and g.name == d.name
     assert g.reading_sigma_mm == d.reading_sigma_mm
     # its frame is the built-in robot's nominal K
-    from station.io.robot_files import load_robot
+    from station.io.robot.files import load_robot
 
     np.testing.assert_allclose(h.frame_pose, load_robot("sr800").nominal[-6:], atol=1e-12)
     # and it round-trips through head_to_toml

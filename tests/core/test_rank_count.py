@@ -23,7 +23,7 @@ from station.core.kinematics.forward import forward
 from station.core.kinematics.poses import spread_joints
 from station.core.kinematics.transforms import invert, matrix_to_pose, pose_to_matrix, rot_z
 from station.core.measurement.measurements import synthetic_set
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 from station.ui.cli.main import main
 
 #: a 7-axis humanoid arm as URDFs describe one: shoulder pitch (y), roll (x) and yaw (z), elbow

@@ -11,8 +11,8 @@ import pytest
 from station.core.kinematics.forward import forward
 from station.core.kinematics.poses import spread_joints
 from station.core.kinematics.transforms import pose_error
-from station.io.robot_export import FORMATS, export_model
-from station.io.robot_files import builtin_robots, load_robot
+from station.io.export.model_files import FORMATS, export_model
+from station.io.robot.files import builtin_robots, load_robot
 
 ARM6 = str(Path(__file__).parent / "data" / "arm6_fixture.dh.csv")
 ROBOTS = [*builtin_robots(), ARM6]

@@ -9,7 +9,7 @@ import pytest
 
 from station.core.kinematics.model import robot_from_dict, robot_to_toml
 from station.errors import ConfigError
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 
 def _doc(speeds):

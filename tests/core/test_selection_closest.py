@@ -13,7 +13,7 @@ from station.core.kinematics.poses import spread_joints
 from station.core.measurement.measurements import MeasurementSet, add_noise
 from station.core.terms.error_model import TermSpec, apply_terms, term_basis
 from station.core.terms.selection import select_model
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 ARM = load_robot("irb2600")
 

@@ -12,7 +12,7 @@ import pytest
 from station.core.table.build import build_correction_table
 from station.core.table.design import Region, curvature, design_table, prior_robots, refine_for
 from station.core.units import ARCSEC
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 #: a few working targets of the SR 800 (base frame, mm), well inside its reach
 TARGETS = np.array([[420.0, -150.0, 300.0], [500.0, 60.0, 340.0], [450.0, 200.0, 300.0]])

@@ -9,7 +9,7 @@ import numpy as np
 from station.core.kinematics.forward import forward
 from station.core.kinematics.poses import spread_joints
 from station.core.table import build
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 SR800 = load_robot("sr800")
 

@@ -17,7 +17,7 @@ from station.core.measurement.measurements import MeasurementSet, add_noise
 from station.core.terms.error_model import GravityModel, TermSpec
 from station.core.terms.selection import select_model
 from station.core.terms.term_size import GEAR_MAX_RAD, robot_class
-from station.io.robot_import import read_dh_file
+from station.io.robot.formats import read_dh_file
 
 ROOT = Path(__file__).resolve().parents[2]
 ARCSEC = np.radians(1 / 3600)
@@ -77,7 +77,7 @@ def test_identify_json_gives_the_class_and_the_sizes_with_units(tmp_path, capsys
 
     from station.core.terms.error_model import apply_terms, term_basis
     from station.io.datafile import write_csv
-    from station.io.robot_files import load_robot
+    from station.io.robot.files import load_robot
     from station.ui.cli.main import main
 
     arm = load_robot("irb2600")

@@ -15,7 +15,7 @@ from station.core.measurement.measurements import MeasurementSet, add_noise
 from station.core.terms.error_model import GravityModel, TermSpec, apply_terms, gravity_torques, term_basis
 from station.core.terms.selection import select_model
 from station.core.units import ARCSEC
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 ARM = load_robot("irb2600")
 GRAVITY = GravityModel(masses=(0.0, 25.0, 20.0, 8.0, 4.0, 1.0), payload_kg=12.0)

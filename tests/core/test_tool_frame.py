@@ -16,7 +16,7 @@ from station.core.kinematics.tool_frame import (
     tool_transform,
 )
 from station.core.kinematics.transforms import invert, matrix_to_pose, pose_to_matrix, rot_z
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 DEG = np.pi / 180
 

@@ -23,7 +23,7 @@ from station.core.measurement.measurements import synthetic_set
 from station.core.units import DEG
 from station.errors import ConfigError
 from station.io.datafile import read_measurement_file, read_table
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 from station.ui.cli.main import main
 
 IRB = load_robot("irb2600")

@@ -14,7 +14,7 @@ from station.core.kinematics.transforms import pose_to_matrix
 from station.core.measurement.measurements import MeasurementSet, synthetic_set
 from station.core.units import DEG
 from station.errors import ConfigError, IdentificationError
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 SR800 = load_robot("sr800")
 

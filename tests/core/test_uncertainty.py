@@ -12,7 +12,7 @@ from station.core.kinematics.poses import spread_joints
 from station.core.kinematics.transforms import pose_error
 from station.core.measurement.measurements import synthetic_set
 from station.core.measurement.uncertainty import linear_uncertainty, monte_carlo, pose_accuracy
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 SR800 = load_robot("sr800")
 INPUTS = StudyInputs()

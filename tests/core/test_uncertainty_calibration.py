@@ -17,7 +17,7 @@ from station.core.identification.identify import identify
 from station.core.kinematics.poses import spread_joints
 from station.core.measurement.distance_pairs import make_pairs
 from station.core.measurement.measurements import synthetic_set
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 ARM6 = Path(__file__).parent / "data" / "arm6_fixture.dh.csv"
 DRAWS = 200

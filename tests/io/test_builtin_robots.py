@@ -18,9 +18,9 @@ from drivers.controller_errors import MotionRejected
 from simulators.controller_server import SimulatedController
 from station.cell.limits.motion_guard import MotionGuard
 from station.errors import ConfigError, UnreachableError
-from station.io import robot_files
-from station.io.robot_files import builtin_robots, load_robot
-from station.io.robot_schema import validate_robot_toml
+from station.io.robot import files as robot_files
+from station.io.robot.files import builtin_robots, load_robot
+from station.io.robot.schema import validate_robot_toml
 
 #: sr800's revolute limits as its file writes them (deg), docs/robot-file.md: angle_unit = "deg"
 SR800_DEG = {1: 130.0, 2: 145.0, 4: 360.0}

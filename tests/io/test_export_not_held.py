@@ -14,8 +14,8 @@ import pytest
 import yaml
 
 from station.core.kinematics.model import robot_to_toml
-from station.io.robot_files import load_robot
-from station.io.robot_terms import error_terms_toml
+from station.io.robot.files import load_robot
+from station.io.robot.terms import error_terms_toml
 from station.ui.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[2]

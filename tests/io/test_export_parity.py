@@ -19,9 +19,9 @@ from scipy.spatial.transform import Rotation
 
 from station.core.kinematics.forward import forward
 from station.core.kinematics.model import robot_to_toml
-from station.io.robot_export import export_model
-from station.io.robot_files import load_robot
-from station.io.urdf_calibrated import write_calibrated_urdf
+from station.io.export.model_files import export_model
+from station.io.export.urdf_calibrated import write_calibrated_urdf
+from station.io.robot.files import load_robot
 from station.ui.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -21,7 +21,7 @@ from station.core.kinematics.transforms import matrix_to_pose
 from station.core.measurement.measurements import synthetic_set
 from station.errors import ConfigError
 from station.io.datafile import write_csv
-from station.io.robot_files import load_mapped_robot, load_robot
+from station.io.robot.files import load_mapped_robot, load_robot
 from station.ui.cli.main import main
 
 JOINTS = ["q1 [deg]", "q2 [deg]", "q3 [mm]", "q4 [deg]"]

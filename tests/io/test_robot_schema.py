@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from station.errors import ConfigError
-from station.io.robot_files import load_mapped_robot, load_robot
+from station.io.robot.files import load_mapped_robot, load_robot
 from station.ui.cli.main import main
 
 SR800 = resources.files("station.io.robots").joinpath("sr800.toml").read_text()

@@ -18,7 +18,7 @@ from station.core.kinematics.poses import spread_joints
 from station.core.measurement.measurements import synthetic_set
 from station.core.units import DEG
 from station.io.datafile import write_csv
-from station.io.robot_files import load_mapped_robot, load_robot, tool_marked_unknown
+from station.io.robot.files import load_mapped_robot, load_robot, tool_marked_unknown
 from station.ui.cli.main import main
 
 IRB = load_robot("irb2600")

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from station.errors import ConfigError
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 HEAD = "type,theta [{a}],d [{u}],a [{u}],alpha [{a}],lower [{a}|{u}],upper [{a}|{u}]\n"
 #: a six-axis arm of 25 / 400 / 455 / 35 / 420 / 80 mm (a KR 6 R900-like data sheet, written here)

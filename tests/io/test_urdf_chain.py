@@ -14,7 +14,7 @@ import pytest
 from station.core.kinematics.forward import forward
 from station.core.kinematics.transforms import matrix_to_pose
 from station.io.datafile import write_csv
-from station.io.robot_files import load_mapped_robot
+from station.io.robot.files import load_mapped_robot
 from station.ui.cli.main import main
 
 # name, type, parent, child, xyz [m], rpy [rad], axis, limits [rad | m]

@@ -9,8 +9,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from station.core.terms.error_model import gravity_torques
-from station.io.robot_import import robot_from_urdf
-from station.io.urdf_inertial import urdf_gravity
+from station.io.robot.formats import robot_from_urdf
+from station.io.robot.urdf_inertial import urdf_gravity
 
 URDF = """<robot name="three">
   <link name="base"><inertial><mass value="50"/><origin xyz="0 0 0.1"/></inertial></link>

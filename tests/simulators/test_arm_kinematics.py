@@ -17,7 +17,7 @@ from simulators.urscript.arm import Arm
 from station.core.kinematics.forward import forward, inverse_kinematics, scara_ik
 from station.core.kinematics.transforms import matrix_to_pose
 from station.errors import UnreachableError
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 SCARAS = [pytest.param("sr800", id="sr800"),

@@ -12,7 +12,7 @@ from station.core.identification.identify import identify
 from station.core.kinematics.forward import forward
 from station.core.kinematics.poses import spread_joints
 from station.core.measurement.measurements import synthetic_set
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 SCARA = "examples/scara600/robot.toml"
 SIX_AXIS = "examples/puma560/puma560.mdh.csv"

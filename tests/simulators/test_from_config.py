@@ -33,7 +33,7 @@ from station.cell.config import schema as cfgschema
 from station.cell.config.cell_config import parse_text
 from station.core.kinematics.transforms import matrix_to_pose
 from station.core.units import ARCSEC, DEG
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 from station.ui.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -14,7 +14,7 @@ from station.cell.config.cell_config import simulation_settings
 from station.core.kinematics.poses import spread_joints
 from station.core.terms.error_model import GravityModel, gravity_torques
 from station.errors import ConfigError
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 
 def test_the_simulators_torques_agree_with_the_stations_own_computation():

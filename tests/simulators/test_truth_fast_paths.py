@@ -11,7 +11,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from simulators import truth_kinematics as tk
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -9,7 +9,7 @@ import pytest
 
 from simulators.truth_kinematics import true_forward
 from station.core.kinematics.forward import forward
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 
 def test_planar_two_link_arm_matches_its_closed_form():

@@ -15,7 +15,7 @@ from station.core.kinematics.poses import spread_joints
 from station.core.kinematics.transforms import matrix_to_pose
 from station.core.measurement.measurements import synthetic_set
 from station.io.datafile import write_csv
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 from station.ui.cli.main import main
 
 SR800 = load_robot("sr800")

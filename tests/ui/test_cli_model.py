@@ -12,7 +12,7 @@ from station.core.kinematics.poses import spread_joints
 from station.core.measurement.measurements import MeasurementSet, add_noise
 from station.core.terms.error_model import TermSpec, apply_terms, term_basis
 from station.io.datafile import write_csv
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 from station.ui.cli.main import main
 
 ARM = load_robot("irb2600")
@@ -74,8 +74,8 @@ def test_identified_terms_travel_in_the_robot_file(bent_file, tmp_path, capsys):
     """identify --output keeps the terms in [error_terms]; predict applies them; MDH says what it loses."""
     from station.core.kinematics.forward import forward
     from station.core.terms.error_model import prediction_basis
-    from station.io.robot_files import load_robot
-    from station.io.robot_terms import read_error_terms
+    from station.io.robot.files import load_robot
+    from station.io.robot.terms import read_error_terms
 
     out = tmp_path / "bent.toml"
     rc, _, err = run(capsys, "identify", bent_file, "--robot", "irb2600", "--model", "auto", "-o", out)
@@ -150,7 +150,7 @@ def test_compensate_lands_a_robot_with_error_terms_on_its_targets(tmp_path, caps
     from station.core.kinematics.model import robot_to_toml
     from station.core.kinematics.transforms import matrix_to_pose, pose_error, pose_to_matrix
     from station.core.terms.error_model import prediction_basis
-    from station.io.robot_terms import error_terms_toml
+    from station.io.robot.terms import error_terms_toml
 
     rng = np.random.default_rng(9)
     ident = perturbed(ARM, rng, StudyInputs())
@@ -195,7 +195,7 @@ def test_link_masses_from_the_robot_file_give_compliance_in_rad_per_newton_metre
     fitted compliances are the true ones, and the identified file keeps the table."""
     from station.core.kinematics.model import robot_to_toml
     from station.core.terms.error_model import GravityModel
-    from station.io.robot_terms import gravity_toml, read_error_terms, read_gravity
+    from station.io.robot.terms import gravity_toml, read_error_terms, read_gravity
 
     gm = GravityModel(masses=(0.0, 90.0, 40.0, 0.0, 0.0, 0.0),
                       com=((0.0, 0.0, 0.0), (0.0, -350.0, 0.0), (400.0, -60.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0),
@@ -268,7 +268,7 @@ def test_payload_per_row_loads_the_compliance_term(tmp_path, capsys):
     each row's payload into its torques and recovers the compliances (without the column it cannot)."""
     from station.core.kinematics.model import robot_to_toml
     from station.core.terms.error_model import GravityModel, TermRows
-    from station.io.robot_terms import gravity_toml
+    from station.io.robot.terms import gravity_toml
 
     gm = GravityModel(masses=(0.0, 90.0, 40.0, 0.0, 0.0, 0.0), payload_com=(0.0, 0.0, 80.0))
     robot = tmp_path / "arm.toml"
@@ -300,7 +300,7 @@ def test_gear_ratios_make_the_harmonics_cycle_with_the_motor(tmp_path, capsys):
     (a harmonic of the joint angle would not), and the written model predicts with it."""
     from station.core.kinematics.forward import forward
     from station.core.kinematics.model import robot_to_toml
-    from station.io.robot_terms import gears_toml, read_gear_ratios
+    from station.io.robot.terms import gears_toml, read_gear_ratios
 
     ratios = (1.0, 3.0, 1.0, 1.0, 1.0, 1.0)
     robot = tmp_path / "geared.toml"

@@ -85,8 +85,8 @@ def test_reports_are_named_after_their_database(tmp_path):
 
 
 def test_export_model_never_writes_nan():
-    from station.io import robot_export
-    from station.io.robot_files import load_robot
+    from station.io.export import model_files as robot_export
+    from station.io.robot.files import load_robot
 
     model = load_robot("sr800")
     p = np.array(model.nominal, dtype=float)

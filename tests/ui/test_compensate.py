@@ -17,7 +17,7 @@ from station.core.kinematics.model import robot_to_toml
 from station.core.kinematics.poses import spread_joints
 from station.core.kinematics.transforms import matrix_to_pose, pose_error, pose_to_matrix
 from station.core.units import ARCSEC
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 from station.ui.cli.main import main
 
 HEADER = "x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg"

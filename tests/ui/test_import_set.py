@@ -19,7 +19,7 @@ import pytest
 from station.core.kinematics.poses import spread_joints
 from station.core.measurement.measurements import synthetic_set
 from station.io.datafile import write_csv
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 from station.ui.cli.main import build_parser
 
 ROOT = Path(__file__).resolve().parents[2]

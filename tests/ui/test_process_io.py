@@ -24,7 +24,7 @@ from station.core.kinematics.poses import spread_joints
 from station.core.kinematics.transforms import matrix_to_pose
 from station.core.measurement.measurements import synthetic_set
 from station.io.datafile import write_csv
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 
 ROOT = Path(__file__).resolve().parents[2]
 ENV = dict(os.environ, PYTHONPATH=str(ROOT))

@@ -20,7 +20,7 @@ from station.core.kinematics.poses import spread_joints
 from station.core.measurement.measurements import MeasurementSet, add_noise
 from station.core.terms.error_model import TermSpec, apply_terms, term_basis
 from station.io.datafile import write_csv
-from station.io.robot_files import load_robot
+from station.io.robot.files import load_robot
 from station.ui.cli.main import main
 
 ARM = load_robot("irb2600")

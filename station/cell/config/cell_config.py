@@ -67,7 +67,7 @@ from station.core.table.grid import GridSpec
 from station.core.units import ARCSEC, DEG, UM
 from station.errors import ConfigError
 from station.io.certificate import Certificate
-from station.io.robot_files import load_robot, read_user_text
+from station.io.robot.files import load_robot, read_user_text
 
 #: a configuration file larger than this is refused before it is read (a real one is a few kB;
 #: a body of 5 000 points is ~0.5 MB)
@@ -101,7 +101,7 @@ class CellConfig:
     body_sigma: np.ndarray | None = None  # (n_points, 2) σ of each body point: position [mm], angle [rad]
     tools: tuple[ToolConfig, ...] = ()  # the tools that replace the head ([[tool]])
     obstacles: tuple[ObstacleConfig, ...] = ()  # the cell's fixed obstacles ([[obstacle]], issue 40)
-    robot_collision: Any = None  # the robot file's [collision] (station.io.robot_collision.CollisionSpec)
+    robot_collision: Any = None  # the robot file's [collision] (station.io.robot.collision.CollisionSpec)
     simulation: Any = None  # the validated [simulation] table (what --simulated CONFIG simulates)
     source: str = ""  # the file it was read from (or a label such as "<simulated cell>")
     verification: VerificationConfig = VerificationConfig()  # [verification]: the report's specification
@@ -317,7 +317,7 @@ def _check_terms(ident: IdentificationConfig, model: RobotModel, source: str, ro
             expand_families(model, tuple(t for t in ident.terms if t != "backlash"))
         except ConfigError as exc:
             raise ConfigError(f"{where}: {exc}") from None
-    from station.io.robot_terms import read_gear_ratios, read_gravity
+    from station.io.robot.terms import read_gear_ratios, read_gravity
 
     gravity = read_gravity(robot_file, model.n_joints)
     if model.is_scara and "compliance" in ident.terms:
@@ -396,7 +396,7 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
     if sim.joint_backlash_um is not None and len(sim.joint_backlash_um) != model.n_joints:
         raise ConfigError(f"{source}: simulation.joint_backlash_um has {len(sim.joint_backlash_um)} values: give one "
                           f"per joint of the robot ({model.n_joints})")
-    from station.io.robot_collision import read_collision
+    from station.io.robot.collision import read_collision
 
     links = tuple(t.name for t in model.transforms if t.joint is not None or t is model.transforms[0])
     robot_collision = read_collision(_robot_path(f.robot.model, source), links)

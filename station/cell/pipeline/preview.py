@@ -27,7 +27,7 @@ from station.core.kinematics.forward import forward, scara_reach_margin
 from station.core.measurement.measurements import residuals_and_jacobian, synthetic_set
 from station.core.measurement.uncertainty import body_sandwich, linear_uncertainty, pose_accuracy
 from station.core.units import ARCSEC, DEG
-from station.io.robot_import import SPEED_HINT
+from station.io.robot.formats import SPEED_HINT
 
 
 @dataclass(frozen=True)

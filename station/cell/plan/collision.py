@@ -497,7 +497,7 @@ def plan_path(cfg: CellConfig, plan: Plan, with_upload: bool = True) -> list[tup
                     out.append((v, f"{name}: {what}", s.point))
                 else:  # the depart and the stages of a long move, away from any cube
                     out.append((v, f"{last[0]}: {what}", last[1] if what == "depart" else -1))
-        names = ("approach", "above the point", "touch")
+        names: tuple[str, ...] = ("approach", "above the point", "touch")
         if back is None and s.kind.is_verification:
             # a SCARA's verification touch is a Cartesian target the controller reaches straight
             # from the approach (station/cell/run/runner.py _touch): no pose above the point

@@ -27,7 +27,7 @@ import numpy as np
 
 from station.cell.config.cell_config import CellConfig, parse_text
 from station.errors import ConfigError
-from station.io.robot_import import SPEED_HINT
+from station.io.robot.formats import SPEED_HINT
 
 __all__ = ["arm_cell_text", "arm_placement", "SIX_AXIS_WORDS"]
 

@@ -232,7 +232,7 @@ def new_cell_text(dest: str | Path, robot: str | None = None, head: str | None =
     notes: list[str] = []
     if robot is None and head is None and body is None:
         return NewCell(text, ())
-    from station.io.robot_files import load_robot
+    from station.io.robot.files import load_robot
 
     if robot is not None:
         model = load_robot(robot if Path(robot).exists() else robot)

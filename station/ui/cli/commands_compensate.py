@@ -43,7 +43,7 @@ MAX_TARGET_FILE_BYTES = 64 * 2**20
 def read_targets(path: str | Path) -> tuple[np.ndarray, np.ndarray | None, list[int]]:
     """Poses ``(n, 6)`` [mm, rad], configurations ``(n, 3)`` (None without those columns) and
     the file line of each row. Any defect is a :class:`ConfigError` naming line and column."""
-    from station.io.robot_files import read_user_text
+    from station.io.robot.files import read_user_text
 
     text = read_user_text(Path(path), MAX_TARGET_FILE_BYTES, "target file")
     lines = [(i + 1, ln) for i, ln in enumerate(text.splitlines()) if ln.strip() and not ln.lstrip().startswith("#")]
@@ -109,7 +109,7 @@ def _chains(args) -> tuple[tuple[str | None, str | None], tuple[str | None, str 
 
 
 def _nominal_for(model, robot_arg: str | None, jmap, chain: tuple[str | None, str | None] = (None, None)):
-    from station.io.robot_files import builtin_robots, load_mapped_robot
+    from station.io.robot.files import builtin_robots, load_mapped_robot
 
     name = robot_arg or model.name
     if robot_arg is None and name not in builtin_robots():
@@ -159,7 +159,7 @@ def _out_rows(model, res, n: int, jmap) -> list[list[str]]:
 def cmd_compensate(args) -> int:
     from station.core.kinematics.compensation import compensated_targets
     from station.core.kinematics.transforms import pose_to_matrix
-    from station.io.robot_files import load_mapped_robot
+    from station.io.robot.files import load_mapped_robot
 
     model_chain, robot_chain = _chains(args)
     model, jmap = load_mapped_robot(args.model, *model_chain)

@@ -34,7 +34,7 @@ def _robot(args, name):
     """``(model, joint map)`` of the robot ``name``; a URDF's chain from ``--base``/``--tip``.
     Controller joints from data files go through the map (``jmap.to_model``) before the model
     sees them (docs/robot-file.md, "Joint map")."""
-    from station.io.robot_files import load_mapped_robot
+    from station.io.robot.files import load_mapped_robot
 
     return load_mapped_robot(name, getattr(args, "base_link", None), getattr(args, "tip_link", None))
 
@@ -207,7 +207,7 @@ def identify_report(model, res, data, objective: str, pairs_strategy: str | None
 def _tool_unknown(args) -> tuple[bool, list[str]]:
     """Whether identify fits the tool point: ``--tool unknown|file``, else the robot file's
     ``[tool] unknown``; and the note that says the file chose it."""
-    from station.io.robot_files import tool_marked_unknown
+    from station.io.robot.files import tool_marked_unknown
 
     tool = getattr(args, "tool", None)
     if tool is not None:
@@ -221,7 +221,7 @@ def cmd_identify(args) -> int:
     from station.core.identification.identify import MAX_EVALUATIONS, identify, require_converged
     from station.core.kinematics.model import robot_to_toml
     from station.io.datafile import read_measurement_file
-    from station.io.robot_files import joint_map_toml
+    from station.io.robot.files import joint_map_toml
 
     model, jmap = _robot(args, args.robot)
     mf = read_measurement_file(args.data, model)
@@ -516,13 +516,13 @@ def _print_validation(result: dict, model_name: str, data, kind: str, with_orien
 # --- export-model ---------------------------------------------------------------------------
 
 def cmd_export_model(args) -> int:
-    from station.io.robot_export import export_model
-    from station.io.robot_files import joint_map_toml
-    from station.io.robot_terms import gears_toml, gravity_toml
+    from station.io.export.model_files import export_model
+    from station.io.robot.files import joint_map_toml
+    from station.io.robot.terms import gears_toml, gravity_toml
     from station.ui.cli.commands_model import gear_ratios_of, gravity_of, lost_in_format, stored_terms
 
     if getattr(args, "robot", None) and not str(args.model).endswith(".urdf"):  # the links are --robot's URDF's
-        from station.io.robot_files import load_mapped_robot
+        from station.io.robot.files import load_mapped_robot
 
         model, jmap = load_mapped_robot(args.model)
     else:
@@ -548,7 +548,7 @@ def cmd_export_model(args) -> int:
     if args.format == "toml":
         text += joint_map_toml(jmap, model, angle_unit="rad")
         if terms is not None and terms.names:
-            from station.io.robot_terms import error_terms_toml
+            from station.io.robot.terms import error_terms_toml
 
             text += error_terms_toml(terms.families, terms.names, terms.values, terms.sigma, terms.units,
                                      terms.effect_on_fit_um, terms.geometric_params)

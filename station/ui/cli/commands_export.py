@@ -70,9 +70,9 @@ def export_calibrated(args, model, jmap, terms_note: str | None) -> int:
 
 
 def _urdf(args, model, p, notes):
-    from station.io.robot_export import fk_difference
-    from station.io.robot_files import load_robot
-    from station.io.urdf_calibrated import write_calibrated_urdf
+    from station.io.export.model_files import fk_difference
+    from station.io.export.urdf_calibrated import write_calibrated_urdf
+    from station.io.robot.files import load_robot
 
     path = _urdf_source(args)
     nominal = load_robot(path, args.base_link, args.tip_link)
@@ -96,8 +96,8 @@ def _urdf(args, model, p, notes):
 
 
 def _ur(model, p, notes):
-    from station.io.robot_export import fk_difference
-    from station.io.ur_calibration import frames_params, reload_frames, ur_calibration_yaml
+    from station.io.export.model_files import fk_difference
+    from station.io.export.ur_calibration import frames_params, reload_frames, ur_calibration_yaml
 
     K = matrix_to_pose(pose_to_matrix(p[-6:]))
     if np.abs(K).max() > 0.0:

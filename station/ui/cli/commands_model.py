@@ -12,7 +12,7 @@ import numpy as np
 from station.core.units import UM
 
 if TYPE_CHECKING:
-    from station.io.robot_terms import StoredTerms
+    from station.io.robot.terms import StoredTerms
 
 
 def model_names(text: str | None) -> tuple[str, ...]:
@@ -96,7 +96,7 @@ def output_params(res, sel) -> np.ndarray:
 def terms_toml(sel, robot=None, model=None, base=None, tip=None, data=None, geometric=None) -> str:
     """The ``[error_terms]`` table of the kept terms for ``identify --output`` (none: ''), and the
     robot file's ``[gravity]`` (the terms were computed with it; '' without)."""
-    from station.io.robot_terms import error_terms_toml, gears_toml, gravity_toml
+    from station.io.robot.terms import error_terms_toml, gears_toml, gravity_toml
 
     grav = (gravity_toml(gravity_of(robot, model, base, tip)) + gears_toml(gear_ratios_of(robot, model))
             if robot is not None and model is not None else "")
@@ -122,7 +122,7 @@ def gear_ratios_of(path, model) -> tuple[float, ...] | None:
     """The robot file's ``[gears] ratios`` (the cyclic terms cycle with the motor angle), or None."""
     if path is None:
         return None
-    from station.io.robot_terms import read_gear_ratios
+    from station.io.robot.terms import read_gear_ratios
 
     return read_gear_ratios(path, model.n_joints)
 
@@ -133,17 +133,17 @@ def gravity_of(path, model, base=None, tip=None):
     if path is None:
         return None
     if str(path).endswith(".urdf"):
-        from station.io.urdf_inertial import urdf_gravity
+        from station.io.robot.urdf_inertial import urdf_gravity
 
         return urdf_gravity(path, base, tip)
-    from station.io.robot_terms import read_gravity
+    from station.io.robot.terms import read_gravity
 
     return read_gravity(path, model.n_joints)
 
 
 def stored_terms(path) -> StoredTerms | None:
     """The ``[error_terms]`` of a robot file (None: none, or not a TOML file)."""
-    from station.io.robot_terms import read_error_terms
+    from station.io.robot.terms import read_error_terms
 
     return read_error_terms(path)
 

@@ -31,8 +31,8 @@ import numpy as np
 from station.core.kinematics.joint_map import JointMap, joint_map_from_file_units
 from station.core.kinematics.model import RobotModel, robot_from_dict
 from station.errors import ConfigError
-from station.io.robot_bounds import check_map_plausible, check_plausible
-from station.io.robot_units import check_toml_units
+from station.io.robot.bounds import check_map_plausible, check_plausible
+from station.io.robot.units import check_toml_units
 
 #: a robot file larger than this is refused before it is read (a URDF with inline meshes is
 #: rarely above a few MB; the DH and TOML files are a few kB)
@@ -139,7 +139,7 @@ def load_mapped_robot(name_or_path: str | Path, base: str | None = None,
         _refuse_chain_choice(s, base, tip)
     if path.suffix == ".urdf" or path.name.endswith((".dh.csv", ".mdh.csv")):
         read_user_text(path, MAX_ROBOT_FILE_BYTES, "robot file")  # regular, bounded, UTF-8
-        from station.io.robot_import import read_dh_file, robot_from_urdf
+        from station.io.robot.formats import read_dh_file, robot_from_urdf
 
         try:
             if path.suffix == ".urdf":
@@ -151,7 +151,7 @@ def load_mapped_robot(name_or_path: str | Path, base: str | None = None,
             raise ConfigError(f"{path}: cannot read the robot file ({exc})") from None
         return check_model(model, str(path)), _plausible_map(jmap, model, str(path))
     data = _read_toml(path)
-    from station.io.robot_schema import validate_robot_toml  # pydantic: only for a TOML file
+    from station.io.robot.schema import validate_robot_toml  # pydantic: only for a TOML file
 
     validate_robot_toml(data, str(path))  # unknown tables and keys: the nearest known name
     model = robot_from_dict(data, source=str(path))

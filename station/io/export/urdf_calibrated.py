@@ -1,6 +1,6 @@
 """The calibrated joint origins written into the robot's own URDF (issue 41 §2).
 
-The station imports a URDF chain (:func:`station.io.robot_import.robot_from_urdf`) as
+The station imports a URDF chain (:func:`station.io.robot.formats.robot_from_urdf`) as
 ``A_k = P_k · O_k · X_k``: ``O_k`` the ``<origin>`` of moving joint k, ``P_k`` the inverse of
 the previous joint's axis rotation ``X_{k-1}`` times the fixed joints' origins in between, and
 ``X_k`` the rotation taking the joint's ``<axis>`` onto z. An identified ``A'_k`` is written as
@@ -33,7 +33,7 @@ import numpy as np
 from station.core.kinematics.model import RobotModel
 from station.core.kinematics.transforms import invert, matrix_to_pose, pose_to_matrix
 from station.errors import ConfigError
-from station.io.robot_import import _urdf_chain, urdf_joint_origin, urdf_root
+from station.io.robot.formats import _urdf_chain, urdf_joint_origin, urdf_root
 
 #: K or an origin closer than this to what the file holds needs no edit [mm, rad]: round-off of
 #: the import and the metre conversion, far below the parity the export promises (1 µm, 1 µrad)

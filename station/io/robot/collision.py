@@ -3,7 +3,7 @@ the radius of every link's capsule and the pairs of links allowed to touch.
 
 A DH, MDH or URDF file has no such table: its links get the default radii
 (:func:`station.cell.plan.collision.default_radii`). The table's keys and types are checked with the
-rest of the file (:mod:`station.io.robot_schema`); here its values are checked against the robot.
+rest of the file (:mod:`station.io.robot.schema`); here its values are checked against the robot.
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 an unknown table or key is refused with the nearest known name (``lenght_unit`` → "did you mean
 'length_unit'?"), so a typo never silently falls back to a default. The semantics (units, limits,
 the joint map's joints) stay with :func:`station.core.kinematics.model.robot_from_dict` and
-:mod:`station.io.robot_files`; physical plausibility (:mod:`station.io.robot_bounds`) holds for
+:mod:`station.io.robot.files`; physical plausibility (:mod:`station.io.robot.bounds`) holds for
 every robot file format. Imported only where a TOML robot file is read (pydantic's import is not
 free: ``station --help`` and the built-in robots do without it).
 """
@@ -15,7 +15,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from station.errors import ConfigError
-from station.io.robot_bounds import nearest
+from station.io.robot.bounds import nearest
 
 _NO_CONTROL = r"^[^\x00-\x1f\x7f]*$"
 

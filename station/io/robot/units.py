@@ -3,7 +3,7 @@
 A unit slip turns a robot into another robot that still parses: a DH α of 90 under ``[rad]`` is
 90 rad, which the conversion to a rotation wraps to 26.6°; link lengths in metres under ``[mm]``
 make a robot a thousand times too small; radians under ``[deg]`` give twists of 1.57°. Each
-passed :mod:`station.io.robot_bounds` (±2π·10 rad, ±100 m after conversion) and failed later,
+passed :mod:`station.io.robot.bounds` (±2π·10 rad, ±100 m after conversion) and failed later,
 far from the file, blaming the set-up or the soft limits. So each column is judged here on the
 numbers as written, against what its header's unit makes of them, and a slip is refused naming
 the column (or key), the line, the value and the unit it reads like.

@@ -35,8 +35,8 @@ from station.core.kinematics.joint_map import JointMap, joint_map_from_file_unit
 from station.core.kinematics.model import RobotModel, TransformSpec
 from station.core.kinematics.transforms import invert, matrix_to_pose, pose_to_matrix, rot_x, rot_z, rotation_exp
 from station.errors import ConfigError
-from station.io.robot_bounds import nearest
-from station.io.robot_units import RawValue, check_raw_units
+from station.io.robot.bounds import nearest
+from station.io.robot.units import RawValue, check_raw_units
 
 #: cos(pitch) below which a frame in front of a joint is turned off the gimbal lock: sin 5°, the
 #: reach of the structural snap (station.core.identification.identifiability.structural_params), which would put

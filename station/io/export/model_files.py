@@ -248,7 +248,7 @@ def _urdf(model: RobotModel, params: np.ndarray, setup: bool) -> str:
 
 
 def _reimport(fmt: str, text: str) -> RobotModel:
-    from station.io.robot_files import load_robot
+    from station.io.robot.files import load_robot
 
     suffix = {"mdh": ".mdh.csv", "dh": ".dh.csv", "urdf": ".urdf", "toml": ".toml"}[fmt]
     with tempfile.TemporaryDirectory() as d:

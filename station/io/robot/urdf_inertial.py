@@ -1,7 +1,7 @@
 """The link masses of a URDF chain for the compliance term (issue 30): each ``<inertial>`` (mass,
 centre of mass) of the links the chain moves, in the station's frames.
 
-:func:`station.io.robot_import.robot_from_urdf` turns every moving joint's axis into the z axis of
+:func:`station.io.robot.formats.robot_from_urdf` turns every moving joint's axis into the z axis of
 its transform (a rotation ``A``), so the station's frame after joint k's motion is the URDF child
 link's frame times ``A``: a centre of mass ``c`` in the child link is ``A⁻¹ c`` in the station's
 frame. Links hung on by fixed joints count with the moving link before them (a flange, a tool);
@@ -19,7 +19,7 @@ import numpy as np
 from station.core.kinematics.transforms import invert
 from station.core.terms.error_model import GravityModel
 from station.errors import ConfigError
-from station.io.robot_import import (
+from station.io.robot.formats import (
     _T,
     _axis_to_z,
     _off_gimbal_lock,
