@@ -1,4 +1,4 @@
-"""Time of drawing the cell's picture (issue 40, station/ui/report/cell_picture.py) for an example
+"""Time of drawing the cell's picture (issue 40, station/ui/report/render/cell_picture.py) for an example
 cell's plan: the SVG alone, the SVG and the PNG (what ``station plan --out`` writes), each the median
 of 5, besides the poses' sequence (the vias: plan_path) and the collision check the report makes for
 a stored plan, which come before the drawing. The target: the drawing under 1 s for a 300-step plan
@@ -15,7 +15,7 @@ import time
 from station.cell.config.cell_config import load_config
 from station.cell.plan.collision import check_path
 from station.cell.plan.measurement_plan import build_plan
-from station.ui.report.cell_picture import cell_picture, picture_poses
+from station.ui.report.render.cell_picture import cell_picture, picture_poses
 
 RUNS = 5
 

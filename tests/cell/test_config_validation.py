@@ -17,7 +17,7 @@ from station.cell.config import cell_config as cfgmod
 from station.cell.config import schema
 from station.cell.config.cell_config import correction_grid, load_config, parse_config, parse_text
 from station.cell.config.template import TEMPLATE
-from station.cell.records.run_export import csv_text, export_csv
+from station.cell.records.reading.run_export import csv_text, export_csv
 from station.cell.records.rundb import RunDB
 from station.errors import ConfigError
 from station.io.robot.files import load_robot

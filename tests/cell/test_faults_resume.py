@@ -9,7 +9,7 @@ from drivers.probe_protocol import ChannelStatus
 from simulators import start_simulated_cell
 from simulators.reference_cell import cell_config_text
 from station.cell.records.rundb import RunDB
-from station.cell.run.events import MeasurementRecorded
+from station.cell.run.facts.events import MeasurementRecorded
 from station.cell.run.runcontrol import RunControl
 from station.cell.session.calibrate import CellRequest, run_calibration_session
 from station.errors import Outcome

@@ -15,7 +15,7 @@ import pytest
 
 from simulators import start_simulated_cell
 from simulators.reference_cell import cell_config_text
-from station.cell.run.events import MeasurementRecorded
+from station.cell.run.facts.events import MeasurementRecorded
 from station.cell.session.calibrate import CellRequest, run_calibration_session
 from station.errors import Outcome
 

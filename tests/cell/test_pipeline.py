@@ -17,7 +17,7 @@ from station.cell.pipeline.calibration import Options, run_calibration
 from station.cell.pipeline.outcomes import classify
 from station.cell.plan.steps import StepKind
 from station.cell.records.rundb import RunDB
-from station.cell.run.events import MeasurementRecorded, Notice, PhaseChanged, RunFinished
+from station.cell.run.facts.events import MeasurementRecorded, Notice, PhaseChanged, RunFinished
 from station.cell.session.calibrate import open_cell
 from station.errors import Outcome
 

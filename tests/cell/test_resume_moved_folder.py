@@ -13,8 +13,8 @@ import pytest
 
 from station.cell.config.cell_config import parse_text
 from station.cell.records.fingerprint import BY_CONTENT, check_same_cell, current_like, fingerprint
+from station.cell.records.reading.stored_config import stored_config
 from station.cell.records.rundb import RunDB
-from station.cell.records.stored_config import stored_config
 from station.errors import ConfigError, Outcome
 from station.ui.cli.main import main
 

@@ -13,8 +13,8 @@ from types import SimpleNamespace
 import pytest
 
 from station.cell.records.fingerprint import POST_PROCESSING, check_same_cell, resume_note
+from station.cell.records.reading.stored_config import stored_config
 from station.cell.records.rundb import RunDB
-from station.cell.records.stored_config import stored_config
 from station.errors import ConfigError, Outcome
 from station.ui.cli.main import main
 

@@ -13,7 +13,7 @@ from simulators.judge import CellJudge
 from station.cell.pipeline.calibration import Options
 from station.cell.pipeline.judging import judge_run
 from station.cell.plan.steps import StepKind
-from station.cell.records.stored_config import stored_plan
+from station.cell.records.reading.stored_config import stored_plan
 from station.cell.records.summary import RunSummary
 from station.errors import Outcome
 from tests.cell.test_pipeline import Cell

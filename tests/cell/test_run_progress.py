@@ -12,10 +12,10 @@ from pathlib import Path
 import pytest
 
 from station.cell.records.rundb import RunDB
-from station.cell.run import events as ev
+from station.cell.run.facts import events as ev
+from station.cell.run.facts.progress import RunProgress
+from station.cell.run.facts.stream import RunStream
 from station.cell.run.locate import RESULT_KEY
-from station.cell.run.progress import RunProgress
-from station.cell.run.stream import RunStream
 from station.cell.session.calibrate import CellRequest, run_calibration_session
 from station.errors import Outcome
 from station.ui.cli.commands_cell import progress_printer

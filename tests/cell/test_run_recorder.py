@@ -8,8 +8,8 @@ import pytest
 
 from station.cell.pipeline.calibration import run_calibration
 from station.cell.records.rundb import RunDB
-from station.cell.run import events as ev
-from station.cell.run.stream import RunStream
+from station.cell.run.facts import events as ev
+from station.cell.run.facts.stream import RunStream
 from tests.cell.test_pipeline import Cell
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from station.cell.pipeline.calibration import Options, run_calibration
-from station.cell.run.events import (
+from station.cell.run.facts.events import (
     Event,
     Identified,
     MeasurementRecorded,
@@ -19,7 +19,7 @@ from station.cell.run.events import (
     Uploaded,
     Verified,
 )
-from station.cell.run.stream import RunStream
+from station.cell.run.facts.stream import RunStream
 from station.errors import Outcome
 from tests.cell.test_pipeline import Cell
 

@@ -1,6 +1,6 @@
 """The run database's writer of a calibration's facts subscribes to the run's stream (issue 42): the
 pipeline emits its start, plan, identification, table, upload, status and end, and
-:class:`~station.cell.run.writer.RunWriter`, the first subscriber, stores each before any view hears
+:class:`~station.cell.run.facts.writer.RunWriter`, the first subscriber, stores each before any view hears
 of it. A run's events, its stored records and its JSON summary agree figure for figure; a write that
 fails, or a view that raises, stops the run where it stands, every measurement on disk."""
 
@@ -12,9 +12,9 @@ import pytest
 from station.cell.pipeline.calibration import Options, run_calibration
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import RunSummary
-from station.cell.run import events as ev
-from station.cell.run.stream import RunStream
-from station.cell.run.writer import RunWriter
+from station.cell.run.facts import events as ev
+from station.cell.run.facts.stream import RunStream
+from station.cell.run.facts.writer import RunWriter
 from station.errors import Outcome
 from tests.cell.test_pipeline import Cell
 

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from station.cell.records.run_export import export_csv
+from station.cell.records.reading.run_export import export_csv
 from station.cell.records.run_records import (
     SCHEMA_VERSION,
     DuplicateMeasurementError,

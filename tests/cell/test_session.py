@@ -15,7 +15,7 @@ from simulators.reference_cell import cell_config_text
 from station.cell.config.cell_config import parse_text
 from station.cell.config.template import TEMPLATE
 from station.cell.run import devices
-from station.cell.run.events import RunFailed
+from station.cell.run.facts.events import RunFailed
 from station.cell.session.calibrate import CellRequest, check_cell, open_cell, run_calibration_session
 from station.errors import Outcome
 

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from station.cell.config.cell_config import load_config
+from station.cell.records.reading.stored_config import config_source, stored_config
 from station.cell.records.rundb import RunDB
-from station.cell.records.stored_config import config_source, stored_config
 from station.errors import ConfigError
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "scara600" / "cell.toml"

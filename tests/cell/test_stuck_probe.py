@@ -21,7 +21,7 @@ from station.cell.pipeline.calibration import Options, run_calibration
 from station.cell.records.run_records import MeasurementRecord
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import RunSummary
-from station.cell.run.events import MeasurementRecorded, Notice
+from station.cell.run.facts.events import MeasurementRecorded, Notice
 from station.cell.run.stuck_probes import StuckLog, still_stuck, usable_head
 from station.cell.session.calibrate import open_cell
 from station.core.kinematics.transforms import pose_to_matrix

@@ -16,7 +16,7 @@ from station.cell.config.cell_config import parse_text
 from station.cell.correction.table_keeping import RESULT_KEY
 from station.cell.pipeline.calibration import Options, run_calibration
 from station.cell.records.rundb import RunDB
-from station.cell.run.events import MeasurementRecorded, PhaseChanged
+from station.cell.run.facts.events import MeasurementRecorded, PhaseChanged
 from station.cell.run.questions import UploadProposal
 from station.cell.session.calibrate import open_cell
 from station.core.table.values import CorrectionTableData, TableAxis

@@ -27,7 +27,7 @@ from station.cell.pipeline.calibration import Options, reference_params, run_cal
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import RunSummary
-from station.cell.run.events import Notice
+from station.cell.run.facts.events import Notice
 from station.cell.session.calibrate import open_cell
 from station.core.kinematics.forward import forward
 from station.core.kinematics.model import robot_from_dict
@@ -36,8 +36,8 @@ from station.core.kinematics.transforms import matrix_to_pose, pose_to_matrix, r
 from station.core.table.values import CorrectionTableData
 from station.errors import ConfigError, Outcome
 from station.ui.cli.main import main as station_main
-from station.ui.report.html_page import render_html
-from station.ui.report.markdown_page import render_markdown
+from station.ui.report.render.html_page import render_html
+from station.ui.report.render.markdown_page import render_markdown
 from station.ui.report.run import report_data_for_run
 
 GRIPPER = """

@@ -10,7 +10,7 @@ import pytest
 
 from drivers.correction_table import TableError, TableVerifyError
 from station.cell.correction.upload import verified_upload
-from station.cell.run.events import Event, Notice, PhaseChanged
+from station.cell.run.facts.events import Event, Notice, PhaseChanged
 from station.core.table.build import build_correction_table
 from station.core.table.grid import GridSpec
 from station.core.table.values import CorrectionTableData, TableAxis

@@ -15,7 +15,7 @@ from drivers.controller_errors import CommandRejected
 from drivers.controller_map import ErrorCode
 from simulators.controller_server import SimulatedController
 from station.cell.correction.upload import verified_upload
-from station.cell.run.events import Notice
+from station.cell.run.facts.events import Notice
 from station.core.table.values import CorrectionTableData, TableAxis
 
 

@@ -24,8 +24,8 @@ from station.cell.config.cell_config import load_config
 from station.cell.pipeline.results import reference_params, verification_errors
 from station.cell.plan.measurement_plan import head_targets_world, joints_for
 from station.cell.plan.steps import StepKind
+from station.cell.records.reading.stored_config import stored_plan
 from station.cell.records.rundb import RunDB
-from station.cell.records.stored_config import stored_plan
 from station.cell.records.summary import ErrorStats, RecentringStats, RunSummary
 from station.cell.run.recentring import RESULT_KEY, RecentringLog, head_as_commanded, stored_recentring
 from station.cell.run.runner import (

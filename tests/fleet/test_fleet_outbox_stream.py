@@ -10,9 +10,9 @@ from fleet_runs import example_config, finished_run
 from station.cell.publication.outbox import queue_state
 from station.cell.publication.subscriber import FleetOutbox
 from station.cell.records.summary import RunSummary
-from station.cell.run import events as ev
+from station.cell.run.facts import events as ev
+from station.cell.run.facts.stream import RunStream
 from station.cell.run.runcontrol import RunControl
-from station.cell.run.stream import RunStream
 from station.cell.session.calibrate import CellRequest, run_calibration_session
 from station.errors import Outcome
 from station.fleet import store

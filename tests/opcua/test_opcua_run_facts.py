@@ -21,7 +21,7 @@ from station.cell.records.summary import (
     TableSummary,
     UploadSummary,
 )
-from station.cell.run.events import Identified, RunFinished, RunStarted, TableDesigned, Uploaded, Verified
+from station.cell.run.facts.events import Identified, RunFinished, RunStarted, TableDesigned, Uploaded, Verified
 from station.errors import Outcome
 from station.ui.opcua.server import ServeOptions, build_server, offset_parameters
 from tests.opcua.clients import CONFIG, PASSWORDS, connected, read, station

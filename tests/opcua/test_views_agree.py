@@ -13,7 +13,7 @@ import asyncio
 import pytest
 
 from station.cell.records.rundb import RunDB
-from station.cell.run import events as ev
+from station.cell.run.facts import events as ev
 from station.cell.run.questions import KeepCorrection, UploadProposal
 from station.cell.session.calibrate import CellRequest, run_calibration_session
 from station.errors import Outcome

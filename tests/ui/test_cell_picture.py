@@ -23,7 +23,7 @@ import pytest
 from station.cell.config.cell_config import load_config
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.ui.cli.main import main
-from station.ui.report.cell_picture import PNG_NAME, SVG_NAME, family_id, run_picture
+from station.ui.report.render.cell_picture import PNG_NAME, SVG_NAME, family_id, run_picture
 
 pytestmark = pytest.mark.timeout(600)
 
@@ -193,8 +193,8 @@ def test_the_run_report_shows_the_cell_with_the_runs_steps(seed1_run):
     verification left out (the collision check's plan has none)."""
     import base64
 
+    from station.cell.records.reading.stored_config import stored_plan
     from station.cell.records.rundb import RunDB
-    from station.cell.records.stored_config import stored_plan
 
     html = (seed1_run.report / "report.html").read_text(encoding="utf-8")
     section = html[html.index('<section id="cell">'):]
@@ -213,7 +213,7 @@ def test_a_picture_that_cannot_be_drawn_is_a_note_not_a_lost_report(seed1_run, m
     """The rest of the report stands: the notes say why there is no picture, the section is left out."""
     from station.cell.records.rundb import RunDB
     from station.ui.report import run as report_run
-    from station.ui.report.html_page import render_html
+    from station.ui.report.render.html_page import render_html
 
     def broken(cfg, steps):
         raise ValueError("no shapes for this cell")

@@ -11,9 +11,9 @@ import json
 import pytest
 
 from station.cell.pipeline.outcomes import failure_summary, hint_for
-from station.cell.records.run_list import RunInfo
+from station.cell.records.reading.run_list import RunInfo
 from station.cell.records.run_records import RunDatabaseError
-from station.cell.run import events as ev
+from station.cell.run.facts import events as ev
 from station.errors import ConfigError, IdentificationError, Outcome, RunAborted, StationError, UnreachableError
 from station.ui.cli.main import main
 from station.ui.cli.process.progress_clock import ProgressClock, clock_text

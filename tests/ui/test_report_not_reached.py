@@ -9,9 +9,9 @@ from __future__ import annotations
 import pytest
 
 from station.cell.pipeline.calibration import run_calibration
-from station.cell.run.events import MeasurementRecorded
+from station.cell.run.facts.events import MeasurementRecorded
 from station.cell.run.runcontrol import RunAborted, RunControl
-from station.ui.report.markdown_page import render_markdown
+from station.ui.report.render.markdown_page import render_markdown
 from station.ui.report.run import report_data_for_run
 from tests.cell.test_pipeline import Cell
 

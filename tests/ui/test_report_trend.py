@@ -12,7 +12,7 @@ from test_report_html import Page, assert_self_contained, column
 
 from station.cell.records.rundb import RunDB
 from station.ui.cli.main import main
-from station.ui.report import plots as report_plots
+from station.ui.report.render import plots as report_plots
 from station.ui.report.run import report_data_for_run
 from station.ui.report.tables import has_trend
 from station.ui.report.writer import ReportData, TrendRun, write_report

@@ -6,8 +6,8 @@ from __future__ import annotations
 import dataclasses
 
 from station.cell.records.judge import JudgeFigure
-from station.ui.report.html_page import render_html
-from station.ui.report.markdown_page import render_markdown
+from station.ui.report.render.html_page import render_html
+from station.ui.report.render.markdown_page import render_markdown
 from station.ui.tui.result_panel import summary_markup
 from tests.ui.test_report import make_data
 

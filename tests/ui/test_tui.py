@@ -25,7 +25,7 @@ from station.cell.records.summary import (
     RunSummary,
     UploadSummary,
 )
-from station.cell.run.events import (
+from station.cell.run.facts.events import (
     MeasurementRecorded,
     Notice,
     PhaseChanged,

@@ -7,9 +7,9 @@ import threading
 
 import numpy as np
 
-from station.cell.records.run_list import RunInfo
+from station.cell.records.reading.run_list import RunInfo
 from station.cell.records.summary import ErrorStats, Failure, IdentificationSummary, RunSummary, UploadSummary
-from station.cell.run.events import (
+from station.cell.run.facts.events import (
     DeviceSnapshot,
     MeasurementRecorded,
     Notice,

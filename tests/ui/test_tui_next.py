@@ -17,7 +17,7 @@ from drivers.probe_protocol import ProbeTimeout
 from station.cell.pipeline.outcomes import failure_summary
 from station.cell.records.run_records import RunDatabaseError
 from station.cell.records.summary import Failure, RunSummary, TableSummary, UploadSummary
-from station.cell.run.events import Notice, PhaseChanged, RunFailed, RunFinished, RunStarted
+from station.cell.run.facts.events import Notice, PhaseChanged, RunFailed, RunFinished, RunStarted
 from station.errors import ConfigError, IdentificationError, Outcome, RunAborted, UnreachableError
 from station.ui.tui.app import StationApp
 from station.ui.tui.result_panel import can_continue, failure_kind, next_step, summary_markup

@@ -14,8 +14,8 @@ from test_tui_features import wait_until
 from station.cell.config.cell_config import load_config
 from station.cell.plan.collision import check_plan
 from station.cell.plan.measurement_plan import build_plan
-from station.cell.run.events import PhaseChanged, RunStarted, StepStarted
-from station.cell.run.next_move import NextMove, next_moves
+from station.cell.run.facts.events import PhaseChanged, RunStarted, StepStarted
+from station.cell.run.facts.next_move import NextMove, next_moves
 from station.errors import RunAborted
 from station.ui.tui.app import StationApp
 

@@ -12,7 +12,7 @@ from station.cell.records.summary import (
     RunSummary,
     UploadSummary,
 )
-from station.cell.run.events import (
+from station.cell.run.facts.events import (
     Identified,
     PhaseChanged,
     RunFinished,
@@ -21,7 +21,7 @@ from station.cell.run.events import (
     Uploaded,
     Verified,
 )
-from station.cell.run.stream import RunStream
+from station.cell.run.facts.stream import RunStream
 from station.errors import Outcome
 from station.ui.tui.app import StationApp
 from station.ui.tui.run_facts import fact_line

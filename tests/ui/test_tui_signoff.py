@@ -19,7 +19,7 @@ from drivers.controller_errors import ControllerLinkLost
 from drivers.probe_protocol import ProbeTimeout
 from station.cell.pipeline.outcomes import failure_summary
 from station.cell.records.summary import Failure, RunSummary
-from station.cell.run.events import Notice, RunFinished, RunStarted
+from station.cell.run.facts.events import Notice, RunFinished, RunStarted
 from station.cell.session.calibrate import CellRequest
 from station.errors import Outcome
 from station.ui.tui.app import StationApp

@@ -9,7 +9,7 @@ from test_tui_features import SUMMARY, wait_until
 from test_tui_signoff import app_for, screen_lines, settled
 
 from station.cell.records.summary import Failure, RunSummary
-from station.cell.run.events import MeasurementRecorded, PhaseChanged, RunFailed, RunFinished, RunStarted
+from station.cell.run.facts.events import MeasurementRecorded, PhaseChanged, RunFailed, RunFinished, RunStarted
 from station.errors import Outcome
 from station.ui.tui.measurement_table import shorten_middle
 

@@ -38,7 +38,7 @@ reference (oracle's) correction is built with them too.
 
 Nothing here uploads: the head's table stays the one the pipeline uploads; ``station export
 --tool NAME`` writes a tool's table for the controller (a run with terms: rebuilt with its stored
-error model, :mod:`station.cell.records.stored_error_model`).
+error model, :mod:`station.cell.records.reading.stored_error_model`).
 """
 
 from __future__ import annotations
@@ -57,7 +57,7 @@ from station.cell.plan.steps import PlannedStep
 from station.cell.records.judge import RunJudge
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import ToolSummary
-from station.cell.run.events import Event, Notice
+from station.cell.run.facts.events import Event, Notice
 from station.core.kinematics.compensation import compensated_targets
 from station.core.kinematics.forward import forward, inverse_kinematics, scara_ik
 from station.core.kinematics.model import RobotModel

@@ -25,7 +25,7 @@ from station.cell.correction.upload import TableState, restore_table
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import RunSummary, TableSummary
 from station.cell.run.devices import TableController
-from station.cell.run.events import Event, Notice
+from station.cell.run.facts.events import Event, Notice
 from station.core.table.values import CorrectionTableData
 from station.errors import Outcome
 

@@ -12,9 +12,9 @@ import numpy as np
 from drivers.controller_map import MAX_TABLE_VALUES
 from station.cell.correction.design import head_in_flange
 from station.cell.correction.robot_tools import find_tool, result_key, tool_grid
+from station.cell.records.reading.stored_config import stored_config
+from station.cell.records.reading.stored_error_model import stored_error_model
 from station.cell.records.rundb import RunDB
-from station.cell.records.stored_config import stored_config
-from station.cell.records.stored_error_model import stored_error_model
 from station.core.kinematics.tool_frame import derive_tool
 from station.core.table.build import build_correction_table
 from station.core.table.values import CorrectionTableData

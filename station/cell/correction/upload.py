@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 from drivers.correction_table import TableVerifyError
 from station.cell.run.devices import TableController
-from station.cell.run.events import Event, Notice, PhaseChanged
+from station.cell.run.facts.events import Event, Notice, PhaseChanged
 from station.core.table.values import CorrectionTableData
 
 __all__ = ["TableState", "UploadReport", "restore_table", "verified_upload"]

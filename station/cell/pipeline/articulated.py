@@ -35,7 +35,7 @@ from station.cell.records.judge import RunJudge
 from station.cell.records.run_records import MeasurementRecord
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import CompensationSummary, ErrorStats, RunSummary
-from station.cell.run.events import Event, Notice, PhaseChanged, StatusChanged, Verified
+from station.cell.run.facts.events import Event, Notice, PhaseChanged, StatusChanged, Verified
 from station.cell.run.recentring import stored_recentring
 from station.cell.run.runner import Procedure, Runner, approach_and_read
 from station.core.identification.identify import IdentificationResult
@@ -209,7 +209,7 @@ def articulated_correction(cfg: CellConfig, runner: Runner, db: RunDB, run_id: i
                                                                                          ref_delta)))
     outcome, missed = verified_outcome(cfg, summary, min_gain)
     summary = summary.replace(notes=(*summary.notes, *missed), missed=missed_limits(cfg, summary, min_gain))
-    emit(StatusChanged("verified"))  # stored by the run database's writer (station/cell/run/writer.py)
+    emit(StatusChanged("verified"))  # stored by the run database's writer (station/cell/run/facts/writer.py)
     return _articulated_done(db, run_id, summary.replace(outcome=outcome), extra, orient, emit)
 
 

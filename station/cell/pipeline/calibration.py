@@ -46,9 +46,9 @@ from station.cell.plan.measurement_plan import head_targets_world, joints_for
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.fingerprint import check_same_cell, current_like, fingerprint, resume_note
 from station.cell.records.judge import RunJudge
+from station.cell.records.reading.stored_config import config_source, stored_config, stored_plan
 from station.cell.records.run_records import MeasurementRecord
 from station.cell.records.rundb import RunDB
-from station.cell.records.stored_config import config_source, stored_config, stored_plan
 from station.cell.records.summary import (
     CorrectionSummary,
     ErrorStats,
@@ -58,7 +58,7 @@ from station.cell.records.summary import (
     UploadSummary,
 )
 from station.cell.run.devices import CellController, ProbeHead
-from station.cell.run.events import (
+from station.cell.run.facts.events import (
     CellChanged,
     Event,
     Identified,
@@ -72,13 +72,13 @@ from station.cell.run.events import (
     Uploaded,
     Verified,
 )
+from station.cell.run.facts.next_move import next_moves
+from station.cell.run.facts.writer import RunWriter
 from station.cell.run.locate import locate_body, located_joints
-from station.cell.run.next_move import next_moves
 from station.cell.run.questions import Confirm, KeepCorrection, UploadProposal
 from station.cell.run.recentring import recentring_stats, stored_recentring
 from station.cell.run.runcontrol import RunControl
 from station.cell.run.runner import Procedure, Runner, approach_and_read
-from station.cell.run.writer import RunWriter
 from station.core.identification.identify import BODY_NOTE_PREFIX, IdentificationResult
 from station.core.kinematics.transforms import invert, matrix_to_pose, pose_to_matrix
 from station.errors import ConfigError, IdentificationError, Outcome, RunAborted
@@ -177,7 +177,7 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
     pre = premotion_check(cfg)  # tools, plan, correction: what 'station plan' checks, before anything moves
     runner = Runner(cfg, probe, controller, emit, control)
     # the run database's writer, first for the whole run: the pipeline emits its facts, the writer
-    # stores each before a view hears of it, and a failed write stops the run (station/cell/run/writer.py)
+    # stores each before a view hears of it, and a failed write stops the run (station/cell/run/facts/writer.py)
     writer = RunWriter(db, resume_run)
     runner.stream.subscribe(writer, first=True)
     emit = runner.stream
@@ -212,7 +212,7 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
     runner.next_moves = next_moves(pre.collision, checked, steps)  # each step's clearance, for the views
     emit(RunStarted(run_id, len(steps), resumed, resume=resume_run is not None,
                     devices=tuple((devices_info or {}).items())))  # the latest attempt's devices, for the report
-    runner.progress.start(len(steps), resumed)  # k of n from here on (station/cell/run/progress.py)
+    runner.progress.start(len(steps), resumed)  # k of n from here on (station/cell/run/facts/progress.py)
     design = None if pre.design is None else f"correction table designed: {pre.design.describe()}"
     for note in (resume_note(reused), design):
         if note:

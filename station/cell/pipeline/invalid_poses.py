@@ -28,7 +28,7 @@ from station.cell.config.cell_config import CellConfig
 from station.cell.plan.steps import StepKind
 from station.cell.records.run_records import MeasurementRecord
 from station.cell.records.rundb import RunDB
-from station.cell.run.events import Event, Notice
+from station.cell.run.facts.events import Event, Notice
 
 __all__ = ["rejudge", "invalid_advice", "residual_bound_for"]
 

@@ -17,7 +17,7 @@ from station.cell.plan.measurement_plan import head_targets_world
 from station.cell.records.judge import JudgeFigure, RunJudge, judge_figures
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import RunSummary
-from station.cell.run.events import Event, Notice
+from station.cell.run.facts.events import Event, Notice
 from station.core.kinematics.transforms import invert, pose_to_matrix
 from station.errors import StationError
 

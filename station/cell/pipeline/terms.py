@@ -26,8 +26,8 @@ import numpy as np
 
 from station.cell.config.cell_config import CellConfig
 from station.cell.correction.robot_tools import judge_delta  # the reference's joint errors (one definition)
+from station.cell.records.reading.stored_error_model import StoredErrorModel, stored_error_model  # read back (records)
 from station.cell.records.run_records import MeasurementRecord
-from station.cell.records.stored_error_model import StoredErrorModel, stored_error_model  # read back (records)
 from station.cell.records.summary import ErrorModelSummary, ErrorTermEstimate
 from station.core.identification.identify import IdentificationResult
 from station.core.terms.selection import Selection

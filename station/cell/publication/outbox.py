@@ -125,7 +125,7 @@ def enqueue_finished(db_path: str | Path, station: str | None = None,
     the run wrote where there is one (its summary names it, else ``report_dir(run_id)`` holds it:
     the default folder of ``station report``). Returns how many were queued and, for each run that could
     not be, why."""
-    from station.cell.records.stored_config import stored_config
+    from station.cell.records.reading.stored_config import stored_config
 
     conn = _open(db_path)
     try:

@@ -1,6 +1,6 @@
 """The fleet outbox as a subscriber of the run's stream (issue 42): a session subscribes it to its
-:class:`~station.cell.run.stream.RunStream` once the cell is loaded, and the run's end
-(:class:`~station.cell.run.events.RunEnded`: ``RunFinished`` from the pipeline, ``RunFailed`` from
+:class:`~station.cell.run.facts.stream.RunStream` once the cell is loaded, and the run's end
+(:class:`~station.cell.run.facts.events.RunEnded`: ``RunFinished`` from the pipeline, ``RunFailed`` from
 the session once the failure's summary is stored) queues the run for the fleet store and tries to
 send it (:func:`station.cell.publication.outbox.publish_or_queue`), instead of the session calling
 the outbox itself.
@@ -19,8 +19,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 from station.cell.config.cell_config import CellConfig
-from station.cell.run.events import Event, Notice, RunEnded
-from station.cell.run.stream import RunStream
+from station.cell.run.facts.events import Event, Notice, RunEnded
+from station.cell.run.facts.stream import RunStream
 
 log = logging.getLogger(__name__)
 

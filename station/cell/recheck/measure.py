@@ -32,12 +32,12 @@ from station.cell.config.cell_config import CellConfig
 from station.cell.plan.measurement_plan import Target, build_plan, order_by_travel
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.fingerprint import baseline_fingerprint, check_same_cell, current_like, fingerprint
+from station.cell.records.reading.stored_config import stored_config
 from station.cell.records.run_records import MeasurementRecord, RunDatabaseError
 from station.cell.records.rundb import RunDB
-from station.cell.records.stored_config import stored_config
 from station.cell.records.summary import RunSummary
 from station.cell.run.devices import CellController, ProbeHead
-from station.cell.run.events import Event, Notice, PhaseChanged, RunFinished, RunStarted
+from station.cell.run.facts.events import Event, Notice, PhaseChanged, RunFinished, RunStarted
 from station.cell.run.runcontrol import RunControl
 from station.cell.run.runner import Runner, approach_and_read
 from station.cell.run.warmup import run_warmup

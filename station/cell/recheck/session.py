@@ -17,9 +17,9 @@ from station.cell.publication.subscriber import FleetOutbox
 from station.cell.recheck.measure import RecheckOptions, RecheckSummary, run_recheck
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import RunSummary
-from station.cell.run.events import Event, PhaseChanged, RunFailed
+from station.cell.run.facts.events import Event, PhaseChanged, RunFailed
+from station.cell.run.facts.stream import RunStream
 from station.cell.run.runcontrol import RunControl
-from station.cell.run.stream import RunStream
 from station.cell.session.calibrate import (
     CellLoader,
     CellRequest,

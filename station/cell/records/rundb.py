@@ -506,7 +506,7 @@ class RunDB:
     def _context(self, run_id: int) -> rf.RunContext | None:
         """The run's robot, body and head as its stored configuration says (read once per RunDB)."""
         if run_id not in self._contexts:
-            from station.cell.records.stored_config import run_context  # it reads the database: imported here
+            from station.cell.records.reading.stored_config import run_context  # it reads the database: imported here
             self._contexts[run_id] = run_context(self, run_id)
         return self._contexts[run_id]
 

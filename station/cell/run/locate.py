@@ -30,7 +30,7 @@ from station.cell.plan.first_moves import N_LOCATE, face_directions, locate_step
 from station.cell.plan.locating import FACE_NAMES, Coverage, coverage
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.rundb import RunDB
-from station.cell.run.events import Event, Notice, PhaseChanged
+from station.cell.run.facts.events import Event, Notice, PhaseChanged
 from station.cell.run.runner import Procedure, Reading, Runner, TouchInserted, approach_and_read, head_of
 from station.core.identification.setup_locate import point_shift_mm, setup_from_contacts
 from station.core.kinematics.transforms import invert, pose_to_matrix

@@ -11,7 +11,7 @@ from __future__ import annotations
 import threading
 from typing import Callable
 
-from station.cell.run.events import Event, Paused, Resumed
+from station.cell.run.facts.events import Event, Paused, Resumed
 from station.errors import RunAborted
 
 __all__ = ["RunAborted", "RunControl"]

@@ -28,12 +28,12 @@ from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.plan.vias import travel_vias
 from station.cell.records.rundb import RunDB
 from station.cell.run.devices import CellController, ProbeHead, Snapshot
-from station.cell.run.events import DeviceSnapshot, Event, MeasurementRecorded, Notice, StepMeasured, StepStarted
-from station.cell.run.progress import RunProgress
+from station.cell.run.facts.events import DeviceSnapshot, Event, MeasurementRecorded, Notice, StepMeasured, StepStarted
+from station.cell.run.facts.progress import RunProgress
+from station.cell.run.facts.recorder import RunRecorder
+from station.cell.run.facts.stream import RunStream
 from station.cell.run.recentring import displacement
-from station.cell.run.recorder import RunRecorder
 from station.cell.run.runcontrol import RunControl
-from station.cell.run.stream import RunStream
 from station.cell.run.stuck_probes import StuckLog, still_stuck, usable_head
 from station.core.kinematics.forward import scara_ik
 from station.core.kinematics.transforms import invert, matrix_to_pose, pose_to_matrix
@@ -82,7 +82,7 @@ class ReadProbes:
 @dataclass(frozen=True)
 class TouchInserted:
     """A touch the plan does not hold was made (a search touch of locating the body): it counts in
-    the run's progress, total and done alike (:mod:`station.cell.run.progress`)."""
+    the run's progress, total and done alike (:mod:`station.cell.run.facts.progress`)."""
 
     label: str
 
@@ -510,7 +510,7 @@ class Runner:
         self.probe = probe
         self.controller = controller
         #: the runner's events: the caller's ``emit``, and while steps are measured the run database's
-        #: writer before it (station/cell/run/recorder.py)
+        #: writer before it (station/cell/run/facts/recorder.py)
         self.stream = RunStream(emit)
         self.emit = self.stream
         self.control = control or RunControl()
@@ -533,7 +533,7 @@ class Runner:
         # rest (the station's own computation and bookkeeping). benchmarks/ reads this.
         self.timing = {"motion": 0.0, "settle": 0.0, "sampling": 0.0}
         #: per plan step, its moves' clearance as the plan's collision check found it, streamed when
-        #: the step starts (station/cell/run/next_move.py; none: the views show none)
+        #: the step starts (station/cell/run/facts/next_move.py; none: the views show none)
         self.next_moves: Mapping[int, Event] = {}
 
     def execute(self, proc: Procedure, index: int = 0) -> Reading:
@@ -658,7 +658,7 @@ class Runner:
         if not self.progress.started:  # a runner used without a run's start (a test's): the plan's count
             self.progress.start(total, len(valid))
         # the run database's writer, first: each measurement is on disk before a view hears of it and
-        # before the next motion; its failure raises here and stops the run (station/cell/run/recorder.py)
+        # before the next motion; its failure raises here and stops the run (station/cell/run/facts/recorder.py)
         token = self.stream.subscribe(RunRecorder(db, run_id), StepMeasured, first=True)
         n = 0
         try:

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from station.cell.run.events import Event, Notice
+from station.cell.run.facts.events import Event, Notice
 from station.core.probe.geometry import ProbeHeadGeometry
 
 #: a known-stuck probe whose reading moves by more than this many reading σ moves again

@@ -23,7 +23,7 @@ from station.cell.config.cell_config import CellConfig
 from station.cell.plan.measurement_plan import approach_pose, build_plan
 from station.cell.plan.steps import PlannedStep
 from station.cell.records.rundb import RunDB
-from station.cell.run.events import Event, Notice, PhaseChanged
+from station.cell.run.facts.events import Event, Notice, PhaseChanged
 from station.cell.run.recentring import head_as_commanded
 from station.cell.run.runner import Checkpoint, MoveJoints, Procedure, Runner, TouchInserted, Travel, approach_and_read
 from station.core.kinematics.transforms import invert

@@ -35,10 +35,10 @@ from station.cell.records.summary import RunSummary
 from station.cell.run.device_check import controller_lines, probe_lines, wired_channels_invalid
 from station.cell.run.device_errors import ControllerHeld
 from station.cell.run.devices import CellController, ProbeHead
-from station.cell.run.events import Event, Notice, PhaseChanged, RunFailed, RunStarted
+from station.cell.run.facts.events import Event, Notice, PhaseChanged, RunFailed, RunStarted
+from station.cell.run.facts.stream import RunStream
 from station.cell.run.questions import Confirm
 from station.cell.run.runcontrol import RunControl
-from station.cell.run.stream import RunStream
 from station.errors import ConfigError, Outcome, RunAborted
 from station.io.robot_program import ur_program_needs
 

@@ -23,10 +23,10 @@ from typing import TextIO
 from station.cell.config.cell_config import load_config
 from station.cell.config.template import TEMPLATE
 from station.cell.pipeline.outcomes import failure_summary, write_traceback
-from station.cell.records.run_list import list_runs
+from station.cell.records.reading.run_list import list_runs
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import RunSummary
-from station.cell.run import events as ev
+from station.cell.run.facts import events as ev
 from station.cell.run.runcontrol import RunControl
 from station.cell.session.calibrate import CellRequest, check_cell, reset_controller, run_calibration_session
 from station.core.probe.check import check_head
@@ -330,7 +330,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from station.cell.correction.design import GRID_POINT
     from station.cell.pipeline.premotion import moves_json, moves_lines, premotion_check
     from station.cell.pipeline.preview import describe, preview
-    from station.ui.report.cell_picture import check_picture_dir, plan_picture, write_cell_picture
+    from station.ui.report.render.cell_picture import check_picture_dir, plan_picture, write_cell_picture
 
     cfg = load_config(args.config)
     if args.out:
@@ -518,7 +518,7 @@ def cmd_export(args: argparse.Namespace) -> int:
             return 0
         if getattr(args, "force", False):
             raise ConfigError("--force goes with --tool NAME")
-        from station.cell.records.run_export import export_csv, export_pose_file
+        from station.cell.records.reading.run_export import export_csv, export_pose_file
 
         if getattr(args, "format", "record") == "identify":
             _, n, robot = export_pose_file(db, run.id, args.output)

@@ -225,8 +225,8 @@ def fleet_report_written(db: str, run_id: int, report: str) -> str | None:
 
 def _queued_url(db: str, run_id: int) -> str | None:
     """The [fleet] url the run was configured with (from its stored configuration)."""
+    from station.cell.records.reading.stored_config import stored_config
     from station.cell.records.rundb import RunDB
-    from station.cell.records.stored_config import stored_config
 
     try:
         with RunDB(db) as rdb:

@@ -13,7 +13,7 @@ runner stands at a paused safe point) → the outcome's name (``SUCCESS``, ``DRI
 ResultReady event → (Acknowledge) ``Idle``. A start is refused unless the state is ``Idle``.
 
 The service subscribes to the session's stream of run facts (issue 42,
-:class:`~station.cell.run.stream.RunStream`): the axes' identified offsets come from the
+:class:`~station.cell.run.facts.stream.RunStream`): the axes' identified offsets come from the
 ``Identified`` event, the active table's CRC from ``Uploaded`` and the run's end, and
 LastCalibration from the ``RunEnded`` event's summary, the figures the run stores and the CLI's
 JSON prints. The run database is read only for what happened before this server started (and
@@ -40,10 +40,10 @@ from station.cell.pipeline.outcomes import failure_summary
 from station.cell.recheck.measure import RecheckOptions
 from station.cell.recheck.session import run_recheck_session
 from station.cell.records.certificates import stored_certificate
-from station.cell.records.run_list import RunInfo, list_runs
+from station.cell.records.reading.run_list import RunInfo, list_runs
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import RunSummary
-from station.cell.run.events import (
+from station.cell.run.facts.events import (
     Event,
     Identified,
     Notice,
@@ -56,8 +56,8 @@ from station.cell.run.events import (
     StepStarted,
     Uploaded,
 )
+from station.cell.run.facts.stream import RunStream
 from station.cell.run.runcontrol import RunControl
-from station.cell.run.stream import RunStream
 from station.cell.session.calibrate import CellLoader, CellRequest, run_calibration_session
 from station.errors import Outcome
 from station.ui.opcua.guard import guarded, signatures
@@ -111,7 +111,7 @@ class StationService:
         self._loop: asyncio.AbstractEventLoop | None = None
         self._pump: asyncio.Task[None] | None = None
         #: this attempt's progress as the run counts it (Progress: k of n touches in the order made,
-        #: station/cell/run/progress.py), not the plan index: the body's locating touches come first
+        #: station/cell/run/facts/progress.py), not the plan index: the body's locating touches come first
         #: and out of the plan's order (issue 37); the monotonic time of the attempt's first step and
         #: the count then, for the time left
         self._done = self._total = 0

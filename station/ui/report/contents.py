@@ -2,8 +2,8 @@
 strings, checked on construction) and :class:`TrendRun` (one run of the robot's history).
 
 The bottom of the report's modules: :mod:`~station.ui.report.tables` and
-:mod:`~station.ui.report.plots` read it, :mod:`~station.ui.report.html_page` and
-:mod:`~station.ui.report.markdown_page` format it, :mod:`station.ui.report.writer` writes the files, and
+:mod:`~station.ui.report.render.plots` read it, :mod:`~station.ui.report.render.html_page` and
+:mod:`~station.ui.report.render.markdown_page` format it, :mod:`station.ui.report.writer` writes the files, and
 :mod:`station.ui.report.run` fills it from a stored run. It imports none of them.
 """
 
@@ -266,7 +266,7 @@ class ReportData:
     #: first, and the sections the run did not reach say so instead of their tables
     progress: str = ""
     #: the cell from above and from the side with the run's planned poses (SVG text, issue 40:
-    #: :mod:`station.ui.report.cell_picture`); None: not drawn (the notes say why)
+    #: :mod:`station.ui.report.render.cell_picture`); None: not drawn (the notes say why)
     cell_svg: str | None = None
 
     def __post_init__(self) -> None:

@@ -23,11 +23,11 @@ from station.cell.pipeline.results import build_table_for, identify_run, verific
 from station.cell.plan.assembly import head_targets_world
 from station.cell.plan.measurement_plan import build_plan
 from station.cell.plan.steps import PlannedStep, StepKind
-from station.cell.records.run_list import RunInfo, list_runs
+from station.cell.records.reading.run_list import RunInfo, list_runs
+from station.cell.records.reading.stored_config import stored_config, stored_plan
+from station.cell.records.reading.stored_error_model import stored_error_model
 from station.cell.records.run_records import MeasurementRecord
 from station.cell.records.rundb import RunDB
-from station.cell.records.stored_config import stored_config, stored_plan
-from station.cell.records.stored_error_model import stored_error_model
 from station.cell.records.summary import RunSummary
 from station.cell.run.locate import located_config
 from station.cell.run.recentring import stored_recentring
@@ -40,10 +40,10 @@ from station.core.kinematics.transforms import pose_to_matrix
 from station.core.measurement.uncertainty import pose_accuracy
 from station.core.units import ARCSEC, UM
 from station.errors import ConfigError, IdentificationError, StationError
-from station.ui.report.cell_picture import run_picture
 from station.ui.report.contents import Acceptance, IsoPose, ReportData, TestConditions, Traceability, TrendRun
 from station.ui.report.progress import document_id, partial_report_data, run_progress
 from station.ui.report.provenance import software_rows
+from station.ui.report.render.cell_picture import run_picture
 from station.ui.report.stored_fit import with_stored_figures
 from station.ui.report.writer import write_report
 

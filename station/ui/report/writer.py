@@ -4,8 +4,8 @@ data URIs, printable) and ``report.md`` beside it (the same tables as text, for 
 The caller (:mod:`station.ui.report.run` for a stored run) fills a :class:`ReportData`
 (:mod:`~station.ui.report.contents`); the other ``report_*`` modules only format it, in a tree with
 this module at its top: :mod:`~station.ui.report.tables` (rows shared by both files) and
-:mod:`~station.ui.report.plots` read the data, :mod:`~station.ui.report.html_page` and
-:mod:`~station.ui.report.markdown_page` read those, and this module writes the files. Inputs use the
+:mod:`~station.ui.report.render.plots` read the data, :mod:`~station.ui.report.render.html_page` and
+:mod:`~station.ui.report.render.markdown_page` read those, and this module writes the files. Inputs use the
 station's internal units (mm and rad, see :mod:`station.core.kinematics.model`) except the verification
 errors, which are µm already; the report shows µm and arc seconds.
 
@@ -18,8 +18,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from station.ui.report.contents import HTML_NAME, MARKDOWN_NAME, ReportData, TrendRun
-from station.ui.report.html_page import render_html
-from station.ui.report.markdown_page import render_markdown
+from station.ui.report.render.html_page import render_html
+from station.ui.report.render.markdown_page import render_markdown
 
 __all__ = ["ReportData", "TrendRun", "write_report", "HTML_NAME", "MARKDOWN_NAME"]
 

@@ -19,9 +19,9 @@ from textual.message import Message
 from textual.widgets import Static
 from textual.worker import get_current_worker
 
-from station.cell.records.run_list import RunInfo
+from station.cell.records.reading.run_list import RunInfo
 from station.cell.records.summary import RunSummary
-from station.cell.run.events import Event
+from station.cell.run.facts.events import Event
 from station.cell.run.questions import Question
 from station.cell.run.runcontrol import RunControl
 from station.ui.report.writer import ReportData

@@ -3,7 +3,7 @@
 The UI is a *client of the runner*: it never imports drivers and never talks to a device.  It is
 given a ``start_run(emit, control[, confirm, resume]) -> RunSummary`` callable (dependency
 injection); on Start it calls it in a thread worker, receives the runner's typed
-:mod:`station.cell.run.events` through ``emit`` (forwarded thread-safely into the app as
+:mod:`station.cell.run.facts.events` through ``emit`` (forwarded thread-safely into the app as
 :class:`EventMessage`), steers the run only through the shared
 :class:`~station.cell.run.runcontrol.RunControl` (pause / resume / abort at safe points), and answers
 the pipeline's questions (:mod:`station.cell.run.questions`) through ``confirm``, which blocks the
@@ -42,9 +42,9 @@ from textual.widgets import Button, DataTable, Footer, Header, ProgressBar, Stat
 from textual.worker import Worker, WorkerState
 
 from station.cell.pipeline.outcomes import classify, failure_summary
-from station.cell.records.run_list import RunInfo
+from station.cell.records.reading.run_list import RunInfo
 from station.cell.records.summary import Failure, RunSummary
-from station.cell.run.events import (
+from station.cell.run.facts.events import (
     DeviceSnapshot,
     Event,
     MeasurementRecorded,
@@ -58,7 +58,7 @@ from station.cell.run.events import (
     RunStarted,
     StepStarted,
 )
-from station.cell.run.next_move import NextMove
+from station.cell.run.facts.next_move import NextMove
 from station.cell.run.runcontrol import RunControl
 from station.ui.report.writer import ReportData
 from station.ui.tui.actions import EventMessage, QuestionMessage
@@ -491,7 +491,7 @@ class StationApp(RunEnd):
             self._show_next_move(None)  # until the step's own clearance comes: none the check did not see
         elif isinstance(ev, NextMove):
             self._show_next_move(ev if ev.index == self.step_index else None)
-        elif isinstance(ev, Progress):  # the run's k of n (station/cell/run/progress.py), not the plan's index
+        elif isinstance(ev, Progress):  # the run's k of n (station/cell/run/facts/progress.py), not the plan's index
             self.query_one("#progress", ProgressBar).update(total=ev.total, progress=ev.done)
             self.eta.update(ev.done, ev.total)
             self._show_eta()

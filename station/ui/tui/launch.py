@@ -18,10 +18,10 @@ from typing import Any
 
 from station.cell.recheck.measure import RecheckOptions, RecheckSummary
 from station.cell.recheck.session import run_recheck_session
-from station.cell.records.run_list import RunInfo, list_runs
+from station.cell.records.reading.run_list import RunInfo, list_runs
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import RunSummary
-from station.cell.run.events import Event
+from station.cell.run.facts.events import Event
 from station.cell.run.questions import Confirm
 from station.cell.run.runcontrol import RunControl
 from station.cell.session.calibrate import CellRequest, run_calibration_session

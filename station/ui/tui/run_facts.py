@@ -1,13 +1,13 @@
 """The run's figures as the operator UI states them while the run goes on (issue 42).
 
-Each line is made from one figure event of the run's stream (:mod:`station.cell.run.events`):
+Each line is made from one figure event of the run's stream (:mod:`station.cell.run.facts.events`):
 the figures are the event's, which are the run's stored summary's; nothing here computes or
 reads back a figure. Units as people read them: µm, seconds, and the gain as a ratio.
 """
 
 from __future__ import annotations
 
-from station.cell.run.events import Event, Identified, TableDesigned, Uploaded, Verified
+from station.cell.run.facts.events import Event, Identified, TableDesigned, Uploaded, Verified
 from station.ui.tui.widgets import fmt_num
 
 __all__ = ["fact_line"]

@@ -17,7 +17,7 @@ from textual.containers import Horizontal, Vertical, VerticalScroll
 from textual.screen import ModalScreen
 from textual.widgets import Button, DataTable, Label, Static
 
-from station.cell.records.run_list import RunInfo
+from station.cell.records.reading.run_list import RunInfo
 from station.cell.run.questions import KeepCorrection, Question, UploadProposal
 from station.core.units import ARCSEC, UM
 from station.ui.tui.widgets import esc

@@ -2,7 +2,7 @@
 markup of the status line, the phase strip, the device panel, the notices log and the time-left
 estimate (the result panel is :mod:`station.ui.tui.result_panel`).
 
-The device panel reads only the runner's :class:`~station.cell.run.events.DeviceSnapshot` events.
+The device panel reads only the runner's :class:`~station.cell.run.facts.events.DeviceSnapshot` events.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from textual.screen import ModalScreen
 from textual.widget import Widget
 from textual.widgets import Button, Label, Static
 
-from station.cell.run.events import DeviceSnapshot
+from station.cell.run.facts.events import DeviceSnapshot
 
 __all__ = ["APP_CSS", "ConfirmScreen", "DevicePanel", "Eta", "NoticeLog", "PHASES", "PHASE_NAMES", "STATE_TEXT",
            "ACTIVE_STATES", "fmt_num", "fmt_clock", "esc", "phase_markup", "passed_phases", "activity_text",

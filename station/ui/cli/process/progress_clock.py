@@ -9,7 +9,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from station.cell.records.rundb import RunDB
-from station.cell.run import events as ev
+from station.cell.run.facts import events as ev
 
 __all__ = ["ProgressClock", "plan_seconds"]
 
@@ -28,7 +28,7 @@ def plan_seconds(db_path: str | Path, run_id: int, time_scale: float | None) -> 
         return None
     try:
         from station.cell.pipeline.preview import motion_seconds
-        from station.cell.records.stored_config import stored_config, stored_plan
+        from station.cell.records.reading.stored_config import stored_config, stored_plan
 
         with RunDB(db_path) as db:
             cfg, steps = stored_config(db, run_id), stored_plan(db, run_id)

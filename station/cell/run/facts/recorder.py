@@ -1,7 +1,7 @@
 """The run database's writer as a subscriber of the runner's stream (issue 42).
 
 The runner no longer writes its measurements itself: it emits each as a
-:class:`~station.cell.run.events.StepMeasured` and :class:`RunRecorder`, subscribed first for the
+:class:`~station.cell.run.facts.events.StepMeasured` and :class:`RunRecorder`, subscribed first for the
 run's measuring, stores it. The guarantees stay the runner's: the recorder is called synchronously
 on the runner's thread before any other subscriber (the views hear of a measurement when it is on
 disk, committed; the next motion waits for it), and a recorder that fails (a full disk, a damaged
@@ -11,7 +11,7 @@ database) raises through the emit and stops the run at that step.
 from __future__ import annotations
 
 from station.cell.records.rundb import RunDB
-from station.cell.run.events import StepMeasured
+from station.cell.run.facts.events import StepMeasured
 from station.cell.run.recentring import RecentringLog
 
 __all__ = ["RunRecorder"]

@@ -1,10 +1,10 @@
 """The run database's writer of a calibration's facts, a subscriber of its stream (issue 42).
 
 The pipeline no longer writes its run's start, plan, identification, table, upload, status and
-end to the run database itself: it emits them (:mod:`station.cell.run.events`) and
+end to the run database itself: it emits them (:mod:`station.cell.run.facts.events`) and
 :class:`RunWriter`, subscribed first to the runner's stream for the whole run, stores each one as
 the pipeline stored it before (the same result keys, the same values: docs/run-database.md). The
-measurements are :class:`~station.cell.run.recorder.RunRecorder`'s, subscribed likewise while steps
+measurements are :class:`~station.cell.run.facts.recorder.RunRecorder`'s, subscribed likewise while steps
 are measured.
 
 Being first, the writer stores a fact before any view hears of it (a view that reads the run
@@ -18,9 +18,9 @@ from __future__ import annotations
 from functools import singledispatchmethod
 from typing import Any
 
+from station.cell.records.reading.stored_config import POSTPROCESSED_CONFIG
 from station.cell.records.rundb import RunDB
-from station.cell.records.stored_config import POSTPROCESSED_CONFIG
-from station.cell.run.events import (
+from station.cell.run.facts.events import (
     CellChanged,
     Event,
     Identified,

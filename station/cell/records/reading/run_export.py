@@ -89,7 +89,7 @@ def _run_joint_units(db: RunDB, run_id: int, config_toml: str) -> list[str]:
     """'rad'/'mm' per joint of the run's robot: its stored configuration's, else the snapshot's
     inline joint types (:func:`_joint_units`); [] when neither says."""
     try:
-        from station.cell.records.stored_config import stored_config
+        from station.cell.records.reading.stored_config import stored_config
 
         return ["rad" if k == "revolute" else "mm" for k in stored_config(db, run_id).model.joint_types]
     except Exception:  # noqa: BLE001 - a snapshot this version cannot load: the inline types, else unknown
@@ -126,7 +126,7 @@ def export_pose_file(db: RunDB, run_id: int, path: str | Path) -> tuple[Path, in
     frame (what the run identified from: the touched point's CMM pose times the inverse of the
     measured point-in-head pose), ``x [mm] … yaw [deg]``. ``station identify PATH --robot ROBOT``
     reads it as it is. Returns the path, the rows written and the robot (its file or name)."""
-    from station.cell.records.stored_config import stored_config
+    from station.cell.records.reading.stored_config import stored_config
     from station.core.kinematics.transforms import invert
 
     cfg = stored_config(db, run_id)

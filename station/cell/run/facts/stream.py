@@ -18,7 +18,7 @@ from collections.abc import Callable
 from itertools import count
 from typing import TypeVar
 
-from station.cell.run.events import Event
+from station.cell.run.facts.events import Event
 
 __all__ = ["RunStream", "Subscriber"]
 

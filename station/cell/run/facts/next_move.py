@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 from station.cell.plan.collision import CollisionReport
 from station.cell.plan.steps import PlannedStep
-from station.cell.run.events import Event
+from station.cell.run.facts.events import Event
 
 __all__ = ["NextMove", "next_moves"]
 

@@ -1,5 +1,5 @@
 """Progress "k of n" of a run (issue 42): what the progress bars of the CLI, the terminal UI and
-OPC UA's step counter show, counted once, here, and streamed as :class:`~station.cell.run.events.Progress`.
+OPC UA's step counter show, counted once, here, and streamed as :class:`~station.cell.run.facts.events.Progress`.
 
 The plan's index is no measure of how far a run got: locating the body touches the plan's first,
 farthest and next-farthest points before the rest, and its search touches (issue 37) and the
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from station.cell.run.events import Event, Progress
+from station.cell.run.facts.events import Event, Progress
 
 __all__ = ["RunProgress"]
 

@@ -11,11 +11,11 @@ from html import escape
 
 import numpy as np
 
-from station.ui.report import plots
 from station.ui.report import signoff as so
 from station.ui.report import tables as t
 from station.ui.report.before_basis import before_basis
 from station.ui.report.contents import ReportData
+from station.ui.report.render import plots
 
 _CSS = """
 :root { --ok: #1b7f3b; --bad: #b3261e; --warn: #8a5a00; --line: #c8c8c8; --muted: #555; }

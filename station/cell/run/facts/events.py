@@ -1,7 +1,7 @@
 """Typed events of a run: one stream of run facts (issue 42).
 
 The runner emits them; the CLI, the terminal UI, the OPC UA service and any other subscriber
-(:class:`station.cell.run.stream.RunStream`) read a run's figures from them. The figure events
+(:class:`station.cell.run.facts.stream.RunStream`) read a run's figures from them. The figure events
 (:class:`Identified`, :class:`TableDesigned`, :class:`Uploaded`, :class:`Verified`,
 :class:`RunEnded`) carry the very summary objects the run stores (``summary`` in the run
 database, the ``--json`` object), so no view computes or re-reads a figure another view shows.
@@ -41,7 +41,7 @@ class RunPlanned(Event):
     """A new run, planned and checked before anything moves: the configuration's text, one record
     per planned step (``PlannedStep.to_record``), a simulated cell's seed, where the configuration's
     files lie (``config_source``) and the cell's fingerprint. The run database's writer
-    (:class:`station.cell.run.writer.RunWriter`) creates the run from it; its number is the
+    (:class:`station.cell.run.facts.writer.RunWriter`) creates the run from it; its number is the
     database's, and :class:`RunStarted` carries it."""
 
     config_toml: str
@@ -94,7 +94,7 @@ class StepStarted(Event):
 @dataclass(frozen=True, eq=False)
 class StepMeasured(Event):
     """A planned step's reading, all the run database stores of it: the run database's writer
-    (:class:`station.cell.run.recorder.RunRecorder`, the runner's first subscriber) commits it
+    (:class:`station.cell.run.facts.recorder.RunRecorder`, the runner's first subscriber) commits it
     before any view hears of it and before the next motion, and a failure to store it stops the
     run. Joints [rad | mm], readings [mm], the pose solved (4×4, mm), its residual [µm]; the
     re-centring displacement (6: mm, rad) stored with it, None where the step was not re-centred."""
@@ -134,7 +134,7 @@ class Progress(Event):
     did not hold (a body-locating search touch, a warm-up cycle's reference touch, a step measured
     again in the same attempt); ``done`` never goes back. A run that ends needing fewer steps (an
     upload declined: no verification after it) ends at ``done`` of ``done``. Progress bars show
-    this, never the plan's index (:mod:`station.cell.run.progress`)."""
+    this, never the plan's index (:mod:`station.cell.run.facts.progress`)."""
 
     done: int
     total: int
