@@ -113,7 +113,8 @@ def test_trend_from_the_run_database(history):
     figures = column(table, "RMS after / drift RMS µm")
     assert figures[0] != "—" and figures[1] != "—" and figures[2] == "—"  # run 3: nothing uploaded
     assert column(table, "tolerance µm")[1] != "—" and column(table, "moved parameters")[1] == "none"
-    trend_img = trend_images(Page(html[html.index('<section id="trend">'):]))
+    start = html.index('<section id="trend">')  # the trend section alone (the cell's picture follows it)
+    trend_img = trend_images(Page(html[start:html.index("</section>", start)]))
     assert len(trend_img) == 1 and trend_img[0].startswith("data:image/png;base64,")
     assert "## Trend" in (rep / "report.md").read_text(encoding="utf-8")
     # run 1: the history up to run 1 is run 1 alone, so its report has no trend section
