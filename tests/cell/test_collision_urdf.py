@@ -190,3 +190,62 @@ def test_a_bad_collision_element_is_refused_naming_the_link(tmp_path, bad, said)
     with pytest.raises(ConfigError, match=said) as err:
         urdf_link_geometry(path)
     assert "link 'l2'" in str(err.value) and err.value.exit_code == 2
+
+
+# --- a six-axis URDF through `station plan` ---------------------------------------------------------
+
+#: the PUMA 560 example's upper arm and forearm as cylinders in its exported URDF's link frames
+#: (link_A2: the upper arm 431.8 mm along x, 149.09 mm off along z; link_A3: the forearm along y)
+UPPER_ARM = ('<collision><origin xyz="0.2159 0 0.149" rpy="0 1.5707963267948966 0"/>'
+             '<geometry><cylinder radius="0.06" length="0.4318"/></geometry></collision>')
+FOREARM = ('<collision><origin xyz="0.02032 0.2165 0" rpy="1.5707963267948966 0 0"/>'
+           '<geometry><cylinder radius="0.05" length="0.433"/></geometry></collision>')
+
+
+def _puma_urdf_cell(folder: Path, links: dict[str, str]) -> Path:
+    """The puma560 example's cell with its robot exported to URDF, ``links`` giving link elements' insides."""
+    from station.io.export.model_files import export_model
+    from station.io.robot.files import load_robot
+
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in ("head.toml", "body.csv"):
+        shutil.copy(EXAMPLES / "puma560" / name, folder / name)
+    text = export_model(load_robot(str(EXAMPLES / "puma560" / "puma560.mdh.csv")), "urdf", setup=False).text
+    for link, inside in links.items():
+        assert f'<link name="{link}"/>' in text
+        text = text.replace(f'<link name="{link}"/>', f'<link name="{link}">{inside}</link>')
+    (folder / "puma.urdf").write_text(text, encoding="utf-8")
+    cell = (EXAMPLES / "puma560" / "cell.toml").read_text(encoding="utf-8")
+    (folder / "cell.toml").write_text(cell.replace('model = "puma560.mdh.csv"', 'model = "puma.urdf"'), encoding="utf-8")
+    return folder / "cell.toml"
+
+
+def _plan(capsys, cell: Path) -> tuple[int, str, str]:
+    from station.ui.cli.main import main
+
+    rc = main(["plan", str(cell), "--json"])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def test_station_plan_checks_a_six_axis_urdf_with_its_cylinders(capsys, tmp_path):
+    import json
+
+    cell = _puma_urdf_cell(tmp_path, {"link_A2": UPPER_ARM, "link_A3": FOREARM})
+    shapes, _ = cell_shapes(load_config(cell))
+    assert {s.name for s in shapes.moving if s.kind == "cylinder"} == {
+        "link A2 (link_A2's cylinder)", "link A3 (link_A3's cylinder)"}
+    rc, out, _ = _plan(capsys, cell)
+    assert rc == 0
+    report = json.loads(out)["collision"]
+    assert report["clash"] is None and report["poses"] > 1000
+
+
+def test_station_plan_refuses_a_urdf_whose_mesh_is_missing(capsys, tmp_path):
+    mesh = '<collision><geometry><mesh filename="package://puma_description/meshes/upper_arm.stl"/></geometry></collision>'
+    rc, out, err = _plan(capsys, _puma_urdf_cell(tmp_path, {"link_A2": mesh}))
+    assert rc == 2
+    text = out + err
+    assert "Traceback" not in text
+    assert "link 'link_A2'" in text and "package://puma_description/meshes/upper_arm.stl" in text
+    assert "the mesh file is not found" in text and "delete that <collision> element" in text

@@ -40,8 +40,8 @@ MM_PER_M = 1000.0
 class LinkGeometry:
     """One ``<collision>`` element: ``kind`` "box" (``size`` its edges [mm]), "cylinder" (radius,
     length [mm], along local z), "sphere" (radius [mm]) or "mesh" (``vertices`` (m, 3) [mm] and
-    ``faces`` (k, 3) in its local frame; ``missing``: the reference that was not found, then no
-    vertices); ``local`` (4, 4) [mm] its frame in the station frame ``frame`` (-1: the robot base,
+    ``faces`` (k, 3) in its local frame; ``missing``: where the file was named and as what, when
+    it was not found, then no vertices); ``local`` (4, 4) [mm] its frame in the station frame ``frame`` (-1: the robot base,
     else the index of the transform it rides after); ``link`` the station's name of that link (the
     base's set-up transform, else the joint transform: "R", "A1", …) and ``urdf_link`` the URDF's."""
 
@@ -128,7 +128,7 @@ def _geometry(path: Path, where: str, g: ET.Element, urdf_link: str, link: str, 
     scale = _numbers(where, "mesh scale", g.get("scale", "1 1 1"), 3)
     file = resolve_mesh(path, ref)
     if file is None:
-        return LinkGeometry(urdf_link, link, frame, "mesh", (), local, missing=ref)
+        return LinkGeometry(urdf_link, link, frame, "mesh", (), local, missing=f"{where}: <mesh filename=\"{ref}\">")
     vertices, faces = _read_mesh(where, file)
     return LinkGeometry(urdf_link, link, frame, "mesh", (), local, vertices * np.array(scale) * MM_PER_M, faces)
 
