@@ -152,6 +152,18 @@ def test_a_mesh_from_a_package_beside_the_urdf_is_used(tmp_path):
     assert report.clash is None
 
 
+def test_a_dae_mesh_by_a_path_relative_to_the_urdf_is_read_in_metres(tmp_path):
+    import trimesh
+
+    (tmp_path / "meshes").mkdir()
+    trimesh.creation.box(extents=(0.3, 0.2, 0.1)).export(tmp_path / "meshes" / "l2.dae")  # in metres, as URDF
+    path = tmp_path / "arm.urdf"
+    path.write_text(URDF.format(link2='<geometry><mesh filename="meshes/l2.dae"/></geometry>'), encoding="utf-8")
+    [geo] = [g for g in urdf_link_geometry(path) if g.kind == "mesh"]
+    assert geo.missing is None and len(geo.faces) == 12
+    assert np.ptp(geo.vertices, axis=0) == pytest.approx([300.0, 200.0, 100.0])
+
+
 def test_a_missing_mesh_is_refused_with_its_exit_code_and_hint(tmp_path):
     cfg = load_config(_cell(tmp_path / "urdf", MESH))  # the import goes on: only the check needs the mesh
     [geo] = [g for g in cfg.robot_collision.geometry if g.kind == "mesh"]
