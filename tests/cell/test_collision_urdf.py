@@ -117,6 +117,13 @@ def test_a_fat_cylinder_collides_where_the_capsule_passes_and_moves_with_its_joi
     assert {clash.a, clash.b} == {"link A2 (l2's cylinder)", "obstacle 'lid'"}
     assert clash.clearance_mm == pytest.approx(-50.0, abs=1.0)  # 150 mm radius, face 100 mm above the axis
     assert _at(cfg, [0.0, -90.0]) is None  # link 2 turned away with its joint: clear
+    # the path from one side to the other sweeps the cylinder through the lid: found between the ends
+    # (the path's step bounds the motion of the cylinder's far rim, 150 mm off its link's line)
+    assert _at(cfg, [0.0, 90.0]) is None
+    swing = check_path(cfg, [(np.radians([0.0, -90.0]), "step 1: approach", -1),
+                             (np.radians([0.0, 90.0]), "step 2: approach", -1)])
+    assert swing.clash is not None and "on the move from step 1: approach" in swing.clash.where
+    assert "link A2 (l2's cylinder)" in (swing.clash.a, swing.clash.b)
 
 
 def _stl(path: Path) -> None:
