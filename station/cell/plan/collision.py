@@ -47,6 +47,7 @@ from station.cell.plan.assembly import Plan
 from station.core.kinematics.forward import chain_frames
 from station.core.kinematics.transforms import invert, pose_to_matrix
 from station.errors import ConfigError
+from station.io.robot.urdf_collision import LinkGeometry
 
 __all__ = ["Shape", "CellShapes", "Clash", "CollisionReport", "cell_shapes", "default_radii", "check_path",
            "check_plan", "plan_path", "moves_clear", "poses_clear", "fcl_available", "TOUCH_MARGIN_MM", "head_shapes",
@@ -170,7 +171,7 @@ def _link_shapes(cfg: CellConfig) -> tuple[list[Shape], list[str]]:
     return [s for g, own in urdf.items() for s in (own or [c for c in out if c.group == g])], names
 
 
-def _urdf_shape(g) -> Shape:
+def _urdf_shape(g: LinkGeometry) -> Shape:
     """A URDF ``<collision>`` (:class:`station.io.robot.urdf_collision.LinkGeometry`) as a shape; a
     mesh whose file was not found is refused (the check never leaves a link out)."""
     name = f"link {g.link} ({g.urdf_link}'s {g.kind})"
@@ -183,6 +184,7 @@ def _urdf_shape(g) -> Shape:
                           f"the folder PKG itself; a plain path: relative to the URDF), or delete that <collision> "
                           f"element: a link without one gets the station's capsule (docs/collision.md)")
     v, faces = g.vertices, g.faces
+    assert v is not None and faces is not None  # a mesh that was found has both
     centre = (v.min(axis=0) + v.max(axis=0)) / 2
     v = v - centre
     local = g.local.copy()

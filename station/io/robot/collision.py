@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from station.errors import ConfigError
+from station.io.robot.urdf_collision import LinkGeometry
 
 __all__ = ["CollisionSpec", "read_collision"]
 
@@ -29,7 +30,7 @@ class CollisionSpec:
 
     radius_mm: tuple[float, ...] | None = None
     allowed_pairs: tuple[tuple[str, str], ...] = ()
-    geometry: tuple = ()
+    geometry: tuple[LinkGeometry, ...] = ()
 
 
 def read_collision(name_or_path: str | Path, link_names: tuple[str, ...]) -> CollisionSpec:

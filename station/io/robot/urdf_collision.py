@@ -29,6 +29,7 @@ import numpy as np
 from station.core.kinematics.forward import chain_frames
 from station.core.kinematics.transforms import invert, pose_to_matrix
 from station.errors import ConfigError
+from station.io.robot.formats import _urdf_chain, _urdf_link, robot_from_urdf, urdf_joint_origin, urdf_root
 
 __all__ = ["LinkGeometry", "urdf_link_geometry", "resolve_mesh"]
 
@@ -58,8 +59,6 @@ class LinkGeometry:
 
 def urdf_link_geometry(path: Path) -> tuple[LinkGeometry, ...]:
     """Every ``<collision>`` of the links along the URDF's chain (the one the station imports)."""
-    from station.io.robot.formats import _urdf_chain, robot_from_urdf, urdf_joint_origin, urdf_root
-
     model = robot_from_urdf(path)
     root = urdf_root(path)
     base, joints = _urdf_chain(path, root, None, None)
@@ -78,7 +77,7 @@ def urdf_link_geometry(path: Path) -> tuple[LinkGeometry, ...]:
         j = joints[link]
         world = world @ urdf_joint_origin(path, j)
         k += j.get("type") != "fixed"
-        link = str(j.find("child").get("link"))  # type: ignore[union-attr]  # checked by _urdf_chain
+        link = _urdf_link(path, j, "child")
     return tuple(out)
 
 
