@@ -5,7 +5,9 @@ Shapes, all in the robot's base frame (docs/collision.md):
 
 * **the robot's links**: one capsule per link along its transform's offset, split in two where the
   offset has a part along the joint axis and one across it (a DH link's d, then its a), with the
-  radius the robot file's ``[collision] radius_mm`` states, else :func:`default_radii`;
+  radius the robot file's ``[collision] radius_mm`` states, else :func:`default_radii`; a URDF link
+  with ``<collision>`` elements gets those instead (boxes, cylinders, spheres, meshes as fcl's BVH
+  models; :mod:`station.io.robot.urdf_collision`), a mesh file not found is refused;
 * **the probe head**: a capsule per probe from its tip back along its axis by its stroke plus the
   tip's diameter (the probe's body), and the mount from the flange to the head frame;
 * **the body**: every cube (from its measuring points' corner frames and ``[body] cube_edge_mm``) and
@@ -45,6 +47,7 @@ from station.cell.plan.assembly import Plan
 from station.core.kinematics.forward import chain_frames
 from station.core.kinematics.transforms import invert, pose_to_matrix
 from station.errors import ConfigError
+from station.io.robot.urdf_collision import LinkGeometry
 
 __all__ = ["Shape", "CellShapes", "Clash", "CollisionReport", "cell_shapes", "default_radii", "check_path",
            "check_plan", "plan_path", "moves_clear", "poses_clear", "fcl_available", "TOUCH_MARGIN_MM", "head_shapes",
@@ -86,9 +89,11 @@ def _fcl():
 @dataclass(frozen=True)
 class Shape:
     """One collision shape: ``kind`` "capsule" (size = radius, length; axis along local z), "box"
-    (edges), "cylinder" (radius, height) or "sphere" (radius); ``local`` (4, 4) its centre in the frame
-    it rides on: ``frame`` (an index into the chain's frames; -1: the robot base, fixed); ``group`` what
-    it belongs to ("link:A2", "head", "cube:3", "obstacle:column"); ``name`` for people."""
+    (edges), "cylinder" (radius, height), "sphere" (radius) or "mesh" (``mesh``: vertices (m, 3) [mm]
+    and triangles (k, 3) about its centre; size = the radius and length of a cylinder along local z
+    that holds it); ``local`` (4, 4) its centre in the frame it rides on: ``frame`` (an index into the
+    chain's frames; -1: the robot base, fixed); ``group`` what it belongs to ("link:A2", "head",
+    "cube:3", "obstacle:column"); ``name`` for people."""
 
     name: str
     kind: str
@@ -96,6 +101,7 @@ class Shape:
     local: np.ndarray
     frame: int
     group: str
+    mesh: tuple[np.ndarray, np.ndarray] | None = field(default=None, compare=False, repr=False)
 
 
 @dataclass(frozen=True)
@@ -155,7 +161,46 @@ def _link_shapes(cfg: CellConfig) -> tuple[list[Shape], list[str]]:
         out.append(_segment(f"link {names[link]} (along its axis)", np.zeros(3), knee, radii[link], frame, group))
         out.append(_segment(f"link {names[link]}", knee, off, radii[link], frame, group))
         link += 1
-    return [s for s in out if s.kind == "capsule"], names
+    out = [s for s in out if s.kind == "capsule"]
+    geometry = spec.geometry if spec is not None else ()
+    if not geometry:
+        return out, names
+    urdf = {g: [_urdf_shape(x) for x in geometry if x.link == g[len("link:"):]] for g in dict.fromkeys(
+        [f"link:{n}" for n in names])}
+    # a link with <collision> elements: those instead of its capsules, in the chain's order
+    return [s for g, own in urdf.items() for s in (own or [c for c in out if c.group == g])], names
+
+
+def _urdf_shape(g: LinkGeometry) -> Shape:
+    """A URDF ``<collision>`` (:class:`station.io.robot.urdf_collision.LinkGeometry`) as a shape; a
+    mesh whose file was not found is refused (the check never leaves a link out)."""
+    name = f"link {g.link} ({g.urdf_link}'s {g.kind})"
+    if g.kind != "mesh":
+        return Shape(name, g.kind, g.size, g.local, g.frame, f"link:{g.link}")
+    if g.missing is not None:
+        raise ConfigError(f"{g.missing}: the mesh file is not found, so link {g.urdf_link!r} cannot be checked for "
+                          f"collisions (the check does not leave it out). Put the file where the URDF names it "
+                          f"(package://PKG/REL: REL in a folder PKG beside the URDF or in a folder above it, or in "
+                          f"the folder PKG itself; a plain path: relative to the URDF), or delete that <collision> "
+                          f"element: a link without one gets the station's capsule (docs/collision.md)")
+    v, faces = g.vertices, g.faces
+    assert v is not None and faces is not None  # a mesh that was found has both
+    centre = (v.min(axis=0) + v.max(axis=0)) / 2
+    v = v - centre
+    local = g.local.copy()
+    local[:3, 3] = g.local[:3, :3] @ centre + g.local[:3, 3]
+    size = (float(np.max(np.hypot(v[:, 0], v[:, 1]))), 2 * float(np.max(np.abs(v[:, 2]))))
+    return Shape(name, "mesh", size, local, g.frame, f"link:{g.link}", (v, faces))
+
+
+def bounding_capsule(s: Shape) -> tuple[float, float]:
+    """Half the length and the radius of a capsule along the shape's local z that holds it [mm] (the
+    screen's lower bounds and the path's levers take every moving shape as that capsule)."""
+    if s.kind in ("capsule", "cylinder", "mesh"):
+        return s.size[1] / 2, s.size[0]
+    if s.kind == "box":
+        return s.size[2] / 2, float(np.hypot(s.size[0] / 2, s.size[1] / 2))
+    return 0.0, s.size[0]
 
 
 def head_shapes(cfg: CellConfig) -> list[Shape]:
@@ -243,6 +288,11 @@ def cell_shapes(cfg: CellConfig) -> tuple[CellShapes, tuple[str, ...]]:
     point's cube group."""
     links, names = _link_shapes(cfg)
     head = head_shapes(cfg)
+    last = f"link:{names[-1]}"
+    if any(s.group == last for s in links):
+        # the mount stands in for the last link's reach; where the URDF gives that link's own shapes,
+        # it is part of that link (its start, on the last joint's axis, lies in the link before)
+        head = [dataclasses.replace(s, group=last) if s.name == "head mount" else s for s in head]
     body, point_cube = _body_shapes(cfg)
     base_from_body = invert(pose_to_matrix(cfg.model.nominal[:6]))
     fixed = [Shape(s.name, s.kind, s.size, base_from_body @ s.local if s.frame == -2 else s.local, -1, s.group)
@@ -266,8 +316,10 @@ def _joined_over_a_short_link(links: list[Shape], chain: list[str]) -> set[froze
     offset between its base and upper arm, each 92 mm thick by default, always overlapped; a KR 6's
     80 mm flange link between its forearm and the head's mount). As a zero-length link joins its
     neighbours, so does a short one."""
-    length = {g: sum(s.size[1] for s in links if s.group == g and s.kind == "capsule") for g in chain}
-    radius = {g: max((s.size[0] for s in links if s.group == g), default=0.0) for g in chain}
+    # only a link of capsules: a URDF link's own shapes (boxes, meshes) do not meet by construction
+    length = {g: sum(s.size[1] for s in links if s.group == g and s.kind == "capsule") for g in chain
+              if all(s.kind in ("capsule", "sphere") for s in links if s.group == g)}
+    radius = {g: max((bounding_capsule(s)[1] for s in links if s.group == g), default=0.0) for g in chain}
     return {frozenset((a, c)) for a, b, c in zip(chain, chain[1:], chain[2:])
             if b in length and a in radius and c in radius and length[b] <= radius[a] + radius[c]}
 
@@ -282,7 +334,10 @@ def _levers(cfg: CellConfig, moving: list[Shape]) -> np.ndarray:
     seg = np.linalg.norm(p[:, :3], axis=1)
     reach = max((float(np.linalg.norm(s.local[:3, 3])) + s.size[-1] / 2 for s in moving if s.group == "head"),
                 default=0.0)
-    reach += max((s.size[0] for s in moving), default=0.0)
+    reach += max((s.size[0] for s in moving if s.kind in ("capsule", "sphere")), default=0.0)
+    # a URDF link's shape may stand off its link's line: its centre's distance plus its bound
+    reach = max([reach, *(float(np.linalg.norm(s.local[:3, 3])) + sum(bounding_capsule(s)) for s in moving
+                          if s.kind in ("box", "cylinder", "mesh"))])
     out, j = [], 0
     for t, spec in enumerate(tr):
         if spec.joint is None:
@@ -300,6 +355,13 @@ def _grown(fcl, s: Shape, grow: float):
         return fcl.Sphere(r[0] + grow)
     if s.kind == "cylinder":
         return fcl.Cylinder(r[0] + grow, r[1] + 2 * grow)
+    if s.kind == "mesh" and s.mesh is not None:  # a BVH of its triangles (cannot be grown: grow is 0)
+        m = fcl.BVHModel()
+        v, faces = s.mesh
+        m.beginModel(len(v), len(faces))
+        m.addSubModel(np.ascontiguousarray(v, dtype=float), np.ascontiguousarray(faces, dtype=np.int32))
+        m.endModel()
+        return m
     return fcl.Box(*(v + 2 * grow for v in r))
 
 
@@ -321,8 +383,7 @@ class _Checker:
                            dtype=int).reshape(-1, 2)
         self.mf = np.array([(i, j) for i in range(len(mv)) for j in range(len(fx)) if checked(mv[i], fx[j])],
                            dtype=int).reshape(-1, 2)
-        self.half_len = np.array([s.size[1] / 2 if s.kind == "capsule" else 0.0 for s in mv])
-        self.radius = np.array([s.size[0] for s in mv])
+        self.half_len, self.radius = np.array([bounding_capsule(s) for s in mv]).reshape(-1, 2).T
         # a fixed shape's half extents in its own frame (a cylinder's bounding box: still a lower bound)
         self.half_box = np.array([np.array(s.size) / 2 if s.kind == "box" else
                                   np.array([s.size[0], s.size[0], s.size[1] / 2]) for s in fx]).reshape(-1, 3)

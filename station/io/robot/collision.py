@@ -1,9 +1,10 @@
 """The ``[collision]`` table of a TOML robot file (issue 40; docs/robot-file.md "Collision shapes"):
 the radius of every link's capsule and the pairs of links allowed to touch.
 
-A DH, MDH or URDF file has no such table: its links get the default radii
-(:func:`station.cell.plan.collision.default_radii`). The table's keys and types are checked with the
-rest of the file (:mod:`station.io.robot.schema`); here its values are checked against the robot.
+A DH or MDH file has no such table: its links get the default radii
+(:func:`station.cell.plan.collision.default_radii`). A URDF's links get their ``<collision>`` shapes
+(:mod:`station.io.robot.urdf_collision`), a link without one the default capsule. The table's keys
+and types are checked with the rest of the file (:mod:`station.io.robot.schema`); here its values are checked against the robot.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from station.errors import ConfigError
+from station.io.robot.urdf_collision import LinkGeometry
 
 __all__ = ["CollisionSpec", "read_collision"]
 
@@ -22,16 +24,23 @@ __all__ = ["CollisionSpec", "read_collision"]
 class CollisionSpec:
     """``radius_mm``: one radius per link (the base, then one per joint transform), or None for the
     defaults; ``allowed_pairs``: pairs of link names (the set-up transform's name for the base, a
-    joint transform's for the link it moves) never checked against each other."""
+    joint transform's for the link it moves) never checked against each other; ``geometry``: a URDF's
+    ``<collision>`` shapes (:class:`station.io.robot.urdf_collision.LinkGeometry`), used instead of
+    those links' capsules."""
 
     radius_mm: tuple[float, ...] | None = None
     allowed_pairs: tuple[tuple[str, str], ...] = ()
+    geometry: tuple[LinkGeometry, ...] = ()
 
 
 def read_collision(name_or_path: str | Path, link_names: tuple[str, ...]) -> CollisionSpec:
     """The ``[collision]`` table of a TOML robot file, checked against its links ``link_names``
-    (base first); an empty spec for other formats, the built-in names or a file without the table."""
+    (base first); a URDF's ``<collision>`` shapes; an empty spec for other formats, the built-in names or a file without the table."""
     path = Path(str(name_or_path))
+    if path.suffix == ".urdf" and path.is_file():
+        from station.io.robot.urdf_collision import urdf_link_geometry
+
+        return CollisionSpec(geometry=urdf_link_geometry(path))
     if path.suffix != ".toml" or not path.is_file():
         return CollisionSpec()
     with path.open("rb") as f:
