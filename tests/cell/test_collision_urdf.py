@@ -268,3 +268,27 @@ def test_station_plan_refuses_a_urdf_whose_mesh_is_missing(capsys, tmp_path):
     assert "Traceback" not in text
     assert "link 'link_A2'" in text and "package://puma_description/meshes/upper_arm.stl" in text
     assert "the mesh file is not found" in text and "delete that <collision> element" in text
+
+
+def test_station_plan_draws_a_urdf_whose_arms_are_meshes(capsys, tmp_path):
+    """The picture of the cell (issue 40) draws a mesh link and measures its least clearance with it
+    (fcl's BVH of the triangles, as the check uses), not only the primitives."""
+    import json
+
+    import trimesh
+
+    from station.ui.cli.main import main
+
+    meshes = tmp_path / "cell" / "puma_description" / "meshes"
+    meshes.mkdir(parents=True)
+    trimesh.creation.cylinder(radius=0.06, height=0.4318, sections=32).export(meshes / "upper_arm.stl")
+    upper = UPPER_ARM.replace('<cylinder radius="0.06" length="0.4318"/>',
+                              '<mesh filename="package://puma_description/meshes/upper_arm.stl"/>')
+    cell = _puma_urdf_cell(tmp_path / "cell", {"link_A2": upper, "link_A3": FOREARM})
+    assert any(s.kind == "mesh" for s in cell_shapes(load_config(cell))[0].moving)
+    out_dir = tmp_path / "out"
+    rc = main(["plan", str(cell), "--out", str(out_dir), "--json"])
+    out, err = capsys.readouterr()
+    assert rc == 0, err[-2000:]
+    assert json.loads(out)["picture"]["svg"] == str(out_dir / "cell.svg")
+    assert (out_dir / "cell.svg").stat().st_size > 10_000

@@ -39,6 +39,7 @@ import re
 import time
 import weakref
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -347,7 +348,8 @@ def _levers(cfg: CellConfig, moving: list[Shape]) -> np.ndarray:
     return np.array(out)
 
 
-def _grown(fcl, s: Shape, grow: float):
+def fcl_shape(fcl: Any, s: Shape, grow: float = 0.0) -> Any:
+    """``s`` as an fcl geometry, ``grow`` mm fatter (a mesh cannot be grown: only with 0)."""
     r = s.size
     if s.kind == "capsule":
         return fcl.Capsule(r[0] + grow, r[1])
@@ -392,7 +394,7 @@ class _Checker:
         self.ball = self.half_len + self.radius
         self.fixed_centre = np.array([s.local[:3, 3] for s in fx]).reshape(-1, 3)
         self.fixed_ball = np.linalg.norm(self.half_box, axis=1)
-        self.objs = {id(s): fcl.CollisionObject(_grown(fcl, s, 0.0), _tf(fcl, s.local)) for s in (*mv, *fx)}
+        self.objs = {id(s): fcl.CollisionObject(fcl_shape(fcl, s), _tf(fcl, s.local)) for s in (*mv, *fx)}
 
     def placed(self, frames: np.ndarray) -> np.ndarray:
         """(n, moving, 4, 4): every moving shape's pose for each of ``frames`` (n, nt, 4, 4)."""

@@ -37,6 +37,7 @@ from station.cell.plan.collision import (
     Shape,
     cell_shapes,
     check_path,
+    fcl_shape,
     plan_path,
 )
 from station.cell.plan.steps import PlannedStep, StepKind
@@ -156,7 +157,7 @@ def _closest(cfg: CellConfig, shapes: CellShapes, poses: Sequence[tuple[np.ndarr
     t = np.linspace(0.0, 1.0, CLOSEST_SAMPLES) if on_move else np.zeros(1)
     Q = poses[i][0] + t[:, None] * ((poses[i + 1][0] - poses[i][0]) if on_move else 0.0)
     F = chain_frames(cfg.model, Q, setup=False)
-    objs = [fcl.CollisionObject(_fcl_shape(fcl, s), fcl.Transform()) for s in pair]
+    objs = [fcl.CollisionObject(fcl_shape(fcl, s), fcl.Transform()) for s in pair]
     best: tuple[float, int, np.ndarray] | None = None
     for k in range(len(Q)):
         for o, s in zip(objs, pair):
@@ -168,17 +169,6 @@ def _closest(cfg: CellConfig, shapes: CellShapes, poses: Sequence[tuple[np.ndarr
             best = (d, k, np.array(res.nearest_points, dtype=float))
     assert best is not None
     return Q[best[1]], best[2]
-
-
-def _fcl_shape(fcl: Any, s: Shape) -> Any:
-    r = s.size
-    if s.kind == "capsule":
-        return fcl.Capsule(r[0], r[1])
-    if s.kind == "sphere":
-        return fcl.Sphere(r[0])
-    if s.kind == "cylinder":
-        return fcl.Cylinder(r[0], r[1])
-    return fcl.Box(*r)
 
 
 def _family_name(cfg: CellConfig, code: int) -> str:
