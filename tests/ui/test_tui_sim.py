@@ -4,9 +4,8 @@ resume, abort, resume from the list of unfinished runs, upload confirmation and 
 from __future__ import annotations
 
 import pytest
-from textual.widgets import DataTable
-
 from test_process_io import short_cell  # noqa: F401 - the built-in cell, one visit and one cycle
+from textual.widgets import DataTable
 
 from station.cell.session.calibrate import CellRequest
 from station.errors import Outcome
