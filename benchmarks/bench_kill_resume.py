@@ -29,6 +29,7 @@ import numpy as np
 
 from simulators.cell import SimulatedCell
 from simulators.reference_cell import cell_config_text
+from station.cell.records.reading.run_list import committed_steps
 from station.cell.records.rundb import RunDB
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -38,17 +39,6 @@ ENV = dict(os.environ, PYTHONPATH=str(ROOT))
 def _station(*args: object) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "station.ui.cli.main", *map(str, args)], cwd=ROOT, env=ENV,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-
-
-def _committed(db_path: Path) -> list[int]:
-    if not db_path.exists():
-        return []
-    try:
-        with RunDB(db_path) as db:
-            run = db.latest_run()
-            return sorted(db.completed_steps(run.id)) if run is not None else []
-    except Exception:  # noqa: BLE001 - the station is still creating it
-        return []
 
 
 def _finish(cfg: Path, db: Path, *extra: object) -> tuple[np.ndarray, int, bool]:
@@ -84,13 +74,13 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{n_steps} steps; kill  committed  seconds")
             for k, point in enumerate(points, 1):
                 t0 = time.perf_counter()
-                p = _station("calibrate", cfg, "--db", db, *(["--resume", 1] if _committed(db) else []))
+                p = _station("calibrate", cfg, "--db", db, *(["--resume", 1] if committed_steps(db) else []))
                 target = max(len(seen) + 1, int(point))
-                while p.poll() is None and len(_committed(db)) < target:
+                while p.poll() is None and len(committed_steps(db)) < target:
                     time.sleep(0.02)
                 p.send_signal(signal.SIGKILL)
                 p.wait()
-                done = _committed(db)
+                done = committed_steps(db)
                 kept &= set(seen) <= set(done)
                 seen = done
                 print(f"{k:14d}  {len(done):9d}  {time.perf_counter() - t0:7.1f}")

@@ -25,6 +25,7 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+from station.cell.records.reading.run_list import committed_steps
 from station.cell.records.rundb import RunDB
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -32,14 +33,7 @@ ABORTED = 6
 
 
 def _committed(db: Path) -> int:
-    if not db.exists():
-        return 0
-    try:
-        with RunDB(db) as rdb:
-            runs = rdb.runs()
-            return len(rdb.completed_steps(runs[0].id)) if runs else 0
-    except Exception:  # noqa: BLE001 - the station is still creating it
-        return 0
+    return len(committed_steps(db))
 
 
 def _handlers_installed(pid: int) -> bool:

@@ -18,6 +18,7 @@ import pytest
 
 from simulators.cell import SimulatedCell
 from simulators.reference_cell import cell_config_text as simulated_config_text
+from station.cell.records.reading.run_list import committed_steps
 from station.cell.records.rundb import RunDB
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -72,18 +73,6 @@ def reference(tmp_path):
         sim.stop()
 
 
-def _committed(db_path: Path) -> list[int]:
-    """The steps of run 1 committed so far ([] while the run is not created yet)."""
-    if not db_path.exists():
-        return []
-    try:
-        with RunDB(db_path) as db:
-            run = db.latest_run()
-            return sorted(db.completed_steps(run.id)) if run is not None else []
-    except Exception:  # noqa: BLE001 - the station is still creating it
-        return []
-
-
 #: where the kills land, as fractions of the plan's steps committed: early in the measuring, past
 #: the identification poses, and among the last verification poses (after the upload). A kill on a
 #: wall-clock timer (0.5-1.5 s after start, as this test had) never reached the run: every process
@@ -101,14 +90,14 @@ def test_kills_mid_run_and_resumes_reproduce_the_uninterrupted_run(tmp_path, ref
         cfg = sim.config(tmp_path / "cell.toml", SEED)
         seen: list[int] = []
         for fraction in KILL_AT:
-            p = _station("calibrate", cfg, "--db", db_path, *(["--resume", 1] if _committed(db_path) else []))
+            p = _station("calibrate", cfg, "--db", db_path, *(["--resume", 1] if committed_steps(db_path) else []))
             target = max(len(seen) + 1, int(fraction * n_steps))
-            while p.poll() is None and len(_committed(db_path)) < target:
+            while p.poll() is None and len(committed_steps(db_path)) < target:
                 time.sleep(0.02)  # synced on the run database, never on a clock
             assert p.poll() is None, f"the run ended before {target} committed steps: {p.communicate()[1][-2000:]}"
             p.send_signal(signal.SIGKILL)
             p.wait()
-            done = _committed(db_path)
+            done = committed_steps(db_path)
             assert set(seen) <= set(done) and len(done) >= target  # what was committed stays committed
             seen = done
         p = _station("calibrate", cfg, "--db", db_path, "--resume", 1)

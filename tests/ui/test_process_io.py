@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from station.cell.records.reading.run_list import committed_steps
 from station.cell.records.rundb import RunDB
 from station.core.kinematics.poses import spread_joints
 from station.core.kinematics.transforms import matrix_to_pose
@@ -184,15 +185,8 @@ def test_every_command_into_a_closed_pipe_exits_with_its_outcome(files, args):
 # --- stop signals --------------------------------------------------------------------------------
 
 def _committed_steps(db: Path) -> int:
-    """Steps of the (first) run committed to the database so far; 0 while it is being created."""
-    if not db.exists():
-        return 0
-    try:
-        with RunDB(db) as rdb:
-            runs = rdb.runs()
-            return len(rdb.completed_steps(runs[0].id)) if runs else 0
-    except Exception:  # noqa: BLE001 - the station is still creating it
-        return 0
+    """Steps of the run committed to the database so far; 0 while it is being created."""
+    return len(committed_steps(db))
 
 
 def _wait_for_run(db: Path, steps: int = 1, proc: subprocess.Popen | None = None) -> None:

@@ -4,12 +4,14 @@ recheck``) stand beside the calibrations with their drift figures: the trend of 
 
 from __future__ import annotations
 
+import sqlite3
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from station.cell.records.record_checks import checked
+from station.cell.records.run_records import RunDatabaseError
 from station.cell.records.rundb import RunDB
 from station.cell.records.summary import RunSummary
 
@@ -93,3 +95,18 @@ def _recheck_figures(db: RunDB, run_id: int, plan: tuple) -> dict[str, Any]:
     return {"kind": "recheck", "baseline": base.get("run_id"), "drift_rms_um": res.get("rms_um"),
             "drift_max_um": res.get("max_um"), "drift_tolerance_um": tol.get("position_um"),
             "moved": tuple(res.get("moved", ()))}
+
+
+def committed_steps(db_path: str | Path, run_id: int | None = None) -> list[int]:
+    """The steps of run ``run_id`` (None: the latest) committed so far, in order: what a script
+    watching a station at work reads. [] while the database or the run is still being created (the
+    station writes both in its first seconds; a half-made file is read again later, not refused)."""
+    path = Path(db_path)
+    if not path.exists():
+        return []
+    try:
+        with RunDB(path) as db:
+            run = db.latest_run() if run_id is None else db.run(run_id)
+            return sorted(db.completed_steps(run.id)) if run is not None else []
+    except (RunDatabaseError, sqlite3.Error):  # created right now: its schema or run row not yet written
+        return []
