@@ -189,6 +189,17 @@ async def wait_until(pilot, cond, what: str, rounds: int = 500) -> None:
     raise AssertionError(f"timed out waiting for: {what}")
 
 
+async def paused_after(pilot, session: FakeSession, rows: int) -> None:
+    """Start the run, let ``rows`` steps through, pause it and wait until the UI says paused."""
+    app = pilot.app
+    await pilot.press("s")
+    session.open(rows)
+    await wait_until(pilot, lambda: app.query_one("#measurements").row_count == rows, f"{rows} rows")
+    await pilot.press("p")
+    session.open()
+    await wait_until(pilot, lambda: app.state == "paused", "paused")
+
+
 def frozen() -> float:
     return 0.0
 

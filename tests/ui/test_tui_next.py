@@ -7,7 +7,7 @@ CRC, and the results of a run picked from the database in a new session."""
 from __future__ import annotations
 
 import pytest
-from test_tui_features import KEEP, PROPOSAL, RUNS, SUMMARY, FakeSession, wait_until
+from test_tui_features import KEEP, PROPOSAL, RUNS, SUMMARY, FakeSession, paused_after, wait_until
 from test_tui_signoff import CTX, REPORT, app_for, screen_lines, settled
 from textual.content import Content
 
@@ -173,12 +173,7 @@ async def test_after_a_continue_the_phase_strip_keeps_its_ticks_and_the_title_st
     app = app_for(session)
     async with app.run_test(size=SIZE) as pilot:
         title = app.title
-        await pilot.press("s")
-        session.open(3)
-        await wait_until(pilot, lambda: app.query_one("#measurements").row_count == 3, "3 rows")
-        await pilot.press("p")
-        session.open()
-        await wait_until(pilot, lambda: app.state == "paused", "paused")
+        await paused_after(pilot, session, 3)
         await wait_until(pilot, lambda: "p Resume" in screen_lines(app)[-1], "the footer's p Resume")
         assert "p Pause" not in screen_lines(app)[-1]
         await pilot.press("a")

@@ -9,7 +9,7 @@ import threading
 from pathlib import Path
 
 import pytest
-from test_tui_features import wait_until
+from test_tui_features import paused_after, wait_until
 
 from station.cell.config.cell_config import load_config
 from station.cell.plan.collision import check_plan
@@ -138,13 +138,7 @@ def test_snapshot_running_with_the_next_moves_clearance(snap_compare):
     session = WithClearance()
 
     async def before(pilot):
-        app = pilot.app
-        await pilot.press("s")
-        session.open(3)
-        await wait_until(pilot, lambda: app.query_one("#measurements").row_count == 3, "3 rows")
-        await pilot.press("p")
-        session.open()
-        await wait_until(pilot, lambda: app.state == "paused", "paused")
+        await paused_after(pilot, session, 3)
         await at_rest(pilot)
 
     app = StationApp(session, title="SR 800 — snapshot", clock=frozen, list_runs=lambda: RUNS,

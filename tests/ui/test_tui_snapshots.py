@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from test_tui_features import RUNS, FakeSession, frozen, report_data, wait_until
+from test_tui_features import RUNS, FakeSession, frozen, paused_after, report_data, wait_until
 
 from station.ui.tui.app import StationApp
 from station.ui.tui.result_panel import CellContext
@@ -35,13 +35,7 @@ def test_paused_with_a_rejected_reading(snap_compare):
     session = FakeSession()
 
     async def before(pilot):
-        app = pilot.app
-        await pilot.press("s")
-        session.open(4)
-        await wait_until(pilot, lambda: app.query_one("#measurements").row_count == 4, "4 rows")
-        await pilot.press("p")
-        session.open()
-        await wait_until(pilot, lambda: app.state == "paused", "paused")
+        await paused_after(pilot, session, 4)
         await at_rest(pilot)
 
     app = app_for(session)
