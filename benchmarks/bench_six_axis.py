@@ -16,7 +16,7 @@ where the file gives none, at :data:`ASSUMED_SPEED_DEG_S` per joint (a yardstick
 by, not a duration), plus ``[plan] settle_s`` per measurement.
 
     .venv/bin/python benchmarks/bench_six_axis.py [--robot irb2600 | CELL.toml] [--seeds N | --seed-list 1 2 3]
-    .venv/bin/python benchmarks/bench_six_axis.py --terms [--seeds N] [--poses 200]
+    .venv/bin/python benchmarks/bench_six_axis.py --terms [--seeds N] [--poses 200: random poses, not the design]
 """
 
 from __future__ import annotations
@@ -114,34 +114,50 @@ def plan_figures(robot: str) -> dict:
             "design": None if p.design is None else p.design.describe()}
 
 
-def terms_main(seeds: list[int], poses: int) -> int:
-    """``--terms``: per seed, geometric and auto after/oracle on the arm with joint errors (issue 30)."""
+def terms_main(seeds: list[int], poses: int | None) -> int:
+    """``--terms``: per seed, geometric and auto after/oracle on the arm with joint errors (issues 30,
+    38), on the identification poses the station's design takes (or ``poses`` random ones)."""
     import sys
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    from benchmarks._six_axis_terms import rehearse
+    from benchmarks._six_axis_terms import N_CANDIDATES, design_poses, rehearse
+    from simulators.six_axis_cell import six_axis_truth
 
-    print(f"six-axis arm with compliance and cyclic joint errors (simulators/joint_errors.py), {poses} pose "
-          f"measurements (15 µm, 15″), 200 held-out poses; model-level rehearsal")
-    print(f"{'seed':>4}  {'geometric µm':>12}  {'auto µm':>8}  {'oracle µm':>9}  {'geo/orc':>7}  {'auto/orc':>8}  "
-          f"{'struct/orc':>10}  kept")
-    ratios, floors = [], []
+    how = (f"{poses} random poses" if poses else f"the station's I-optimal design from {N_CANDIDATES} random "
+           f"candidates (until the predicted σ is ¼ of the measurement σ)")
+    print(f"six-axis arm with compliance and cyclic joint errors (simulators/joint_errors.py), pose measurements "
+          f"(15 µm, 15″) at {how}, 200 held-out poses; model-level rehearsal")
+    print(f"{'seed':>4}  {'poses':>5}  {'design σ':>8}  {'geometric µm':>12}  {'auto µm':>8}  {'oracle µm':>9}  "
+          f"{'geo/orc':>7}  {'auto/orc':>8}  {'struct/orc':>10}  {'est µm':>6}  {'pred σ':>6}  kept")
+    ratios, floors, est, pred, designs, n_poses = [], [], [], [], {}, []
     for seed in seeds:
-        r = rehearse(seed, n_ident=poses)
+        if not poses:
+            designs[seed] = design_poses(six_axis_truth(seed).model,
+                                         np.random.default_rng(np.random.SeedSequence([seed, 3031])))
+        r = rehearse(seed, n_ident=poses or None, design=designs.get(seed))
         ratios.append(r["auto_vs_oracle"])
         floors.append(r["structure_vs_oracle"])
-        print(f"{seed:>4}  {r['geometric_um']:12.1f}  {r['auto_um']:8.1f}  {r['oracle_um']:9.1f}  "
+        est.append(r["estimation_um"])
+        pred.append(r["predicted_um"])
+        n_poses.append(r["design"]["poses"])
+        sig = r["design"].get("sigma_um")
+        print(f"{seed:>4}  {r['design']['poses']:>5}  {'-' if sig is None else format(sig, '8.2f'):>8}  "
+              f"{r['geometric_um']:12.1f}  {r['auto_um']:8.1f}  {r['oracle_um']:9.1f}  "
               f"{r['geometric_vs_oracle']:7.2f}  {r['auto_vs_oracle']:8.3f}  {r['structure_vs_oracle']:10.3f}  "
-              f"{', '.join(r['chosen']) or 'none'}", flush=True)
+              f"{r['estimation_um']:6.1f}  {r['predicted_um']:6.1f}  {', '.join(r['chosen']) or 'none'}", flush=True)
     print(f"auto after/oracle: median {statistics.median(ratios):.3f}, worst {max(ratios):.3f} (target ≤ 1.1, "
-          f"issue 38); oracle: the truth's own model (geometry and joint errors), leaving the 10 µm repeatability")
+          f"issue 38); oracle: the truth's own model (geometry and joint errors), leaving the 10 µm repeatability; "
+          f"identification poses: median {statistics.median(n_poses):g}")
     print(f"struct: the truth's own structure (its masses, compliance, every first harmonic) fitted to the same "
           f"measurements: median {statistics.median(floors):.3f}, worst {max(floors):.3f}, the estimation floor")
+    print(f"est: auto's prediction against the truth's own at the held-out poses, median {statistics.median(est):.1f} µm; "
+          f"pred σ: its linear σ there (measurement σ only, no repeatability), median {statistics.median(pred):.1f} µm")
     print("the same arm rigid (no joint errors: scale 0), the same poses and noise: auto should keep nothing")
-    rigid = [rehearse(seed, n_ident=poses, scale=0.0) for seed in seeds]
+    rigid = [rehearse(seed, n_ident=poses or None, scale=0.0, design=designs.get(seed)) for seed in seeds]
     for r in rigid:
-        print(f"{r['seed']:>4}  {r['geometric_um']:12.1f}  {r['auto_um']:8.1f}  {r['oracle_um']:9.1f}  "
-              f"{r['geometric_vs_oracle']:7.2f}  {r['auto_vs_oracle']:8.3f}  {', '.join(r['chosen']) or 'none'}", flush=True)
+        print(f"{r['seed']:>4}  {r['design']['poses']:>5}  {'':>8}  {r['geometric_um']:12.1f}  {r['auto_um']:8.1f}  "
+              f"{r['oracle_um']:9.1f}  {r['geometric_vs_oracle']:7.2f}  {r['auto_vs_oracle']:8.3f}  {'':>10}  "
+              f"{r['estimation_um']:6.1f}  {r['predicted_um']:6.1f}  {', '.join(r['chosen']) or 'none'}", flush=True)
     print(f"rigid: {sum(1 for r in rigid if not r['chosen'])} of {len(rigid)} seeds keep nothing")
     return 0
 
@@ -154,7 +170,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--terms", action="store_true",
                     help="the arm with compliance and cyclic joint errors: geometric and --model auto after/oracle "
                          "(a model-level rehearsal, benchmarks/_six_axis_terms.py; issue 30)")
-    ap.add_argument("--poses", type=int, default=200, help="--terms: identification measurements (default 200)")
+    ap.add_argument("--poses", type=int, default=None,
+                    help="--terms: this many random identification poses instead of the station's design")
     args = ap.parse_args(argv)
     seeds = args.seed_list or list(range(1, args.seeds + 1))
     if args.terms:
