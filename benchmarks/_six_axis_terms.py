@@ -144,4 +144,14 @@ def rehearse(seed: int, n_ident: int | None = None, n_held: int = 200, scale: fl
             "structure_um": floor, "structure_vs_oracle": floor / o,
             "geometric_vs_oracle": rms(geo_pred) / o, "auto_vs_oracle": rms(auto_pred) / o, "chosen": sel.chosen,
             "cv_geometric_um": sel.table[0].cv_rms_mm * 1e3, "design": account, "n_parameters": fit.n_parameters,
-            "estimation_um": rms(auto_pred, oracle), "predicted_um": float(np.sqrt(np.mean(auto_sigma**2))) * 1e3}
+            "estimation_um": rms(auto_pred, oracle), "predicted_um": float(np.sqrt(np.mean(auto_sigma**2))) * 1e3,
+            "missed": _missed(errs, sel.chosen)}
+
+
+def _missed(errs, chosen: tuple[str, ...]) -> tuple[str, ...]:
+    """The truth's families that ``chosen`` lacks: compliance where a joint bends (its fitted shape
+    counts as compliance), the first harmonic of every joint that has one."""
+    true = (("compliance",) if any(errs.compliance) else ()) + tuple(
+        f"cyclic.q{j + 1}" for j, (a, b) in enumerate(errs.cyclic) if a or b)
+    have = {f.replace("cyclic2.", "cyclic.") for f in chosen}
+    return tuple(f for f in true if f not in have)

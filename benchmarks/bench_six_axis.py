@@ -144,10 +144,12 @@ def terms_main(seeds: list[int], poses: int | None) -> int:
         print(f"{seed:>4}  {r['design']['poses']:>5}  {'-' if sig is None else format(sig, '8.2f'):>8}  "
               f"{r['geometric_um']:12.1f}  {r['auto_um']:8.1f}  {r['oracle_um']:9.1f}  "
               f"{r['geometric_vs_oracle']:7.2f}  {r['auto_vs_oracle']:8.3f}  {r['structure_vs_oracle']:10.3f}  "
-              f"{r['estimation_um']:6.1f}  {r['predicted_um']:6.1f}  {', '.join(r['chosen']) or 'none'}", flush=True)
+              f"{r['estimation_um']:6.1f}  {r['predicted_um']:6.1f}  {', '.join(r['chosen']) or 'none'}"
+              f"{'; missed ' + ', '.join(r['missed']) if r['missed'] else ''}", flush=True)
     print(f"auto after/oracle: median {statistics.median(ratios):.3f}, worst {max(ratios):.3f} (target ≤ 1.1, "
           f"issue 38); oracle: the truth's own model (geometry and joint errors), leaving the 10 µm repeatability; "
           f"identification poses: median {statistics.median(n_poses):g}")
+    print("kept: the families auto kept; missed: the truth's (compliance, the first harmonic of every joint) it did not")
     print(f"struct: the truth's own structure (its masses, compliance, every first harmonic) fitted to the same "
           f"measurements: median {statistics.median(floors):.3f}, worst {max(floors):.3f}, the estimation floor")
     print(f"est: auto's prediction against the truth's own at the held-out poses, median {statistics.median(est):.1f} µm; "
