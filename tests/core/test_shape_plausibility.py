@@ -26,11 +26,11 @@ from station.core.terms.selection import IMPLAUSIBLE_SIGMAS, select_model
 SIGMA = np.array([0.015] * 3 + [15 * np.pi / 180 / 3600] * 3)
 
 
-def _arm(seed: int, n: int = 100):
-    """The measured pose data of seed ``seed``, and the truth (model, params, joint errors)."""
+def _arm(seed: int, n: int = 100, scale: float = 1.0):
+    """The measured pose data of seed ``seed``, and the truth (model, params, joint errors × ``scale``)."""
     truth = six_axis_truth(seed)
     model, p = truth.model, truth.params
-    errs = six_axis_joint_errors(seed)
+    errs = six_axis_joint_errors(seed, scale)
     rng = np.random.default_rng(seed)
     kinds = [t.joint for t in model.transforms]
     q = spread_joints(model, n, rng)
@@ -87,6 +87,20 @@ def test_where_the_lumped_compliance_bends_a_joint_against_gravity_the_shape_is_
     # what the selection kept before (the harmonics without gravity) against what it keeps now
     ours, before = _held_out_um(auto, truth), _held_out_um(harmonics, truth)
     assert ours < 0.5 * before < _held_out_um(geometric, truth), (ours, before)
+
+
+@pytest.mark.parametrize("seed", [6, 8])
+def test_an_arm_bent_against_gravity_keeps_neither_the_lumped_compliance_nor_the_shape(seed):
+    """The same arm with every joint error's sign turned (scale −1: the joints give against gravity, a
+    physically impossible robot): both physics candidates earn their test and are refused."""
+    data, truth = _arm(seed, scale=-1.0)
+    model = truth[0]
+    auto = select_model(model, data, geometric=identify(model, data))
+    rows = {r.families: r for r in auto.table if r.families in (("compliance",), ("compliance", "mass_shape"))}
+    assert set(rows) == {("compliance",), ("compliance", "mass_shape")}
+    for r in rows.values():
+        assert r.p_value is not None and r.p_value < r.level and not r.plausible and not r.kept
+    assert "compliance" not in auto.chosen and "mass_shape" not in auto.chosen
 
 
 @pytest.mark.parametrize("seed", [6, 8])
