@@ -15,9 +15,10 @@ import pytest
 
 from station.cell.config.cell_config import load_config
 from station.cell.config.sections import ObstacleConfig
-from station.cell.plan import collision
-from station.cell.plan.collision import check_path, check_plan, plan_path
+from station.cell.plan import collision, run_path
+from station.cell.plan.collision import check_path
 from station.cell.plan.measurement_plan import build_plan
+from station.cell.plan.run_path import check_plan, plan_path
 from station.cell.plan.vias import travel_height_mm, travel_vias
 from station.errors import ConfigError, UnreachableError
 
@@ -33,7 +34,7 @@ def puma():
 
 
 def _is_via(label: str) -> bool:
-    return label.endswith(collision._VIA_NAMES)
+    return label.endswith(run_path._VIA_NAMES)
 
 
 def test_the_vias_clear_the_puma_plan_whose_direct_moves_collide(puma):
@@ -140,7 +141,7 @@ def test_travel_vias_of_a_scara_are_none_and_of_one_corner_none(puma):
     q = np.zeros(scara.model.n_joints)
     assert travel_vias(scara, q, q + 0.5) == []
     step = build_plan(cfg).identification[0]
-    from station.cell.plan.articulated import retract_pose
+    from station.cell.plan.arm_motion import retract_pose
 
     r = retract_pose(cfg, step.q)
     assert travel_vias(cfg, r, r + np.radians(0.5)) == []  # the head turned at the same corner: direct

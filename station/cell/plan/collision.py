@@ -30,6 +30,11 @@ Paths are sampled in joint space at a step that moves no point of the arm by mor
 (each joint's step times the largest distance from its axis to any point beyond it); stretches the
 distances at their ends prove clear are not sampled (:func:`_check_paths`). Between measurements an
 articulated arm travels through via poses over the body (:mod:`station.cell.plan.vias`).
+
+This module holds the shapes and the check of any sequence of poses (:func:`check_path`, and
+:func:`moves_clear` / :func:`poses_clear`, which the vias and the plan's candidates ask); it imports no
+planner. The whole plan's sequence and its check (:func:`station.cell.plan.run_path.check_plan`)
+stand above the planners and the vias.
 """
 
 from __future__ import annotations
@@ -44,14 +49,15 @@ from typing import Any
 import numpy as np
 
 from station.cell.config.cell_config import CellConfig
-from station.cell.plan.assembly import Plan
+from station.cell.plan.assembly import nominal_contact
 from station.core.kinematics.forward import chain_frames
 from station.core.kinematics.transforms import invert, pose_to_matrix
+from station.core.probe.geometry import default_probe_head
 from station.errors import ConfigError
 from station.io.robot.urdf_collision import LinkGeometry
 
 __all__ = ["Shape", "CellShapes", "Clash", "CollisionReport", "cell_shapes", "default_radii", "check_path",
-           "check_plan", "plan_path", "moves_clear", "poses_clear", "fcl_available", "TOUCH_MARGIN_MM", "head_shapes",
+           "moves_clear", "poses_clear", "fcl_available", "require_fcl", "fcl_shape", "TOUCH_MARGIN_MM", "head_shapes",
            "head_depth_mm"]
 
 #: the least clearance [mm] of the probes' bodies (their tips excepted) from the cube they touch,
@@ -78,7 +84,8 @@ def fcl_available() -> bool:
     return True
 
 
-def _fcl():
+def require_fcl():
+    """python-fcl, or a refusal (ConfigError) that says how to install it."""
     try:
         import fcl
     except ImportError:
@@ -210,8 +217,6 @@ def head_shapes(cfg: CellConfig) -> list[Shape]:
     mount point, back to the tip pressed fully in, half the stroke behind it: what presses on the
     face at a touch) and its body ("head", from there back by the stroke: what must never touch the
     cube)."""
-    from station.core.probe.geometry import default_probe_head
-
     head = cfg.head if cfg.head is not None else default_probe_head(cube_edge_mm=cfg.cube_edge_mm)
     last = len(cfg.model.transforms) - 1
     out = []
@@ -235,8 +240,6 @@ def head_depth_mm(cfg: CellConfig) -> float:
     """How far [mm] the head's lowest point (a free probe's tip, a probe's body, the mount) hangs
     below its nominal contact, along the contact frame's z (up, out of the cube's top face): a
     SCARA's travel height lifts the contact this much more, or a side probe drags over a cube."""
-    from station.cell.plan.assembly import nominal_contact
-
     M = nominal_contact(cfg)
     up, c = M[:3, 2], M[:3, 3]
     low = 0.0
@@ -374,7 +377,7 @@ class _Checker:
     watch distance (so the plan's closest approach is reported even where nothing clashes)."""
 
     def __init__(self, cfg: CellConfig, shapes: CellShapes):
-        self.fcl = fcl = _fcl()
+        self.fcl = fcl = require_fcl()
         self.shapes = shapes
         mv, fx = shapes.moving, shapes.fixed
 
@@ -522,54 +525,6 @@ class CollisionReport:
         if self.closest_touch is not None:
             out.append(f"  during the touches: {self.closest_touch.describe()}")
         return out
-
-
-def plan_path(cfg: CellConfig, plan: Plan, with_upload: bool = True) -> list[tuple[np.ndarray, str, int]]:
-    """Every pose a run commands, in order: (joints, what it is, the measuring point it touches),
-    the via poses between two measurements included (:func:`station.cell.plan.vias.travel_vias`: a
-    depart and the stages of a long move belong to the measurement the head leaves, an arrive to the
-    one it comes to). The first move, from wherever the robot stands to the first approach, is not
-    known before the run."""
-    from station.cell.plan.measurement_plan import all_motion_poses, retract_offset, retracted
-    from station.cell.plan.vias import lifted_many, travel_vias
-
-    steps = plan.run_steps(cfg.plan.verification_cycles, with_oracle=False, with_upload=with_upload)
-    if not steps:
-        return []
-    lifts: list = [None] * len(steps)
-    back = None
-    if not cfg.model.is_scara:  # the retract poses (each step's approach and retract) and their lifts at once
-        from station.cell.plan.articulated import retract_poses
-
-        back, _ok = retract_poses(cfg, np.array([s.q for s in steps]))
-        up, reached = lifted_many(cfg, back)
-        lifts = [u if r else None for u, r in zip(up, reached)]
-    out: list[tuple[np.ndarray, str, int]] = []
-    last = None  # the previous step's label, point and lift
-    for k, s in enumerate(steps):
-        q = s.q
-        name = f"step {s.index + 1} ({s.label})"
-        if back is None:
-            moves = all_motion_poses(cfg, q, s.direction)
-            leave = retracted(cfg, q)
-        else:  # an arm's approach and retract are both its retract pose (all_motion_poses, retracted)
-            moves, leave = [back[k], q + retract_offset(cfg), q], back[k]
-        if last is not None:
-            for v, what in travel_vias(cfg, out[-1][0], moves[0], None if cfg.model.is_scara else (last[2], lifts[k])):
-                if what == "arrive":  # the descent to the approach is part of the next touch
-                    out.append((v, f"{name}: {what}", s.point))
-                else:  # the depart and the stages of a long move, away from any cube
-                    out.append((v, f"{last[0]}: {what}", last[1] if what == "depart" else -1))
-        names: tuple[str, ...] = ("approach", "above the point", "touch")
-        if back is None and s.kind.is_verification:
-            # a SCARA's verification touch is a Cartesian target the controller reaches straight
-            # from the approach (station/cell/run/runner.py _touch): no pose above the point
-            moves, names = [moves[0], moves[2]], ("approach", "touch")
-        for what, qq in zip(names, moves):
-            out.append((np.asarray(qq, dtype=float), f"{name}: {what}", s.point))
-        out.append((np.asarray(leave, dtype=float), f"{name}: retract", s.point))
-        last = (name, s.point, lifts[k])
-    return out
 
 
 def _where(poses: list[tuple[np.ndarray, str, int]], i: int, on_path: bool) -> str:
@@ -775,7 +730,7 @@ def _step_moves(poses: list[tuple[np.ndarray, str, int]]) -> list[int]:
     """Per pose, the plan step (its index; -1: none) whose moves reach it: a retract pose its own
     step's, every other pose (a depart or a stage of the travel, labelled with the step the head
     leaves, an arrive, the approach, the pose above the point, the touch) the step of the next
-    touch. Labels as :func:`plan_path` writes them ("step N (…): what")."""
+    touch. Labels as :func:`station.cell.plan.run_path.plan_path` writes them ("step N (…): what")."""
     out, nxt = [-1] * len(poses), -1
     for i in range(len(poses) - 1, -1, -1):
         label = poses[i][1]
@@ -788,23 +743,3 @@ def _step_moves(poses: list[tuple[np.ndarray, str, int]]) -> list[int]:
 
 
 _STEP = re.compile(r"step (\d+) \(")
-
-
-#: the labels of the via poses (station/cell/plan/vias.py)
-_VIA_NAMES = ("depart", "arrive", "arm upright", "turned upright", "first")
-
-
-def check_plan(cfg: CellConfig, plan: Plan, with_upload: bool = True) -> CollisionReport:
-    """Refuse (ConfigError, exit 2) a plan any of whose poses or paths collides, naming the pair, the
-    step and the clearance; the report of a clear plan. Without python-fcl it refuses too (the
-    station does not skip the check)."""
-    _fcl()
-    poses = plan_path(cfg, plan, with_upload)
-    report = check_path(cfg, poses)
-    report = dataclasses.replace(report, vias=sum(1 for p in poses if p[1].endswith(_VIA_NAMES)))
-    if report.clash is not None:
-        raise ConfigError(f"the plan collides: {report.clash.describe()} ({report.clashing_moves} poses or moves "
-                          f"collide in all); nothing was moved. Move the obstacle or the body, change [limits] or "
-                          f"[plan], or state the robot's link radii in its file's [collision] table "
-                          f"(docs/collision.md)")
-    return report

@@ -38,8 +38,8 @@ from station.cell.plan.collision import (
     cell_shapes,
     check_path,
     fcl_shape,
-    plan_path,
 )
+from station.cell.plan.run_path import plan_path
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.core.kinematics.forward import chain_frames
 from station.errors import ConfigError
@@ -59,7 +59,7 @@ TRACK_STEP_RAD = np.radians(10.0)
 MAX_TRACK_SAMPLES = 24
 #: samples of the move that holds the least clearance, to show where along it the pair comes closest
 CLOSEST_SAMPLES = 64
-#: the via poses' labels (station/cell/plan/collision.py's _VIA_NAMES: vias.py names them; the tests
+#: the via poses' labels (station/cell/plan/run_path.py's _VIA_NAMES: vias.py names them; the tests
 #: compare the vias drawn with the check's count)
 VIA_NAMES = ("depart", "arrive", "arm upright", "turned upright", "first")
 #: the figure's fixed parts [in]: per line of the title above the top view (and the view's own
@@ -92,7 +92,7 @@ class CellPicture:
 
 def picture_poses(cfg: CellConfig, steps: Sequence[PlannedStep]) -> list[tuple[np.ndarray, str, int]]:
     """Every pose the run commands for ``steps`` (the vias included): the collision check's own
-    sequence (:func:`station.cell.plan.collision.plan_path`) of a plan holding exactly these steps (a
+    sequence (:func:`station.cell.plan.run_path.plan_path`) of a plan holding exactly these steps (a
     stored run's plan: the report draws what the run did)."""
     return plan_path(cfg, Plan(tuple(steps), (), ()))
 
