@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from station.cell.config.cell_config import CellConfig
-from station.cell.correction.design import check_correction
+from station.cell.correction.precheck import check_correction
 from station.cell.correction.robot_tools import check_tools, tool_grid
 from station.cell.plan.collision import CollisionReport
 from station.cell.plan.first_moves import check_first_move, check_locating_moves
