@@ -34,7 +34,7 @@ def puma():
 
 
 def _is_via(label: str) -> bool:
-    return label.endswith(run_path._VIA_NAMES)
+    return label.endswith(run_path.VIA_NAMES)
 
 
 def test_the_vias_clear_the_puma_plan_whose_direct_moves_collide(puma):

@@ -22,7 +22,7 @@ from station.cell.plan.measurement_plan import all_motion_poses, retract_offset,
 from station.cell.plan.vias import lifted_many, travel_vias
 from station.errors import ConfigError
 
-__all__ = ["plan_path", "check_plan"]
+__all__ = ["plan_path", "check_plan", "VIA_NAMES"]
 
 
 def plan_path(cfg: CellConfig, plan: Plan, with_upload: bool = True) -> list[tuple[np.ndarray, str, int]]:
@@ -68,8 +68,8 @@ def plan_path(cfg: CellConfig, plan: Plan, with_upload: bool = True) -> list[tup
     return out
 
 
-#: the labels of the via poses (station/cell/plan/vias.py)
-_VIA_NAMES = ("depart", "arrive", "arm upright", "turned upright", "first")
+#: the labels of the via poses (station/cell/plan/vias.py names them; the report's picture draws them)
+VIA_NAMES = ("depart", "arrive", "arm upright", "turned upright", "first")
 
 
 def check_plan(cfg: CellConfig, plan: Plan, with_upload: bool = True) -> CollisionReport:
@@ -79,7 +79,7 @@ def check_plan(cfg: CellConfig, plan: Plan, with_upload: bool = True) -> Collisi
     require_fcl()
     poses = plan_path(cfg, plan, with_upload)
     report = check_path(cfg, poses)
-    report = dataclasses.replace(report, vias=sum(1 for p in poses if p[1].endswith(_VIA_NAMES)))
+    report = dataclasses.replace(report, vias=sum(1 for p in poses if p[1].endswith(VIA_NAMES)))
     if report.clash is not None:
         raise ConfigError(f"the plan collides: {report.clash.describe()} ({report.clashing_moves} poses or moves "
                           f"collide in all); nothing was moved. Move the obstacle or the body, change [limits] or "

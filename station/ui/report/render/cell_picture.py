@@ -39,7 +39,7 @@ from station.cell.plan.collision import (
     check_path,
     fcl_shape,
 )
-from station.cell.plan.run_path import plan_path
+from station.cell.plan.run_path import VIA_NAMES, plan_path
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.core.kinematics.forward import chain_frames
 from station.errors import ConfigError
@@ -59,9 +59,6 @@ TRACK_STEP_RAD = np.radians(10.0)
 MAX_TRACK_SAMPLES = 24
 #: samples of the move that holds the least clearance, to show where along it the pair comes closest
 CLOSEST_SAMPLES = 64
-#: the via poses' labels (station/cell/plan/run_path.py's _VIA_NAMES: vias.py names them; the tests
-#: compare the vias drawn with the check's count)
-VIA_NAMES = ("depart", "arrive", "arm upright", "turned upright", "first")
 #: the figure's fixed parts [in]: per line of the title above the top view (and the view's own
 #: title), between the views (the top view's X label, the side view's title), the legend below
 #: (with the side view's X label), the Y / Z labels on the left
