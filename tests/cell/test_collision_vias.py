@@ -15,7 +15,7 @@ import pytest
 
 from station.cell.config.cell_config import load_config
 from station.cell.config.sections import ObstacleConfig
-from station.cell.plan import collision, run_path
+from station.cell.plan import collision_shapes, run_path
 from station.cell.plan.collision import check_path
 from station.cell.plan.measurement_plan import build_plan
 from station.cell.plan.run_path import check_plan, plan_path
@@ -104,7 +104,7 @@ def test_the_runner_commands_the_vias_the_plan_checked(puma):
 
 def test_the_check_refuses_a_plan_that_hits_an_obstacle_naming_it(puma):
     cfg, plan = puma
-    shapes, _ = collision.cell_shapes(cfg)
+    shapes, _ = collision_shapes.cell_shapes(cfg)
     cube = next(s for s in shapes.fixed if s.name.startswith("cube of"))
     e = cfg.cube_edge_mm
     # a post beside the cube's corner, flush with its top: the touches there hit it

@@ -30,7 +30,7 @@ from station.cell.plan.assembly import (
     nominal_contact,
     select_d_optimal,
 )
-from station.cell.plan.collision import head_depth_mm
+from station.cell.plan.collision_shapes import head_depth_mm
 from station.core.kinematics.forward import scara_ik
 from station.core.kinematics.transforms import invert
 from station.errors import ConfigError, UnreachableError

@@ -30,7 +30,8 @@ import numpy as np
 from station.cell.config.cell_config import CellConfig
 from station.cell.plan.arm_motion import LIMIT_MARGIN_RAD, follow_ik, preload_offset, retract_poses
 from station.cell.plan.assembly import nominal_contact
-from station.cell.plan.collision import check_path, default_radii, head_shapes, moves_clear, poses_clear
+from station.cell.plan.collision import check_path, moves_clear, poses_clear
+from station.cell.plan.collision_shapes import default_radii, head_shapes
 from station.core.kinematics.forward import chain_frames, forward
 from station.core.kinematics.transforms import invert, pose_to_matrix
 from station.errors import UnreachableError

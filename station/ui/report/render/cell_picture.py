@@ -1,9 +1,9 @@
 """A picture of the cell with the plan's poses (issue 40, "what people see"): the cell seen from
 above (X–Y) and from the side (X–Z), in the robot's base frame, mm.
 
-It shows what the collision check knows (:mod:`station.cell.plan.collision`, the same shapes): the
-body's cubes and their pillars, the cell's ``[[obstacle]]`` boxes and cylinders, the robot's base
-link, the arm (links and probe head) at the first touch of each pose family, every touch of the
+It shows what the collision check knows (:mod:`station.cell.plan.collision`, the same shapes:
+:mod:`station.cell.plan.collision_shapes`): the body's cubes and their pillars, the cell's
+``[[obstacle]]`` boxes and cylinders, the robot's base link, the arm (links and probe head) at the first touch of each pose family, every touch of the
 plan (the head's nominal contact point, one marker per step, coloured by its family: a SCARA's
 elbow, an arm's configuration code), the moves between consecutive poses (the contact point's track
 along the joint-space move; the moves from or to a via pose apart) and the via poses, and the least
@@ -30,15 +30,8 @@ import numpy as np
 
 from station.cell.config.cell_config import CellConfig
 from station.cell.plan.assembly import Plan, nominal_contact
-from station.cell.plan.collision import (
-    CellShapes,
-    Clash,
-    CollisionReport,
-    Shape,
-    cell_shapes,
-    check_path,
-    fcl_shape,
-)
+from station.cell.plan.collision import Clash, CollisionReport, check_path
+from station.cell.plan.collision_shapes import CellShapes, Shape, cell_shapes, fcl_shape
 from station.cell.plan.run_path import VIA_NAMES, plan_path
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.core.kinematics.forward import chain_frames
