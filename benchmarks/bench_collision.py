@@ -10,8 +10,9 @@ import sys
 import time
 
 from station.cell.config.cell_config import load_config
-from station.cell.plan.collision import check_path, check_plan, plan_path
+from station.cell.plan.collision import check_path
 from station.cell.plan.measurement_plan import build_plan
+from station.cell.plan.run_path import check_plan, plan_path
 from station.errors import ConfigError, UnreachableError
 
 

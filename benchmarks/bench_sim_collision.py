@@ -17,8 +17,8 @@ import numpy as np
 
 from simulators.collision_check import CellCollision
 from station.cell.config.cell_config import load_config
-from station.cell.plan.collision import plan_path
 from station.cell.plan.measurement_plan import build_plan
+from station.cell.plan.run_path import plan_path
 
 DEFAULT = ("examples/puma560_obstacles/cell.toml", "examples/scara600_column/cell.toml")
 

@@ -15,8 +15,9 @@ import time
 from pathlib import Path
 
 from station.cell.config.cell_config import load_config
-from station.cell.plan.collision import check_path, plan_path
+from station.cell.plan.collision import check_path
 from station.cell.plan.measurement_plan import build_plan
+from station.cell.plan.run_path import plan_path
 from station.io.export.model_files import export_model
 from station.io.robot.files import load_robot
 

@@ -11,7 +11,8 @@ import pytest
 
 from station.cell.config.cell_config import load_config
 from station.cell.config.sections import ObstacleConfig
-from station.cell.plan.collision import cell_shapes, check_path
+from station.cell.plan.collision import check_path
+from station.cell.plan.collision_shapes import cell_shapes
 from station.core.kinematics.forward import forward
 
 pytest.importorskip("fcl")

@@ -11,8 +11,10 @@ import pytest
 
 from station.cell.config.cell_config import load_config
 from station.cell.plan.assembly import nominal_contact
-from station.cell.plan.collision import TOUCH_MARGIN_MM, check_path, head_depth_mm, plan_path
+from station.cell.plan.collision import TOUCH_MARGIN_MM, check_path
+from station.cell.plan.collision_shapes import head_depth_mm
 from station.cell.plan.measurement_plan import build_plan, point_joints, travel_joints
+from station.cell.plan.run_path import plan_path
 
 pytest.importorskip("fcl")
 

@@ -13,7 +13,8 @@ import pytest
 
 from station.cell.config.cell_config import load_config
 from station.cell.config.sections import ObstacleConfig
-from station.cell.plan.collision import cell_shapes, check_path, default_radii
+from station.cell.plan.collision import check_path
+from station.cell.plan.collision_shapes import cell_shapes, default_radii
 from station.errors import ConfigError
 from station.io.robot.collision import CollisionSpec
 from station.io.robot.urdf_collision import urdf_link_geometry

@@ -15,9 +15,10 @@ import pytest
 
 from station.cell.config.cell_config import load_config
 from station.cell.config.sections import ObstacleConfig
-from station.cell.plan import collision
-from station.cell.plan.collision import check_path, check_plan, plan_path
+from station.cell.plan import collision_shapes, run_path
+from station.cell.plan.collision import check_path
 from station.cell.plan.measurement_plan import build_plan
+from station.cell.plan.run_path import check_plan, plan_path
 from station.cell.plan.vias import travel_height_mm, travel_vias
 from station.errors import ConfigError, UnreachableError
 
@@ -33,7 +34,7 @@ def puma():
 
 
 def _is_via(label: str) -> bool:
-    return label.endswith(collision._VIA_NAMES)
+    return label.endswith(run_path.VIA_NAMES)
 
 
 def test_the_vias_clear_the_puma_plan_whose_direct_moves_collide(puma):
@@ -103,7 +104,7 @@ def test_the_runner_commands_the_vias_the_plan_checked(puma):
 
 def test_the_check_refuses_a_plan_that_hits_an_obstacle_naming_it(puma):
     cfg, plan = puma
-    shapes, _ = collision.cell_shapes(cfg)
+    shapes, _ = collision_shapes.cell_shapes(cfg)
     cube = next(s for s in shapes.fixed if s.name.startswith("cube of"))
     e = cfg.cube_edge_mm
     # a post beside the cube's corner, flush with its top: the touches there hit it
@@ -140,7 +141,7 @@ def test_travel_vias_of_a_scara_are_none_and_of_one_corner_none(puma):
     q = np.zeros(scara.model.n_joints)
     assert travel_vias(scara, q, q + 0.5) == []
     step = build_plan(cfg).identification[0]
-    from station.cell.plan.articulated import retract_pose
+    from station.cell.plan.arm_motion import retract_pose
 
     r = retract_pose(cfg, step.q)
     assert travel_vias(cfg, r, r + np.radians(0.5)) == []  # the head turned at the same corner: direct

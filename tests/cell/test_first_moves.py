@@ -17,7 +17,8 @@ from station.cell.config.cell_config import load_config
 from station.cell.config.sections import ObstacleConfig
 from station.cell.pipeline.premotion import check_first_motion
 from station.cell.plan import first_moves
-from station.cell.plan.collision import check_path, head_shapes
+from station.cell.plan.collision import check_path
+from station.cell.plan.collision_shapes import head_shapes
 from station.cell.plan.first_moves import (
     check_first_move,
     check_locating_moves,

@@ -7,12 +7,8 @@ import pytest
 
 from simulators.six_axis_cell import six_axis_cell, six_axis_config_text
 from station.cell.config.cell_config import CellConfig, parse_text
-from station.cell.plan.articulated import (
-    OUTWARD_DIAGONAL,
-    articulated_candidates,
-    head_orientations,
-    retract_pose,
-)
+from station.cell.plan.arm_motion import OUTWARD_DIAGONAL, retract_pose
+from station.cell.plan.articulated import articulated_candidates, head_orientations
 from station.cell.plan.measurement_plan import all_motion_poses, build_plan, order_by_travel, retracted
 from station.core.identification.identifiability import analyze
 from station.core.kinematics.forward import forward

@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from station.cell.config.cell_config import load_config
-from station.cell.correction.design import CorrectionRefused, check_correction
+from station.cell.correction.design import CorrectionRefused
+from station.cell.correction.precheck import check_correction
 from station.cell.plan.measurement_plan import build_plan
 from station.cell.records.rundb import RunDB
 from station.errors import ConfigError, Outcome

@@ -16,8 +16,8 @@ import pytest
 
 from station.cell.config.cell_config import load_config
 from station.cell.pipeline.preview import preview
-from station.cell.plan.collision import check_plan, plan_path
 from station.cell.plan.measurement_plan import build_plan
+from station.cell.plan.run_path import check_plan, plan_path
 
 pytest.importorskip("fcl")
 

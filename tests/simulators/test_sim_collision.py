@@ -47,8 +47,8 @@ def _over_the_column(cfg) -> np.ndarray:
 def _plan(cfg) -> list:
     """(joints, what, point) of every pose the station commands for ``cfg``, in order, as planned
     on main today."""
-    from station.cell.plan.collision import plan_path
     from station.cell.plan.measurement_plan import build_plan
+    from station.cell.plan.run_path import plan_path
 
     return plan_path(cfg, build_plan(cfg))
 
@@ -198,13 +198,13 @@ def test_the_plan_without_its_vias_collides_in_the_simulators_check(cell, monkey
     before issue 40: direct joint moves between the measurements) the joint-space paths run into the
     cell's obstacles: the check the simulated controller runs refuses it. With the vias, it clears
     every move (the station's own check and the simulator's agree)."""
-    import station.cell.plan.vias as vias
+    import station.cell.plan.run_path as run_path
 
     cfg = load_config(cell)
     cc = CellCollision.from_config(cfg)
     planned = _commanded(cfg)
     assert all(cc.check_move(planned[i - 1], planned[i]) is None for i in range(1, len(planned)))
-    monkeypatch.setattr(vias, "travel_vias", lambda *a, **k: [])
+    monkeypatch.setattr(run_path, "travel_vias", lambda *a, **k: [])
     poses = _commanded(cfg)
     assert len(poses) < len(planned)
     cc = CellCollision.from_config(cfg)

@@ -12,8 +12,8 @@ import pytest
 from test_tui_features import paused_after, wait_until
 
 from station.cell.config.cell_config import load_config
-from station.cell.plan.collision import check_plan
 from station.cell.plan.measurement_plan import build_plan
+from station.cell.plan.run_path import check_plan
 from station.cell.run.facts.events import PhaseChanged, RunStarted, StepStarted
 from station.cell.run.facts.next_move import NextMove, next_moves
 from station.errors import RunAborted

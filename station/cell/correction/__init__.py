@@ -1,5 +1,5 @@
-"""The correction: its design and pre-motion check (design.py), the upload and the operator's
-table, tools.
+"""The correction: its design (design.py) and pre-motion check (precheck.py, with the checked
+advice of advice.py), the upload and the operator's table, tools.
 
 May import run, records, plan, config and station.core; never results or sessions.
 """

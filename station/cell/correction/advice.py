@@ -3,13 +3,18 @@
 A refusal before motion is right; advice that cannot be followed is a dead end. Each suggestion
 here is a change to the cell file written as the user writes it (``[correction]
 max_interpolation_um = 19``), applied to the file's own text, parsed again and run through the
-same plan and correction checks ``station plan`` runs (:func:`check_correction`). Only the
+same plan and correction checks ``station plan`` runs
+(:func:`station.cell.correction.design.check_design`). Only the
 changes that pass are printed, each with the design it gives; where none passes alone, the
 combination of them is tried and printed if it passes.
 
 Why a smaller ``[correction] region`` is never offered alone: the derived region is already the
 box around the verification targets with their margins, so a smaller one leaves a target outside
 the table; fewer targets (one elbow, fewer held-out points) shrink it the way the plan allows.
+
+The advice runs the design's check (:mod:`station.cell.correction.design`) on every changed file,
+so it stands above the design; the pre-motion check that prints it
+(:func:`station.cell.correction.precheck.check_correction`) stands above both.
 """
 
 from __future__ import annotations
@@ -20,6 +25,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 from station.cell.config.cell_config import CellConfig, parse_text
+from station.cell.correction.design import check_design, design_for
+from station.cell.plan.measurement_plan import build_plan
 from station.core.table.design import TableDesign
 from station.errors import StationError
 
@@ -122,14 +129,11 @@ def check_changes(cfg: CellConfig, changes: Sequence[Change], plan: object = Non
     """The design the cell file with ``changes`` gets from the pre-motion checks (plan and
     correction), or None where they refuse it. ``plan``: the cell's plan when the changes leave
     it as it is (None: built again from the changed file)."""
-    from station.cell.correction.design import check_correction
-    from station.cell.plan.measurement_plan import build_plan
-
     if not cfg.source_text:
         return None  # nothing to apply the change to (a built-in cell): no advice is printed unchecked
     try:
         changed = parse_text(apply_changes(cfg.source_text, changes), cfg.source or "<config>")
-        return check_correction(changed, plan if plan is not None else build_plan(changed), advise=False)
+        return check_design(changed, plan if plan is not None else build_plan(changed))
     except (StationError, ValueError):
         return None
 
@@ -230,8 +234,6 @@ def coverage_advice(cfg: CellConfig, plan: object, widened: tuple[tuple[float, f
 
 
 def _derived_advice(cfg: CellConfig, plan: object, removal: tuple[Change, ...]) -> str:
-    from station.cell.correction.design import design_for
-
     try:
         changed = parse_text(apply_changes(cfg.source_text, removal), cfg.source or "<config>")
         design = design_for(changed, plan)

@@ -15,7 +15,8 @@ at the same joints (:func:`tool_grid_for`).
   simulation's true robot).
 * ``x_mm`` / ``y_mm`` / ``z_mm`` (and ``yaw_step_deg``) given: that grid, checked the same way.
 
-:func:`check_correction` is the pre-motion check ``station plan`` and ``station calibrate`` share:
+:func:`check_design` is the pre-motion check ``station plan`` and ``station calibrate`` share
+(:func:`station.cell.correction.precheck.check_correction` adds the checked advice to its refusal):
 every verification target inside the table (named by target, axis and key when not) and a table
 within the controller's capacity that meets ``correction.max_interpolation_um`` (else the
 numbers to change). :func:`identified_table` builds the identified robot's table on the design,
@@ -42,7 +43,7 @@ from station.core.units import ARCSEC, DEG
 from station.errors import ConfigError
 
 __all__ = ["CorrectionRefused", "WorkingTarget", "working_targets", "target_margin_mm", "region_for",
-           "design_for", "check_correction", "identified_table", "grid_to_json", "grid_from_json", "tool_grid_for",
+           "design_for", "check_design", "identified_table", "grid_to_json", "grid_from_json", "tool_grid_for",
            "worst_cell", "DRAWS", "GRID_POINT"]
 
 #: robots with the expected error size the design is made and checked for (their tables built)
@@ -59,7 +60,28 @@ GRID_POINT = ("the head frame's origin (MKKS, as the probe head's CMM report giv
 
 class CorrectionRefused(ConfigError):
     """No correction table as configured can serve the cell (a target outside it, or no grid
-    within the controller's capacity meets the bound): found before anything moved (exit 2)."""
+    within the controller's capacity meets the bound): found before anything moved (exit 2).
+
+    A refusal that checked advice can answer (:meth:`found`) carries its parts: ``finding`` (what
+    fails), ``way`` (what to change) and what the advice starts from, ``widened`` (targets outside
+    the table: per axis the (lo, hi) [mm] that holds them all with their margins) or ``design`` (the
+    design that misses the bound). Its message is the finding, the way, then "Nothing was measured"."""
+
+    finding: str = ""
+    way: str = ""
+    widened: tuple[tuple[float, float], ...] | None = None
+    design: TableDesign | None = None
+
+    @classmethod
+    def found(cls, finding: str, way: str, widened: tuple[tuple[float, float], ...] | None = None,
+              design: TableDesign | None = None) -> CorrectionRefused:
+        exc = cls(f"{finding}. {way}. Nothing was measured")
+        exc.finding, exc.way, exc.widened, exc.design = finding, way, widened, design
+        return exc
+
+    def with_way(self, way: str) -> CorrectionRefused:
+        """The same finding with another way out (the advice that passes the same check)."""
+        return self.found(self.finding, way, self.widened, self.design)
 
 
 @dataclass(frozen=True)
@@ -215,11 +237,10 @@ def design_for(cfg: CellConfig, plan: Any = None, capacity: int | None = None) -
 _AXIS_KEY = {"x": "x_mm", "y": "y_mm", "z": "z_mm"}
 
 
-def _coverage(cfg: CellConfig, targets: tuple[WorkingTarget, ...], region: Region, plan: Any = None,
-              advise: bool = True) -> None:
+def _coverage(cfg: CellConfig, targets: tuple[WorkingTarget, ...], region: Region) -> None:
     """Refuse a verification target that (with its margin) leaves the table, named by target,
-    axis, amount and key; ``advise``: with the ways out that pass the same checks
-    (:func:`station.cell.correction.advice.coverage_advice`)."""
+    axis, amount and key; the refusal carries the region that holds every target, from which
+    :func:`station.cell.correction.advice.coverage_advice` seeks the ways out."""
     margin = target_margin_mm(cfg, targets)
     c = cfg.correction
     key = ("correction.x_mm / y_mm / z_mm" if c.explicit else "correction.region")
@@ -238,23 +259,17 @@ def _coverage(cfg: CellConfig, targets: tuple[WorkingTarget, ...], region: Regio
                                 f"margin {need:.1f} mm, lies {abs(need - edge):.1f} mm {side} the table's {axis} "
                                 f"range [{lo:g}, {hi:g}] mm ({which})")
     if problems:
-        if advise:
-            from station.cell.correction.advice import coverage_advice
-
-            way = coverage_advice(cfg, plan, tuple(zip(lows, highs)))
-        else:
-            way = f"Change {key}, or remove it so that the station derives the region"
-        raise CorrectionRefused(
+        raise CorrectionRefused.found(
             f"before the first motion: {len(problems)} verification target{'s' if len(problems) > 1 else ''} "
             f"would leave the correction table ({GRID_POINT}; the margin covers the set-up guess's error, "
             f"[simulation] setup_sigma_*, and a re-centred touch): " + "; ".join(problems[:6])
-            + ("; …" if len(problems) > 6 else "") + f". {way}. Nothing was measured")
+            + ("; …" if len(problems) > 6 else ""),
+            f"Change {key}, or remove it so that the station derives the region", widened=tuple(zip(lows, highs)))
 
 
-def _infeasible_text(cfg: CellConfig, d: TableDesign, plan: Any = None, advise: bool = True) -> str:
-    """The refusal of a design that misses the bound; ``advise``: with the changes that pass the
-    same checks (:func:`station.cell.correction.advice.advice_text`), else the bare finding (the
-    advice's own checks)."""
+def _infeasible(cfg: CellConfig, d: TableDesign) -> CorrectionRefused:
+    """The refusal of a design that misses the bound; it carries the design, from which
+    :func:`station.cell.correction.advice.advice_text` seeks the changes that pass the same check."""
     r = d.region
     limit = cfg.correction.max_interpolation_um
     what = ("the configured grid (correction.x_mm, y_mm, z_mm, yaw_step_deg) interpolates with "
@@ -262,36 +277,27 @@ def _infeasible_text(cfg: CellConfig, d: TableDesign, plan: Any = None, advise: 
             f"size [simulation] states" if _counts(cfg) is not None and d.n_values <= d.capacity else
             f"no correction grid within the controller's {d.capacity} values meets it for every one of "
             f"{len(d.bounds_um) or DRAWS} robots with errors of the size [simulation] states")
-    if advise:
-        from station.cell.correction.advice import advice_text
-
-        options = advice_text(cfg, d, plan)
-    else:
-        options = "Change the bound, the region or the grid"
-    return (f"before the first motion: {what}, above correction.max_interpolation_um = {limit:g} over the region "
-            f"x {r.x_mm[0]:g} … {r.x_mm[1]:g}, y {r.y_mm[0]:g} … {r.y_mm[1]:g}, z {r.z_mm[0]:g} … {r.z_mm[1]:g} mm "
-            f"({GRID_POINT}). " + options + ". Nothing was measured")
+    return CorrectionRefused.found(
+        f"before the first motion: {what}, above correction.max_interpolation_um = {limit:g} over the region "
+        f"x {r.x_mm[0]:g} … {r.x_mm[1]:g}, y {r.y_mm[0]:g} … {r.y_mm[1]:g}, z {r.z_mm[0]:g} … {r.z_mm[1]:g} mm "
+        f"({GRID_POINT})", "Change the bound, the region or the grid", design=d)
 
 
-def check_correction(cfg: CellConfig, plan: Any = None, advise: bool = True) -> TableDesign | None:
-    """The correction's pre-motion check (``station plan`` and ``station calibrate``): the design,
-    or None for a robot without a table. Raises :class:`CorrectionRefused` when a verification
-    target leaves the table or no table meets the bound within the capacity, with the changes
-    that pass this same check (``advise``; False: the bare finding, as the advice's own checks
-    run it)."""
+def check_design(cfg: CellConfig, plan: Any) -> TableDesign | None:
+    """The correction's pre-motion check on ``plan`` without advice (the advice's own check of a
+    changed file; ``station plan`` and ``station calibrate`` add the advice:
+    :func:`station.cell.correction.precheck.check_correction`): the design, or None for a robot
+    without a table. Raises :class:`CorrectionRefused` when a verification target leaves the table
+    or no table meets the bound within the capacity."""
     if not cfg.model.is_scara:
         return None
-    if plan is None:
-        from station.cell.plan.measurement_plan import build_plan
-
-        plan = build_plan(cfg)
     targets = working_targets(cfg, plan.verification)
     region = region_for(cfg, targets)
     if cfg.correction.explicit or cfg.correction.region is not None:
-        _coverage(cfg, targets, region, plan, advise)
+        _coverage(cfg, targets, region)
     d = design_for(cfg, plan)
     if not d.feasible:
-        raise CorrectionRefused(_infeasible_text(cfg, d, plan, advise))
+        raise _infeasible(cfg, d)
     return d
 
 

@@ -7,7 +7,7 @@ The checks, in order: the probes' stroke can find the body within the set-up's u
 (point, elbow) within reach and the soft limits, enough poses for the identifiable set); the
 correction (every verification target inside the table, a table within the controller's
 capacity that meets ``correction.max_interpolation_um``); the collision check of every pose and
-path the run commands, vias included (:func:`station.cell.plan.collision.check_plan`, issue 40), and
+path the run commands, vias included (:func:`station.cell.plan.run_path.check_plan`, issue 40), and
 of the moves the plan does not hold (:mod:`station.cell.plan.first_moves`): every search touch of
 locating the body, and the first move from where the robot is parked (``[conformance]
 park_joints``, when the file gives them; ``calibrate`` checks it again from the joints the
@@ -22,12 +22,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from station.cell.config.cell_config import CellConfig
-from station.cell.correction.design import check_correction
+from station.cell.correction.precheck import check_correction
 from station.cell.correction.robot_tools import check_tools, tool_grid
-from station.cell.plan.collision import CollisionReport, check_plan
+from station.cell.plan.collision import CollisionReport
 from station.cell.plan.first_moves import check_first_move, check_locating_moves
 from station.cell.plan.locating import Coverage, check_locating
 from station.cell.plan.measurement_plan import Plan, build_plan
+from station.cell.plan.run_path import check_plan
 from station.cell.plan.steps import PlannedStep
 from station.core.table.design import TableDesign
 from station.errors import ConfigError

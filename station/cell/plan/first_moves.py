@@ -36,11 +36,13 @@ from itertools import product
 import numpy as np
 
 from station.cell.config.cell_config import CellConfig
+from station.cell.plan.arm_motion import follow_ik, retract_poses
 from station.cell.plan.assembly import Plan
 from station.cell.plan.collision import CollisionReport, check_path
 from station.cell.plan.locating import coverage
 from station.cell.plan.measurement_plan import above_offset, approach_pose, retracted
 from station.cell.plan.steps import PlannedStep, StepKind
+from station.cell.plan.vias import travel_vias
 from station.errors import ConfigError, UnreachableError
 
 __all__ = ["N_LOCATE", "locate_steps", "touch_poses", "first_move_path", "check_first_move", "face_directions",
@@ -69,15 +71,13 @@ def locate_steps(cfg: CellConfig, steps: Sequence[PlannedStep]) -> list[PlannedS
 def touch_poses(cfg: CellConfig, Q: np.ndarray, st: PlannedStep, names: Sequence[str]) -> list[Pose]:
     """What the runner commands for a touch at each row of ``Q`` (``_touch``): the approach, the pose
     above the point, the touch, and the retract the next touch starts with; labelled as
-    :func:`station.cell.plan.collision.plan_path` labels a step's poses (``name: what``). An
+    :func:`station.cell.plan.run_path.plan_path` labels a step's poses (``name: what``). An
     articulated arm's approach and retract are its retract pose, computed for all rows at once."""
     Q = np.asarray(Q, dtype=float).reshape(-1, cfg.model.n_joints)
     if cfg.model.is_scara:
         back = np.array([approach_pose(cfg, q, st.direction, st.cycle) for q in Q])
         leave = np.array([retracted(cfg, q) for q in Q])
     else:
-        from station.cell.plan.articulated import retract_poses
-
         back, ok = retract_poses(cfg, Q)
         if not np.all(ok):
             k = int(np.flatnonzero(~ok)[0])
@@ -99,8 +99,6 @@ def _step_name(st: PlannedStep) -> str:
 def first_move_path(cfg: CellConfig, here: np.ndarray, st: PlannedStep) -> list[Pose]:
     """The first move's poses: where the robot stands, the retract to the travel height from there,
     the vias to ``st``'s approach and ``st``'s touch."""
-    from station.cell.plan.vias import travel_vias
-
     here = np.asarray(here, dtype=float)
     up = retracted(cfg, here)
     k = _touching(cfg, here)
@@ -118,7 +116,7 @@ def first_move_path(cfg: CellConfig, here: np.ndarray, st: PlannedStep) -> list[
 
 def _touching(cfg: CellConfig, q: np.ndarray) -> int | None:
     """The measuring point the head touches at ``q`` (its nominal contact within half the clearance
-    of it, as :func:`station.cell.plan.articulated.retract_from` tells a touch), None: none."""
+    of it, as :func:`station.cell.plan.arm_motion.retract_from` tells a touch), None: none."""
     from station.cell.plan.assembly import nominal_contact
     from station.core.kinematics.forward import forward
 
@@ -176,8 +174,6 @@ def shifted_joints(cfg: CellConfig, q: np.ndarray, t: np.ndarray) -> tuple[np.nd
     if cfg.model.is_scara:
         out = scara_ik(cfg.model, T, 1 if q[1] > 0 else -1, setup=False, check_limits=False)
         return out, np.all(np.isfinite(out), axis=1)
-    from station.cell.plan.articulated import follow_ik
-
     return follow_ik(cfg.model, T, np.repeat(q[None], len(t), axis=0))
 
 

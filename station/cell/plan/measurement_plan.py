@@ -19,7 +19,8 @@ import numpy as np
 from station.cell.config.cell_config import CellConfig
 from station.cell.limits.joint_text import joint_value
 from station.cell.limits.motion_guard import MotionGuard
-from station.cell.plan.articulated import build_articulated_plan, preload_offset, retract_from, retract_pose
+from station.cell.plan.arm_motion import preload_offset, retract_from, retract_pose
+from station.cell.plan.articulated import build_articulated_plan
 from station.cell.plan.assembly import (
     Plan,
     Target,
@@ -29,11 +30,12 @@ from station.cell.plan.assembly import (
     nominal_contact,
     select_d_optimal,
 )
+from station.cell.plan.collision_shapes import head_depth_mm
 from station.core.kinematics.forward import scara_ik
 from station.core.kinematics.transforms import invert
 from station.errors import ConfigError, UnreachableError
 
-# The shared pieces live in plan_common (both planners import them); they stay importable from here.
+# The shared pieces live in station.cell.plan.assembly (both planners import them); they stay importable from here.
 __all__ = ["Target", "Plan", "nominal_contact", "head_targets_world", "assemble_plan", "hold_out",
            "select_d_optimal", "approach_offsets", "retract_offset", "travel_joints", "retracted",
            "check_joints", "joints_for", "REMEASURE_STEP", "approach_pose", "above_offset", "all_motion_poses",
@@ -73,8 +75,6 @@ def travel_joints(cfg: CellConfig) -> np.ndarray:
         return hit
     out = np.full(cfg.model.n_joints, np.nan)
     if cfg.model.is_scara:  # an articulated arm retracts along the corner's diagonal instead
-        from station.cell.plan.collision import head_depth_mm
-
         q = point_joints(cfg, cfg.plan.elbows[0])
         # the clearance is the head's lowest point's above the highest cube, not the contact's: a side
         # probe hanging below the corner would otherwise drag over a neighbouring cube (issue 40)

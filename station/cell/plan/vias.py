@@ -10,7 +10,7 @@ head off its corner by ``[plan] clearance_mm``; a joint-space move from there to
 passed the head through the neighbouring cubes (the PUMA 560 example: 195 moves, up to 87 mm deep).
 
 The vias are a function of the two poses alone (:func:`travel_vias`), so that the plan's collision
-check (:func:`station.cell.plan.collision.plan_path`) and the runner command the same ones:
+check (:func:`station.cell.plan.run_path.plan_path`) and the runner command the same ones:
 
 * **depart**: the head lifted along the body's +z from where it stands, its orientation kept, until
   its lowest point (a free probe tip, a probe's body, the mount) lies ``[plan] clearance_mm`` plus
@@ -28,7 +28,11 @@ import weakref
 import numpy as np
 
 from station.cell.config.cell_config import CellConfig
-from station.core.kinematics.forward import forward
+from station.cell.plan.arm_motion import LIMIT_MARGIN_RAD, follow_ik, preload_offset, retract_poses
+from station.cell.plan.assembly import nominal_contact
+from station.cell.plan.collision import check_path, moves_clear, poses_clear
+from station.cell.plan.collision_shapes import default_radii, head_shapes
+from station.core.kinematics.forward import chain_frames, forward
 from station.core.kinematics.transforms import invert, pose_to_matrix
 from station.errors import UnreachableError
 
@@ -45,8 +49,6 @@ def _head_points(cfg: CellConfig) -> np.ndarray:
     hit = _HEAD.get(cfg)
     if hit is not None:
         return hit
-    from station.cell.plan.collision import head_shapes
-
     rows = []
     for s in head_shapes(cfg):
         half = s.local[:3, 2] * (s.size[1] / 2 if s.kind == "capsule" else 0.0)
@@ -84,8 +86,6 @@ def travel_height_mm(cfg: CellConfig) -> float:
 def lifted_many(cfg: CellConfig, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """:func:`lifted` of every row of ``Q (n, g)`` at once: the joints ``(n, g)`` and a mask ``(n,)``
     of the rows the arm reaches."""
-    from station.cell.plan.articulated import follow_ik
-
     Q = np.asarray(Q, dtype=float).reshape(-1, cfg.model.n_joints)
     rise = np.maximum(travel_height_mm(cfg) - head_low_mm(cfg, Q), 0.0)
     out, ok = Q.copy(), np.ones(len(Q), dtype=bool)
@@ -107,8 +107,6 @@ def lifted(cfg: CellConfig, q: np.ndarray) -> np.ndarray | None:
 
 
 def _contact_mm(cfg: CellConfig, q: np.ndarray) -> np.ndarray:
-    from station.cell.plan.assembly import nominal_contact
-
     return (forward(cfg.model, np.asarray(q, dtype=float)[None], setup=True)[0] @ nominal_contact(cfg))[:3, 3]
 
 
@@ -130,8 +128,6 @@ def _upright(cfg: CellConfig, q: np.ndarray) -> np.ndarray:
     tool) highest above the base (a grid of 5° inside the soft limits): the arm stretched upwards.
     A change of shoulder configuration turns there, over the shoulder's singularity, instead of
     folding the elbow past the shoulder (the PUMA 560's head mount then met the shoulder's capsule)."""
-    from station.core.kinematics.forward import chain_frames
-
     lim = cfg.soft_limits
     grid = [np.arange(lim[j, 0] + np.deg2rad(5.0), lim[j, 1] - np.deg2rad(5.0) + 1e-9, np.deg2rad(5.0)) for j in (1, 2)]
     g2, g3 = (v.ravel() for v in np.meshgrid(*grid, indexing="ij"))
@@ -149,8 +145,6 @@ def _staged(cfg: CellConfig, a: np.ndarray, b: np.ndarray) -> list[tuple[np.ndar
     order (the plan and the runner choose the same): through the arm stretched upwards
     (:func:`_upright`), or one joint group (:func:`_groups`) first and the others after. Raises
     :class:`UnreachableError` when none is clear."""
-    from station.cell.plan.collision import moves_clear
-
     rev = np.array([t == "revolute" for t in cfg.model.joint_types])
     if not np.any(np.abs(b - a)[rev] > LONG_MOVE_RAD) or moves_clear(cfg, [a, b]):
         return []  # a short move at the travel height: the plan's check checks it with the rest
@@ -166,7 +160,6 @@ def _staged(cfg: CellConfig, a: np.ndarray, b: np.ndarray) -> list[tuple[np.ndar
         v[list(grp)] = b[list(grp)]
         if moves_clear(cfg, [a, v, b]):
             return [(v, f"joint{'s' if len(grp) > 1 else ''} {', '.join(str(j + 1) for j in grp)} first")]
-    from station.cell.plan.collision import check_path
 
     clash = check_path(cfg, [(a, "depart: travel", -1), (b, "arrive: travel", -1)]).clash
     why = "" if clash is None else f" (straight: {clash.describe()})"
@@ -182,9 +175,6 @@ def fold_note(cfg: CellConfig, a: np.ndarray, b: np.ndarray) -> str:
     on a 0.1° grid over joint 3's soft range) and the wrist lies there inside the upper arm's
     capsule. "" otherwise. The PUMA 560 example's file admits the fold and not the stretched arm: its
     shoulder-back configuration cannot be reached whatever the vias (tests/cell/test_puma_fold.py)."""
-    from station.cell.plan.collision import default_radii
-    from station.core.kinematics.forward import chain_frames
-
     model = cfg.model
     if model.n_joints < 4 or not all(t == "revolute" for t in model.joint_types[:3]):
         return ""
@@ -220,8 +210,6 @@ def _scara_around(cfg: CellConfig, a: np.ndarray, b: np.ndarray) -> list[tuple[n
     direct joint move is clear, else the first clear of joint 1 first, joint 2 first, or the swing
     with the elbow at another angle (a fixed order, so the plan and the runner choose the same).
     None of them clear: the direct move, which the plan's check refuses where it collides."""
-    from station.cell.plan.collision import moves_clear
-
     if np.allclose(a, b, atol=1e-9, rtol=0) or moves_clear(cfg, [a, b]):
         return []
     for j in (0, 1):
@@ -277,9 +265,6 @@ def clear_candidates(cfg: CellConfig, cands: list, orient: list[int]
     configuration the lifted head cannot travel to from
     the first configuration's (:func:`travel_vias`: the PUMA 560's shoulder-back configuration
     folds the elbow past the shoulder, its head mount through the shoulder's capsule)."""
-    from station.cell.plan.articulated import preload_offset, retract_poses
-    from station.cell.plan.collision import poses_clear
-
     if not cands:
         return cands, orient, []
     q = np.array([t.joints for t in cands])
@@ -297,8 +282,6 @@ def clear_candidates(cfg: CellConfig, cands: list, orient: list[int]
     up, reached = lifted_many(cfg, back)  # every candidate's depart and arrive: reached, inside the limits
     # as every planned pose, LIMIT_MARGIN_RAD inside the soft limits: a located or corrected target
     # moves its lift a little (a PUMA-like arm 3 mm off: an arrive 0.97° beyond joint 3's limit)
-    from station.cell.plan.articulated import LIMIT_MARGIN_RAD
-
     m = LIMIT_MARGIN_RAD * np.array([t == "revolute" for t in cfg.model.joint_types])
     lim = cfg.soft_limits
     inside = reached & np.all((up >= lim[:, 0] + m) & (up <= lim[:, 1] - m), axis=1)

@@ -92,7 +92,7 @@ def _ik_near(cfg: CellConfig, T_base: np.ndarray, q: np.ndarray, what: str) -> n
         out = scara_ik(cfg.model, T_base[None], 1 if q[1] > 0 else -1, setup=False, check_limits=False)[0]
         ok = bool(np.all(np.isfinite(out)))
     else:
-        from station.cell.plan.articulated import follow_ik
+        from station.cell.plan.arm_motion import follow_ik
 
         sol, good = follow_ik(cfg.model, T_base[None], np.asarray(q, dtype=float)[None])
         out, ok = sol[0], bool(good[0])

@@ -453,7 +453,7 @@ def _recentre(cfg: CellConfig, q: np.ndarray, pose_cmd: np.ndarray | None, M: np
               M_nom: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
     """Re-centre on the measured contact pose ``M``: the joints (and the Cartesian command)."""
     if not cfg.model.is_scara:  # all six: back to the contact q was planned for (head tilted)
-        from station.cell.plan.articulated import recentred as recentre
+        from station.cell.plan.arm_motion import recentred as recentre
 
         q, T_new = recentre(cfg, q, M)
         return q, (None if pose_cmd is None else matrix_to_pose(T_new))

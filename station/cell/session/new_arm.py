@@ -123,7 +123,7 @@ def arm_placement(text: str, dest: Path, cfg: CellConfig, with_setup) -> tuple[n
 
 def _park_line(cfg: CellConfig) -> tuple[str, str]:
     """``park_joints`` (deg | mm): the retract pose of the plan's first step, and a note."""
-    from station.cell.plan.articulated import retract_pose
+    from station.cell.plan.arm_motion import retract_pose
     from station.cell.plan.measurement_plan import build_plan
 
     plan = build_plan(cfg)

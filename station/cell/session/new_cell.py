@@ -278,7 +278,8 @@ def new_cell_text(dest: str | Path, robot: str | None = None, head: str | None =
         text = _with_setup(text, setup)
         notes.append(f"[robot] setup: {line}; measure where the robot really stands and correct it to a few mm")
         notes.append(f"[plan] repeats = {repeats}, verification_cycles = {cycles}: {why}")
-        from station.cell.correction.design import GRID_POINT, check_correction
+        from station.cell.correction.design import GRID_POINT
+        from station.cell.correction.precheck import check_correction
 
         cfg = parse_text(text, str(dest))
         try:

@@ -2,7 +2,7 @@
 the radius of every link's capsule and the pairs of links allowed to touch.
 
 A DH or MDH file has no such table: its links get the default radii
-(:func:`station.cell.plan.collision.default_radii`). A URDF's links get their ``<collision>`` shapes
+(:func:`station.cell.plan.collision_shapes.default_radii`). A URDF's links get their ``<collision>`` shapes
 (:mod:`station.io.robot.urdf_collision`), a link without one the default capsule. The table's keys
 and types are checked with the rest of the file (:mod:`station.io.robot.schema`); here its values are checked against the robot.
 """

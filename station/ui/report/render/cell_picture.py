@@ -1,9 +1,9 @@
 """A picture of the cell with the plan's poses (issue 40, "what people see"): the cell seen from
 above (X–Y) and from the side (X–Z), in the robot's base frame, mm.
 
-It shows what the collision check knows (:mod:`station.cell.plan.collision`, the same shapes): the
-body's cubes and their pillars, the cell's ``[[obstacle]]`` boxes and cylinders, the robot's base
-link, the arm (links and probe head) at the first touch of each pose family, every touch of the
+It shows what the collision check knows (:mod:`station.cell.plan.collision`, the same shapes:
+:mod:`station.cell.plan.collision_shapes`): the body's cubes and their pillars, the cell's
+``[[obstacle]]`` boxes and cylinders, the robot's base link, the arm (links and probe head) at the first touch of each pose family, every touch of the
 plan (the head's nominal contact point, one marker per step, coloured by its family: a SCARA's
 elbow, an arm's configuration code), the moves between consecutive poses (the contact point's track
 along the joint-space move; the moves from or to a via pose apart) and the via poses, and the least
@@ -30,16 +30,9 @@ import numpy as np
 
 from station.cell.config.cell_config import CellConfig
 from station.cell.plan.assembly import Plan, nominal_contact
-from station.cell.plan.collision import (
-    CellShapes,
-    Clash,
-    CollisionReport,
-    Shape,
-    cell_shapes,
-    check_path,
-    fcl_shape,
-    plan_path,
-)
+from station.cell.plan.collision import Clash, CollisionReport, check_path
+from station.cell.plan.collision_shapes import CellShapes, Shape, cell_shapes, fcl_shape
+from station.cell.plan.run_path import VIA_NAMES, plan_path
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.core.kinematics.forward import chain_frames
 from station.errors import ConfigError
@@ -59,9 +52,6 @@ TRACK_STEP_RAD = np.radians(10.0)
 MAX_TRACK_SAMPLES = 24
 #: samples of the move that holds the least clearance, to show where along it the pair comes closest
 CLOSEST_SAMPLES = 64
-#: the via poses' labels (station/cell/plan/collision.py's _VIA_NAMES: vias.py names them; the tests
-#: compare the vias drawn with the check's count)
-VIA_NAMES = ("depart", "arrive", "arm upright", "turned upright", "first")
 #: the figure's fixed parts [in]: per line of the title above the top view (and the view's own
 #: title), between the views (the top view's X label, the side view's title), the legend below
 #: (with the side view's X label), the Y / Z labels on the left
@@ -92,7 +82,7 @@ class CellPicture:
 
 def picture_poses(cfg: CellConfig, steps: Sequence[PlannedStep]) -> list[tuple[np.ndarray, str, int]]:
     """Every pose the run commands for ``steps`` (the vias included): the collision check's own
-    sequence (:func:`station.cell.plan.collision.plan_path`) of a plan holding exactly these steps (a
+    sequence (:func:`station.cell.plan.run_path.plan_path`) of a plan holding exactly these steps (a
     stored run's plan: the report draws what the run did)."""
     return plan_path(cfg, Plan(tuple(steps), (), ()))
 
