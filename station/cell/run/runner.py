@@ -23,7 +23,7 @@ import numpy as np
 
 from station.cell.config.cell_config import CellConfig
 from station.cell.limits.motion_guard import MotionGuard
-from station.cell.plan.measurement_plan import above_offset, approach_pose, retracted
+from station.cell.plan.measurement_plan import above_offset, approach_pose, cartesian_above, retracted
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.plan.vias import travel_vias
 from station.cell.records.rundb import RunDB
@@ -300,6 +300,8 @@ def _touch(cfg: CellConfig, visit: _Visit, direction: int, cycle: int,
         # from q by the table's Δq, whose sign must not decide the direction of arrival.
         if not cfg.model.is_scara:  # an articulated arm stands short of q (its joints) first
             yield MoveJoints(q + r, "above the point")
+        else:  # a SCARA comes down from above the point, on the approach side (cartesian_above)
+            yield MoveJoints(cartesian_above(cfg, q, direction, cycle, visit.remeasured), "above the point")
         yield MoveCartesian(pose_cmd, cartesian[1], q, "touch (Cartesian)")
     yield Settle(cfg.plan.settle_s)
     snap = yield ReadProbes()
