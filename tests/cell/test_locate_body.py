@@ -25,14 +25,6 @@ from station.ui.cli.main import main
 CELL = Path(__file__).resolve().parent / "data" / "integrator_scara"
 
 #: issue 40, found by the simulated controller's collision check now on by default
-SCARA_CARTESIAN_DESCENT = (
-    "issue 40: a SCARA's Cartesian touch (verification with the table active) is one joint move from the "
-    "approach down to the touch, not the approach, the pose above the point and the touch the plan's check "
-    "checks; on this cell it puts probe Y2's housing 0.1 mm into cube 6 and the simulated controller refuses "
-    "it (MOVE_CARTESIAN, exit 4). A Cartesian pose above the point lies outside the table's grid (z 292.6 > "
-    "280 mm): the runner's descent needs redesigning, not the check turning off")
-
-
 def _copy(tmp_path: Path) -> Path:
     shutil.copytree(CELL, tmp_path / "cell")
     return tmp_path / "cell" / "cell.toml"
@@ -49,7 +41,6 @@ def test_the_premise_the_simulated_base_stands_beyond_the_stroke():
     assert np.abs(along_faces).max() > 3.0 == float(cfg.head.strokes.min()) / 2  # a face beyond the probes' reach
 
 
-@pytest.mark.xfail(strict=True, reason=SCARA_CARTESIAN_DESCENT)
 def test_an_integrators_scara_is_located_and_calibrated_at_the_first_try(tmp_path, capsys):
     cfg_path = _copy(tmp_path)
     db = tmp_path / "runs.sqlite"

@@ -21,7 +21,6 @@ from station.errors import Outcome
 from station.ui.cli.commands_cell import progress_printer
 from station.ui.cli.process.progress_clock import ProgressClock
 from station.ui.simulated_cell import load_cell
-from tests.cell.test_locate_body import SCARA_CARTESIAN_DESCENT
 
 CELL = Path(__file__).resolve().parent / "data" / "integrator_scara"
 
@@ -79,7 +78,6 @@ def located_run(tmp_path_factory):
     return summary, events, plan, located, warmup
 
 
-@pytest.mark.xfail(strict=True, reason=SCARA_CARTESIAN_DESCENT)
 def test_a_located_runs_progress_never_goes_back_and_ends_at_n_of_n(located_run):
     summary, events, plan, located, warmup = located_run
     assert summary.outcome is Outcome.SUCCESS, summary.failure
@@ -102,7 +100,6 @@ def test_a_located_runs_progress_never_goes_back_and_ends_at_n_of_n(located_run)
             assert isinstance(events[i - 1], ev.Progress) and events[i - 1].label.endswith(e.label)
 
 
-@pytest.mark.xfail(strict=True, reason=SCARA_CARTESIAN_DESCENT)
 def test_the_cli_bar_of_a_located_run_counts_up_to_n_of_n(located_run):
     _, events, plan, _, _ = located_run
     out = io.StringIO()

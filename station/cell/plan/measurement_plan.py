@@ -177,6 +177,29 @@ def above_offset(cfg: CellConfig, cycle: int = 0, remeasure: int = 0) -> np.ndar
     return retract_offset(cfg) * (1.0 + 0.1 * cycle + REMEASURE_STEP * remeasure)
 
 
+#: the share of the approach offset a SCARA's Cartesian touch keeps on the approach side above the
+#: point: the last move then sweeps a quarter of it (0.125° at 0.5°, ten times the simulated arm's
+#: backlash at 450 mm) while it comes down; the runner keeps it to the joints the table corrects to
+#: (station.cell.run.runner.AboveCartesian), so it arrives from the approach side whatever the correction
+CARTESIAN_SIDE = 0.25
+
+
+def cartesian_above(cfg: CellConfig, q: np.ndarray, direction: int = 1, cycle: int = 0,
+                    remeasure: int = 0) -> np.ndarray:
+    """Where a SCARA's Cartesian touch (verification, the table active) comes down from: above the
+    point by the clearance (at most as high as its approach, which the soft limits hold), its
+    revolute joints still :data:`CARTESIAN_SIDE` of the approach offset on the approach side (of the
+    nominal joints here; the runner adds the active table's correction, which the plan cannot know).
+    Straight from the approach, the head swept the whole offset while it came down and a probe's
+    housing grazed a face (issue 40: the integrator's SCARA, refused by the simulated controller's
+    own collision check)."""
+    approach = approach_pose(cfg, q, direction, cycle, remeasure)
+    lift = retract_offset(cfg) > 0
+    above = q + above_offset(cfg, cycle, remeasure)
+    side = q + CARTESIAN_SIDE * (approach - q)
+    return np.where(lift, np.minimum(above, approach), side)
+
+
 def all_motion_poses(cfg: CellConfig, q: np.ndarray, direction: int = 1) -> list[np.ndarray]:
     """Every joint vector a measurement at ``q`` commands (approach, above the point, target)."""
     return [approach_pose(cfg, q, direction), q + retract_offset(cfg), q]

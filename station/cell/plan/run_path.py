@@ -18,7 +18,7 @@ from station.cell.config.cell_config import CellConfig
 from station.cell.plan.arm_motion import retract_poses
 from station.cell.plan.assembly import Plan
 from station.cell.plan.collision import CollisionReport, check_path, require_fcl
-from station.cell.plan.measurement_plan import all_motion_poses, retract_offset, retracted
+from station.cell.plan.measurement_plan import all_motion_poses, cartesian_above, retract_offset, retracted
 from station.cell.plan.vias import lifted_many, travel_vias
 from station.errors import ConfigError
 
@@ -58,9 +58,9 @@ def plan_path(cfg: CellConfig, plan: Plan, with_upload: bool = True) -> list[tup
                     out.append((v, f"{last[0]}: {what}", last[1] if what == "depart" else -1))
         names: tuple[str, ...] = ("approach", "above the point", "touch")
         if back is None and s.kind.is_verification:
-            # a SCARA's verification touch is a Cartesian target the controller reaches straight
-            # from the approach (station/cell/run/runner.py _touch): no pose above the point
-            moves, names = [moves[0], moves[2]], ("approach", "touch")
+            # a SCARA's verification touch is a Cartesian target it comes down to from above the
+            # point on the approach side (station/cell/run/runner.py _touch, cartesian_above)
+            moves = [moves[0], cartesian_above(cfg, q, s.direction), q]
         for what, qq in zip(names, moves):
             out.append((np.asarray(qq, dtype=float), f"{name}: {what}", s.point))
         out.append((np.asarray(leave, dtype=float), f"{name}: retract", s.point))
