@@ -64,13 +64,14 @@ def _turn(T: np.ndarray, kind: str, q: np.ndarray) -> None:
     out: the motion changes two columns of T (one), so no 4 × 4 joint matrix is built and
     multiplied, and the frame's memory is reused (fresh pages for every intermediate frame of
     ~17 000 poses cost as much as the arithmetic)."""
+    # rows 0-2 only: a homogeneous transform's last row (0, 0, 0, 1) is what the motion leaves it
     if kind == "revolute":
         c, s = np.cos(q)[..., None], np.sin(q)[..., None]
-        x, y = T[..., :, 0].copy(), T[..., :, 1]
-        T[..., :, 0] = x * c + y * s
-        T[..., :, 1] = y * c - x * s
+        x, y = T[..., :3, 0].copy(), T[..., :3, 1]
+        T[..., :3, 0] = x * c + y * s
+        T[..., :3, 1] = y * c - x * s
     else:
-        T[..., :, 3] += T[..., :, 2] * q[..., None]
+        T[..., :3, 3] += T[..., :3, 2] * q[..., None]
 
 
 _EYE = np.eye(4)

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from station.core.blas_threads import single_blas_thread
 from station.core.kinematics.forward import forward, forward_with_jacobian
 from station.core.kinematics.model import RobotModel
 from station.core.kinematics.transforms import rotation_exp
@@ -242,6 +243,16 @@ def monte_carlo(model: RobotModel, data: MeasurementSet, true_params, chosen_ind
     distance data, always) solves every set by Gauss–Newton with its own analytic Jacobian at every
     iteration (the reference the fast path is tested against; ~10× slower).
     """
+    with single_blas_thread():
+        return _monte_carlo(model, data, true_params, chosen_index, n_sets, rng, start, sigma_joints, point_ids,
+                            sigma_point, max_iter, tol, exact_jacobian)
+
+
+def _monte_carlo(model, data, true_params, chosen_index, n_sets, rng, start, sigma_joints, point_ids, sigma_point,
+                 max_iter, tol, exact_jacobian) -> MonteCarloResult:
+    """:func:`monte_carlo` on one BLAS thread: its products are many small ones (sets × rows ×
+    parameters), where OpenBLAS's threads on a busy two-core machine cost more CPU in waiting
+    than they save (a 10 000-set study: 1.9 s of CPU on two threads, 1.1 s on one, load ~7)."""
     idx = np.asarray(chosen_index, dtype=int)
     p_exact = np.asarray(true_params, dtype=float)
     p0 = np.array(model.nominal if start is None else start, dtype=float)
@@ -319,13 +330,15 @@ def _gauss_newton(model, data, measured, p0, idx, w, max_iter, tol):
 class _Expansion:
     """The weighted Jacobian of the chosen parameters about the noise-free solution ``p_ref``:
     ``J0`` ``(rows, m)``, its derivative ``H`` ``(rows, m, m)`` (H[i, j, k] = ∂J0[i, j]/∂p_k),
-    and the column-scaled normal matrix's inverse the steps use."""
+    and the column-scaled normal matrix's inverse the steps use. ``Hf`` ``(rows, len(pairs))``
+    keeps the columns j·m + k of H flattened that are not all zero, ``pairs`` their indices."""
 
     p_ref: np.ndarray
     idx: np.ndarray
     w: np.ndarray
     J0: np.ndarray
     Hf: np.ndarray
+    pairs: np.ndarray
     scale: np.ndarray
     normal_inv: np.ndarray
     step_tol: np.ndarray
@@ -353,7 +366,11 @@ class _Expansion:
         # left, shrinking ~1e-3 per step (the pose residual's rotation vs. J), is then ~1e-8 σ
         step_tol = np.maximum(tol, 1e-5 * np.sqrt(np.diag(normal_inv)) / scale)
         Hw = (H * w[:, None, None]).reshape(H.shape[0], -1)  # (rows, m·m)
-        return cls(p_ref, idx, w, J0w, Hw, scale, normal_inv, step_tol)
+        # only the (j, k) pairs where the Jacobian changes at all: a length's column does not turn
+        # with another length (about half of the SR 800's 400 pairs are exactly zero), and the
+        # products with H are the solve's largest after the forward kinematics
+        pairs = np.flatnonzero(np.any(Hw != 0.0, axis=0))
+        return cls(p_ref, idx, w, J0w, np.ascontiguousarray(Hw[:, pairs]), pairs, scale, normal_inv, step_tol)
 
     def solve(self, model, data, measured, max_iter, tol):
         """Estimates ``(n_sets, m)``, the iterations, and the sets that did not converge.
@@ -397,13 +414,15 @@ class _Expansion:
     def _along(self, delta: np.ndarray, at: np.ndarray) -> np.ndarray:
         """(J0 + H·at)·delta ``(n, rows)``: the residuals' change over ``delta`` ``(n, m)``."""
         n, m = delta.shape
-        return delta @ self.J0.T + (delta[:, :, None] * at[:, None, :]).reshape(n, m * m) @ self.Hf.T
+        return delta @ self.J0.T + (delta[:, :, None] * at[:, None, :]).reshape(n, m * m)[:, self.pairs] @ self.Hf.T
 
     def _along_t(self, r: np.ndarray, d: np.ndarray) -> np.ndarray:
         """(H·d)ᵀ r ``(n, m)``: the Jacobian's change at ``d`` applied to the residuals ``r``
         (Σ_ik H[i, j, k] d_k r_i)."""
         n, m = d.shape
-        return ((r @ self.Hf).reshape(n, m, m) @ d[:, :, None])[..., 0]
+        rH = np.zeros((n, m * m))
+        rH[:, self.pairs] = r @ self.Hf
+        return (rH.reshape(n, m, m) @ d[:, :, None])[..., 0]
 
 
 def pair_units(model: RobotModel, data: MeasurementSet, params) -> np.ndarray | None:
