@@ -413,16 +413,16 @@ class _Expansion:
 
     def _along(self, delta: np.ndarray, at: np.ndarray) -> np.ndarray:
         """(J0 + H·at)·delta ``(n, rows)``: the residuals' change over ``delta`` ``(n, m)``."""
-        n, m = delta.shape
-        return delta @ self.J0.T + (delta[:, :, None] * at[:, None, :]).reshape(n, m * m)[:, self.pairs] @ self.Hf.T
+        j, k = np.divmod(self.pairs, delta.shape[1])
+        return delta @ self.J0.T + (delta[:, j] * at[:, k]) @ self.Hf.T
 
     def _along_t(self, r: np.ndarray, d: np.ndarray) -> np.ndarray:
         """(H·d)ᵀ r ``(n, m)``: the Jacobian's change at ``d`` applied to the residuals ``r``
         (Σ_ik H[i, j, k] d_k r_i)."""
-        n, m = d.shape
-        rH = np.zeros((n, m * m))
-        rH[:, self.pairs] = r @ self.Hf
-        return (rH.reshape(n, m, m) @ d[:, :, None])[..., 0]
+        m = d.shape[1]
+        j, k = np.divmod(self.pairs, m)
+        # Σ_k (rᵀH)[j, k] d_k: the pairs' products summed into their j by a (pairs, m) one-hot product
+        return ((r @ self.Hf) * d[:, k]) @ (j[:, None] == np.arange(m)).astype(float)
 
 
 def pair_units(model: RobotModel, data: MeasurementSet, params) -> np.ndarray | None:
