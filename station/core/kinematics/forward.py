@@ -67,9 +67,13 @@ def _turn(T: np.ndarray, kind: str, q: np.ndarray) -> None:
     # rows 0-2 only: a homogeneous transform's last row (0, 0, 0, 1) is what the motion leaves it
     if kind == "revolute":
         c, s = np.cos(q)[..., None], np.sin(q)[..., None]
-        x, y = T[..., :3, 0].copy(), T[..., :3, 1]
-        T[..., :3, 0] = x * c + y * s
-        T[..., :3, 1] = y * c - x * s
+        x, y, col0 = T[..., :3, 0].copy(), T[..., :3, 1], T[..., :3, 0]
+        # x c + y s and y c − x s, written into the frame's own columns (fewer temporaries)
+        np.multiply(y, s, out=col0)
+        col0 += x * c
+        y *= c
+        x *= s
+        y -= x
     else:
         T[..., :3, 3] += T[..., :3, 2] * q[..., None]
 
