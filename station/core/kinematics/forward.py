@@ -64,13 +64,18 @@ def _turn(T: np.ndarray, kind: str, q: np.ndarray) -> None:
     out: the motion changes two columns of T (one), so no 4 × 4 joint matrix is built and
     multiplied, and the frame's memory is reused (fresh pages for every intermediate frame of
     ~17 000 poses cost as much as the arithmetic)."""
+    # rows 0-2 only: a homogeneous transform's last row (0, 0, 0, 1) is what the motion leaves it
     if kind == "revolute":
         c, s = np.cos(q)[..., None], np.sin(q)[..., None]
-        x, y = T[..., :, 0].copy(), T[..., :, 1]
-        T[..., :, 0] = x * c + y * s
-        T[..., :, 1] = y * c - x * s
+        x, y, col0 = T[..., :3, 0].copy(), T[..., :3, 1], T[..., :3, 0]
+        # x c + y s and y c − x s, written into the frame's own columns (fewer temporaries)
+        np.multiply(y, s, out=col0)
+        col0 += x * c
+        y *= c
+        x *= s
+        y -= x
     else:
-        T[..., :, 3] += T[..., :, 2] * q[..., None]
+        T[..., :3, 3] += T[..., :3, 2] * q[..., None]
 
 
 _EYE = np.eye(4)
@@ -100,6 +105,18 @@ class _Frames:
     p: np.ndarray
 
 
+def _times(T: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """``T @ C`` for frames ``(..., n, 4, 4)`` and one transform per batch entry ``(..., 4, 4)``.
+    With batch axes (many parameter sets or joint sets, the Monte Carlo's) each entry's frames are
+    one ``(4n, 4) @ (4, 4)`` product: numpy hands it to BLAS whole, 4.5× faster than its own loop
+    over 4 × 4 blocks (10 000 sets × 25 poses: 3.2 ms from 14.8 ms), the same values; a BLAS
+    product that small never spreads over threads. Without batch axes the stacked product stays
+    (one ``(4n, 4)`` product of thousands of poses is what OpenBLAS threads, see :func:`_compose`)."""
+    if T.ndim < 4:
+        return T @ C
+    return (T.reshape(T.shape[:-3] + (-1, 4)) @ C).reshape(T.shape)
+
+
 def _compose(model: RobotModel, joints, params, setup: bool, keep_frames: bool,
              keep_axes: bool = False) -> _Frames:
     """Compose the chain ``R · A1(q1) · … · K`` over poses and parameter sets; every product
@@ -122,7 +139,7 @@ def _compose(model: RobotModel, joints, params, setup: bool, keep_frames: bool,
             consts.append(C)
         if t == 0 and not setup:
             continue
-        T = np.array(np.broadcast_to(C, shape)) if T is None else T @ C
+        T = np.array(np.broadcast_to(C, shape)) if T is None else _times(T, Cs[..., t, :, :])
         if spec.joint is not None:
             if keep_axes:
                 axes.append(T[..., :3, 2:4].copy())
