@@ -3,8 +3,9 @@
 A simulated calibration of the built-in cell costs about 16 s of CPU (33 s of wall time beside other
 work on 2 cores), and a dozen modules need one finished run of seed 1 to read, damage, recheck or
 report on. ``seed1_run`` (uploaded) and ``seed1_not_uploaded`` (``--no-upload --json``) run once per
-process (each xdist worker runs one the first time one of its tests asks); a test that writes into
-the run database or the report works on ``run.copy_to(folder)``, never on the original.
+test session (tests/once.py: the first xdist worker that asks runs it, the others read its result);
+a test that writes into the run database or the report works on ``run.copy_to(folder)``, never on
+the original, which every worker reads.
 """
 
 from __future__ import annotations
