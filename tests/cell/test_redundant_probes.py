@@ -31,6 +31,7 @@ from station.core.probe.geometry import FACE_NORMALS, ProbeHeadGeometry
 from station.errors import ConfigError, MeasurementFault
 from station.io.head_file import head_to_toml, load_head
 from station.io.robot.files import load_robot
+from tests.once import once_per_session
 
 SEVEN = Path(__file__).resolve().parents[2] / "examples" / "heads" / "seven-probe.toml"
 SEED = 1
@@ -140,7 +141,9 @@ def after_fault(run: Run) -> list[MeasurementRecord]:
 
 @pytest.fixture(scope="module")
 def seven_baseline(tmp_path_factory) -> Run:
-    return calibrate(tmp_path_factory.mktemp("seven-base"), SEVEN)
+    """The fault-free seven-probe run four tests compare with: once per session, not once per
+    xdist worker their tests land on (issue 42)."""
+    return once_per_session(tmp_path_factory, "seven-probe-baseline", lambda tmp: calibrate(tmp, SEVEN))
 
 
 def test_fault_free_seven_probe_run_reports_a_residual_and_needs_no_remeasure(seven_baseline):

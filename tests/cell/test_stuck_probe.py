@@ -29,6 +29,7 @@ from station.core.probe.check import diagnose, residual_test
 from station.core.probe.geometry import readings_from_pose, solve_pose
 from station.errors import Outcome
 from station.io.head_file import load_head
+from tests.once import once_per_session
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "scara600"
 SEED = 1
@@ -87,9 +88,10 @@ def rehearse(tmp: Path, stuck: str | None, plan: dict[str, str] | None = None,
 def runs(tmp_path_factory) -> tuple[Run, Run]:
     """The fault-free run and the stuck-probe run of the same seed, the example's full plan (the
     verification's after/oracle of a shortened plan varies by ±20 % from realisation to
-    realisation, too much to compare two runs within 10 %)."""
-    base = rehearse(tmp_path_factory.mktemp("fault-free"), None)
-    stuck = rehearse(tmp_path_factory.mktemp("stuck"), STUCK)
+    realisation, too much to compare two runs within 10 %). Built once per session: under xdist
+    the module's tests land on two workers, and each built both runs (78 s of setup twice)."""
+    base = once_per_session(tmp_path_factory, "stuck-probe-fault-free", lambda tmp: rehearse(tmp, None))
+    stuck = once_per_session(tmp_path_factory, "stuck-probe-stuck", lambda tmp: rehearse(tmp, STUCK))
     return base, stuck
 
 
