@@ -7,7 +7,6 @@ against the kept DCC schema."""
 from __future__ import annotations
 
 import json
-import shutil
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -18,8 +17,8 @@ from station.ui.cli.main import main
 from station.ui.report.dcc import validate_dcc
 from tests.opcua.clients import CONFIG, PASSWORDS, connected, station
 from tests.opcua.conftest import Pki, Served, serving
+from tests.short_plan import example_short
 from tests.ui.test_export_dcc import ISSUER
-from tests.ui.test_process_io import SHORT_PLAN
 
 RESULT_NS = "http://opcfoundation.org/UA/Machinery/Result/"
 
@@ -31,18 +30,12 @@ def certified_server(pki: Pki, tmp_path_factory) -> Iterator[tuple[Served, Path]
     per identification pose and one verification cycle: what is tested is how the certificate
     travels, which the example's full plan (three times the CPU) shows alike (issue 42)."""
     work = tmp_path_factory.mktemp("serve-dcc")
-    cell = work / "scara600"
-    shutil.copytree(CONFIG.parent, cell)
-    text = (cell / "cell.toml").read_text(encoding="utf-8")
-    for old, new in SHORT_PLAN.items():
-        assert old in text
-        text = text.replace(old, new)
-    (cell / "cell.toml").write_text(text, encoding="utf-8")
+    cell = example_short(CONFIG, work)
     db, issuer, out = work / "runs.sqlite", work / "issuer.toml", work / "run1.xml"
-    assert main(["calibrate", str(cell / "cell.toml"), "--simulated", "--seed", "1", "--db", str(db)]) == 0
+    assert main(["calibrate", str(cell), "--simulated", "--seed", "1", "--db", str(db)]) == 0
     issuer.write_text(ISSUER)
     assert main(["export-dcc", "1", "--db", str(db), "--issuer", str(issuer), "-o", str(out)]) == 0
-    with serving(pki, work, db, cell / "cell.toml") as served:
+    with serving(pki, work, db, cell) as served:
         yield served, out
 
 

@@ -12,7 +12,6 @@ from __future__ import annotations
 import threading
 
 import pytest
-from test_process_io import short_cell  # noqa: F401 - the built-in cell, one visit and one cycle
 from textual.widgets import DataTable
 
 from station.cell.run.runcontrol import RunControl
@@ -64,7 +63,7 @@ HOLD_S = 280  # a hang guard: a failing test lets the runner go before pytest's 
 @pytest.mark.slow
 @pytest.mark.timeout(300)  # two whole simulated runs through the UI: minutes on a loaded 2-core machine
 @pytest.mark.parametrize("size", [(80, 24), (160, 48)])
-async def test_full_simulated_run_with_pause_abort_resume_upload_and_roll_back(tmp_path, size, short_cell,  # noqa: F811
+async def test_full_simulated_run_with_pause_abort_resume_upload_and_roll_back(tmp_path, size, short_cell,
                                                                                  monkeypatch):
     # the built-in cell with one visit per identification pose and one verification cycle: the
     # operator's keys and screens are the same on a shorter run (issue 42: the suite's time)
@@ -76,7 +75,7 @@ async def test_full_simulated_run_with_pause_abort_resume_upload_and_roll_back(t
         hold.release()
 
 
-async def _pause_abort_resume_upload_roll_back(app, size, tmp_path, short_cell, hold: Hold) -> None:  # noqa: F811
+async def _pause_abort_resume_upload_roll_back(app, size, tmp_path, short_cell, hold: Hold) -> None:
     async with app.run_test(size=size) as pilot:
         table = app.query_one("#measurements", DataTable)
         await pilot.press("s")
