@@ -3,13 +3,14 @@
 A simulated calibration of the built-in cell costs about 16 s of CPU (33 s of wall time beside other
 work on 2 cores), and a dozen modules need one finished run of seed 1 to read, damage, recheck or
 report on. ``seed1_run`` (uploaded) and ``seed1_not_uploaded`` (``--no-upload --json``) run once per
-process (each xdist worker runs one the first time one of its tests asks); a test that writes into
+test session (the first xdist worker to ask runs it, the others read it); a test that writes into
 the run database or the report works on ``run.copy_to(folder)``, never on the original.
 """
 
 from __future__ import annotations
 
 import io
+import json
 import os
 import shutil
 import sys
@@ -83,10 +84,31 @@ def _calibrate(root: Path, *options: str) -> FinishedRun:
     return FinishedRun(code, out.getvalue(), err.getvalue(), db, report)
 
 
+def _calibrate_once(tmp_path_factory, name: str, *options: str) -> FinishedRun:
+    """:func:`_calibrate` once per test session, not once per xdist worker: the first worker to ask
+    runs it in the session's shared temporary folder under a file lock, the others wait on that lock
+    and read what it left (xdist's documented way to share a session fixture; issue 42: each run is
+    ~16 s of CPU, and three workers each ran both). Tests only read it or copy it (``copy_to``)."""
+    from filelock import FileLock
+
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent  # the workers' folders' parent: one per session
+    folder, done = root / name, root / f"{name}.json"
+    with FileLock(str(root / f"{name}.lock")):
+        if done.exists():
+            kept = json.loads(done.read_text(encoding="utf-8"))
+            return FinishedRun(kept["code"], kept["out"], kept["err"], folder / "runs.sqlite", folder / "rep")
+        folder.mkdir()
+        run = _calibrate(folder, *options)
+        done.write_text(json.dumps({"code": run.code, "out": run.out, "err": run.err}), encoding="utf-8")
+    return run
+
+
 @pytest.fixture(scope="session")
 def seed1_run(tmp_path_factory) -> FinishedRun:
     """The built-in cell's seed-1 calibration, uploaded and verified (exit 0)."""
-    run = _calibrate(tmp_path_factory.mktemp("seed1-run"))
+    run = _calibrate_once(tmp_path_factory, "seed1-run")
     assert run.code == 0, run.err[-3000:]
     return run
 
@@ -95,7 +117,7 @@ def seed1_run(tmp_path_factory) -> FinishedRun:
 def seed1_not_uploaded(tmp_path_factory) -> FinishedRun:
     """The same calibration with ``--no-upload --json``: NOT_UPLOADED (exit 11), its one JSON object
     on stdout and the human summary on stderr, and its report."""
-    run = _calibrate(tmp_path_factory.mktemp("seed1-not-uploaded"), "--no-upload", "--json")
+    run = _calibrate_once(tmp_path_factory, "seed1-not-uploaded", "--no-upload", "--json")
     assert run.code == 11, run.err[-3000:]
     return run
 
