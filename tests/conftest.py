@@ -81,3 +81,14 @@ def seed1_not_uploaded(tmp_path_factory) -> FinishedRun:
                            lambda root: _calibrate(root, "--no-upload", "--json"))
     assert run.code == 11, run.err[-3000:]
     return run
+
+
+# --- issue 42 (tui): the built-in cell with a short plan, one per session ---------------------------
+
+@pytest.fixture(scope="session")
+def short_cell(tmp_path_factory) -> Path:
+    """The built-in simulated cell's file with one visit per identification pose and one verification
+    cycle (tests/short_plan.py), for the tests about keys, pipes and signals, not accuracy."""
+    from tests.short_plan import built_in_short
+
+    return built_in_short(tmp_path_factory.mktemp("short-cell"))

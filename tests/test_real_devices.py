@@ -19,6 +19,7 @@ import pytest
 from simulators.judge import CellJudge
 from station.cell.config.cell_config import load_config
 from station.ui.cli.main import main
+from tests.short_plan import example_short
 
 ROOT = Path(__file__).resolve().parents[1]
 CELL = ROOT / "examples" / "scara600" / "cell.toml"
@@ -37,8 +38,11 @@ def test_a_rehearsal_of_the_example_cell_stays_inside_registers_128_to_255(tmp_p
     from station.cell.session.calibrate import open_cell
     from station.errors import Outcome
 
+    # the example with one visit per identification pose and one verification cycle: every kind of
+    # request (moves, joint reads, the table's upload and read back) is made on the shorter run (42)
+    cell = example_short(CELL, tmp_path)
     with ExitStack() as stack:
-        rehearsal = stack.enter_context(simulate_config(load_config(CELL), seed=1, source=CELL))
+        rehearsal = stack.enter_context(simulate_config(load_config(cell), seed=1, source=cell))
         server = rehearsal.servers.controller_server
         assert (server.register_base, server.register_count) == (128, 128)  # [simulation] controller_register_count
         db = stack.enter_context(RunDB(tmp_path / "runs.sqlite"))

@@ -22,11 +22,11 @@ def _station(*args: str, url: str, cwd) -> subprocess.CompletedProcess:
 
 @pytest.mark.slow
 @pytest.mark.timeout(400)
-def test_a_run_during_an_outage_is_queued_then_synced_once_and_listed(fleet_db, pg_server, tmp_path):
+def test_a_run_during_an_outage_is_queued_then_synced_once_and_listed(fleet_db, pg_server, tmp_path, short_cell):
     db = tmp_path / "a.sqlite"
     pg_server.stop()
-    try:
-        run = _station("calibrate", "--simulated", "--db", str(db), "--report", str(tmp_path / "report"), "--json",
+    try:  # the built-in cell, one visit per identification pose and one verification cycle (issue 42)
+        run = _station("calibrate", "--simulated", str(short_cell), "--db", str(db), "--report", str(tmp_path / "report"), "--json",
                        url=fleet_db.station_url, cwd=tmp_path)
     finally:
         pg_server.start()

@@ -69,12 +69,12 @@ class Served:
 
 
 @contextmanager
-def serving(pki: Pki, work: Path, db: Path) -> Iterator[Served]:
+def serving(pki: Pki, work: Path, db: Path, config: Path = CONFIG) -> Iterator[Served]:
     """``station serve --opcua CONFIG --simulated`` on run database ``db`` in its own process
-    (working in ``work``), until the block ends."""
+    (working in ``work``), until the block ends; ``config``: another cell file than CONFIG."""
     port = free_port()
     log = work / "serve.log"
-    cmd = [sys.executable, "-m", "station.ui.cli.main", "serve", "--opcua", str(CONFIG), "--simulated",
+    cmd = [sys.executable, "-m", "station.ui.cli.main", "serve", "--opcua", str(config), "--simulated",
            "--pki", str(pki.root / "server"), "--users", str(pki.users), "--host", "127.0.0.1", "--port", str(port),
            "--db", str(db)]
     with log.open("w") as out:

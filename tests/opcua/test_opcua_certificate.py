@@ -17,6 +17,7 @@ from station.ui.cli.main import main
 from station.ui.report.dcc import validate_dcc
 from tests.opcua.clients import CONFIG, PASSWORDS, connected, station
 from tests.opcua.conftest import Pki, Served, serving
+from tests.short_plan import example_short
 from tests.ui.test_export_dcc import ISSUER
 
 RESULT_NS = "http://opcfoundation.org/UA/Machinery/Result/"
@@ -25,13 +26,16 @@ RESULT_NS = "http://opcfoundation.org/UA/Machinery/Result/"
 @pytest.fixture(scope="module")
 def certified_server(pki: Pki, tmp_path_factory) -> Iterator[tuple[Served, Path]]:
     """A simulated calibration of the served cell with its certificate exported, then
-    ``station serve --opcua`` over that run database."""
+    ``station serve --opcua`` over that run database. The cell is examples/scara600 with one visit
+    per identification pose and one verification cycle: what is tested is how the certificate
+    travels, which the example's full plan (three times the CPU) shows alike (issue 42)."""
     work = tmp_path_factory.mktemp("serve-dcc")
+    cell = example_short(CONFIG, work)
     db, issuer, out = work / "runs.sqlite", work / "issuer.toml", work / "run1.xml"
-    assert main(["calibrate", str(CONFIG), "--simulated", "--seed", "1", "--db", str(db)]) == 0
+    assert main(["calibrate", str(cell), "--simulated", "--seed", "1", "--db", str(db)]) == 0
     issuer.write_text(ISSUER)
     assert main(["export-dcc", "1", "--db", str(db), "--issuer", str(issuer), "-o", str(out)]) == 0
-    with serving(pki, work, db) as served:
+    with serving(pki, work, db, cell) as served:
         yield served, out
 
 

@@ -25,6 +25,7 @@ from station.ui.tui.run_facts import fact_line
 from station.ui.tui.widgets import fmt_num
 from tests.opcua.clients import CONFIG, PASSWORDS, connected, read, station
 from tests.opcua.conftest import free_port
+from tests.short_plan import example_short
 
 pytestmark = [pytest.mark.timeout(600)]
 
@@ -46,7 +47,10 @@ async def test_the_tui_the_json_the_report_and_opc_ua_show_the_one_stored_bound(
         asked.append(question)
         return True
 
-    request = CellRequest(config=str(CONFIG), simulated=True, seed=1, db=str(db_path))
+    # the served cell with one visit per identification pose and one verification cycle: one stored
+    # figure shown by every view is as well shown on the shorter run (issue 42: the suite's time)
+    cell = example_short(CONFIG, tmp_path)
+    request = CellRequest(config=str(cell), simulated=True, seed=1, db=str(db_path))
     summary = await asyncio.to_thread(run_calibration_session, request, events.append, None, confirm, load_cell)
     assert summary.outcome in (Outcome.SUCCESS, Outcome.TARGET_MISSED), summary.failure
     json = summary.to_json()  # what --json prints
@@ -89,7 +93,7 @@ async def test_the_tui_the_json_the_report_and_opc_ua_show_the_one_stored_bound(
         db.save_result(summary.run_id, "identification", ident)
 
     # OPC UA: from the run database when the service starts, then from the run's end as streamed
-    opts = ServeOptions(config=str(CONFIG), users=str(pki.users), pki=str(pki.root / "server"), host="127.0.0.1",
+    opts = ServeOptions(config=str(cell), users=str(pki.users), pki=str(pki.root / "server"), host="127.0.0.1",
                         port=free_port(), simulated=True, db=str(db_path))
     server, service, url = await build_server(opts)
     async with server:

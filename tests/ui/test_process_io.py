@@ -36,10 +36,6 @@ ABORTED, CONFIG_ERROR, NOT_UPLOADED = 6, 2, 11
 # but 120 s and more beside two CPU hogs on 2 cores (issue 42: the three full-run tests here failed
 # at 120.0 s), so each wait stops just short of pytest's own 600 s guard (pyproject's timeout)
 HANG_S = 540
-#: the built-in cell's plan with one visit per identification pose and one verification cycle: the
-#: tests that let a whole session finish are about pipes and signals, not accuracy, and the example's
-#: plan cost three times the CPU in each of them (issue 42)
-SHORT_PLAN = {"repeats = 4": "repeats = 1", "verification_cycles = 5": "verification_cycles = 1"}
 
 
 def _popen(args, cwd: Path, **kw) -> subprocess.Popen:
@@ -74,23 +70,6 @@ def _handlers_installed(pid: int) -> bool:
     except OSError:
         pass
     return False
-
-
-@pytest.fixture(scope="module")
-def short_cell(tmp_path_factory) -> Path:
-    """The built-in simulated cell's configuration with :data:`SHORT_PLAN`, for ``calibrate
-    --simulated CONFIG`` (which starts its own simulators on it)."""
-    from simulators import start_simulated_cell
-    from simulators.reference_cell import cell_config_text
-
-    with start_simulated_cell(seed=1) as sim:
-        text = cell_config_text(sim, 1)
-    for old, new in SHORT_PLAN.items():
-        assert old in text
-        text = text.replace(old, new)
-    path = tmp_path_factory.mktemp("short-cell") / "cell.toml"
-    path.write_text(text)
-    return path
 
 
 def _short(cell: Path) -> list:

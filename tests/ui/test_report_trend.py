@@ -90,13 +90,15 @@ def test_trend_without_figures_has_table_but_no_plot(tmp_path, fast_plots):
 
 # ----------------------------------------------------------------------------- real runs
 @pytest.fixture(scope="module")
-def history(tmp_path_factory, seed1_run):
+def history(tmp_path_factory, seed1_run, short_cell):
     """Run 1: a calibration (uploaded; the suite's seed-1 run, copied), run 2: a recheck against it,
-    run 3: a calibration without upload whose report is written at its end."""
+    run 3: a calibration without upload whose report is written at its end (the same built-in cell
+    with one visit per identification pose and one verification cycle: a trend row is a trend row,
+    issue 42)."""
     root = tmp_path_factory.mktemp("trend")
     db = seed1_run.copy_to(root, report_name="rep-1").db
     assert main(["recheck", "--simulated", "--seed", "1", "--db", str(db)]) == 0
-    assert main(["calibrate", "--simulated", "--seed", "1", "--no-upload", "--db", str(db),
+    assert main(["calibrate", "--simulated", str(short_cell), "--seed", "1", "--no-upload", "--db", str(db),
                  "--report", str(root / "rep")]) == 11  # NOT_UPLOADED
     return db, root / "rep"
 

@@ -21,27 +21,10 @@ ROOT = Path(__file__).resolve().parents[2]
 ENV = dict(os.environ, PYTHONPATH=str(ROOT))
 
 
-def _short_cell(folder: Path) -> Path:
-    """The built-in simulated cell's file with one visit per identification pose and one
-    verification cycle: what follows the outcome is tested, not the accuracy, and the example's
-    plan cost three times the CPU (issue 42)."""
-    from simulators import start_simulated_cell
-    from simulators.reference_cell import cell_config_text
-
-    with start_simulated_cell(seed=1) as sim:
-        text = cell_config_text(sim, 1)
-    for old, new in (("repeats = 4", "repeats = 1"), ("verification_cycles = 5", "verification_cycles = 1")):
-        assert old in text
-        text = text.replace(old, new)
-    path = folder / "cell.toml"
-    path.write_text(text)
-    return path
-
-
-def test_sigterm_and_sigint_right_after_the_json_keep_exit_0(tmp_path):
+def test_sigterm_and_sigint_right_after_the_json_keep_exit_0(tmp_path, short_cell):
     """A simulated calibration; from the moment its JSON line is read, SIGTERM and SIGINT in turn,
     again and again, until the process has exited: its exit code is still the outcome's, 0."""
-    cell = _short_cell(tmp_path)
+    cell = short_cell  # the built-in cell, one visit and one cycle: what follows the outcome is tested, not accuracy
     proc = subprocess.Popen([sys.executable, "-m", "station.ui.cli.main", "calibrate", "--simulated", str(cell),
                              "--seed", "1", "--json", "--db", str(tmp_path / "runs.sqlite")],
                             cwd=tmp_path, env=ENV, text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE)

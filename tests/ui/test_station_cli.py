@@ -121,9 +121,11 @@ def test_d_optimal_selection_keeps_the_most_informative_steps(sim):
     assert len(full.identification) > len(sel.identification)
 
 
-def test_simulated_calibration_console_script_exit_code(tmp_path):
-    p = subprocess.run([sys.executable, "-m", "station.ui.cli.main", "calibrate", "--simulated", "--seed", "2",
-                        "--no-upload", "--db", str(tmp_path / "r.sqlite"), "--json"],
+def test_simulated_calibration_console_script_exit_code(tmp_path, short_cell):
+    # the built-in cell with one visit per identification pose and one verification cycle: the
+    # process's exit code and its one JSON object are the same on the shorter run (issue 42)
+    p = subprocess.run([sys.executable, "-m", "station.ui.cli.main", "calibrate", "--simulated", str(short_cell),
+                        "--seed", "2", "--no-upload", "--db", str(tmp_path / "r.sqlite"), "--json"],
                        cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert p.returncode == 11, p.stderr  # its own outcome: a script tells it from a correction
     assert json.loads(p.stdout)["outcome"] == "NOT_UPLOADED"

@@ -286,7 +286,8 @@ async def test_a_long_result_scrolls_with_pgdn_without_tab_first():
 
 
 @pytest.mark.slow
-async def test_a_real_session_that_fails_building_its_table_is_advised_as_a_correction_failure(tmp_path, monkeypatch):
+async def test_a_real_session_that_fails_building_its_table_is_advised_as_a_correction_failure(tmp_path, monkeypatch,
+                                                                                               short_cell):
     """The simulated cell through the session, its correction step made to fail as the issue saw it
     (an IdentificationError, exit code 3, after the identification held): the phase the session
     reported is what tells it from a rank deficiency."""
@@ -299,7 +300,8 @@ async def test_a_real_session_that_fails_building_its_table_is_advised_as_a_corr
 
     monkeypatch.setattr(pipeline, "identified_table", no_table)
     db = tmp_path / "runs.sqlite"
-    app = make_app(CellRequest(simulated=True, db=str(db)))
+    # the built-in cell with one visit per identification pose and one verification cycle (issue 42)
+    app = make_app(CellRequest(config=str(short_cell), simulated=True, db=str(db)))
     async with app.run_test(size=SIZE) as pilot:
         await pilot.press("s")
         await wait_until(pilot, lambda: app.worker is not None and app.worker.is_finished and app.summary is not None,

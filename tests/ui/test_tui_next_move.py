@@ -125,7 +125,7 @@ def test_snapshot_running_with_the_next_moves_clearance(snap_compare):
     """80×24 while a run streams the next move's clearance: its own line under the step's."""
     pytest.importorskip("pytest_textual_snapshot")
     from test_tui_features import RUNS, FakeSession, frozen, report_data
-    from test_tui_snapshots import SIZE, at_rest
+    from test_tui_snapshots import SIZE, at_rest, released_at_exit
 
     class WithClearance(FakeSession):
         def __call__(self, emit, control, confirm=None, resume=None):
@@ -141,7 +141,6 @@ def test_snapshot_running_with_the_next_moves_clearance(snap_compare):
         await paused_after(pilot, session, 3)
         await at_rest(pilot)
 
-    app = StationApp(session, title="SR 800 — snapshot", clock=frozen, list_runs=lambda: RUNS,
-                     load_results=lambda run_id: report_data(), db_label="runs.sqlite")
+    app = released_at_exit(StationApp(session, title="SR 800 — snapshot", clock=frozen, list_runs=lambda: RUNS,
+                                      load_results=lambda run_id: report_data(), db_label="runs.sqlite"))
     assert snap_compare(app, terminal_size=SIZE, run_before=before)
-    app.control.abort()  # release the fake's worker

@@ -134,6 +134,7 @@ async def test_running_notices_at_80x24_are_whole():
         whole = flat("probe 4 over range (+2.61 mm > +2.50 mm): tip not in contact")
         await wait_until(pilot, lambda: whole in inside(app, app.query_one("#notices")), "the notice whole")
         app.control.abort()
+        session.open()  # the fake's worker waits on its gate: let it reach the checkpoint the abort ends
 
 
 # -- a stopped run: one key continues it; the command line is the exact one --------------------
