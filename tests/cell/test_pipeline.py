@@ -20,6 +20,7 @@ from station.cell.records.rundb import RunDB
 from station.cell.run.facts.events import MeasurementRecorded, Notice, PhaseChanged, RunFinished
 from station.cell.session.calibrate import open_cell
 from station.errors import Outcome
+from tests.short_plan import SHORT_PLAN
 
 
 class Cell:
@@ -49,7 +50,7 @@ class Cell:
 #: one visit per identification pose and one verification cycle: the faults, stops, resumes and
 #: questions below are about what the run does, not its accuracy, and the whole plan would cost
 #: about three times the CPU for each (issue 42); the accuracy targets keep the example's plan
-SHORT = {"repeats = 4": "repeats = 1", "verification_cycles = 5": "verification_cycles = 1"}
+SHORT = SHORT_PLAN  # tests/short_plan.py: the one short plan of the suite
 
 
 @pytest.fixture
