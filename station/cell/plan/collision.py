@@ -531,7 +531,8 @@ def plan_path(cfg: CellConfig, plan: Plan, with_upload: bool = True) -> list[tup
     one it comes to). The first move, from wherever the robot stands to the first approach, is not
     known before the run."""
     from station.cell.plan.measurement_plan import all_motion_poses, retract_offset, retracted
-    from station.cell.plan.vias import lifted_many, travel_vias
+    from station.cell.plan.via_memo import memo_travel_vias
+    from station.cell.plan.vias import lifted_many
 
     steps = plan.run_steps(cfg.plan.verification_cycles, with_oracle=False, with_upload=with_upload)
     if not steps:
@@ -555,7 +556,7 @@ def plan_path(cfg: CellConfig, plan: Plan, with_upload: bool = True) -> list[tup
         else:  # an arm's approach and retract are both its retract pose (all_motion_poses, retracted)
             moves, leave = [back[k], q + retract_offset(cfg), q], back[k]
         if last is not None:
-            for v, what in travel_vias(cfg, out[-1][0], moves[0], None if cfg.model.is_scara else (last[2], lifts[k])):
+            for v, what in memo_travel_vias(cfg, out[-1][0], moves[0], None if cfg.model.is_scara else (last[2], lifts[k])):
                 if what == "arrive":  # the descent to the approach is part of the next touch
                     out.append((v, f"{name}: {what}", s.point))
                 else:  # the depart and the stages of a long move, away from any cube
