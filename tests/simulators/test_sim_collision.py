@@ -198,13 +198,13 @@ def test_the_plan_without_its_vias_collides_in_the_simulators_check(cell, monkey
     before issue 40: direct joint moves between the measurements) the joint-space paths run into the
     cell's obstacles: the check the simulated controller runs refuses it. With the vias, it clears
     every move (the station's own check and the simulator's agree)."""
-    import station.cell.plan.run_path as run_path
+    import station.cell.plan.vias as vias
 
     cfg = load_config(cell)
     cc = CellCollision.from_config(cfg)
     planned = _commanded(cfg)
     assert all(cc.check_move(planned[i - 1], planned[i]) is None for i in range(1, len(planned)))
-    monkeypatch.setattr(run_path, "travel_vias", lambda *a, **k: [])
+    monkeypatch.setattr(vias, "travel_vias", lambda *a, **k: [])  # via_memo asks vias.travel_vias per call
     poses = _commanded(cfg)
     assert len(poses) < len(planned)
     cc = CellCollision.from_config(cfg)

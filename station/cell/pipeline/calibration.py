@@ -43,6 +43,7 @@ from station.cell.pipeline.results import (
     verified_outcome,
 )
 from station.cell.plan.measurement_plan import head_targets_world, joints_for
+from station.cell.plan.path_record import PATH_RESULT, checked_path_record
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.fingerprint import check_same_cell, current_like, fingerprint, resume_note
 from station.cell.records.judge import RunJudge
@@ -209,6 +210,9 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
                               f"or start a new run")
         resumed = len(db.completed_steps(run_id, ok_only=True))
     checked = pre.plan.run_steps(cfg.plan.verification_cycles, False)  # the steps the collision check saw
+    if pre.collision is not None:  # its poses and least clearance, for the report's picture (issue 42); None
+        # (the picture's path is not the checked one) replaces a resumed run's earlier record
+        db.save_result(run_id, PATH_RESULT, checked_path_record(cfg, pre.plan, checked, pre.collision))
     runner.next_moves = next_moves(pre.collision, checked, steps)  # each step's clearance, for the views
     emit(RunStarted(run_id, len(steps), resumed, resume=resume_run is not None,
                     devices=tuple((devices_info or {}).items())))  # the latest attempt's devices, for the report

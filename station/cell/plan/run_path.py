@@ -19,7 +19,8 @@ from station.cell.plan.arm_motion import retract_poses
 from station.cell.plan.assembly import Plan
 from station.cell.plan.collision import CollisionReport, check_path, require_fcl
 from station.cell.plan.measurement_plan import all_motion_poses, cartesian_above, retract_offset, retracted
-from station.cell.plan.vias import lifted_many, travel_vias
+from station.cell.plan.via_memo import memo_travel_vias
+from station.cell.plan.vias import lifted_many
 from station.errors import ConfigError
 
 __all__ = ["plan_path", "check_plan", "VIA_NAMES"]
@@ -51,7 +52,7 @@ def plan_path(cfg: CellConfig, plan: Plan, with_upload: bool = True) -> list[tup
         else:  # an arm's approach and retract are both its retract pose (all_motion_poses, retracted)
             moves, leave = [back[k], q + retract_offset(cfg), q], back[k]
         if last is not None:
-            for v, what in travel_vias(cfg, out[-1][0], moves[0], None if cfg.model.is_scara else (last[2], lifts[k])):
+            for v, what in memo_travel_vias(cfg, out[-1][0], moves[0], None if cfg.model.is_scara else (last[2], lifts[k])):
                 if what == "arrive":  # the descent to the approach is part of the next touch
                     out.append((v, f"{name}: {what}", s.point))
                 else:  # the depart and the stages of a long move, away from any cube

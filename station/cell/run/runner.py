@@ -25,7 +25,7 @@ from station.cell.config.cell_config import CellConfig
 from station.cell.limits.motion_guard import MotionGuard
 from station.cell.plan.measurement_plan import above_offset, approach_pose, cartesian_above, retract_offset, retracted
 from station.cell.plan.steps import PlannedStep, StepKind
-from station.cell.plan.vias import travel_vias
+from station.cell.plan.via_memo import memo_travel_vias
 from station.cell.records.rundb import RunDB
 from station.cell.run.devices import CellController, ProbeHead, Snapshot
 from station.cell.run.facts.events import DeviceSnapshot, Event, MeasurementRecorded, Notice, StepMeasured, StepStarted
@@ -583,7 +583,7 @@ class Runner:
         if isinstance(msg, Travel):  # the vias depend on where the robot stands: the last command, else read
             here = self._last_q if self._last_q is not None else np.asarray(self.controller.read_joints(), dtype=float)
             target = np.asarray(msg.q, dtype=float)
-            for q, name in travel_vias(cfg, here, target):
+            for q, name in memo_travel_vias(cfg, here, target):
                 self._do(MoveJoints(q, f"{msg.why}: {name}"), index)
             return self._do(MoveJoints(target, msg.why), index)
         if isinstance(msg, AboveCartesian):

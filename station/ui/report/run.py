@@ -22,6 +22,7 @@ from station.cell.pipeline.calibration import Options
 from station.cell.pipeline.results import build_table_for, identify_run, verification_errors
 from station.cell.plan.assembly import head_targets_world
 from station.cell.plan.measurement_plan import build_plan
+from station.cell.plan.path_record import PATH_RESULT
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.reading.run_list import RunInfo, list_runs
 from station.cell.records.reading.stored_config import stored_config, stored_plan
@@ -43,7 +44,7 @@ from station.errors import ConfigError, IdentificationError, StationError
 from station.ui.report.contents import Acceptance, IsoPose, ReportData, TestConditions, Traceability, TrendRun
 from station.ui.report.progress import document_id, partial_report_data, run_progress
 from station.ui.report.provenance import software_rows
-from station.ui.report.render.cell_picture import run_picture
+from station.ui.report.render.cell_picture import run_picture, stored_check
 from station.ui.report.stored_fit import with_stored_figures
 from station.ui.report.writer import write_report
 
@@ -445,14 +446,16 @@ def report_data_for_run(db: RunDB, run_id: int, *, operator: str | None = None) 
         acceptance=Acceptance(Options().min_gain, cfg.verification.max_ap_um, cfg.verification.max_rp_um),
         traceability=_traceability(cfg, db, run_id, run.station_version, run.config_toml, operator),
         document_id=_document_id(cfg, run), progress=run_progress(db, run_id, steps, summary, run.status),
-        cell_svg=_cell_svg(cfg, steps, notes))
+        cell_svg=_cell_svg(cfg, steps, notes, db.load_result(run_id, PATH_RESULT, default=None)))
 
 
-def _cell_svg(cfg: CellConfig, steps: Sequence[PlannedStep], notes: list[str]) -> str | None:
-    """The picture of the cell with the run's planned poses (issue 40); None, and a note why, where it
+def _cell_svg(cfg: CellConfig, steps: Sequence[PlannedStep], notes: list[str], stored: Any = None) -> str | None:
+    """The picture of the cell with the run's planned poses (issue 40), from the pre-motion check's
+    record where the run stored one (``stored``); None, and a note why, where it
     cannot be drawn (a collision check the station cannot make: the shapes or python-fcl)."""
     try:
-        return run_picture(cfg, steps).svg
+        with stored_check(stored):
+            return run_picture(cfg, steps).svg
     except Exception as exc:  # noqa: BLE001 - the rest of the report stands; the gap is stated in the notes
         notes.append(f"no picture of the cell ({type(exc).__name__}: {exc})")
         return None

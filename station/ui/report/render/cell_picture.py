@@ -21,7 +21,9 @@ from __future__ import annotations
 import io
 import re
 import textwrap
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -32,6 +34,7 @@ from station.cell.config.cell_config import CellConfig
 from station.cell.plan.assembly import Plan, nominal_contact
 from station.cell.plan.collision import Clash, CollisionReport, check_path
 from station.cell.plan.collision_shapes import CellShapes, Shape, cell_shapes, fcl_shape
+from station.cell.plan.path_record import stored_path
 from station.cell.plan.run_path import VIA_NAMES, plan_path
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.core.kinematics.forward import chain_frames
@@ -425,10 +428,30 @@ def plan_picture(cfg: CellConfig, plan: Plan, report: CollisionReport | None, wi
     return cell_picture(cfg, steps, poses, report, png=png)
 
 
+#: the run's record of its pre-motion check (:mod:`station.cell.plan.path_record`) while the report
+#: draws its picture (:func:`stored_check`); None: none known
+_STORED: ContextVar[Any] = ContextVar("stored_check", default=None)
+
+
+@contextmanager
+def stored_check(record: Any) -> Iterator[None]:
+    """Within it, :func:`run_picture` draws from ``record`` (the run's stored pre-motion check) where
+    it is the check of the steps drawn, instead of planning the vias and checking the path again."""
+    token = _STORED.set(record)
+    try:
+        yield
+    finally:
+        _STORED.reset(token)
+
+
 def run_picture(cfg: CellConfig, steps: Sequence[PlannedStep], png: bool = False) -> CellPicture:
     """The picture of a stored run's plan (the report): its steps less the simulation's reference
-    verification (the pre-motion check's plan has none), the poses and the clearance the collision
+    verification (the pre-motion check's plan has none), the poses and the clearance the run's
+    pre-motion check found for them (its record, :func:`stored_check`), else those the collision
     check finds for them now."""
     steps = tuple(s for s in steps if s.kind is not StepKind.REFERENCE)
+    hit = stored_path(cfg, steps, _STORED.get())
+    if hit is not None:
+        return cell_picture(cfg, steps, hit[0], hit[1], png=png)
     poses = picture_poses(cfg, steps)
     return cell_picture(cfg, steps, poses, check_path(cfg, poses), png=png)
