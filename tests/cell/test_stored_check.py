@@ -15,8 +15,8 @@ import station.cell.plan.vias as vias
 from station.cell.config.cell_config import load_config
 from station.cell.pipeline.premotion import premotion_check
 from station.cell.plan.assembly import Plan
-from station.cell.plan.collision import plan_path
 from station.cell.plan.path_record import checked_path_record, stored_path
+from station.cell.plan.run_path import plan_path
 from station.cell.plan.via_memo import memo_travel_vias
 
 pytestmark = pytest.mark.timeout(600)
