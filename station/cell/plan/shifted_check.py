@@ -1,0 +1,100 @@
+"""The verification path as the controller will move it (issue 40): the pre-motion check
+(:func:`station.cell.plan.run_path.check_plan`) sees the plan's verification touches at their nominal
+joints, but with a correction table active the controller commands a Cartesian target's nominal
+inverse kinematics plus the table's Δq (the controller's interpolation rule; up to ~0.3° on the
+built-in cell, a few mm at full reach), so the path it moves was never checked.
+
+Once the table is designed (it is what the upload writes and reads back, CRC-32 for CRC-32) and before
+it is activated, :func:`check_shifted` checks the remaining verification steps' path through the same
+collision check (:func:`station.cell.plan.collision.check_path`), each pose as the runner will command
+it (:mod:`station.cell.run.runner`, ``_touch``): the approach at the target's nominal joints (a joint
+move: no table), the pose above the point moved in its revolute joints by the table's Δq (the runner's
+``AboveCartesian``), the Cartesian touch at nominal + Δq (the guard's copy of the controller's rule,
+:meth:`station.cell.limits.motion_guard.MotionGuard.commanded_joints`), the retract lifted from there,
+and the vias between two touches (:func:`station.cell.plan.vias.travel_vias`, as the runner's
+``Travel``). The targets are the run's (its identified set-up, :func:`verification_targets`), not the
+plan's. A pose or move that collides or comes under the margin is refused (ConfigError, exit 2, as the
+pre-motion refusal) before any verification motion; the caller leaves the table inactive.
+
+Only a table's Cartesian moves shift: an articulated arm's verification (compensated joint targets,
+no table) is not checked here. A re-measure's slightly larger approach offset is not known before the
+run and is not in the path (the pre-motion check leaves it out too).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection, Sequence
+
+import numpy as np
+
+from station.cell.config.cell_config import CellConfig
+from station.cell.limits.motion_guard import MotionGuard
+from station.cell.plan.assembly import head_targets_world
+from station.cell.plan.collision import CollisionReport, check_path, require_fcl
+from station.cell.plan.measurement_plan import approach_pose, cartesian_above, joints_for, retract_offset, retracted
+from station.cell.plan.steps import PlannedStep, StepKind
+from station.cell.plan.vias import travel_vias
+from station.core.kinematics.transforms import invert, matrix_to_pose, pose_to_matrix
+from station.core.table.values import CorrectionTableData
+from station.errors import ConfigError
+
+__all__ = ["verification_targets", "shifted_path", "check_shifted"]
+
+
+def verification_targets(cfg: CellConfig, steps: Sequence[PlannedStep], R_world_base: np.ndarray
+                         ) -> list[tuple[np.ndarray, np.ndarray, int]]:
+    """Per verification step, what the pipeline commands (station/cell/pipeline/calibration.py
+    ``_proc_for``): (the target's nominal joints, its Cartesian pose (6,) in the base frame [mm, rad],
+    the elbow), at the set-up ``R_world_base`` (the identified one)."""
+    heads = head_targets_world(cfg)
+    to_base = invert(pose_to_matrix(np.asarray(R_world_base, dtype=float)))
+    out = []
+    for st in steps:
+        q_nom = joints_for(cfg, heads[st.point], st.elbow, R_world_base)[0]
+        out.append((np.asarray(q_nom, dtype=float), matrix_to_pose(to_base @ heads[st.point]), int(st.elbow)))
+    return out
+
+
+def shifted_path(cfg: CellConfig, steps: Sequence[PlannedStep], R_world_base: np.ndarray,
+                 table: CorrectionTableData) -> list[tuple[np.ndarray, str, int]]:
+    """The poses the runner commands for ``steps`` (verification steps, in order) with ``table``
+    active, labelled as :func:`station.cell.plan.run_path.plan_path` labels them: (joints, what it
+    is, the measuring point). Raises the guard's UnreachableError of a target outside the table's grid."""
+    guard = MotionGuard(cfg.soft_limits, elbows=cfg.plan.elbows, joint_types=cfg.model.joint_types)
+    guard.table = table
+    lift = retract_offset(cfg) > 0  # the quill keeps its height above the point (the runner's _above_corrected)
+    out: list[tuple[np.ndarray, str, int]] = []
+    for st, (q, pose, elbow) in zip(steps, verification_targets(cfg, steps, R_world_base)):
+        name = f"step {st.index + 1} ({st.label})"
+        touch = guard.commanded_joints(pose, elbow, q)
+        approach = approach_pose(cfg, q, 1, st.cycle)  # verification approaches from direction 1 (_proc_for)
+        if out:
+            out += [(v, f"{name}: {what}", st.point) for v, what in travel_vias(cfg, out[-1][0], approach)]
+        above = cartesian_above(cfg, q, 1, st.cycle) + np.where(lift, 0.0, touch - q)
+        for what, qq in (("approach", approach), ("above the point", above), ("touch", touch),
+                         ("retract", retracted(cfg, touch))):
+            out.append((np.asarray(qq, dtype=float), f"{name}: {what}", st.point))
+    return out
+
+
+def check_shifted(cfg: CellConfig, steps: Sequence[PlannedStep], R_world_base: np.ndarray,
+                  table: CorrectionTableData, kinds: Collection[StepKind], done: Collection[int] = (),
+                  what: str = "the new correction table") -> CollisionReport | None:
+    """Refuse (ConfigError, exit 2) the verification path of the steps of ``kinds`` not in ``done``
+    where, shifted by ``table``, a pose or a move collides or comes under ``[plan]
+    collision_margin_mm``, naming the step, the pair and the clearance; the report of a clear path
+    (its ``closest``: the least clearance, shifted), None where no such step is left."""
+    todo = [st for st in steps if st.kind in kinds and st.index not in done]
+    if not todo or not cfg.model.is_scara:  # an articulated arm: no table shifts its touches
+        return None
+    require_fcl()
+    report = check_path(cfg, shifted_path(cfg, todo, R_world_base, table))
+    if report.clash is not None:
+        raise ConfigError(
+            f"with {what} active the verification path collides: {report.clash.describe()} "
+            f"({report.clashing_moves} poses or moves in all, the table's correction added to the touches, "
+            f"{len(todo)} steps checked); nothing of the verification was moved and the table is not activated. "
+            f"Raise [plan] clearance_mm or move the obstacle away from the verification points ([plan] "
+            f"verification), or lower [plan] collision_margin_mm if the robot's stated accuracy allows it "
+            f"(docs/collision.md)")
+    return report
