@@ -38,7 +38,16 @@ from station.core.kinematics.transforms import invert, matrix_to_pose, pose_to_m
 from station.core.table.values import CorrectionTableData
 from station.errors import ConfigError
 
-__all__ = ["verification_targets", "shifted_path", "check_shifted"]
+__all__ = ["ShiftedPathCollides", "verification_targets", "shifted_path", "check_shifted"]
+
+
+class ShiftedPathCollides(ConfigError):
+    """The verification path, shifted by a table's correction, collides or comes under the margin
+    (exit 2, as the pre-motion refusal of a plan that collides); ``hint``: the settings to change."""
+
+    def __init__(self, message: str, hint: str):
+        super().__init__(message)
+        self.hint = hint
 
 
 def verification_targets(cfg: CellConfig, steps: Sequence[PlannedStep], R_world_base: np.ndarray
@@ -90,11 +99,16 @@ def check_shifted(cfg: CellConfig, steps: Sequence[PlannedStep], R_world_base: n
     require_fcl()
     report = check_path(cfg, shifted_path(cfg, todo, R_world_base, table))
     if report.clash is not None:
-        raise ConfigError(
+        least = report.closest
+        deepest = "" if least is None or least == report.clash else (
+            f"; the least clearance: {least.clearance_mm:.1f} mm ({least.a} and {least.b} {least.where})")
+        raise ShiftedPathCollides(
             f"with {what} active the verification path collides: {report.clash.describe()} "
-            f"({report.clashing_moves} poses or moves in all, the table's correction added to the touches, "
-            f"{len(todo)} steps checked); nothing of the verification was moved and the table is not activated. "
-            f"Raise [plan] clearance_mm or move the obstacle away from the verification points ([plan] "
-            f"verification), or lower [plan] collision_margin_mm if the robot's stated accuracy allows it "
-            f"(docs/collision.md)")
+            f"({report.clashing_moves} poses or moves in all{deepest}; {len(todo)} steps checked with the table's "
+            f"correction added to their Cartesian touches); none of these steps was moved and the table "
+            f"is not left active",
+            "the table's correction moves the head toward what the message names by more than the nominal path "
+            "keeps from it: move that obstacle away from the verification point, or hold other points out "
+            "([plan] verification_every), or lower [plan] collision_margin_mm where the cell allows it "
+            "(docs/collision.md), then start the run again")
     return report
