@@ -116,6 +116,8 @@ def summary_rows(d: ReportData, *, outcome: bool = True) -> list[tuple[str, str]
         rows.append(("'before' measured on", line.removeprefix("before: ")))
     if s is not None and (recentred := s.recentring_text()) is not None:
         rows.append(("re-centred readings", recentred))
+    if s is not None and s.clearances:  # the collision checks' least clearances [mm] (issue 40)
+        rows.append(("least collision clearance", "; ".join(c.text() for c in s.clearances)))
     return rows
 
 
