@@ -38,9 +38,11 @@ def checked_shifted(cfg: CellConfig, steps: tuple[PlannedStep, ...], done: set[i
     the summary with the least clearance recorded (its ``clearances``) and a notice."""
     what = "the new correction table" if kind is StepKind.VERIFY_AFTER else "the oracle's table"
     report = check_shifted(cfg, steps, R_world_base, table, {kind}, done, what)
-    rec = clearance_of(f"{kind.caption} (shifted)", report)
+    rec = clearance_of("after (shifted)" if kind is StepKind.VERIFY_AFTER else "oracle (shifted)", report)
     if report is None or rec is None:
         return summary
-    emit(Notice("info", f"collision check of the verification path with {what}'s correction: least clearance "
-                        f"{rec.text().split(': ', 1)[1]}, {report.seconds:.2f} s"))
+    least = rec.text().removeprefix(rec.check + " ")
+    emit(Notice("info", f"collision check of the verification path with {what}'s correction: {report.poses} poses, "
+                        f"least clearance {least}{'' if rec.least_mm is None else ' ' + rec.where}, "
+                        f"{report.seconds:.2f} s"))
     return summary.replace(clearances=(*summary.clearances, rec))

@@ -242,7 +242,7 @@ class RecentringStats:
 @dataclass(frozen=True)
 class ClearanceSummary:
     """A collision check's least clearance [mm] (issue 40, docs/collision.md): ``check`` says which
-    ("pre-motion": the plan at its nominal joints; "verification after (shifted)" / "oracle (shifted)":
+    ("pre-motion": the plan at its nominal joints; "after (shifted)" / "oracle (shifted)":
     the verification path with that table's correction added, station/cell/plan/shifted_check.py),
     ``least_mm`` None where no pair held to the margin came within twice ``margin_mm``; the pair and
     where it comes closest."""
@@ -256,9 +256,10 @@ class ClearanceSummary:
     where: str = ""
 
     def text(self) -> str:
+        """E.g. "after (shifted) 3.4 mm (head mount ↔ obstacle 'post')"; over twice the margin: "over 4 mm"."""
         if self.least_mm is None:
-            return f"{self.check}: over {2 * self.margin_mm:g} mm ({self.poses} poses)"
-        return f"{self.check}: {self.least_mm:.1f} mm ({self.a} ↔ {self.b}, {self.where}; {self.poses} poses)"
+            return f"{self.check} over {2 * self.margin_mm:g} mm"
+        return f"{self.check} {self.least_mm:.1f} mm ({self.a} ↔ {self.b})"
 
 
 @dataclass(frozen=True)
