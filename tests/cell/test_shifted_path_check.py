@@ -144,3 +144,21 @@ def test_a_refused_shifted_path_moves_none_of_it_and_leaves_no_table_active(tmp_
         assert cell.srv.controller_server.active_table is None
     finally:
         cell.close()
+
+
+def test_around_a_column_the_shifted_path_takes_the_runners_vias():
+    """scara600_column: direct moves between two verification steps pass through the column, so the
+    check strings the vias the runner's Travel takes (travel_vias) and finds that path clear."""
+    cfg = parse_text((CELL.parent.parent / "scara600_column" / "cell.toml").read_text(),
+                     str(CELL.parent.parent / "scara600_column" / "cell.toml"))
+    steps = build_plan(cfg).run_steps(cfg.plan.verification_cycles, False)
+    dq = np.array([np.radians(0.3) if k == "revolute" else 0.0 for k in cfg.model.joint_types])
+    after = [st for st in steps if st.kind is StepKind.VERIFY_AFTER]
+    R = cfg.model.nominal[:6]
+    direct = shifted_path(cfg, after, R, _table(dq), vias=False)
+    assert len(direct) == 4 * len(after)
+    report = check_shifted(cfg, steps, R, _table(dq), {StepKind.VERIFY_AFTER})
+    assert report is not None and report.clash is None
+    assert report.vias > 0 and report.poses == len(direct) + report.vias
+    names = [p[1] for p in shifted_path(cfg, after, R, _table(dq))]
+    assert any(n.endswith(("joint 1 first", "joint 2 first", "elbow to swing", "swung")) for n in names)
