@@ -51,7 +51,7 @@ def _derive(src: Path, dst: Path, *, outcome: Outcome, failure: dict | None = No
             c.execute(f"DELETE FROM measurements WHERE run_id = 1 AND {drop['where']}", drop.get("args", ()))
         s = json.loads(c.execute("SELECT json FROM results WHERE run_id = 1 AND key = 'summary'").fetchone()[0])
         figures = ("identification", "correction", "before", "after", "oracle", "upload", "gain", "after_vs_oracle",
-                   "reversal", "tables")
+                   "reversal", "tables", "clearances")  # clearances: a run stopped before its table checked none
         s = {k: v for k, v in s.items() if k not in figures or k in keep}
         s.update(outcome=outcome.name, exit_code=int(outcome))
         if failure is not None:

@@ -42,6 +42,7 @@ from station.cell.pipeline.results import (
     verification_errors,
     verified_outcome,
 )
+from station.cell.pipeline.shifted import checked_shifted, clearance_of
 from station.cell.plan.measurement_plan import head_targets_world, joints_for
 from station.cell.plan.path_record import PATH_RESULT, checked_path_record
 from station.cell.plan.steps import PlannedStep, StepKind
@@ -221,7 +222,8 @@ def run_calibration(cfg: CellConfig, probe: ProbeHead, controller: CellControlle
     for note in (resume_note(reused), design):
         if note:
             emit(Notice("info", note))
-    summary = RunSummary(outcome=Outcome.SUCCESS, run_id=run_id, cell=cfg.name, robot=cfg.model.name)
+    summary = RunSummary(outcome=Outcome.SUCCESS, run_id=run_id, cell=cfg.name, robot=cfg.model.name,
+                         clearances=tuple(c for c in [clearance_of("pre-motion", pre.collision)] if c))
     start = table_at_start(controller, db, run_id, emit)  # before anything changes the controller's tables
     try:  # the first move, from where the robot stands, is checked as the plan's moves are (issue 40)
         check_first_motion(cfg, controller.read_joints(), steps, db.completed_steps(run_id, ok_only=True))
@@ -369,6 +371,9 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
                                                   None if judge is None else reference_params(planned, judge), judge,
                                                   emit, delta=delta))
 
+    if options.upload:  # the table's verification path as the controller will move it, before any of it (40)
+        summary = checked_shifted(cfg, steps, set(db.completed_steps(run_id, ok_only=True)), params[:6],
+                                  table.data, StepKind.VERIFY_AFTER, summary, emit)
     emit(PhaseChanged("verify", "before correction"))
     if runner.controller.status().table_active:  # the operator's table: kept aside (table_keeping.py)
         runner.controller.deactivate_table()
@@ -510,6 +515,8 @@ def _reference_check(run: _Run, cfg: CellConfig, table, used, summary: RunSummar
     p_ref = reference_params(cfg, judge)
     # a simulated arm whose joints err (the judge's reference_delta): the oracle's table carries them too
     oracle_table = build_table_for(cfg, p_ref, used.grid, judge_delta(judge)).data
+    summary = checked_shifted(cfg, run.steps, set(run.db.completed_steps(run.run_id, ok_only=True)), p_ref[:6],
+                              oracle_table, StepKind.REFERENCE, summary, emit)  # before it is active (40)
     verified_upload(controller, oracle_table, emit)
     run.runner.guard.table = oracle_table
     emit(PhaseChanged("verify", "oracle (reference parameters)"))  # back from the upload's phase

@@ -240,6 +240,29 @@ class RecentringStats:
 
 
 @dataclass(frozen=True)
+class ClearanceSummary:
+    """A collision check's least clearance [mm] (issue 40, docs/collision.md): ``check`` says which
+    ("pre-motion": the plan at its nominal joints; "after (shifted)" / "oracle (shifted)":
+    the verification path with that table's correction added, station/cell/plan/shifted_check.py),
+    ``least_mm`` None where no pair held to the margin came within twice ``margin_mm``; the pair and
+    where it comes closest."""
+
+    check: str
+    least_mm: float | None
+    margin_mm: float
+    poses: int
+    a: str = ""
+    b: str = ""
+    where: str = ""
+
+    def text(self) -> str:
+        """E.g. "after (shifted) 3.4 mm (head mount ↔ obstacle 'post')"; over twice the margin: "over 4 mm"."""
+        if self.least_mm is None:
+            return f"{self.check} over {2 * self.margin_mm:g} mm"
+        return f"{self.check} {self.least_mm:.1f} mm ({self.a} ↔ {self.b})"
+
+
+@dataclass(frozen=True)
 class Failure:
     """Why a run stopped early: the error's type and message and what to do."""
 
@@ -283,6 +306,8 @@ class RunSummary:
     simulation: tuple[JudgeFigure, ...] = field(default=())
     #: TARGET_MISSED: the acceptance limits missed (station/cell/records/missed.py); the JSON's failure
     missed: tuple[MissedLimit, ...] = field(default=())
+    #: the collision checks' least clearances [mm]: the pre-motion one, then each table's shifted one
+    clearances: tuple[ClearanceSummary, ...] = field(default=())
 
     @property
     def exit_code(self) -> int:
@@ -393,6 +418,8 @@ class RunSummary:
             out["notes"] = list(self.notes)
         if self.recentring:
             out["recentring"] = [_plain(dataclasses.asdict(r)) for r in self.recentring]
+        if self.clearances:
+            out["clearances"] = [_plain(dataclasses.asdict(c)) for c in self.clearances]
         if self.tools:
             out["tools"] = [{**_plain(dataclasses.asdict(t)), "after_vs_oracle": t.after_vs_oracle}
                             for t in self.tools]
@@ -401,7 +428,8 @@ class RunSummary:
                                  for f in self.simulation}
         out["units"] = {"lengths": "µm (keys *_um)", "times": "s (keys *_s, seconds)",
                         "parameters": "mm and rad (identification.parameters)",
-                        "error terms": "each term's own unit (error_model.terms[].unit)"}
+                        "error terms": "each term's own unit (error_model.terms[].unit)",
+                        "clearances": "mm (keys *_mm)"}
         return out
 
     @classmethod
@@ -425,6 +453,7 @@ class RunSummary:
             tools=tuple(_build(ToolSummary, t) for t in d.get("tools", ())),
             compensation=sub("compensation", CompensationSummary), tables=sub("tables", TableSummary),
             recentring=tuple(_build(RecentringStats, r) for r in d.get("recentring", ())),
+            clearances=tuple(_build(ClearanceSummary, c) for c in d.get("clearances", ())),
             not_uploaded_reason=d.get("not_uploaded_reason"), error_model=sub("error_model", ErrorModelSummary),
             simulation=tuple(JudgeFigure(k, float(v["value"]), str(v["unit"]), str(v.get("caption", "")))
                              for k, v in (d.get("simulation") or {}).items()))

@@ -116,6 +116,10 @@ def summary_rows(d: ReportData, *, outcome: bool = True) -> list[tuple[str, str]
         rows.append(("'before' measured on", line.removeprefix("before: ")))
     if s is not None and (recentred := s.recentring_text()) is not None:
         rows.append(("re-centred readings", recentred))
+    # the shifted verification path's least clearance beside the pre-motion one [mm] (issue 40); a run
+    # that designed no table has the pre-motion one alone, which the cell's picture states
+    if s is not None and any(c.check != "pre-motion" for c in s.clearances):
+        rows.append(("least collision clearance", "; ".join(c.text() for c in s.clearances)))
     return rows
 
 

@@ -1,0 +1,126 @@
+"""The verification path as the controller will move it (issue 40): the pre-motion check
+(:func:`station.cell.plan.run_path.check_plan`) sees the plan's verification touches at their nominal
+joints, but with a correction table active the controller commands a Cartesian target's nominal
+inverse kinematics plus the table's Δq (the controller's interpolation rule; up to ~0.3° on the
+built-in cell, a few mm at full reach), so the path it moves was never checked.
+
+Once the table is designed (it is what the upload writes and reads back, CRC-32 for CRC-32) and before
+it is activated, :func:`check_shifted` checks the remaining verification steps' path through the same
+collision check (:func:`station.cell.plan.collision.check_path`), each pose as the runner will command
+it (:mod:`station.cell.run.runner`, ``_touch``): the approach at the target's nominal joints (a joint
+move: no table), the pose above the point moved in its revolute joints by the table's Δq (the runner's
+``AboveCartesian``), the Cartesian touch at nominal + Δq (the guard's copy of the controller's rule,
+:meth:`station.cell.limits.motion_guard.MotionGuard.commanded_joints`), the retract lifted from there,
+and the vias between two touches (:func:`station.cell.plan.vias.travel_vias`, as the runner's
+``Travel``). The targets are the run's (its identified set-up, :func:`verification_targets`), not the
+plan's. A pose or move that collides or comes under the margin is refused (ConfigError, exit 2, as the
+pre-motion refusal) before any verification motion; the caller leaves the table inactive.
+
+Only a table's Cartesian moves shift: an articulated arm's verification (compensated joint targets,
+no table) is not checked here. A re-measure's slightly larger approach offset is not known before the
+run and is not in the path (the pre-motion check leaves it out too).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Collection, Sequence
+
+import numpy as np
+
+from station.cell.config.cell_config import CellConfig
+from station.cell.limits.motion_guard import MotionGuard
+from station.cell.plan.assembly import head_targets_world
+from station.cell.plan.collision import CollisionReport, check_path, require_fcl
+from station.cell.plan.measurement_plan import approach_pose, cartesian_above, joints_for, retract_offset, retracted
+from station.cell.plan.steps import PlannedStep, StepKind
+from station.cell.plan.vias import travel_vias
+from station.core.kinematics.transforms import invert, matrix_to_pose, pose_to_matrix
+from station.core.table.values import CorrectionTableData
+from station.errors import ConfigError
+
+__all__ = ["ShiftedPathCollides", "verification_targets", "shifted_path", "check_shifted"]
+
+
+class ShiftedPathCollides(ConfigError):
+    """The verification path, shifted by a table's correction, collides or comes under the margin
+    (exit 2, as the pre-motion refusal of a plan that collides); ``hint``: the settings to change."""
+
+    def __init__(self, message: str, hint: str):
+        super().__init__(message)
+        self.hint = hint
+
+
+def verification_targets(cfg: CellConfig, steps: Sequence[PlannedStep], R_world_base: np.ndarray
+                         ) -> list[tuple[np.ndarray, np.ndarray, int]]:
+    """Per verification step, what the pipeline commands (station/cell/pipeline/calibration.py
+    ``_proc_for``): (the target's nominal joints, its Cartesian pose (6,) in the base frame [mm, rad],
+    the elbow), at the set-up ``R_world_base`` (the identified one)."""
+    heads = head_targets_world(cfg)
+    to_base = invert(pose_to_matrix(np.asarray(R_world_base, dtype=float)))
+    q_nom: dict[tuple[int, int], np.ndarray] = {}
+    for elbow in {int(st.elbow) for st in steps}:  # each elbow's inverse kinematics at once
+        points = sorted({st.point for st in steps if st.elbow == elbow})
+        q_nom.update(zip(((p, elbow) for p in points), joints_for(cfg, heads[points], elbow, R_world_base)))
+    return [(np.asarray(q_nom[st.point, int(st.elbow)], dtype=float), matrix_to_pose(to_base @ heads[st.point]),
+             int(st.elbow)) for st in steps]
+
+
+def shifted_path(cfg: CellConfig, steps: Sequence[PlannedStep], R_world_base: np.ndarray,
+                 table: CorrectionTableData, vias: bool = True) -> list[tuple[np.ndarray, str, int]]:
+    """The poses the runner commands for ``steps`` (verification steps, in order) with ``table``
+    active, labelled as :func:`station.cell.plan.run_path.plan_path` labels them: (joints, what it
+    is, the measuring point). Raises the guard's UnreachableError of a target outside the table's grid.
+    ``vias=False``: the direct moves between two steps (what :func:`travel_vias` keeps where they
+    are clear)."""
+    guard = MotionGuard(cfg.soft_limits, elbows=cfg.plan.elbows, joint_types=cfg.model.joint_types)
+    guard.table = table
+    lift = retract_offset(cfg) > 0  # the quill keeps its height above the point (the runner's _above_corrected)
+    out: list[tuple[np.ndarray, str, int]] = []
+    for st, (q, pose, elbow) in zip(steps, verification_targets(cfg, steps, R_world_base)):
+        name = f"step {st.index + 1} ({st.label})"
+        touch = guard.commanded_joints(pose, elbow, q)
+        approach = approach_pose(cfg, q, 1, st.cycle)  # verification approaches from direction 1 (_proc_for)
+        if out and vias:  # labelled as plan_path labels a SCARA's: the step the head leaves, no point
+            leaving = out[-1][1].rsplit(": ", 1)[0]
+            out += [(v, f"{leaving}: {what}", -1) for v, what in travel_vias(cfg, out[-1][0], approach)]
+        above = cartesian_above(cfg, q, 1, st.cycle) + np.where(lift, 0.0, touch - q)
+        for what, qq in (("approach", approach), ("above the point", above), ("touch", touch),
+                         ("retract", retracted(cfg, touch))):
+            out.append((np.asarray(qq, dtype=float), f"{name}: {what}", st.point))
+    return out
+
+
+def check_shifted(cfg: CellConfig, steps: Sequence[PlannedStep], R_world_base: np.ndarray,
+                  table: CorrectionTableData, kinds: Collection[StepKind], done: Collection[int] = (),
+                  what: str = "the new correction table") -> CollisionReport | None:
+    """Refuse (ConfigError, exit 2) the verification path of the steps of ``kinds`` not in ``done``
+    where, shifted by ``table``, a pose or a move collides or comes under ``[plan]
+    collision_margin_mm``, naming the step, the pair and the clearance; the report of a clear path
+    (its ``closest``: the least clearance, shifted), None where no such step is left."""
+    todo = [st for st in steps if st.kind in kinds and st.index not in done]
+    if not todo or not cfg.model.is_scara:  # an articulated arm: no table shifts its touches
+        return None
+    require_fcl()
+    # The direct moves first: where none of the path clashes, travel_vias (a SCARA's way around an
+    # obstacle) keeps every direct move (it keeps one whose move is clear at the full margin, and every
+    # candidate of its ends the same), so this is the runner's path; its vias asked the check of each
+    # move again (0.99 of 1.22 s on scara_arc's 120 steps). Else the path with the vias decides.
+    report = check_path(cfg, shifted_path(cfg, todo, R_world_base, table, vias=False))
+    if report.clash is not None:
+        report = check_path(cfg, shifted_path(cfg, todo, R_world_base, table))
+    report = dataclasses.replace(report, vias=report.poses - 4 * len(todo))  # four poses a step, the rest vias
+    if report.clash is not None:
+        least = report.closest
+        deepest = "" if least is None or least == report.clash else (
+            f"; the least clearance: {least.clearance_mm:.1f} mm ({least.a} and {least.b} {least.where})")
+        raise ShiftedPathCollides(
+            f"with {what} active the verification path collides: {report.clash.describe()} "
+            f"({report.clashing_moves} poses or moves in all{deepest}; {len(todo)} steps checked with the table's "
+            f"correction added to their Cartesian touches); none of these steps was moved and the table "
+            f"is not left active",
+            "the table's correction moves the head toward what the message names by more than the nominal path "
+            "keeps from it: move that obstacle away from the verification point, or hold other points out "
+            "([plan] verification_every), or lower [plan] collision_margin_mm where the cell allows it "
+            "(docs/collision.md), then start the run again")
+    return report
