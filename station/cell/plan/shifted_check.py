@@ -34,7 +34,7 @@ from station.cell.plan.assembly import head_targets_world
 from station.cell.plan.collision import CollisionReport, check_path, require_fcl
 from station.cell.plan.measurement_plan import approach_pose, cartesian_above, joints_for, retract_offset, retracted
 from station.cell.plan.steps import PlannedStep, StepKind
-from station.cell.plan.vias import travel_vias
+from station.cell.plan.via_memo import memo_travel_vias
 from station.core.kinematics.transforms import invert, matrix_to_pose, pose_to_matrix
 from station.core.table.values import CorrectionTableData
 from station.errors import ConfigError
@@ -83,7 +83,7 @@ def shifted_path(cfg: CellConfig, steps: Sequence[PlannedStep], R_world_base: np
         approach = approach_pose(cfg, q, 1, st.cycle)  # verification approaches from direction 1 (_proc_for)
         if out and vias:  # labelled as plan_path labels a SCARA's: the step the head leaves, no point
             leaving = out[-1][1].rsplit(": ", 1)[0]
-            out += [(v, f"{leaving}: {what}", -1) for v, what in travel_vias(cfg, out[-1][0], approach)]
+            out += [(v, f"{leaving}: {what}", -1) for v, what in memo_travel_vias(cfg, out[-1][0], approach)]
         above = cartesian_above(cfg, q, 1, st.cycle) + np.where(lift, 0.0, touch - q)
         for what, qq in (("approach", approach), ("above the point", above), ("touch", touch),
                          ("retract", retracted(cfg, touch))):
