@@ -363,7 +363,7 @@ def terms_study(model: RobotModel, families: tuple[str, ...], n_poses: int = 40,
     dropped = fit.dropped
     if dropped:
         # a term these poses cannot tell from the geometry is left out of the fit (fit_terms): the
-        # truth and the Monte Carlo then carry the terms the fit keeps, so that the linear σ and
+        # simulated values and the Monte Carlo then carry the terms the fit keeps, so that the linear σ and
         # the scatter describe the same parameters (they had 27 beside 26 σ for the SR 800's auto)
         keep = np.array([basis.names.index(n) for n in fit.basis.names], dtype=int)
         basis, x_true = basis.select(keep), x_true[keep]
