@@ -44,6 +44,7 @@ def test_plan_of_the_example_cell(capsys):
 
 
 @pytest.mark.parametrize("seed", [1])
+@pytest.mark.slow  # an end-to-end session: the slow tier (README), run by CI
 def test_rehearsal_of_the_example_cell(seed, tmp_path, capsys):
     """One seed: each costs a whole simulated session of the example cell, and seeds 2 and 3 asserted
     the same bounds again (issue 42: the suite's time); benchmarks/bench_example_cell.py runs seeds

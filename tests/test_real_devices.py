@@ -75,6 +75,7 @@ def test_station_check_passes_against_a_dl_rs1a_that_answers_only_its_manual(tmp
     assert "DL-RS1A" in text and "base 128" in text
 
 
+@pytest.mark.slow  # an end-to-end session: the slow tier (README), run by CI
 def test_the_mitutoyo_dialect_rehearses_end_to_end(tmp_path, capsys):
     cell = tmp_path / "cell.toml"
     for f in CELL.parent.iterdir():  # the example cell's files, its probe interface a Mitutoyo one

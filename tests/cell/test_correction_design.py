@@ -9,6 +9,8 @@ import re
 import shutil
 from pathlib import Path
 
+import pytest
+
 from station.cell.records.rundb import RunDB
 from station.cell.session.calibrate import CellRequest, run_calibration_session
 from station.errors import Outcome
@@ -30,6 +32,7 @@ def _new_scara(tmp_path: Path) -> None:
     shutil.copy(ROOT / "examples" / "bodies" / "reference-body.csv", tmp_path / "body.csv")
 
 
+@pytest.mark.slow  # an end-to-end session: the slow tier (README), run by CI
 def test_init_from_the_files_then_plan_and_calibrate_succeed_at_the_first_try(tmp_path, capsys, monkeypatch):
     _new_scara(tmp_path)
     monkeypatch.chdir(tmp_path)

@@ -57,6 +57,7 @@ def test_a_second_process_reads_the_kept_design_and_a_changed_bound_designs_anew
         design_module.design_for(looser, plan)
 
 
+@pytest.mark.slow  # an end-to-end session: the slow tier (README), run by CI
 def test_a_damaged_file_is_designed_again_and_off_keeps_nothing(cache, monkeypatch):
     cfg = load_config(EXAMPLE)
     plan = build_plan(cfg)

@@ -41,6 +41,7 @@ def test_the_premise_the_simulated_base_stands_beyond_the_stroke():
     assert np.abs(along_faces).max() > 3.0 == float(cfg.head.strokes.min()) / 2  # a face beyond the probes' reach
 
 
+@pytest.mark.slow  # an end-to-end session: the slow tier (README), run by CI
 def test_an_integrators_scara_is_located_and_calibrated_at_the_first_try(tmp_path, capsys):
     cfg_path = _copy(tmp_path)
     db = tmp_path / "runs.sqlite"

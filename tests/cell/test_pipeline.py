@@ -67,6 +67,7 @@ def full_cell(tmp_path):
     c.close()
 
 
+@pytest.mark.slow  # an end-to-end session: the slow tier (README), run by CI
 def test_simulated_calibration_meets_the_targets(full_cell):
     cell = full_cell
     summary = cell.run(options=Options(judge=CellJudge(cell.srv.cell.truth)))

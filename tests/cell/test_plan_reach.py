@@ -111,6 +111,7 @@ def _refused_alike(path: Path, capsys, db: Path) -> str:
     return said
 
 
+@pytest.mark.slow  # an end-to-end session: the slow tier (README), run by CI
 def test_a_grid_too_coarse_is_refused_before_anything_moves_with_what_to_change(tmp_path, capsys):
     path = _cell(tmp_path, (), lambda t: t.replace("x_mm = [180.0, 480.0, 30.0]", "x_mm = [180.0, 480.0, 100.0]")
                  .replace("y_mm = [-270.0, 270.0, 30.0]", "y_mm = [-270.0, 270.0, 90.0]"))
@@ -137,6 +138,7 @@ def test_a_verification_target_outside_the_table_is_named_by_target_axis_and_key
     assert "1) remove [correction] x_mm, y_mm, z_mm, yaw_step_deg, region (checked: " in msg, msg
 
 
+@pytest.mark.slow  # an end-to-end session: the slow tier (README), run by CI
 def test_no_table_within_the_capacity_is_refused_with_numbers(tmp_path, capsys):
     path = _cell(tmp_path, (), lambda t: re.sub(r"x_mm = .*\ny_mm = .*\nz_mm = .*\nyaw_step_deg = .*\n", "", t)
                  .replace("max_interpolation_um = 15.0", "max_interpolation_um = 2.0"))

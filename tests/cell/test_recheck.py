@@ -87,6 +87,7 @@ def _sim_cfg(seed, extra=""):
     return parse_text(cell_config_text(fake, seed) + extra)
 
 
+@pytest.mark.slow  # an end-to-end session: the slow tier (README), run by CI
 def test_no_change_is_within_tolerance_in_95_percent_of_40_seeds():
     """Baseline identified from the identification poses of the simulated cell's plan (in-process,
     the runner's procedure on the cell's physics), then a recheck of the unchanged robot.

@@ -190,6 +190,7 @@ def test_debris_that_stays_on_a_seven_probe_head_stops_the_run_naming_the_candid
     assert len(bad) == 3 and all("P6 (channel 7)" in r.message and "cannot single out" in r.message for r in bad)
 
 
+@pytest.mark.slow  # an end-to-end session: the slow tier (README), run by CI
 def test_a_ten_probe_head_names_permanent_debris_and_keeps_the_identification(tmp_path):
     head = ten_probe_head(tmp_path / "ten.toml")
     base = calibrate(tmp_path / "base", head)

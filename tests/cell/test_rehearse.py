@@ -66,6 +66,7 @@ sigma_angle_arcsec = 6.0
 """
 
 
+@pytest.mark.slow  # an end-to-end session: the slow tier (README), run by CI
 def test_a_user_cell_is_rehearsed_end_to_end(tmp_path, capsys):
     """Calibrated in simulation: ≥ 20× better, within 1.2× of the oracle; then a recheck of the
     same rehearsal (through the same loading) finds the same cell and no drift."""

@@ -87,6 +87,7 @@ KILL_AT = (0.02, 0.5, 0.93)
 
 
 @pytest.mark.timeout(400)
+@pytest.mark.slow  # an end-to-end session: the slow tier (README), run by CI
 def test_kills_mid_run_and_resumes_reproduce_the_uninterrupted_run(tmp_path, reference):
     ref_params, n_steps = reference
     sim = Simulator(SEED)

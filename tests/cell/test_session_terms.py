@@ -143,6 +143,7 @@ def test_a_bending_arm_is_calibrated_with_the_terms_auto_keeps(tmp_path):
     assert any(n.startswith("error model ([identification] model = 'auto')") for n in auto.notes)
 
 
+@pytest.mark.slow  # an end-to-end session: the slow tier (README), run by CI
 def test_auto_keeps_nothing_on_a_rigid_arm(tmp_path):
     s = _session(_puma(tmp_path, "none", "auto"))
     assert s.outcome is Outcome.SUCCESS, s.failure

@@ -4,6 +4,8 @@ verify — the figures of the issue's checks on seed 1 (benchmarks/bench_six_axi
 
 from __future__ import annotations
 
+import pytest
+
 from station.cell.plan.steps import StepKind
 from station.cell.records.rundb import RunDB
 from station.cell.session.calibrate import CellRequest, run_calibration_session
@@ -11,6 +13,7 @@ from station.errors import Outcome
 from station.ui.simulated_cell import load_cell
 
 
+@pytest.mark.slow  # an end-to-end session: the slow tier (README), run by CI
 def test_six_axis_cell_calibrates_through_compensated_targets(tmp_path):
     db = str(tmp_path / "six.sqlite")
     s = run_calibration_session(CellRequest(simulated=True, robot="irb2600", seed=1, db=db), lambda e: None,

@@ -211,6 +211,7 @@ def run(tmp_path_factory):
         yield {"cfg": cfg, "db": db, "summary": summary, "events": events, "srv": srv, "tmp": tmp}
 
 
+@pytest.mark.slow  # an end-to-end session: the slow tier (README), run by CI
 def test_the_gripper_reaches_its_oracle_and_the_heads_correction_does_not(run):
     s = run["summary"]
     assert s.outcome is Outcome.SUCCESS

@@ -190,6 +190,7 @@ def _rougher_arc_cell(tmp_path: Path) -> Path:
 # Seed 2: every "before" reading is re-centred there (the old calculation read 9.7 µm for 1627 µm).
 # One seed keeps the suite short.
 @pytest.mark.parametrize("seed", [2])
+@pytest.mark.slow  # an end-to-end session: the slow tier (README), run by CI
 def test_the_arc_cell_rehearses_with_an_honest_before(seed, tmp_path, capsys):
     from simulators.from_config import simulated_cell_for
 

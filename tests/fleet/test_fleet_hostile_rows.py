@@ -233,6 +233,7 @@ def check_example(fleet_db: Any, data: Any, sort: str) -> Counter[str]:
     return seen
 
 
+@pytest.mark.slow  # an end-to-end session: the slow tier (README), run by CI
 def test_no_row_a_station_can_write_breaks_station_fleet_or_a_page(fleet_db, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # an internal error's log is written here, not into the checkout
     seen: Counter[str] = Counter()

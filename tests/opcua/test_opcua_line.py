@@ -53,6 +53,7 @@ async def _until(node, idx: int, name: str, value: object) -> None:
         await asyncio.sleep(0.05)
 
 
+@pytest.mark.slow  # an end-to-end session: the slow tier (README), run by CI
 async def test_line_sequence(served, pki, tmp_path: Path) -> None:
     async with connected(served.url, pki.client_cert, pki.client_key, user="line", password=PASSWORDS["line"]) as client:
         idx, node = await station(client)

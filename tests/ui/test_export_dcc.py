@@ -53,6 +53,7 @@ def _floats(el: ET.Element | None) -> np.ndarray:
     return np.array([float(v) for v in el.text.split()])
 
 
+@pytest.mark.slow  # an end-to-end session: the slow tier (README), run by CI
 def test_certificate_validates_and_holds_the_reports_figures(certified):
     db, _, out = certified
     text = out.read_bytes()

@@ -103,6 +103,7 @@ def test_cli_exit_code_and_json_agree(tmp_path, capsys, case, expected):
     assert summary["failure"]["message"] and "Traceback" not in summary["failure"]["message"]
 
 
+@pytest.mark.slow  # an end-to-end session: the slow tier (README), run by CI
 def test_cli_exit_code_and_json_agree_on_success(tmp_path, capsys):
     code, summary = _run_json(capsys, ["calibrate", "--simulated", "--seed", "2", "--db", str(tmp_path / "r.sqlite")])
     assert code == summary["exit_code"] == 0 and summary["outcome"] == "SUCCESS"
@@ -120,6 +121,7 @@ def test_a_bad_report_path_is_refused_before_any_motion(tmp_path, capsys):
     assert not db.exists()  # refused before a run was created, so before anything moved
 
 
+@pytest.mark.slow  # an end-to-end session: the slow tier (README), run by CI
 def test_no_upload_with_report_writes_the_report(seed1_not_uploaded):
     """calibrate --simulated --seed 1 --no-upload --json --report: the suite's run (tests/conftest.py)."""
     (line,) = seed1_not_uploaded.out.strip().splitlines()  # exactly one JSON object

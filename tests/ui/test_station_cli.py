@@ -76,6 +76,7 @@ def test_check_connects_to_every_device(sim, tmp_path, capsys):
     assert "FAILED" in capsys.readouterr().out
 
 
+@pytest.mark.slow  # an end-to-end session: the slow tier (README), run by CI
 def test_calibrate_json_summary_export_and_reversal(sim, tmp_path, capsys):
     text = simulated_config_text(sim, 2).replace("repeats = 4", "repeats = 1\nboth_directions = true")
     cfg = tmp_path / "sim.toml"

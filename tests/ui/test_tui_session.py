@@ -97,6 +97,7 @@ def test_launch_returns_the_sessions_exit_code(missing_probe_request, monkeypatc
 
 # -- a full calibration of the simulated cell (needs the pipeline's RunSummary) ----------------
 
+@pytest.mark.slow  # an end-to-end session: the slow tier (README), run by CI
 async def test_simulated_calibration_through_the_ui(tmp_path, short_cell):
     # the built-in cell with one visit per identification pose and one verification cycle: the
     # panel's rows and the exit code are the same on the shorter run (issue 42: the suite's time)
