@@ -70,4 +70,9 @@ def test_the_old_unsigned_reads_fail_conformance(tmp_path):
         conformance = station("conformance", str(config))
     text = conformance.stdout + conformance.stderr
     assert conformance.returncode == 7, text  # the kit's documented failure code, never 4
-    assert re.search(r"joint 5", text), text
+    # the old reads decode a word >= 0x8000 as negative: joint 5's parked 30° (low word 0xFD4F) reads
+    # 3.75° off, and so does a claim token whose low word is >= 0x8000 (the tokens are random,
+    # drivers/controller_session.new_token). Where the kit's claim check draws such a token it finds
+    # the bug there first and the commands after it are refused NOT_CLAIMED (1 failure in a full run
+    # beside two CPU hogs): either finding names the signed-word decoding
+    assert re.search(r"joint 5|claim_request as the map's u32", text), text
