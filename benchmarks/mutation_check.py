@@ -56,11 +56,11 @@ MUTANTS = (
      (("            _turn(T, spec.joint, q[..., j])",
        "            _turn(T, spec.joint, -q[..., j] if j == 1 else q[..., j])"),), DEFAULT_TESTS),
     ("a prismatic joint moves along -z", KINEMATICS,
-     (("        T[..., :, 3] += T[..., :, 2] * q[..., None]", "        T[..., :, 3] -= T[..., :, 2] * q[..., None]"),),
+     (("        T[..., :3, 3] += T[..., :3, 2] * q[..., None]", "        T[..., :3, 3] -= T[..., :3, 2] * q[..., None]"),),
      DEFAULT_TESTS),
     ("a revolute joint's sine flipped (a mirrored rotation)", KINEMATICS,
-     (("        T[..., :, 0] = x * c + y * s", "        T[..., :, 0] = x * c - y * s"),
-      ("        T[..., :, 1] = y * c - x * s", "        T[..., :, 1] = y * c + x * s")), DEFAULT_TESTS),
+     (("        np.multiply(y, s, out=col0)", "        np.multiply(y, -s, out=col0)"),
+      ("        x *= s\n", "        x *= -s\n")), DEFAULT_TESTS),
     # symmetric slips that a simulator sharing the station's or the driver's code would have made
     # too, so that they cancelled: the simulated head now touches the cube with its own physics
     # (simulators/probe_contact.py), the simulated program reads words with its own code
