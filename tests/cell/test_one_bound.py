@@ -6,8 +6,6 @@ the run judged, stored and reported the bound over the working cells (4.7 µm)."
 
 from __future__ import annotations
 
-import pytest
-
 from station.cell.pipeline.calibration import Options, run_calibration
 from station.cell.publication.payload import build_publication
 from station.cell.run.questions import UploadProposal
@@ -15,16 +13,6 @@ from station.errors import Outcome
 from station.ui.report.run import report_for_run
 from station.ui.report.tables import fmt
 from station.ui.tui.screens import question_markup
-from tests.cell.test_pipeline import SHORT, Cell
-
-
-@pytest.fixture
-def cell(tmp_path):
-    # the short plan (one visit per identification pose, one verification cycle): the same held-out
-    # targets, so the same working cells whose bound differs from the whole table's (issue 42)
-    c = Cell(tmp_path, **SHORT)
-    yield c
-    c.close()
 
 
 def test_the_upload_dialog_the_json_the_report_and_the_fleet_read_one_bound(cell, tmp_path):

@@ -53,12 +53,6 @@ class Cell:
 SHORT = SHORT_PLAN  # tests/short_plan.py: the one short plan of the suite
 
 
-@pytest.fixture
-def cell(tmp_path):
-    c = Cell(tmp_path, **SHORT)
-    yield c
-    c.close()
-
 
 @pytest.fixture
 def full_cell(tmp_path):

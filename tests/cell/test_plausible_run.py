@@ -8,16 +8,6 @@ import pytest
 from station.cell.pipeline.calibration import run_calibration
 from station.cell.pipeline.outcomes import classify
 from station.errors import IdentificationError, Outcome
-from tests.cell.test_pipeline import SHORT, Cell
-
-
-@pytest.fixture
-def cell(tmp_path):
-    # the short plan (one visit per identification pose): the refusal comes at the identification,
-    # whose plausibility check does not depend on how many visits it fits (issue 42)
-    c = Cell(tmp_path, **SHORT)
-    yield c
-    c.close()
 
 
 def test_an_identification_beyond_the_plausible_limits_ends_the_run_with_exit_3(cell, monkeypatch):

@@ -16,7 +16,7 @@ from station.cell.plan.steps import StepKind
 from station.cell.records.reading.stored_config import stored_plan
 from station.cell.records.summary import RunSummary
 from station.errors import Outcome
-from tests.cell.test_pipeline import SHORT, Cell
+from tests.cell.test_pipeline import Cell
 
 ROOT = Path(__file__).resolve().parents[2]
 BASE_FRAME = ("base_frame_nominal_um", "base_frame_corrected_um", "base_frame_reference_um", "base_frame_ratio")
@@ -31,13 +31,15 @@ def test_the_station_has_no_simulation_words():
 
 
 @pytest.fixture
-def cell(tmp_path):
+def full_cell(tmp_path):
+    # the whole plan: the judge's ≤ 1.2 ratio bound was fitted to it
     c = Cell(tmp_path)
     yield c
     c.close()
 
 
-def test_a_simulated_run_reports_the_judges_base_frame_figures_with_units(cell):
+def test_a_simulated_run_reports_the_judges_base_frame_figures_with_units(full_cell):
+    cell = full_cell
     summary = cell.run(options=Options(judge=CellJudge.of(cell.srv.cell)))
     assert summary.outcome is Outcome.SUCCESS
     out = summary.to_json()
@@ -60,17 +62,8 @@ def test_a_simulated_run_reports_the_judges_base_frame_figures_with_units(cell):
     assert StepKind.REFERENCE in kinds and StepKind.REFERENCE.value == "oracle"  # as stored before issue 42
 
 
-@pytest.fixture
-def short_cell(tmp_path):
-    # one visit per identification pose, one verification cycle: which steps and keys a run without
-    # a judge has does not depend on how many there are (issue 42)
-    c = Cell(tmp_path, **SHORT)
-    yield c
-    c.close()
 
-
-def test_a_real_cells_run_has_no_oracle_step_and_no_simulation(short_cell):
-    cell = short_cell
+def test_a_real_cells_run_has_no_oracle_step_and_no_simulation(cell):  # the short plan (tests/cell/conftest.py)
     summary = cell.run(options=Options())  # no judge: what a real cell's session passes
     assert summary.outcome is Outcome.SUCCESS
     assert {st.kind for st in stored_plan(cell.db, summary.run_id)} == {

@@ -21,7 +21,6 @@ from station.cell.run.facts.events import (
 )
 from station.cell.run.facts.stream import RunStream
 from station.errors import Outcome
-from tests.cell.test_pipeline import SHORT, Cell
 
 # --- the stream itself -----------------------------------------------------------------------------
 
@@ -64,14 +63,6 @@ def test_a_subscriber_that_fails_stops_the_emit_and_a_kind_must_be_an_event():
 
 # --- one run's facts --------------------------------------------------------------------------------
 
-
-@pytest.fixture
-def cell(tmp_path):
-    # the short plan (one visit per identification pose, one verification cycle): the events' order
-    # and figures against the stored summary do not depend on the plan's length (issue 42)
-    c = Cell(tmp_path, **SHORT)
-    yield c
-    c.close()
 
 
 def test_one_runs_events_carry_the_figures_of_its_stored_summary_and_json(cell):

@@ -16,16 +16,6 @@ from station.cell.run.facts import events as ev
 from station.cell.run.facts.stream import RunStream
 from station.cell.run.facts.writer import RunWriter
 from station.errors import Outcome
-from tests.cell.test_pipeline import SHORT, Cell
-
-
-@pytest.fixture
-def cell(tmp_path):
-    # the short plan (one visit per identification pose, one verification cycle): what is stored,
-    # when and in which order does not depend on how many steps there are (issue 42)
-    c = Cell(tmp_path, **SHORT)
-    yield c
-    c.close()
 
 
 def _one(events: list[ev.Event], kind: type) -> ev.Event:
