@@ -135,6 +135,7 @@ async def test_running_notices_at_80x24_are_whole():
         await wait_until(pilot, lambda: whole in inside(app, app.query_one("#notices")), "the notice whole")
         app.control.abort()
         session.open()  # the fake's worker waits on its gate: let it reach the checkpoint the abort ends
+        await wait_until(pilot, lambda: app.state == "aborted", "aborted")  # the end lands before the app closes
 
 
 # -- a stopped run: one key continues it; the command line is the exact one --------------------
