@@ -464,6 +464,8 @@ class StationApp(RunEnd):
     # ------------------------------------------------------------------ events from the runner
     def on_event_message(self, message: EventMessage) -> None:
         ev = message.event
+        if not self.query("#summary"):  # the app is closing (its panels are gone): the run's record has the event
+            return
         if isinstance(ev, DeviceSnapshot):
             self.query_one("#devices", DevicePanel).show(ev)
         elif isinstance(ev, RunStarted):
