@@ -367,7 +367,7 @@ def parse_config(data: dict, source: str = "<config>", text: str = "") -> CellCo
         objective=i.objective, sigma_position_um=i.sigma_position_um,
         sigma_angle_arcsec=i.sigma_angle_arcsec,
         prefer=tuple(model.prefer if i.prefer is None else i.prefer), fix=tuple(i.fix), exclude=tuple(i.exclude),
-        model=i.model.strip())
+        model=i.model.strip(), repeatability_mm=model.repeatability_mm)
     ident = _check_terms(ident, model, source, _robot_path(f.robot.model, source), plan.both_directions)
     for key in ("prefer", "fix", "exclude"):
         for n in getattr(ident, key):

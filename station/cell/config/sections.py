@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from station.core.kinematics.transforms import pose_to_matrix
+from station.core.measurement.repeatability import with_repeatability
 from station.core.terms.error_model import GravityModel
 from station.core.units import ARCSEC
 
@@ -77,6 +78,8 @@ class IdentificationConfig:
     # read only when the model has terms
     gravity: GravityModel | None = None
     gear_ratios: tuple[float, ...] | None = None
+    #: the robot file's ISO 9283 pose repeatability RP [mm] (None: the file states none)
+    repeatability_mm: float | None = None
 
     @property
     def terms(self) -> tuple[str, ...]:
@@ -84,9 +87,11 @@ class IdentificationConfig:
         return tuple(n.strip() for n in self.model.split("+") if n.strip()) or ("geometric",)
 
     def pose_sigma(self) -> np.ndarray:
-        """σ of the six pose residual rows (x, y, z [mm], rx, ry, rz [rad])."""
+        """σ of the six pose residual rows (x, y, z [mm], rx, ry, rz [rad]): the measurement's, with
+        the robot's repeatability (``repeatability_mm``) in quadrature on x, y, z: the fit's
+        weights, the σ it reports and the plan's stopping rule all see the robot that is measured."""
         s, a = self.sigma_position_um * 1e-3, self.sigma_angle_arcsec * ARCSEC
-        return np.array([s, s, s, a, a, a])
+        return with_repeatability(np.array([s, s, s, a, a, a]), self.repeatability_mm)
 
 
 @dataclass(frozen=True)

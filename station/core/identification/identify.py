@@ -56,6 +56,7 @@ from station.core.kinematics.model import RobotModel
 from station.core.kinematics.transforms import rpy_to_matrix
 from station.core.measurement.distance_pairs import coincident_pairs, shares_points
 from station.core.measurement.measurements import MeasurementSet
+from station.core.measurement.repeatability import VarianceFactor, scaled, variance_factor
 from station.core.measurement.uncertainty import (
     LinearUncertainty,
     body_sandwich,
@@ -118,6 +119,10 @@ class IdentificationResult:
     pairs: np.ndarray | None = None
     #: the evaluations the fit was allowed (``identify``'s ``max_nfev``)
     max_evaluations: int = 0
+    #: the a-posteriori check of the assumed noise (:func:`~station.core.measurement.repeatability.variance_factor`):
+    #: where it says the noise is larger, ``uncertainty`` is already scaled by its s0; None where it
+    #: does not apply (no redundancy, distances, the robust loss)
+    variance: VarianceFactor | None = None
 
     def item_rows(self, item: int) -> tuple[int, ...]:
         """The 0-based joint rows of measurement ``item``: itself, or a distance's two rows."""
@@ -290,6 +295,10 @@ def _identify(model: RobotModel, data: MeasurementSet, start, prefer, fix, exclu
             f"rank deficient at the solution ({unc.rank} of {len(idx)} parameters determined); "
             f"spread the poses over the workspace or identify fewer parameters"
         )
+    var = _variance_check(data, r * w, len(idx), loss)
+    if var is not None:
+        notes.append(var.note())
+        unc = scaled(unc, var.factor)
     med = _median(per_item)
     mad = 1.4826 * _median(np.abs(per_item - med)) or 1.0
     outliers = tuple(int(i) for i in np.nonzero((per_item - med) / mad > OUTLIER_SIGMAS)[0]
@@ -304,7 +313,17 @@ def _identify(model: RobotModel, data: MeasurementSet, start, prefer, fix, exclu
         registration=reg, information=info, design_rank=d_rank, notes=tuple(notes),
         loss=loss, downweighted=downweighted, dropped_pairs=dropped,
         pairs=data.distance_pairs() if data.kind == "distance" else None, max_evaluations=max_nfev,
+        variance=var,
     )
+
+
+def _variance_check(data: MeasurementSet, weighted: np.ndarray, n_params: int, loss: str) -> VarianceFactor | None:
+    """The a-posteriori variance factor of a least-squares fit of independent rows (pose, position):
+    distances share their points (rᵀWr is then no χ²(m − n)), and the robust loss's residuals are
+    not Gaussian by design, so neither is checked."""
+    if data.kind == "distance" or loss != "linear":
+        return None
+    return variance_factor(weighted, n_params)
 
 
 def _check_distance_scale(model: RobotModel, data: MeasurementSet, p0: np.ndarray) -> None:

@@ -65,6 +65,9 @@ class RobotModel:
     #: ``(n_joints,)`` [rad/s or mm/s] the joints' maximum speeds from the robot file (None: not
     #: given); the plan preview estimates the motion time from them
     max_speed: np.ndarray | None = field(default=None, compare=False)
+    #: [mm] the data sheet's ISO 9283 pose repeatability RP from the robot file (None: not given);
+    #: the noise model adds it to every measured position (station.core.measurement.repeatability)
+    repeatability_mm: float | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "nominal", _readonly(self.nominal))
@@ -170,7 +173,7 @@ class RobotModel:
         if params.shape != self.nominal.shape:
             raise ValueError(f"expected {self.nominal.shape} parameters, got {params.shape}")
         return RobotModel(self.name, self.transforms, params, self.joint_limits, self.description, self.prefer,
-                          self.max_speed)
+                          self.max_speed, self.repeatability_mm)
 
     def with_setup(self, pose: np.ndarray) -> "RobotModel":
         """The same robot with the set-up transform R set to ``pose`` (6,) [mm, rad]."""
@@ -207,6 +210,24 @@ class RobotModel:
 
 
 # --- robot files ------------------------------------------------------------------------------
+
+#: an arm that repeats worse than 10 mm is no robot a station calibrates (and likely a unit mistake)
+MAX_REPEATABILITY_MM = 10.0
+
+
+def check_repeatability(value: object, source: str) -> float | None:
+    """The robot file's ``repeatability_mm`` as a float [mm] (None where absent), or a
+    :class:`ConfigError` with its fix."""
+    if value is None:
+        return None
+    hint = ("give the data sheet's ISO 9283 pose repeatability RP in mm, e.g. repeatability_mm = 0.02 for "
+            "±0.02 mm, or leave the key out when the data sheet states none")
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ConfigError(f"{source}: [robot].repeatability_mm must be a finite number, got {value!r}; {hint}")
+    if not 0.0 < float(value) <= MAX_REPEATABILITY_MM:
+        raise ConfigError(f"{source}: [robot].repeatability_mm = {value!r} is outside (0, {MAX_REPEATABILITY_MM:g}] mm; {hint}")
+    return float(value)
+
 
 def robot_from_dict(data: dict, source: str = "<dict>") -> RobotModel:
     """Build a model from the parsed TOML of a robot file (format in docs/robot-file.md)."""
@@ -279,7 +300,8 @@ def robot_from_dict(data: dict, source: str = "<dict>") -> RobotModel:
                           f"got {prefer_raw!r}")
     prefer = tuple(prefer_raw)
     model = RobotModel(name, tuple(specs), np.array(params), np.array(limits).reshape(-1, 2),
-                       str(head.get("description", "")), prefer)
+                       str(head.get("description", "")), prefer,
+                       repeatability_mm=check_repeatability(head.get("repeatability_mm"), source))
     if speeds:
         if len(speeds) != model.n_joints:
             raise ConfigError(f"{source}: max_speed is given for {len(speeds)} of {model.n_joints} joints; give it "
@@ -311,6 +333,8 @@ def robot_to_toml(model: RobotModel, params: np.ndarray | None = None, angle_uni
     }
     if model.prefer:
         doc["robot"]["prefer"] = list(model.prefer)
+    if model.repeatability_mm is not None:
+        doc["robot"]["repeatability_mm"] = model.repeatability_mm
     li = 0
     for t_i, spec in enumerate(model.transforms):
         e: dict = {"name": spec.name}

@@ -34,6 +34,9 @@ class _Robot(_Section):
     angle_unit: Literal["deg", "rad"] = "deg"
     length_unit: Literal["mm", "m"] = "mm"
     prefer: list[Name] = Field(default_factory=list, max_length=1024)
+    # the data sheet's ISO 9283 pose repeatability RP [mm] (its value is checked, with the fix,
+    # by station.core.kinematics.model.check_repeatability)
+    repeatability_mm: Any = None
 
 
 class _Transform(_Section):
