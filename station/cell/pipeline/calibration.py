@@ -306,7 +306,10 @@ def _identification_summary(res: IdentificationResult) -> IdentificationSummary:
         rms_normalized=float(res.rms_normalized), rms_residual_um=float(res.rms_position_mm() * 1e3),
         outliers=tuple(int(i) for i in res.outliers),
         parameters=tuple(ParameterEstimate(n, float(v), float(s))
-                         for n, v, s in zip(res.chosen, res.estimates, res.uncertainty.sigma)))
+                         for n, v, s in zip(res.chosen, res.estimates, res.uncertainty.sigma)),
+        variance_factor_s0=None if res.variance is None else res.variance.s0,
+        variance_limit_s0=None if res.variance is None else res.variance.limit,
+        sigma_scaled_by=1.0 if res.variance is None else res.variance.factor)
 
 
 @dataclass(frozen=True)

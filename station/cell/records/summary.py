@@ -82,6 +82,11 @@ class IdentificationSummary:
     rms_residual_um: float
     outliers: tuple[int, ...]
     parameters: tuple[ParameterEstimate, ...]
+    #: the a-posteriori check (issue 38): s0 = √(rᵀWr/(m − n)), the χ² limit it was tested against
+    #: (5 %), and what the parameters' σ were multiplied by (1.0: the residuals agree with the noise)
+    variance_factor_s0: float | None = None
+    variance_limit_s0: float | None = None
+    sigma_scaled_by: float = 1.0
 
 
 @dataclass(frozen=True)

@@ -176,6 +176,8 @@ def identify_report(model, res, data, objective: str, pairs_strategy: str | None
         "converged": res.converged, "evaluations": res.iterations,
         "rms_normalized": res.rms_normalized,
         "rms_position_residual_um": res.rms_position_mm() * 1e3,
+        # the a-posteriori check (issue 38): s0 and the factor the σ were scaled by, if any
+        "variance_factor": res.variance.as_dict() if res.variance is not None else None,
         "parameters": {n: _param_json(n, v, s) for n, v, s in
                        zip(res.chosen, res.estimates, res.uncertainty.sigma)},
         "fitted": len(res.chosen), "model_parameters": model.n_params,

@@ -357,6 +357,9 @@ def accuracy_comparison(d: ReportData) -> list[tuple[str, str]]:
     if s is not None and s.identification is not None:
         out.append(("identification residual RMS (noise, repeatability, what the model leaves out)",
                     f"{fmt(s.identification.rms_residual_um)} µm"))
+        if s.identification.sigma_scaled_by != 1.0:  # the a-posteriori check scaled the σ (issue 38)
+            out.append(("σ scaled by the a-posteriori variance factor s0 (residuals above the assumed noise, "
+                        "χ² test at 5 %)", f"× {s.identification.sigma_scaled_by:.2f}"))
     if s is not None and s.correction is not None:
         out.append(("table interpolation bound", f"{fmt(s.correction.interpolation_bound_um)} µm"))
     if s is not None and s.reversal is not None:
