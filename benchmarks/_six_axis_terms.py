@@ -43,6 +43,7 @@ from station.core.kinematics.forward import forward_with_jacobian
 from station.core.kinematics.model import RobotModel
 from station.core.kinematics.poses import spread_joints
 from station.core.measurement.measurements import MeasurementSet, add_noise, synthetic_set
+from station.core.measurement.repeatability import variance_factor, with_repeatability
 from station.core.terms.design import design_jacobians, term_columns
 from station.core.terms.error_model import GravityModel, TermBasis, TermSpec, apply_terms, term_basis
 from station.core.terms.fit import TermFit, fit_terms
@@ -101,10 +102,11 @@ def _structure_prediction(model, data: MeasurementSet, geo, errs, q_h: np.ndarra
 
 
 def rehearse(seed: int, n_ident: int | None = None, n_held: int = 200, scale: float = 1.0,
-             design: tuple[np.ndarray, dict] | None = None) -> dict:
+             design: tuple[np.ndarray, dict] | None = None, rp_mm: float | None = None) -> dict:
     """One seed: geometric and auto after, oracle, the terms auto kept (see the module). The
     identification poses: ``n_ident`` random ones, else ``design`` (from :func:`design_poses`),
-    else the design made here. ``estimation_um``: auto against the truth's own prediction (what the
+    else the design made here. ``rp_mm``: the fit weighs with the repeatability a robot file would
+    state (σ per axis RP/3.617 on the positions). ``estimation_um``: auto against the truth's own prediction (what the
     fit adds to the repeatability); ``predicted_um``: the fit's linear σ there (RMS)."""
     truth = six_axis_truth(seed)
     model, p_true = truth.model, truth.params
@@ -124,6 +126,8 @@ def rehearse(seed: int, n_ident: int | None = None, n_held: int = 200, scale: fl
     T_meas = true_forward(kinds, p_true, physical(q_id))
     data = MeasurementSet("pose", q_id, T_meas, SIGMA)
     data = data.with_measured(add_noise(data, T_meas, rng))
+    if rp_mm is not None:  # the robot file's ISO 9283 RP in the weights (issue 38); the noise as drawn
+        data = MeasurementSet("pose", q_id, data.measured, with_repeatability(SIGMA, rp_mm))
     geo = identify(model, data)
     sel = select_model(model, data, geometric=geo)
     q_h = spread_joints(model, n_held, rng)
@@ -139,12 +143,16 @@ def rehearse(seed: int, n_ident: int | None = None, n_held: int = 200, scale: fl
         return float(np.sqrt(np.mean(np.sum((p - ref) ** 2, axis=1)))) * 1e3
 
     o = rms(oracle)
+    var = variance_factor(fit.residuals_w, len(fit.uncertainty.sigma))
     floor = rms(_structure_prediction(model, data, geo, errs, q_h)) if errs.active else rms(geo_pred)
     return {"seed": seed, "geometric_um": rms(geo_pred), "auto_um": rms(auto_pred), "oracle_um": o,
             "structure_um": floor, "structure_vs_oracle": floor / o,
             "geometric_vs_oracle": rms(geo_pred) / o, "auto_vs_oracle": rms(auto_pred) / o, "chosen": sel.chosen,
             "cv_geometric_um": sel.table[0].cv_rms_mm * 1e3, "design": account, "n_parameters": fit.n_parameters,
             "estimation_um": rms(auto_pred, oracle), "predicted_um": float(np.sqrt(np.mean(auto_sigma**2))) * 1e3,
+            # the a-posteriori check of auto's fit (issue 38): s0 and the σ it reports, scaled where the χ² test says so
+            "s0": np.nan if var is None else var.s0, "reported_um": float(np.sqrt(np.mean(auto_sigma**2))) * 1e3
+            * (1.0 if var is None else var.factor),
             "missed": _missed(errs, sel.chosen)}
 
 

@@ -21,7 +21,9 @@ leaving it out costs.
   at 5 % says the noise is larger); ``MC``: the Monte Carlo scatter (``monte_carlo``, the joints
   drawn through the truth's repeatability), propagated to the same poses.
 
-Prints the ratios actual/σ per seed and their median over seeds (1.0 = honest).
+Prints the ratios actual/σ per seed and their median over seeds (1.0 = honest). Then the case of
+issue 38's closing note, the six-axis arm with joint errors under ``--model auto``
+(:func:`terms_section`).
 
     PYTHONPATH=. .venv/bin/python benchmarks/bench_sigma_honesty.py [--seeds 5] [--draws 10] [--sets 300]
 """
@@ -108,11 +110,40 @@ def one_seed(make, sig_um, n_poses: int, seed: int, draws: int, n_sets: int) -> 
             "mc_um": _rms_sigma(model, p_true, plain.chosen_index, cov_mc, q_h) * 1e3}
 
 
+def terms_section(seeds: list[int]) -> None:
+    """The case of issue 38's closing note: ``bench_six_axis.py --terms``'s rehearsal (the six-axis
+    arm with compliance and cyclic joint errors, the station's design of ~450 poses, ``--model auto``),
+    its estimation error beside auto's linear σ as the station had it, with the a-posteriori factor,
+    and with the robot file's RP in the weights."""
+    from benchmarks._six_axis_terms import design_poses, rehearse
+
+    print("six-axis arm with joint errors, --model auto on the station's design (bench_six_axis.py --terms): "
+          "estimation error against the truth's own model at 200 held-out poses and auto's σ there [µm]")
+    print(f"{'seed':>4} {'RP':>6} {'est':>6} {'pred':>6} {'s0':>5} {'post':>6} {'rp':>6} {'s0 rp':>5} {'post rp':>7}  "
+          f"{'est/pred':>8} {'est/post':>8} {'est/rp':>6} {'est/post rp':>11}")
+    rows = []
+    for seed in seeds:
+        design = design_poses(six_axis_truth(seed).model, np.random.default_rng(np.random.SeedSequence([seed, 3031])))
+        rp = datasheet_rp(six_axis_truth(seed), np.random.default_rng(np.random.SeedSequence([seed, 3838])))
+        a, b = rehearse(seed, design=design), rehearse(seed, design=design, rp_mm=rp)
+        r = {"est": a["estimation_um"], "pred": a["predicted_um"], "post": a["reported_um"], "rp": b["predicted_um"],
+             "post_rp": b["reported_um"], "est_rp": b["estimation_um"]}
+        rows.append(r)
+        print(f"{seed:>4} {rp * 1e3:6.1f} {r['est']:6.2f} {r['pred']:6.2f} {a['s0']:5.2f} {r['post']:6.2f} "
+              f"{r['rp']:6.2f} {b['s0']:5.2f} {r['post_rp']:7.2f}  {r['est'] / r['pred']:8.2f} {r['est'] / r['post']:8.2f} "
+              f"{r['est_rp'] / r['rp']:6.2f} {r['est_rp'] / r['post_rp']:11.2f}", flush=True)
+    med = {k: statistics.median(r[e] / r[k] for r in rows)
+           for k, e in (("pred", "est"), ("post", "est"), ("rp", "est_rp"), ("post_rp", "est_rp"))}
+    print(f"median over {len(rows)} seeds: est/pred {med['pred']:.2f}, est/post (a-posteriori) {med['post']:.2f}, "
+          f"est/rp (RP key) {med['rp']:.2f}, est/post rp (both) {med['post_rp']:.2f}\n", flush=True)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=5, help="seeds 1 … N")
     ap.add_argument("--draws", type=int, default=10, help="noise draws per seed (the actual error's mean square)")
     ap.add_argument("--sets", type=int, default=300, help="Monte Carlo sets per seed")
+    ap.add_argument("--no-terms", action="store_true", help="leave out the six-axis --model auto section (~40 s a seed)")
     args = ap.parse_args(argv)
     for arm, (make, sig_um, n_poses) in ARMS.items():
         print(f"{arm}: {n_poses} pose measurements (σ {sig_um[0]:g} µm, {sig_um[1]:g}″), the joints through the "
@@ -134,6 +165,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"median over {len(rows)} seeds: actual/meas {med('actual_um', 'meas_um'):.2f}, actual/rp "
               f"{med('actual_um', 'rp_sigma_um'):.2f}, actual/post (no key, a-posteriori) {med('actual_um', 'post_um'):.2f}, "
               f"MC/meas {med('mc_um', 'meas_um'):.2f}, MC/rp {med('mc_um', 'rp_sigma_um'):.2f}\n", flush=True)
+    if not args.no_terms:
+        terms_section(list(range(1, args.seeds + 1)))
     return 0
 
 

@@ -164,3 +164,20 @@ def test_the_repeatability_in_the_linear_model_matches_the_monte_carlo_through_t
     with_rp = rms(keyed.uncertainty.covariance)
     assert mc_sigma / plain > 1.15  # what leaving the repeatability out costs
     assert 0.8 < mc_sigma / with_rp < 1.1
+
+
+def test_the_runs_summary_says_the_sigma_were_scaled_and_by_how_much():
+    from station.cell.pipeline.calibration import _identification_summary
+    from station.cell.records.summary import RunSummary
+
+    rng = np.random.default_rng(13)
+    model, _, exact = _scara_set(rng, scale=2.0)
+    res = next(_draws(model, exact, rng, 1))
+    ident = _identification_summary(res)
+    assert ident.sigma_scaled_by == pytest.approx(res.variance.s0) and ident.sigma_scaled_by > 1.5
+    assert ident.variance_factor_s0 == pytest.approx(res.variance.s0)
+    assert ident.variance_limit_s0 == pytest.approx(res.variance.limit)
+    assert [p.sigma for p in ident.parameters] == pytest.approx(list(res.uncertainty.sigma))
+    out = RunSummary(Outcome.SUCCESS, identification=ident).to_json()
+    assert out["identification"]["sigma_scaled_by"] == pytest.approx(res.variance.s0)
+    assert RunSummary.from_json(out).identification == ident

@@ -449,6 +449,9 @@ def _identify_recorded(run: _Run, cfg: CellConfig, records, summary: RunSummary)
     for note in (n for n in res.notes if n.startswith(BODY_NOTE_PREFIX)):  # the body's CMM σ is in the fit
         summary = summary.replace(notes=(*summary.notes, note))
         emit(Notice("info", note))
+    if res.variance is not None and res.variance.scaled:  # the σ reported are the residuals' (issue 38)
+        summary = summary.replace(notes=(*summary.notes, res.variance.note()))
+        emit(Notice("info", res.variance.note()))
     if res.outliers:
         emit(Notice("warning", f"suspected outliers among identification measurements: {list(res.outliers)}"))
     return res, summary

@@ -30,6 +30,7 @@ from station.cell.records.reading.stored_error_model import StoredErrorModel, st
 from station.cell.records.run_records import MeasurementRecord
 from station.cell.records.summary import ErrorModelSummary, ErrorTermEstimate
 from station.core.identification.identify import IdentificationResult
+from station.core.measurement.repeatability import variance_factor
 from station.core.terms.selection import Selection
 from station.core.units import UM
 
@@ -120,11 +121,15 @@ def error_model_summary(cfg: CellConfig, sel: Selection) -> ErrorModelSummary:
     fit = sel.fit
     kept = [r for r in sel.table if r.families == sel.chosen and r.kept]
     cv_chosen = kept[-1].cv_rms_mm if kept else sel.table[0].cv_rms_mm
-    terms = tuple(ErrorTermEstimate(str(t["name"]), float(t["value"]), float(t["sigma"]), str(t["unit"]))
+    # the reported σ pass the same a-posteriori check as the geometric fit's (issue 38); the
+    # selection itself weighs held-out error and the a-priori σ, untouched
+    var = variance_factor(fit.residuals_w, len(fit.uncertainty.sigma)) if fit.kind != "distance" else None
+    factor = 1.0 if var is None else var.factor
+    terms = tuple(ErrorTermEstimate(str(t["name"]), float(t["value"]), float(t["sigma"]) * factor, str(t["unit"]))
                   for t in fit.terms_dict())
     return ErrorModelSummary(model=cfg.identification.model, chosen=tuple(sel.chosen), summary=sel.summary,
                              cv=sel.cv, cv_geometric_um=sel.table[0].cv_rms_mm / UM, cv_chosen_um=cv_chosen / UM,
-                             rms_residual_um=float(fit.rms_position_mm() / UM), terms=terms)
+                             rms_residual_um=float(fit.rms_position_mm() / UM), terms=terms, sigma_scaled_by=factor)
 
 
 def error_model_record(cfg: CellConfig, sel: Selection) -> dict[str, Any]:

@@ -228,6 +228,9 @@ class ErrorModelSummary:
     cv_chosen_um: float
     rms_residual_um: float
     terms: tuple[ErrorTermEstimate, ...] = ()
+    #: the a-posteriori variance factor of the fit with the terms, where its χ² test (5 %) scaled
+    #: the terms' σ (1.0: the residuals agree with the assumed noise; issue 38)
+    sigma_scaled_by: float = 1.0
 
 
 @dataclass(frozen=True)
