@@ -46,3 +46,14 @@ def test_a_negative_repeatability_stops_the_plan_with_its_fix(tmp_path, capsys):
     assert code == 2
     assert "repeatability_mm = -0.02 is outside (0, 10] mm" in err and "ISO 9283" in err
     assert "Traceback" not in err
+
+
+def test_init_takes_the_robots_repeatability_from_its_data_sheet(tmp_path, capsys, monkeypatch):
+    """`station init`'s expected figure after correction counts the robot file's RP, not the
+    simulator's [simulation] repeatability_um, where the file states it."""
+    folder = _cell(tmp_path, "repeatability_mm = 0.02").parent
+    monkeypatch.chdir(folder)
+    assert main(["init", "new.toml", "--robot", "robot.toml", "--head", "head.toml", "--body", "body.csv"]) == 0
+    said = capsys.readouterr().out
+    assert f"repeatability σ {0.02 / RP_PER_SIGMA * 1e3:.1f} µm per axis from the robot file's RP 20 µm" in said
+    assert load_config(folder / "new.toml").identification.repeatability_mm == 0.02

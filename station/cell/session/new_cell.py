@@ -202,9 +202,16 @@ def _repeats_cycles(cfg: CellConfig) -> tuple[int, int, str]:
     from station.cell.correction.design import _prior
     from station.cell.pipeline.preview import preview
     from station.core.kinematics.forward import forward
+    from station.core.measurement.repeatability import sigma_from_rp
 
     sim = cfg.simulation
-    rep_um = float(getattr(sim, "repeatability_um", 5.0) or 5.0)
+    rp = cfg.model.repeatability_mm
+    if rp is not None:  # the robot's data sheet (issue 38), not the simulator's figure
+        rep_um = sigma_from_rp(rp) * 1e3
+        rep_text = f"repeatability σ {rep_um:.1f} µm per axis from the robot file's RP {rp * 1e3:g} µm"
+    else:
+        rep_um = float(getattr(sim, "repeatability_um", 5.0) or 5.0)
+        rep_text = f"repeatability {rep_um:g} µm"
     plan_cfg = dataclasses.replace(cfg, plan=dataclasses.replace(cfg.plan, repeats=1))
     p1 = preview(plan_cfg, with_upload=True)
     q = np.array([s.step.joints for s in p1.steps if s.step.kind.value == "identification"])
@@ -218,7 +225,7 @@ def _repeats_cycles(cfg: CellConfig) -> tuple[int, int, str]:
             break
     cycles = int(min(10, max(5, math.ceil(VERIFICATION_READINGS / max(p1.n_verification_targets, 1)))))
     why = (f"predicted: before correction ≈ {before:.0f} µm RMS (robots with errors of the size [simulation] states), "
-           f"after ≈ {after:.1f} µm (σ {sigma:.1f} µm from {repeats} repeats, repeatability {rep_um:g} µm): gain "
+           f"after ≈ {after:.1f} µm (σ {sigma:.1f} µm from {repeats} repeats, {rep_text}): gain "
            f"≈ {before / after:.0f}× against the {MIN_GAIN:g}× the run must show")
     return repeats, cycles, why
 
