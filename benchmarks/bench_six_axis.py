@@ -153,7 +153,8 @@ def terms_main(seeds: list[int], poses: int | None) -> int:
     print(f"struct: the truth's own structure (its masses, compliance, every first harmonic) fitted to the same "
           f"measurements: median {statistics.median(floors):.3f}, worst {max(floors):.3f}, the estimation floor")
     print(f"est: auto's prediction against the truth's own at the held-out poses, median {statistics.median(est):.1f} µm; "
-          f"pred σ: its linear σ there (measurement σ only, no repeatability), median {statistics.median(pred):.1f} µm")
+          f"pred σ: its linear σ there (measurement σ only, no repeatability), median {statistics.median(pred):.1f} µm "
+          f"(with the a-posteriori factor and the robot file's RP: benchmarks/bench_sigma_honesty.py)")
     print("the same arm rigid (no joint errors: scale 0), the same poses and noise: auto should keep nothing")
     rigid = [rehearse(seed, n_ident=poses or None, scale=0.0, design=designs.get(seed)) for seed in seeds]
     for r in rigid:

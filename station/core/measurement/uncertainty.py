@@ -222,7 +222,9 @@ def monte_carlo(model: RobotModel, data: MeasurementSet, true_params, chosen_ind
     Inputs drawn per data set: measurement noise of ``data.sigma`` (distance data: of the
     measured points, ``data.point_sigma``, with the distances computed from them); robot repeatability as
     Gaussian joint noise ``sigma_joints`` ``(g,)`` (the robot reports the commanded joints but
-    stands slightly elsewhere); calibration-body geometry as one pose error of σ
+    stands slightly elsewhere; a robot file's ISO 9283 RP is already in ``data.sigma`` where the
+    data come from :meth:`~station.cell.config.sections.IdentificationConfig.pose_sigma`, drawn as
+    position noise: give one or the other for one robot, never both); calibration-body geometry as one pose error of σ
     ``sigma_point`` ``(6,)`` per measuring point ``point_ids`` ``(n,)`` shared by all
     measurements at that point (pose and position data), and, when ``data`` carries the body's
     uncertainty (``body_point``, ``body_sigma``, ``body_lever``), one error per body point and
