@@ -75,7 +75,9 @@ class ModbusTcpRelay:
     def close(self) -> None:
         self._listener.close()
         for t in self._threads:
-            t.join(timeout=5)
+            t.join(timeout=60)  # a hang guard: the pumps end when the station has closed its connection
+        # a pump appends a request after forwarding it: one still running could add to the list read next
+        assert not any(t.is_alive() for t in self._threads), "the relay's pumps did not end"
 
 
 @pytest.mark.slow

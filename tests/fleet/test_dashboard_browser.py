@@ -29,13 +29,20 @@ def served(fleet_db):
 
 def test_fleet_page_robot_plots_and_report_in_chromium(browser, served):
     from selenium.webdriver.common.by import By
+    from selenium.webdriver.support import expected_conditions as loaded
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    def after_click(element_id: str):
+        """The next page's element, once that page is there: a click's navigation may still be under
+        way when click() returns, and the old page has no such element (a hang guard, not a pace)"""
+        return WebDriverWait(browser, 60).until(loaded.presence_of_element_located((By.ID, element_id)))
 
     browser.get(served + "/")
     rows = browser.find_elements(By.CSS_SELECTOR, "table#fleet tr.robot")
     assert [r.get_attribute("data-robot") for r in rows] == ["SR-7"]
     assert "ok" in rows[0].text
     rows[0].find_element(By.CSS_SELECTOR, "a.robot-link").click()
-    assert browser.find_element(By.ID, "robot-title").text == "SR-7"
+    assert after_click("robot-title").text == "SR-7"
     for plot in ("plot-accuracy", "plot-drift"):
         svg = browser.find_element(By.CSS_SELECTOR, f'svg[data-testid="{plot}"]')
         assert svg.size["width"] > 200 and svg.size["height"] > 50  # laid out, not an empty box
@@ -43,4 +50,4 @@ def test_fleet_page_robot_plots_and_report_in_chromium(browser, served):
     assert len(drift.find_elements(By.CSS_SELECTOR, "circle.drift")) == 4
     assert drift.find_elements(By.CSS_SELECTOR, "polygon.band")
     browser.find_element(By.CSS_SELECTOR, "a.report-link").click()
-    assert browser.find_element(By.ID, "title").text == "Calibration report of SR-7"
+    assert after_click("title").text == "Calibration report of SR-7"

@@ -162,6 +162,8 @@ async def test_full_run_progress_table_and_summary():
         assert app.state == "idle" and app.summary is None and app.exit_code is None
         await pilot.press("s")
         await wait_until(pilot, lambda: app.state == "finished", "run finished")
+        # the runner sets its flags after its RunFinished event, in its thread: wait for that thread's end
+        await wait_until(pilot, lambda: app.worker is not None and app.worker.is_finished, "the worker's end")
 
         # the runner ran in a worker thread, not on the UI thread
         assert runner.thread_name != threading.main_thread().name
@@ -214,6 +216,8 @@ async def test_start_button_starts_the_run():
     async with app.run_test(size=(120, 40)) as pilot:
         await pilot.click("#start")
         await wait_until(pilot, lambda: app.state == "finished", "run finished")
+        # the runner sets its flag after its RunFinished event, in its thread: wait for that thread's end
+        await wait_until(pilot, lambda: app.worker is not None and app.worker.is_finished, "the worker's end")
         assert runner.finished
 
 

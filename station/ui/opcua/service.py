@@ -150,6 +150,8 @@ class StationService:
             await asyncio.get_running_loop().run_in_executor(None, self.thread.join, 60.0)
         if self._pump is not None:
             self._pump.cancel()
+            # awaited: a write it was making ends here, not while the caller stops the server under it
+            await asyncio.wait([self._pump])  # (wait, not await: the pump's CancelledError is not the caller's)
 
     @property
     def operator_methods(self) -> set[ua.NodeId]:
@@ -323,13 +325,16 @@ class StationService:
         if self.kind != "calibration" or summary.run_id is None:
             return
         self._ended = True
-        await self._write(self.nodes.last_calibration, RunId=summary.run_id, Outcome=summary.outcome.name,
+        # RunId last, in each record: the values are written one by one, and a client that sees a
+        # new RunId (its subscription, its poll) must read that run's figures, not the last run's
+        await self._write(self.nodes.last_calibration, Outcome=summary.outcome.name,
                           ExitCode=summary.exit_code, FinishedUtc=self._started_utc,
                           RmsBeforeMicrometre=_float(summary.before.rms_um if summary.before else None),
                           RmsAfterMicrometre=_float(summary.after.rms_um if summary.after else None),
                           Gain=_float(summary.gain),
                           InterpolationBoundMicrometre=_float(summary.correction.interpolation_bound_um
-                                                              if summary.correction else None))
+                                                              if summary.correction else None),
+                          RunId=summary.run_id)
         if summary.tables is not None:
             await self._write_state(ActiveTableCrc=summary.tables.active_at_end)
 
@@ -407,16 +412,16 @@ class StationService:
         cal, rec, params, crc = records
         if cal is not None and calibration:
             bound = await asyncio.get_running_loop().run_in_executor(None, self._stored_bound, cal.id)
-            await self._write(self.nodes.last_calibration, RunId=cal.id, Outcome=cal.outcome or "", ExitCode=_exit(cal),
+            await self._write(self.nodes.last_calibration, Outcome=cal.outcome or "", ExitCode=_exit(cal),
                               FinishedUtc=_utc(cal.created_utc), RmsBeforeMicrometre=_float(cal.rms_before_um),
                               RmsAfterMicrometre=_float(cal.rms_after_um), Gain=_float(cal.gain),
-                              InterpolationBoundMicrometre=bound)
+                              InterpolationBoundMicrometre=bound, RunId=cal.id)  # RunId last (_run_ended)
         if rec is not None:
-            await self._write(self.nodes.last_recheck, RunId=rec.id, Outcome=rec.outcome or "", ExitCode=_exit(rec),
+            await self._write(self.nodes.last_recheck, Outcome=rec.outcome or "", ExitCode=_exit(rec),
                               FinishedUtc=_utc(rec.created_utc), Verdict=rec.outcome or "",
                               BaselineRunId=int(rec.baseline or 0), DriftRmsMicrometre=_float(rec.drift_rms_um),
                               DriftMaxMicrometre=_float(rec.drift_max_um),
-                              ToleranceMicrometre=_float(rec.drift_tolerance_um))
+                              ToleranceMicrometre=_float(rec.drift_tolerance_um), RunId=rec.id)
         if calibration:
             await self._write_offsets(params)
             await self._write_state(ActiveTableCrc=crc)

@@ -243,7 +243,8 @@ class SideActions(App[RunSummary | None]):
 
     # ------------------------------------------------------------------ the pipeline's questions
     def on_question_message(self, message: QuestionMessage) -> None:
-        if self.control is not None and self.control.aborted:
+        # aborted, or the app is closing (its panels are gone, no dialog can open): "no", as an abort answers
+        if (self.control is not None and self.control.aborted) or not self.query("#summary"):
             message.reply(False)
             return
         if self.abort_asked:

@@ -330,7 +330,8 @@ class StationApp(RunEnd):
         # A runner that does not announce Paused still shows up as standing in checkpoint(): the state
         # line says so. The notice is the Paused event's alone; a note here as well raced with it (two
         # lines or one, as the timer fell: a flaky 80×24 snapshot).
-        if self.state == PAUSING and self.control is not None and self.control.waiting:
+        # The 0.1 s timer can fire while the app closes and its panels are gone (as the ETA's can).
+        if self.state == PAUSING and self.control is not None and self.control.waiting and self.query("#state"):
             self._set_state(PAUSED)
 
     def _show_phases(self, current: str | None) -> None:
