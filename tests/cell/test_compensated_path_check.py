@@ -1,0 +1,131 @@
+"""An articulated arm's verification path as the controller will move it (issue 40): its correction is
+no table but compensated Cartesian targets, whose joints (the controller's nominal inverse kinematics of
+the command) differ from the plan's by the identified errors, a path the pre-motion check never saw.
+Before any verification motion the run checks the remaining steps at those joints, from where the step
+before them leaves the robot (station/cell/plan/compensated_check.py), and refuses a path that collides,
+as a SCARA's shifted table path (tests/cell/test_shifted_path_check.py)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from station.cell.config.cell_config import parse_text
+from station.cell.pipeline.articulated import articulated_targets
+from station.cell.pipeline.outcomes import classify, hint_for
+from station.cell.plan.compensated_check import check_compensated, compensated_path, standing_at
+from station.cell.plan.measurement_plan import above_offset, build_plan
+from station.cell.plan.run_path import check_plan
+from station.cell.plan.shifted_check import ShiftedPathCollides, preceding
+from station.cell.plan.steps import StepKind
+from station.errors import Outcome
+
+pytest.importorskip("fcl")
+
+CELL = Path(__file__).resolve().parents[2] / "examples" / "puma560" / "cell.toml"
+
+#: the example's plan, one repetition and one verification cycle (tests/short_plan.py's idea: this
+#: example's plan lines are its own)
+SHORT = {"repeats = 2": "repeats = 1", "verification_cycles = 3": "verification_cycles = 1"}
+
+#: a 10 mm cube of a post beside the head's mount at the verification touch of P1c (elbow +1), 31 mm
+#: from the head frame's origin along the way a joint-1 zero error of +0.15° moves the compensated head
+#: there (1.9 mm), 50 mm over it: the nominal path clears it by 2.7 mm, over the 2 mm margin, the
+#: compensated one by 1.8 mm
+POST = """
+[[obstacle]]
+name = "post"
+shape = "box"
+frame = "body"
+pose = [126.455, -256.252, 150.0, 0.0, 0.0, 0.0]
+size_mm = [10.0, 10.0, 10.0]
+"""
+
+
+def _cell(extra: str = ""):
+    text = CELL.read_text(encoding="utf-8")
+    for old, new in SHORT.items():
+        assert old in text, f"the example has no {old!r} to shorten"
+        text = text.replace(old, new)
+    cfg = parse_text(text + extra, str(CELL))
+    plan = build_plan(cfg)
+    return cfg, plan, plan.run_steps(cfg.plan.verification_cycles, False)
+
+
+def _joint1_error(cfg, deg: float) -> np.ndarray:
+    """The robot's parameters with joint 1's zero off by ``deg`` (A1's rotation about its z)."""
+    p = np.array(cfg.model.nominal, dtype=float)
+    p[cfg.model.param_names.index("A1.yaw")] += np.radians(deg)
+    return p
+
+
+@pytest.fixture(scope="module")
+def post_cell():
+    return _cell(POST)
+
+
+def test_compensated_targets_that_push_a_verification_touch_into_an_obstacle_are_refused(post_cell):
+    cfg, plan, steps = post_cell
+    R = cfg.model.nominal[:6]
+    # the pre-motion check passes: the plan's path at its nominal joints clears the post over the margin
+    pre = check_plan(cfg, plan)
+    assert pre.clash is None
+    # no error to compensate: the targets are the plan's joints, the path as planned, clear
+    zero = articulated_targets(cfg, steps, cfg.model.nominal, R)
+    first = next(st for st in steps if st.kind is StepKind.VERIFY_AFTER and st.label == "P1c elbow +1")
+    np.testing.assert_allclose(zero[first.point, first.elbow][0], first.q, atol=1e-7)
+    clear = check_compensated(cfg, steps, zero, {StepKind.VERIFY_AFTER})
+    assert clear is not None and clear.clash is None and clear.vias > 0
+    post = dict(clear.by_step)[first.index]
+    assert post is not None and "post" in post.b and cfg.plan.collision_margin_mm < post.clearance_mm < 4.0
+    # +0.15° of joint 1's zero: the controller's joints for the compensated command, each pose as the runner moves it
+    large = articulated_targets(cfg, steps, _joint1_error(cfg, 0.15), R)
+    q = large[first.point, first.elbow][0]
+    assert abs(np.degrees(q - first.q)[0]) == pytest.approx(0.15, abs=1e-6)
+    path = compensated_path(cfg, [first], large)
+    assert [p[1] for p in path] == [f"step {first.index + 1} ({first.label}): {w}"
+                                    for w in ("approach", "above the point", "touch", "retract")]
+    np.testing.assert_allclose(path[2][0], q)
+    np.testing.assert_allclose(path[1][0], q + above_offset(cfg, first.cycle))  # short of it by the approach offset
+    np.testing.assert_allclose(path[0][0], path[3][0])  # an arm's approach and retract: its retract pose
+    # refused before any of it moves, naming the step, the pair and the clearance, exit 2
+    with pytest.raises(ShiftedPathCollides) as exc:
+        check_compensated(cfg, steps, large, {StepKind.VERIFY_AFTER})
+    msg = str(exc.value)
+    assert f"step {first.index + 1} ({first.label})" in msg and "obstacle 'post'" in msg
+    assert "under the margin of 2 mm" in msg and "compensated" in msg
+    assert classify(exc.value) is Outcome.CONFIG_ERROR and exc.value.exit_code == 2
+    assert "collision_margin_mm" in hint_for(exc.value) and "compensation" in hint_for(exc.value)
+    # without the post the same compensation is clear: it is the post, not the body, that refuses it
+    cfg0, _plan0, steps0 = _cell()
+    assert check_compensated(cfg0, steps0, articulated_targets(cfg0, steps0, _joint1_error(cfg0, 0.15), R),
+                             {StepKind.VERIFY_AFTER}).clash is None
+    # steps already measured (a resume past them) leave nothing to check; a SCARA's are check_shifted's
+    done = {st.index for st in steps if st.kind is StepKind.VERIFY_AFTER}
+    assert check_compensated(cfg, steps, large, {StepKind.VERIFY_AFTER}, done) is None
+
+
+def test_the_path_begins_where_the_step_before_leaves_the_robot(post_cell):
+    """The transition: the first compensated step's path starts at the retract of the last step before
+    correction, and the travel from there (depart, arrive over the compensated approach) is in it."""
+    cfg, _plan, steps = post_cell
+    R = cfg.model.nominal[:6]
+    before = articulated_targets(cfg, steps, None, R)
+    prev = preceding(steps, {StepKind.VERIFY_AFTER})
+    assert prev is not None and prev.kind is StepKind.VERIFY_BEFORE
+    assert preceding(steps, {StepKind.VERIFY_AFTER}, {st.index for st in steps}) is None
+    start = standing_at(cfg, prev, before)
+    assert start is not None and start[1] == f"step {prev.index + 1} ({prev.label}): retract"
+    first = next(st for st in steps if st.kind is StepKind.VERIFY_AFTER)
+    large = articulated_targets(cfg, steps, _joint1_error(cfg, 0.15), R)
+    path = compensated_path(cfg, [first], large, start)
+    names = [p[1] for p in path]
+    assert names[0] == start[1] and names[1].endswith("depart") and names[2] == f"step {first.index + 1} " \
+        f"({first.label}): arrive"
+    report = check_compensated(cfg, steps, articulated_targets(cfg, steps, cfg.model.nominal, R),
+                               {StepKind.VERIFY_AFTER}, start=start)
+    assert report is not None and report.poses == len(compensated_path(
+        cfg, [st for st in steps if st.kind is StepKind.VERIFY_AFTER],
+        articulated_targets(cfg, steps, cfg.model.nominal, R), start))
