@@ -169,3 +169,32 @@ def test_around_a_column_the_shifted_path_takes_the_runners_vias():
     assert report.vias > 0 and report.poses == len(direct) + report.vias
     names = [p[1] for p in shifted_path(cfg, after, R, _table(dq))]
     assert any(n.endswith(("joint 1 first", "joint 2 first", "elbow to swing", "swung")) for n in names)
+
+
+def test_the_next_move_line_shows_the_shifted_clearance_once_checked(post_cell):
+    """The TUI's "next move" line (a NextMove event when the step starts): for the steps the shifted
+    check saw, its figure, not the plan's, and the line says so."""
+    from types import SimpleNamespace
+
+    from station.cell.pipeline.shifted import checked_shifted
+    from station.cell.run.facts.next_move import next_moves
+
+    cfg, plan, steps, dq = post_cell
+    R = cfg.model.nominal[:6]
+    pre = check_plan(cfg, plan)
+    runner = SimpleNamespace(next_moves=next_moves(pre, steps, steps))  # what run_calibration sets before motion
+    first = next(st for st in steps if st.kind is StepKind.VERIFY_AFTER)
+    planned = runner.next_moves[first.index]
+    assert planned.check == "" and "post" in planned.b and planned.text().startswith("next move: clearance")
+    notes = []
+    summary = checked_shifted(cfg, steps, set(), R, _table(dq / 3), StepKind.VERIFY_AFTER, RunSummary(Outcome.SUCCESS),
+                              notes.append, runner)  # +0.1°: clear, 1.2 mm closer to the post
+    shown = runner.next_moves[first.index]
+    assert shown.check == "after (shifted)" and "post" in shown.b
+    assert shown.clearance_mm < planned.clearance_mm - 1.0
+    assert shown.clearance_mm == pytest.approx(summary.clearances[-1].least_mm)  # the step nearest the post
+    assert shown.text() == f"next move, with the correction: clearance {shown.clearance_mm:.1f} mm ({shown.a} ↔ {shown.b})"
+    ident = next(st for st in steps if st.kind is StepKind.IDENTIFICATION)
+    assert runner.next_moves[ident.index] == next_moves(pre, steps, steps)[ident.index]  # the others: the plan's
+    assert {i for i, m in runner.next_moves.items() if m.check} == {
+        st.index for st in steps if st.kind is StepKind.VERIFY_AFTER}

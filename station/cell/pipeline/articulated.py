@@ -188,9 +188,12 @@ def articulated_correction(cfg: CellConfig, runner: Runner, db: RunDB, run_id: i
     except Exception as exc:  # noqa: BLE001 - a figure beside the result must not stop the run
         emit(Notice("warning", f"joint-offset-only figure not computed: {exc}"))
     before_targets = articulated_targets(cfg, steps, None, res.params[:6])
-    if upload:  # the path the compensated targets move, before any verification motion (issue 40)
+    # the path the compensated targets move, before any verification motion (issue 40), the body where the
+    # configured set-up puts it (the identified one is no place alone: R and A1 merge); the oracle's at
+    # the simulated robot's true set-up, the one its targets are compensated in
+    if upload:
         summary = checked_compensated(cfg, steps, set(db.completed_steps(run_id, ok_only=True)), after_targets,
-                                      StepKind.VERIFY_AFTER, summary, emit, runner, before_targets)
+                                      StepKind.VERIFY_AFTER, summary, emit, runner, before_targets, None)
     runner.guard.table = None
     controller = runner.controller
     if controller.status().table_active:  # a table would act on top of the compensated targets
@@ -211,7 +214,8 @@ def articulated_correction(cfg: CellConfig, runner: Runner, db: RunDB, run_id: i
         emit(PhaseChanged("verify", "oracle (reference parameters)"))
         ref_targets = articulated_targets(cfg, steps, p_ref, p_ref[:6], ref_delta)
         summary = checked_compensated(cfg, steps, set(db.completed_steps(run_id, ok_only=True)), ref_targets,
-                                      StepKind.REFERENCE, summary, emit, runner, after_targets)  # before it moves (40)
+                                      StepKind.REFERENCE, summary, emit, runner, after_targets,
+                                      p_ref[:6])  # before it moves (40)
         summary = summary.replace(oracle=measure(StepKind.REFERENCE, ref_targets))
     outcome, missed = verified_outcome(cfg, summary, min_gain)
     summary = summary.replace(notes=(*summary.notes, *missed), missed=missed_limits(cfg, summary, min_gain))

@@ -60,13 +60,13 @@ def checked_shifted(cfg: CellConfig, steps: tuple[PlannedStep, ...], done: set[i
 
 def checked_compensated(cfg: CellConfig, steps: tuple[PlannedStep, ...], done: set[int], targets: Targets,
                         kind: StepKind, summary: RunSummary, emit: Callable[[Event], None], runner: Runner,
-                        before: Targets) -> RunSummary:
+                        before: Targets, R_world_base: np.ndarray | None) -> RunSummary:
     """An articulated arm's :func:`checked_shifted`: the ``kind`` steps not yet done at their
-    compensated ``targets``, from where the step before them leaves the robot (measured at
-    ``before``, the targets of its kind)."""
+    compensated ``targets`` (the body placed at ``R_world_base``, None: the configured set-up), from where the step before
+    them leaves the robot (measured at ``before``, the targets of its kind)."""
     what = "the compensated targets" if kind is StepKind.VERIFY_AFTER else "the oracle's compensated targets"
     start = standing_at(cfg, preceding(steps, {kind}), before)
-    report = check_compensated(cfg, steps, targets, {kind}, done, what, start)
+    report = check_compensated(cfg, steps, targets, {kind}, done, what, start, R_world_base)
     check = "after (compensated)" if kind is StepKind.VERIFY_AFTER else "oracle (compensated)"
     return _recorded(report, check, what, steps, done, kind, summary, emit, runner)
 

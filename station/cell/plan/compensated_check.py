@@ -28,7 +28,7 @@ from station.cell.config.cell_config import CellConfig
 from station.cell.plan.arm_motion import retract_poses
 from station.cell.plan.collision import CollisionReport, check_path, require_fcl
 from station.cell.plan.measurement_plan import above_offset
-from station.cell.plan.shifted_check import Pose, refuse_clash, remeasures
+from station.cell.plan.shifted_check import Pose, at_setup, refuse_clash, remeasures
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.plan.via_memo import memo_travel_vias
 from station.errors import UnreachableError
@@ -88,18 +88,23 @@ def compensated_path(cfg: CellConfig, steps: Sequence[PlannedStep], targets: Tar
 
 def check_compensated(cfg: CellConfig, steps: Sequence[PlannedStep], targets: Targets, kinds: Collection[StepKind],
                       done: Collection[int] = (), what: str = "the compensated targets",
-                      start: Pose | None = None) -> CollisionReport | None:
+                      start: Pose | None = None, R_world_base: np.ndarray | None = None) -> CollisionReport | None:
     """Refuse (:class:`~station.cell.plan.shifted_check.ShiftedPathCollides`, exit 2) the path of an
     arm's verification steps of ``kinds`` not in ``done`` at ``targets`` where a pose or a move collides
     or comes under ``[plan] collision_margin_mm``, naming the step, the pair and the clearance; the
     report of a clear path, None where no such step is left (or the robot is a SCARA: its table's
     path is :func:`~station.cell.plan.shifted_check.check_shifted`'s). ``start``: where the robot
-    stands before the first of them; the move from there is checked too."""
+    stands before the first of them; the move from there is checked too. ``R_world_base``: a set-up
+    that places the body and the obstacles in the robot's base frame (None: the configured one;
+    :func:`~station.cell.plan.shifted_check.at_setup`). The links are the nominal robot's: an arm's
+    identified parameters are a minimal set (its set-up and first joint's frame merge), no link's place,
+    so the check sees the compensated joints on the nominal robot, the correction's whole move."""
     todo = [st for st in steps if st.kind in kinds and st.index not in done]
     if not todo or cfg.model.is_scara:
         return None
     require_fcl()
-    report = check_path(cfg, compensated_path(cfg, todo, targets, start))
+    placed = cfg if R_world_base is None else at_setup(cfg, R_world_base)
+    report = check_path(placed, compensated_path(cfg, todo, targets, start))
     own = 4 * len(todo) * (remeasures(cfg) + 1) + (start is not None)  # the steps' poses and the start; the rest vias
     report = dataclasses.replace(report, vias=report.poses - own)
     refuse_clash(report, len(todo), what, "at their compensated joints (the controller's inverse kinematics of the "
