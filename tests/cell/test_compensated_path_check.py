@@ -129,3 +129,38 @@ def test_the_path_begins_where_the_step_before_leaves_the_robot(post_cell):
     assert report is not None and report.poses == len(compensated_path(
         cfg, [st for st in steps if st.kind is StepKind.VERIFY_AFTER],
         articulated_targets(cfg, steps, cfg.model.nominal, R), start))
+
+
+#: a 10 x 10 x 30 mm post at the travel height (z 333 mm), 80 mm from where the head comes down to the
+#: first verification touch after correction (P1c elbow +1 in the short plan without the post): the
+#: transition from the last step before correction passes it by the margin, and with the targets
+#: compensated for a set-up 5 mm off toward it the descent over P1c's approach brings link A3 under
+#: the margin (the post stands in other steps' travel, which the cell would refuse before motion: this
+#: is the transition's check alone, on the plan without it)
+TRANSIT_POST = POST.replace("126.455, -256.252, 150.0", "199.82, -160.23, 333.0").replace(
+    "size_mm = [10.0, 10.0, 10.0]", "size_mm = [10.0, 10.0, 30.0]")
+
+
+def test_the_move_into_the_first_compensated_step_is_checked():
+    cfg0, _plan, steps = _cell()
+    cfg = parse_text(cfg0.source_text + TRANSIT_POST, str(CELL))
+    R = cfg.model.nominal[:6]
+    toward = np.array([np.sqrt(0.5), np.sqrt(0.5), 0.0])
+    off = np.concatenate([R[:3] - 5.0 * toward, R[3:]])  # the targets compensated in a set-up 5 mm off
+    first = next(st for st in steps if st.kind is StepKind.VERIFY_AFTER)
+    assert first.label == "P1c elbow +1"
+    later = {st.index for st in steps if st.kind is StepKind.VERIFY_AFTER and st.index != first.index}
+    start = standing_at(cfg, preceding(steps, {StepKind.VERIFY_AFTER}), articulated_targets(cfg, steps, None, R))
+    zero = articulated_targets(cfg, steps, cfg.model.nominal, R)
+    large = articulated_targets(cfg, steps, cfg.model.nominal, off)
+    # no correction: the move from the step before, and the first step, clear the post over the margin
+    clear = check_compensated(cfg, steps, zero, {StepKind.VERIFY_AFTER}, later, start=start)
+    assert clear is not None and clear.clash is None
+    # the step alone, compensated, clears it too: what the check saw before the transition was in it
+    assert check_compensated(cfg, steps, large, {StepKind.VERIFY_AFTER}, later).clash is None
+    # with the transition: refused, on the move down over the compensated approach, naming the post
+    with pytest.raises(ShiftedPathCollides) as exc:
+        check_compensated(cfg, steps, large, {StepKind.VERIFY_AFTER}, later, start=start)
+    msg = str(exc.value)
+    assert "obstacle 'post'" in msg and f"step {first.index + 1} ({first.label}): arrive" in msg
+    assert exc.value.exit_code == 2
