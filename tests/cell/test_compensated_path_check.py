@@ -18,7 +18,7 @@ from station.cell.pipeline.outcomes import classify, hint_for
 from station.cell.plan.compensated_check import check_compensated, compensated_path, standing_at
 from station.cell.plan.measurement_plan import above_offset, build_plan
 from station.cell.plan.run_path import check_plan
-from station.cell.plan.shifted_check import ShiftedPathCollides, preceding
+from station.cell.plan.shifted_check import ShiftedPathCollides, preceding, remeasures
 from station.cell.plan.steps import StepKind
 from station.errors import Outcome
 
@@ -164,3 +164,25 @@ def test_the_move_into_the_first_compensated_step_is_checked():
     msg = str(exc.value)
     assert "obstacle 'post'" in msg and f"step {first.index + 1} ({first.label}): arrive" in msg
     assert exc.value.exit_code == 2
+
+
+def test_a_redundant_heads_re_measure_is_in_the_arms_path():
+    """A seven-probe head touches again where its probes disagree ([plan] remeasure_attempts = 1), standing
+    short of the target by a wider approach offset (the runner's _touch): those poses are in the path."""
+    head = Path(__file__).resolve().parents[2] / "examples" / "heads" / "seven-probe.toml"
+    cfg, _plan, steps = _cell()
+    cfg = parse_text(cfg.source_text.replace('file = "head.toml"', f'file = "{head.as_posix()}"'), str(CELL))
+    assert cfg.head.n_probes == 7 and remeasures(cfg) == cfg.plan.remeasure_attempts == 1
+    steps = build_plan(cfg).run_steps(cfg.plan.verification_cycles, False)
+    first = next(st for st in steps if st.kind is StepKind.VERIFY_AFTER)
+    targets = articulated_targets(cfg, steps, _joint1_error(cfg, 0.05), cfg.model.nominal[:6])
+    path = compensated_path(cfg, [first], targets)
+    name = f"step {first.index + 1} ({first.label})"
+    whats = ("approach", "above the point", "touch", "retract")
+    assert [p[1] for p in path] == [f"{name}: {w}{again}" for again in ("", " (re-measure 1)") for w in whats]
+    q = targets[first.point, first.elbow][0]
+    np.testing.assert_allclose(path[5][0], q + above_offset(cfg, first.cycle, 1))  # wider than the first touch's
+    assert np.abs(path[5][0] - q).max() > np.abs(path[1][0] - q).max()
+    report = check_compensated(cfg, steps, targets, {StepKind.VERIFY_AFTER})
+    n_after = sum(1 for st in steps if st.kind is StepKind.VERIFY_AFTER)
+    assert report is not None and report.poses - report.vias == 8 * n_after
