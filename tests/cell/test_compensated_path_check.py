@@ -186,3 +186,32 @@ def test_a_redundant_heads_re_measure_is_in_the_arms_path():
     report = check_compensated(cfg, steps, targets, {StepKind.VERIFY_AFTER})
     n_after = sum(1 for st in steps if st.kind is StepKind.VERIFY_AFTER)
     assert report is not None and report.poses - report.vias == 8 * n_after
+
+
+@pytest.mark.slow  # an end-to-end six-axis session to its identification (12 s here, more beside the suite)
+def test_a_refused_compensated_path_moves_no_verification_step(tmp_path, monkeypatch):
+    """The run refuses before any verification motion (exit 2, the failure's hint), as a SCARA's."""
+    import station.cell.pipeline.shifted as shifted
+    from station.cell.records.rundb import RunDB
+    from station.cell.session.calibrate import CellRequest, run_calibration_session
+    from station.ui.simulated_cell import load_cell
+
+    real, asked = shifted.check_compensated, []
+
+    def check(cfg, steps, targets, kinds, done=(), what="", start=None, R_world_base=None):
+        asked.append((set(kinds), start is not None))
+        report = real(cfg, steps, targets, kinds, done, what, start, R_world_base)  # the real check runs first
+        assert report is not None and report.clash is None
+        raise ShiftedPathCollides(f"with {what} active the verification path collides (test)", "a hint")
+
+    monkeypatch.setattr(shifted, "check_compensated", check)
+    db = str(tmp_path / "six.sqlite")
+    s = run_calibration_session(CellRequest(simulated=True, robot="irb2600", seed=1, db=db), lambda e: None,
+                                load=load_cell)
+    assert s.outcome is Outcome.CONFIG_ERROR and s.failure is not None
+    assert s.failure.error_type == "ShiftedPathCollides" and s.failure.hint == "a hint"
+    assert asked == [({StepKind.VERIFY_AFTER}, True)]  # from where the last step before correction leaves it
+    with RunDB(db) as rdb:
+        measured = {r.kind for r in rdb.measurements(s.run_id)}
+    assert StepKind.IDENTIFICATION.value in measured
+    assert not measured & {k.value for k in (StepKind.VERIFY_BEFORE, StepKind.VERIFY_AFTER, StepKind.REFERENCE)}
