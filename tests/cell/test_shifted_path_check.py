@@ -14,9 +14,9 @@ from simulators.judge import CellJudge
 from station.cell.config.cell_config import parse_text
 from station.cell.pipeline.calibration import Options
 from station.cell.pipeline.outcomes import classify, hint_for
-from station.cell.plan.measurement_plan import build_plan
+from station.cell.plan.measurement_plan import approach_pose, build_plan
 from station.cell.plan.run_path import check_plan
-from station.cell.plan.shifted_check import ShiftedPathCollides, check_shifted, shifted_path
+from station.cell.plan.shifted_check import ShiftedPathCollides, check_shifted, remeasures, shifted_path
 from station.cell.plan.steps import StepKind
 from station.cell.records.summary import RunSummary
 from station.core.table.values import CorrectionTableData, TableAxis
@@ -68,11 +68,18 @@ def test_a_table_that_pushes_a_verification_touch_into_an_obstacle_is_refused(po
     # the touch is the nominal joints plus the table's Δq (the guard's rule), the pose above shifts with it
     first = next(st for st in steps if st.kind is StepKind.VERIFY_AFTER)
     nominal, shifted = shifted_path(cfg, [first], R, _table(0 * dq)), shifted_path(cfg, [first], R, _table(dq))
-    assert [p[1] for p in shifted] == [f"step {first.index + 1} ({first.label}): {w}"
-                                       for w in ("approach", "above the point", "touch", "retract")]
+    # the seven-probe head re-measures once where its probes disagree ([plan] remeasure_attempts = 1): from
+    # a wider approach (the runner's _touch), after the touch and its retract
+    assert remeasures(cfg) == cfg.plan.remeasure_attempts == 1
+    whats = ("approach", "above the point", "touch", "retract")
+    assert [p[1] for p in shifted] == [f"step {first.index + 1} ({first.label}): {w}{again}"
+                                       for again in ("", " (re-measure 1)") for w in whats]
     np.testing.assert_allclose(shifted[0][0], nominal[0][0])  # the approach is a joint move: no table
-    for k in (1, 2, 3):
+    for k in (1, 2, 3, 5, 6, 7):
         np.testing.assert_allclose(shifted[k][0] - nominal[k][0], dq, atol=1e-7)
+    np.testing.assert_allclose(shifted[4][0], approach_pose(cfg, nominal[2][0], 1, first.cycle, 1))
+    rev = dq != 0  # the revolute joints: the re-measure's approach offset is wider there
+    assert np.abs(shifted[4][0] - nominal[2][0])[rev].max() > np.abs(shifted[0][0] - nominal[2][0])[rev].max()
     # +0.3°: refused before any of it moves, naming the step, the pair and the clearance, exit 2
     with pytest.raises(ShiftedPathCollides) as exc:
         check_shifted(cfg, steps, R, _table(dq), {StepKind.VERIFY_AFTER})
@@ -102,7 +109,7 @@ def test_the_built_in_cell_records_its_shifted_clearance(tmp_path):
     for c in summary.clearances[1:]:
         assert c.margin_mm == cell.cfg.plan.collision_margin_mm and c.poses >= 4
         assert c.least_mm is None or c.least_mm >= c.margin_mm
-    assert n_after and summary.clearances[1].poses >= 4 * n_after  # approach, above, touch, retract each
+    assert n_after and summary.clearances[1].poses >= 4 * n_after  # approach, above, touch, retract each (and re-measures)
     js = summary.to_json()
     assert js["units"]["clearances"].startswith("mm") and js["clearances"][1]["check"] == checks[1]
     assert RunSummary.from_json(js).clearances == summary.clearances
@@ -115,10 +122,10 @@ def _refusing(kind: StepKind, monkeypatch):
 
     real = shifted.check_shifted
 
-    def check(cfg, steps, R, table, kinds, done=(), what=""):
+    def check(cfg, steps, R, table, kinds, done=(), what="", start=None):
         if kind in kinds:
             raise ShiftedPathCollides(f"with {what} active the verification path collides (test)", "a hint")
-        return real(cfg, steps, R, table, kinds, done, what)
+        return real(cfg, steps, R, table, kinds, done, what, start)
 
     monkeypatch.setattr(shifted, "check_shifted", check)
 
@@ -156,9 +163,38 @@ def test_around_a_column_the_shifted_path_takes_the_runners_vias():
     after = [st for st in steps if st.kind is StepKind.VERIFY_AFTER]
     R = cfg.model.nominal[:6]
     direct = shifted_path(cfg, after, R, _table(dq), vias=False)
-    assert len(direct) == 4 * len(after)
+    assert len(direct) == 4 * len(after) * (remeasures(cfg) + 1)  # each touch and its re-measure
     report = check_shifted(cfg, steps, R, _table(dq), {StepKind.VERIFY_AFTER})
     assert report is not None and report.clash is None
     assert report.vias > 0 and report.poses == len(direct) + report.vias
     names = [p[1] for p in shifted_path(cfg, after, R, _table(dq))]
     assert any(n.endswith(("joint 1 first", "joint 2 first", "elbow to swing", "swung")) for n in names)
+
+
+def test_the_next_move_line_shows_the_shifted_clearance_once_checked(post_cell):
+    """The TUI's "next move" line (a NextMove event when the step starts): for the steps the shifted
+    check saw, its figure, not the plan's, and the line says so."""
+    from types import SimpleNamespace
+
+    from station.cell.pipeline.shifted import checked_shifted
+    from station.cell.run.facts.next_move import next_moves
+
+    cfg, plan, steps, dq = post_cell
+    R = cfg.model.nominal[:6]
+    pre = check_plan(cfg, plan)
+    runner = SimpleNamespace(next_moves=next_moves(pre, steps, steps))  # what run_calibration sets before motion
+    first = next(st for st in steps if st.kind is StepKind.VERIFY_AFTER)
+    planned = runner.next_moves[first.index]
+    assert planned.check == "" and "post" in planned.b and planned.text().startswith("next move: clearance")
+    notes = []
+    summary = checked_shifted(cfg, steps, set(), R, _table(dq / 3), StepKind.VERIFY_AFTER, RunSummary(Outcome.SUCCESS),
+                              notes.append, runner)  # +0.1°: clear, 1.2 mm closer to the post
+    shown = runner.next_moves[first.index]
+    assert shown.check == "after (shifted)" and "post" in shown.b
+    assert shown.clearance_mm < planned.clearance_mm - 1.0
+    assert shown.clearance_mm == pytest.approx(summary.clearances[-1].least_mm)  # the step nearest the post
+    assert shown.text() == f"next move, with the correction: clearance {shown.clearance_mm:.1f} mm ({shown.a} ↔ {shown.b})"
+    ident = next(st for st in steps if st.kind is StepKind.IDENTIFICATION)
+    assert runner.next_moves[ident.index] == next_moves(pre, steps, steps)[ident.index]  # the others: the plan's
+    assert {i for i, m in runner.next_moves.items() if m.check} == {
+        st.index for st in steps if st.kind is StepKind.VERIFY_AFTER}

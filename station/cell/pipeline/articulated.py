@@ -21,6 +21,7 @@ from station.cell.pipeline.results import (
     verification_orientation_errors,
     verified_outcome,
 )
+from station.cell.pipeline.shifted import checked_compensated
 from station.cell.pipeline.terms import (
     JointDelta,
     error_model_record,
@@ -186,6 +187,13 @@ def articulated_correction(cfg: CellConfig, runner: Runner, db: RunDB, run_id: i
             p_ref if ref_delta is None else None)  # a geometric reference misses a bending arm: predicted then
     except Exception as exc:  # noqa: BLE001 - a figure beside the result must not stop the run
         emit(Notice("warning", f"joint-offset-only figure not computed: {exc}"))
+    before_targets = articulated_targets(cfg, steps, None, res.params[:6])
+    # the path the compensated targets move, before any verification motion (issue 40), the body where the
+    # configured set-up puts it (the identified one is no place alone: R and A1 merge); the oracle's at
+    # the simulated robot's true set-up, the one its targets are compensated in
+    if upload:
+        summary = checked_compensated(cfg, steps, set(db.completed_steps(run_id, ok_only=True)), after_targets,
+                                      StepKind.VERIFY_AFTER, summary, emit, runner, before_targets, None)
     runner.guard.table = None
     controller = runner.controller
     if controller.status().table_active:  # a table would act on top of the compensated targets
@@ -194,8 +202,7 @@ def articulated_correction(cfg: CellConfig, runner: Runner, db: RunDB, run_id: i
     emit(PhaseChanged("verify", "before correction"))
     # before: the plain targets through the geometric fit's set-up, as in a geometric session (the
     # set-up fitted with the terms may differ along what R and A1 share, and the gain compares alike)
-    summary = summary.replace(before=measure(StepKind.VERIFY_BEFORE,
-                                             articulated_targets(cfg, steps, None, res.params[:6])))
+    summary = summary.replace(before=measure(StepKind.VERIFY_BEFORE, before_targets))
     if not upload:
         return _articulated_done(db, run_id, summary.replace(upload_skipped=True, outcome=Outcome.NOT_UPLOADED),
                                  extra, orient, emit)
@@ -205,8 +212,11 @@ def articulated_correction(cfg: CellConfig, runner: Runner, db: RunDB, run_id: i
         emit(Verified(summary.before, summary.after, summary.gain))
     if with_oracle and p_ref is not None:
         emit(PhaseChanged("verify", "oracle (reference parameters)"))
-        summary = summary.replace(oracle=measure(StepKind.REFERENCE, articulated_targets(cfg, steps, p_ref, p_ref[:6],
-                                                                                         ref_delta)))
+        ref_targets = articulated_targets(cfg, steps, p_ref, p_ref[:6], ref_delta)
+        summary = checked_compensated(cfg, steps, set(db.completed_steps(run_id, ok_only=True)), ref_targets,
+                                      StepKind.REFERENCE, summary, emit, runner, after_targets,
+                                      p_ref[:6])  # before it moves (40)
+        summary = summary.replace(oracle=measure(StepKind.REFERENCE, ref_targets))
     outcome, missed = verified_outcome(cfg, summary, min_gain)
     summary = summary.replace(notes=(*summary.notes, *missed), missed=missed_limits(cfg, summary, min_gain))
     emit(StatusChanged("verified"))  # stored by the run database's writer (station/cell/run/facts/writer.py)

@@ -42,7 +42,7 @@ from station.cell.pipeline.results import (
     verification_errors,
     verified_outcome,
 )
-from station.cell.pipeline.shifted import checked_shifted, clearance_of
+from station.cell.pipeline.shifted import checked_shifted, clearance_of, scara_standing
 from station.cell.plan.measurement_plan import head_targets_world, joints_for
 from station.cell.plan.path_record import PATH_RESULT, checked_path_record
 from station.cell.plan.steps import PlannedStep, StepKind
@@ -374,9 +374,11 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
                                                   None if judge is None else reference_params(planned, judge), judge,
                                                   emit, delta=delta))
 
-    if options.upload:  # the table's verification path as the controller will move it, before any of it (40)
+    if options.upload:  # the table's verification path as the controller will move it, before any of it, from
+        # where the last step before correction leaves the robot (40)
+        start = scara_standing(cfg, steps, StepKind.VERIFY_AFTER, res.params[:6], None)
         summary = checked_shifted(cfg, steps, set(db.completed_steps(run_id, ok_only=True)), params[:6],
-                                  table.data, StepKind.VERIFY_AFTER, summary, emit)
+                                  table.data, StepKind.VERIFY_AFTER, summary, emit, runner, start)
     emit(PhaseChanged("verify", "before correction"))
     if runner.controller.status().table_active:  # the operator's table: kept aside (table_keeping.py)
         runner.controller.deactivate_table()
@@ -390,7 +392,7 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
         return declined
     summary = _upload_and_verify(run, cfg, table, params[:6], summary)
     if with_oracle:
-        summary = _reference_check(run, cfg, table, used, summary)
+        summary = _reference_check(run, cfg, table, used, summary, params[:6])
     outcome, missed = verified_outcome(cfg, summary, options.min_gain)
     summary = summary.replace(notes=(*summary.notes, *missed), missed=missed_limits(cfg, summary, options.min_gain))
     emit(StatusChanged("verified"))
@@ -510,9 +512,10 @@ def _upload_and_verify(run: _Run, cfg: CellConfig, table, R_after: np.ndarray, s
     return summary
 
 
-def _reference_check(run: _Run, cfg: CellConfig, table, used, summary: RunSummary) -> RunSummary:
+def _reference_check(run: _Run, cfg: CellConfig, table, used, summary: RunSummary, R_after: np.ndarray) -> RunSummary:
     """A simulated cell's reference: the held-out poses through the table of the judge's robot,
-    then the station's own table active again and the roll-back slot emptied."""
+    then the station's own table active again and the roll-back slot emptied (``R_after``: the
+    set-up the steps after correction were commanded in)."""
     emit, controller, judge = run.emit, run.runner.controller, run.options.judge
     assert judge is not None  # with_oracle
     from station.cell.pipeline.terms import judge_delta
@@ -521,8 +524,9 @@ def _reference_check(run: _Run, cfg: CellConfig, table, used, summary: RunSummar
     p_ref = reference_params(cfg, judge)
     # a simulated arm whose joints err (the judge's reference_delta): the oracle's table carries them too
     oracle_table = build_table_for(cfg, p_ref, used.grid, judge_delta(judge)).data
+    start = scara_standing(cfg, run.steps, StepKind.REFERENCE, R_after, table.data)  # the last step after correction's
     summary = checked_shifted(cfg, run.steps, set(run.db.completed_steps(run.run_id, ok_only=True)), p_ref[:6],
-                              oracle_table, StepKind.REFERENCE, summary, emit)  # before it is active (40)
+                              oracle_table, StepKind.REFERENCE, summary, emit, run.runner, start)  # before it is active (40)
     verified_upload(controller, oracle_table, emit)
     run.runner.guard.table = oracle_table
     emit(PhaseChanged("verify", "oracle (reference parameters)"))  # back from the upload's phase

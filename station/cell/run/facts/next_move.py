@@ -9,6 +9,10 @@ farther than twice the margin are not measured exactly (the check's screen prove
 the clearance is "over" that. A step the check did not see (a simulated run's reference steps, a
 resumed run whose stored plan differs from today's) gets no event: the view says nothing rather
 than something untrue.
+
+Once a correction's path is checked as the controller will move it (a table's shifted touches, an
+arm's compensated targets: :mod:`station.cell.pipeline.shifted`), its steps' events are that check's
+(``check`` names it) and the line says so: "next move, with the correction: clearance …".
 """
 
 from __future__ import annotations
@@ -26,7 +30,8 @@ __all__ = ["NextMove", "next_moves"]
 @dataclass(frozen=True)
 class NextMove(Event):
     """The clearance of plan step ``index``'s moves: ``clearance_mm`` [mm] between ``a`` and ``b``
-    (None: no pair within ``watch_mm`` [mm], the check proved them all farther), the margin [mm]."""
+    (None: no pair within ``watch_mm`` [mm], the check proved them all farther), the margin [mm];
+    ``check``: the check that found it, "" the pre-motion check of the plan (else e.g. "after (shifted)")."""
 
     index: int
     clearance_mm: float | None
@@ -34,18 +39,21 @@ class NextMove(Event):
     b: str
     watch_mm: float
     margin_mm: float
+    check: str = ""
 
     def text(self) -> str:
         """What an operator reads, e.g. "next move: clearance 12.3 mm (link A3 ↔ obstacle 'column')"."""
+        head = "next move" + (", with the correction" if self.check else "")
         if self.clearance_mm is None:
-            return f"next move: clearance over {self.watch_mm:g} mm"
-        return f"next move: clearance {self.clearance_mm:.1f} mm ({self.a} ↔ {self.b})"
+            return f"{head}: clearance over {self.watch_mm:g} mm"
+        return f"{head}: clearance {self.clearance_mm:.1f} mm ({self.a} ↔ {self.b})"
 
 
 def next_moves(report: CollisionReport | None, checked: Sequence[PlannedStep],
-               steps: Sequence[PlannedStep]) -> dict[int, NextMove]:
+               steps: Sequence[PlannedStep], check: str = "") -> dict[int, NextMove]:
     """Per step of ``steps`` (the run's) the event of its moves, for the steps the plan's check
-    ``report`` saw: the same index, kind and joints in ``checked`` (the steps it checked)."""
+    ``report`` saw: the same index, kind and joints in ``checked`` (the steps it checked); ``check``:
+    which check it is ("": the plan's)."""
     if report is None:
         return {}
     seen = {st.index: st for st in checked}
@@ -57,5 +65,5 @@ def next_moves(report: CollisionReport | None, checked: Sequence[PlannedStep],
             continue
         c = found[st.index]
         out[st.index] = NextMove(st.index, None if c is None else c.clearance_mm, "" if c is None else c.a,
-                                 "" if c is None else c.b, 2 * report.margin_mm, report.margin_mm)
+                                 "" if c is None else c.b, 2 * report.margin_mm, report.margin_mm, check)
     return out
