@@ -22,8 +22,9 @@ def test_six_axis_cell_calibrates_through_compensated_targets(tmp_path):
     assert s.robot == "irb2600" and s.identification is not None and s.run_id is not None
     assert s.identification.n_parameters == 30
     assert s.correction is None and s.upload is None  # no table: compensated targets
-    # the compensated targets' paths checked before they moved (issue 40), each clear of the margin
-    assert [c.check for c in s.clearances] == ["pre-motion", "after (compensated)", "oracle (compensated)"]
+    # the plain and the compensated targets' paths checked before they moved (issue 40), each clear of the margin
+    assert [c.check for c in s.clearances] == ["pre-motion", "before (plain)", "after (compensated)",
+                                               "oracle (compensated)"]
     assert all(c.least_mm is None or c.least_mm >= c.margin_mm for c in s.clearances)
     assert s.before is not None and s.after is not None and s.oracle is not None
     # the issue's checks: ≥ 10× better, within 1.2× of the oracle's

@@ -21,7 +21,7 @@ from station.cell.pipeline.results import (
     verification_orientation_errors,
     verified_outcome,
 )
-from station.cell.pipeline.shifted import checked_compensated
+from station.cell.pipeline.shifted import checked_compensated, checked_plain
 from station.cell.pipeline.terms import (
     JointDelta,
     error_model_record,
@@ -140,14 +140,17 @@ def joint_offset_figures(cfg: CellConfig, steps: Sequence[PlannedStep], records:
 def articulated_correction(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tuple[PlannedStep, ...],
                            emit: Callable[[Event], None], with_oracle: bool, summary: RunSummary,
                            res: IdentificationResult, *, upload: bool, min_gain: float,
-                           judge: RunJudge | None, terms: Selection | None = None) -> RunSummary:
+                           judge: RunJudge | None, terms: Selection | None = None,
+                           configured: np.ndarray | None = None) -> RunSummary:
     """Correct and verify an articulated arm: no table; the held-out targets are commanded as
     Cartesian targets, before correction as they are, after it compensated with the identified
     model (and, in simulation, with the true one: the oracle). Beside the full model: what
     joint-zero offsets alone would reach on the same targets, and the orientation errors.
     ``terms``: the error model of ``[identification] model`` (:mod:`station.cell.pipeline.terms`);
     with terms kept, the targets are compensated with the geometry fitted with them and the terms,
-    and the reference (a simulated cell's judge) with its joint errors as well as its geometry."""
+    and the reference (a simulated cell's judge) with its joint errors as well as its geometry.
+    ``configured``: the ``[robot] setup`` the plan was made at (where the last identification pose stood
+    on the located set-up follows from it); given, the path before correction is checked before it moves."""
     total = len(steps)
     params, delta = res.params, None
     if terms is not None:
@@ -187,7 +190,15 @@ def articulated_correction(cfg: CellConfig, runner: Runner, db: RunDB, run_id: i
             p_ref if ref_delta is None else None)  # a geometric reference misses a bending arm: predicted then
     except Exception as exc:  # noqa: BLE001 - a figure beside the result must not stop the run
         emit(Notice("warning", f"joint-offset-only figure not computed: {exc}"))
-    before_targets = articulated_targets(cfg, steps, None, res.params[:6])
+    # before: the plain targets in the frame the uncorrected robot located the body in (cfg's set-up: the
+    # located one, else the configured), the joints its identification poses were commanded at. Not the
+    # identified set-up: an arm's shares its turn about axis 1 with A1's zero (a minimal set), and the
+    # nominal robot took that share alone, up to 0.43° of joint 1 from the plan's joints (irb2600 seed 5:
+    # probe 6's housing 0.5 mm into cube 1 in the controller's model, the run ended UNREACHABLE)
+    before_targets = articulated_targets(cfg, steps, None, cfg.model.nominal[:6])
+    if configured is not None:  # and their path checked as the runner moves it, before any verification motion (40)
+        summary = checked_plain(cfg, steps, set(db.completed_steps(run_id, ok_only=True)), before_targets,
+                                configured, summary, emit, runner)
     # the path the compensated targets move, before any verification motion (issue 40), the body where the
     # configured set-up puts it (the identified one is no place alone: R and A1 merge); the oracle's at
     # the simulated robot's true set-up, the one its targets are compensated in
@@ -200,8 +211,6 @@ def articulated_correction(cfg: CellConfig, runner: Runner, db: RunDB, run_id: i
         controller.deactivate_table()
 
     emit(PhaseChanged("verify", "before correction"))
-    # before: the plain targets through the geometric fit's set-up, as in a geometric session (the
-    # set-up fitted with the terms may differ along what R and A1 share, and the gain compares alike)
     summary = summary.replace(before=measure(StepKind.VERIFY_BEFORE, before_targets))
     if not upload:
         return _articulated_done(db, run_id, summary.replace(upload_skipped=True, outcome=Outcome.NOT_UPLOADED),

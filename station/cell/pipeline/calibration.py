@@ -354,7 +354,8 @@ def _pipeline(cfg: CellConfig, runner: Runner, db: RunDB, run_id: int, steps: tu
     if not cfg.model.is_scara:  # an articulated arm: compensated targets, no table (issue 9)
         return articulated_correction(cfg, runner, db, run_id, steps, emit, with_oracle, summary, res,
                                       upload=options.upload, min_gain=options.min_gain,
-                                      judge=options.judge, terms=terms)
+                                      judge=options.judge, terms=terms,
+                                      configured=planned.model.nominal[:6])
 
     # a SCARA with error terms: the table's nodes carry them, on the geometry fitted with them, and the
     # targets after correction are commanded in that fit's base frame (before: the geometric fit's)

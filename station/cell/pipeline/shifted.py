@@ -15,15 +15,17 @@ import numpy as np
 from station.cell.config.cell_config import CellConfig
 from station.cell.plan.collision import CollisionReport
 from station.cell.plan.compensated_check import Targets, check_compensated, standing_at
-from station.cell.plan.shifted_check import check_shifted, preceding, shifted_path
+from station.cell.plan.plain_check import check_plain
+from station.cell.plan.shifted_check import at_setup, check_shifted, preceding, shifted_path
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.summary import ClearanceSummary, RunSummary
 from station.cell.run.facts.events import Event, Notice
 from station.cell.run.facts.next_move import next_moves
+from station.cell.run.locate import located_joints
 from station.cell.run.runner import Runner
 from station.core.table.values import CorrectionTableData
 
-__all__ = ["clearance_of", "checked_shifted", "checked_compensated", "scara_standing"]
+__all__ = ["clearance_of", "checked_shifted", "checked_compensated", "checked_plain", "scara_standing"]
 
 
 def clearance_of(check: str, report: CollisionReport | None) -> ClearanceSummary | None:
@@ -69,6 +71,25 @@ def checked_compensated(cfg: CellConfig, steps: tuple[PlannedStep, ...], done: s
     report = check_compensated(cfg, steps, targets, {kind}, done, what, start, R_world_base)
     check = "after (compensated)" if kind is StepKind.VERIFY_AFTER else "oracle (compensated)"
     return _recorded(report, check, what, steps, done, kind, summary, emit, runner)
+
+
+def checked_plain(cfg: CellConfig, steps: tuple[PlannedStep, ...], done: set[int], targets: Targets,
+                  configured: np.ndarray, summary: RunSummary, emit: Callable[[Event], None],
+                  runner: Runner) -> RunSummary:
+    """An articulated arm's verification steps before correction not yet done, at the joints the
+    controller moves for their plain ``targets`` (:func:`check_plain`, refused: exit 2), the body at
+    ``cfg``'s set-up (the located one), from where the step before them leaves the robot: an
+    identification step at its joints on the located set-up (where the run commanded them; the plan's
+    where ``cfg``'s set-up is the ``configured`` one)."""
+    prev = preceding(steps, {StepKind.VERIFY_BEFORE})
+    start = None
+    if prev is not None and not prev.kind.is_verification:
+        planned = at_setup(cfg, configured)
+        q = prev.q if planned is cfg else located_joints(planned, prev, cfg.model.nominal[:6])
+        start = standing_at(cfg, prev, {(prev.point, prev.elbow): (q, np.zeros(6))})
+    report = check_plain(cfg, steps, targets, done, start)
+    return _recorded(report, "before (plain)", "the plain targets before correction", steps, done,
+                     StepKind.VERIFY_BEFORE, summary, emit, runner)
 
 
 def _recorded(report: CollisionReport | None, check: str, what: str, steps: tuple[PlannedStep, ...], done: set[int],
