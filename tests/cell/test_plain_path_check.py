@@ -108,3 +108,12 @@ def test_the_built_in_six_axis_cell_at_seed_5_moves_nothing_its_controller_refus
     before = checks["before (plain)"]
     assert before.poses > 400 and (before.least_mm is None or before.least_mm >= before.margin_mm)
     assert "after (compensated)" in checks
+
+
+def test_the_next_move_line_of_a_step_before_correction_says_no_correction():
+    from station.cell.run.facts.next_move import NextMove
+
+    before = NextMove(3, 2.5, "probe 1", "cube of P1a", 4.0, 2.0, "before (plain)")
+    assert before.text() == "next move, before correction: clearance 2.5 mm (probe 1 ↔ cube of P1a)"
+    assert NextMove(3, None, "", "", 4.0, 2.0, "after (compensated)").text() == \
+        "next move, with the correction: clearance over 4 mm"

@@ -12,7 +12,9 @@ than something untrue.
 
 Once a correction's path is checked as the controller will move it (a table's shifted touches, an
 arm's compensated targets: :mod:`station.cell.pipeline.shifted`), its steps' events are that check's
-(``check`` names it) and the line says so: "next move, with the correction: clearance …".
+(``check`` names it) and the line says so: "next move, with the correction: clearance …"; an arm's
+plain targets before correction, checked at the joints they are commanded at, "next move, before
+correction: …".
 """
 
 from __future__ import annotations
@@ -43,7 +45,9 @@ class NextMove(Event):
 
     def text(self) -> str:
         """What an operator reads, e.g. "next move: clearance 12.3 mm (link A3 ↔ obstacle 'column')"."""
-        head = "next move" + (", with the correction" if self.check else "")
+        # an arm's plain targets before correction (check "before (plain)") carry no correction
+        head = "next move" + ("" if not self.check else ", before correction" if self.check.startswith("before")
+                              else ", with the correction")
         if self.clearance_mm is None:
             return f"{head}: clearance over {self.watch_mm:g} mm"
         return f"{head}: clearance {self.clearance_mm:.1f} mm ({self.a} ↔ {self.b})"
