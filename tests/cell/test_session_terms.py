@@ -146,7 +146,12 @@ def test_a_bending_arm_is_calibrated_with_the_terms_auto_keeps(tmp_path):
 @pytest.mark.slow  # an end-to-end session: the slow tier (README), run by CI
 def test_auto_keeps_nothing_on_a_rigid_arm(tmp_path):
     s = _session(_puma(tmp_path, "none", "auto"))
-    assert s.outcome is Outcome.SUCCESS, s.failure
+    # verified to the end; before correction is the uncorrected robot's in the frame it located the body in
+    # (issue 40: no longer through the identified set-up, whose turn about axis 1 is a share of A1's zero),
+    # 253 µm at seed 1, so the gain (~17) misses the station's default min_gain of 20 and nothing else
+    if s.outcome is not Outcome.SUCCESS:
+        assert s.outcome is Outcome.TARGET_MISSED and [m.id for m in s.missed] == ["min_gain"], s.failure
+    assert s.gain is not None and s.gain >= 10.0, s.gain  # the six-axis cells' check (issue 9)
     em = s.error_model
     assert em is not None and em.chosen == () and em.terms == () and "geometric fit" in em.summary
     # nothing kept: the geometric fit, on poses designed for the terms' candidates too (seed 1: 1.20,
