@@ -21,7 +21,7 @@ from station.cell.pipeline.results import (
     verification_orientation_errors,
     verified_outcome,
 )
-from station.cell.pipeline.shifted import checked_compensated, checked_plain
+from station.cell.pipeline.shifted import checked_compensated, checked_plain, reference_skipped
 from station.cell.pipeline.terms import (
     JointDelta,
     error_model_record,
@@ -31,6 +31,7 @@ from station.cell.pipeline.terms import (
     terms_note,
 )
 from station.cell.plan.measurement_plan import head_targets_world
+from station.cell.plan.shifted_check import ShiftedPathCollides
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.judge import RunJudge
 from station.cell.records.run_records import MeasurementRecord
@@ -222,10 +223,13 @@ def articulated_correction(cfg: CellConfig, runner: Runner, db: RunDB, run_id: i
     if with_oracle and p_ref is not None:
         emit(PhaseChanged("verify", "oracle (reference parameters)"))
         ref_targets = articulated_targets(cfg, steps, p_ref, p_ref[:6], ref_delta)
-        summary = checked_compensated(cfg, steps, set(db.completed_steps(run_id, ok_only=True)), ref_targets,
-                                      StepKind.REFERENCE, summary, emit, runner, after_targets,
-                                      p_ref[:6])  # before it moves (40)
-        summary = summary.replace(oracle=measure(StepKind.REFERENCE, ref_targets))
+        try:  # before it moves (40)
+            summary = checked_compensated(cfg, steps, set(db.completed_steps(run_id, ok_only=True)), ref_targets,
+                                          StepKind.REFERENCE, summary, emit, runner, after_targets, p_ref[:6])
+        except ShiftedPathCollides as exc:
+            emit(Notice("warning", reference_skipped(exc)))
+        else:
+            summary = summary.replace(oracle=measure(StepKind.REFERENCE, ref_targets))
     outcome, missed = verified_outcome(cfg, summary, min_gain)
     summary = summary.replace(notes=(*summary.notes, *missed), missed=missed_limits(cfg, summary, min_gain))
     emit(StatusChanged("verified"))  # stored by the run database's writer (station/cell/run/facts/writer.py)

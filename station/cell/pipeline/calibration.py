@@ -42,9 +42,10 @@ from station.cell.pipeline.results import (
     verification_errors,
     verified_outcome,
 )
-from station.cell.pipeline.shifted import checked_shifted, clearance_of, scara_standing
+from station.cell.pipeline.shifted import checked_shifted, clearance_of, reference_skipped, scara_standing
 from station.cell.plan.measurement_plan import head_targets_world, joints_for
 from station.cell.plan.path_record import PATH_RESULT, checked_path_record
+from station.cell.plan.shifted_check import ShiftedPathCollides
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.fingerprint import check_same_cell, current_like, fingerprint, resume_note
 from station.cell.records.judge import RunJudge
@@ -526,8 +527,12 @@ def _reference_check(run: _Run, cfg: CellConfig, table, used, summary: RunSummar
     # a simulated arm whose joints err (the judge's reference_delta): the oracle's table carries them too
     oracle_table = build_table_for(cfg, p_ref, used.grid, judge_delta(judge)).data
     start = scara_standing(cfg, run.steps, StepKind.REFERENCE, R_after, table.data)  # the last step after correction's
-    summary = checked_shifted(cfg, run.steps, set(run.db.completed_steps(run.run_id, ok_only=True)), p_ref[:6],
-                              oracle_table, StepKind.REFERENCE, summary, emit, run.runner, start)  # before it is active (40)
+    try:  # before it is active (40)
+        summary = checked_shifted(cfg, run.steps, set(run.db.completed_steps(run.run_id, ok_only=True)), p_ref[:6],
+                                  oracle_table, StepKind.REFERENCE, summary, emit, run.runner, start)
+    except ShiftedPathCollides as exc:  # the station's own table stays active, its result stands
+        emit(Notice("warning", reference_skipped(exc)))
+        return summary
     verified_upload(controller, oracle_table, emit)
     run.runner.guard.table = oracle_table
     emit(PhaseChanged("verify", "oracle (reference parameters)"))  # back from the upload's phase
