@@ -130,11 +130,10 @@ def _refusing(kind: StepKind, monkeypatch):
     monkeypatch.setattr(shifted, "check_shifted", check)
 
 
-@pytest.mark.parametrize("kind", [StepKind.VERIFY_AFTER, StepKind.REFERENCE])
-def test_a_refused_shifted_path_moves_none_of_it_and_leaves_no_table_active(tmp_path, monkeypatch, kind):
+def test_a_refused_shifted_path_moves_none_of_it_and_leaves_no_table_active(tmp_path, monkeypatch):
     from tests.cell.test_pipeline import SHORT, Cell
 
-    _refusing(kind, monkeypatch)
+    _refusing(StepKind.VERIFY_AFTER, monkeypatch)
     cell = Cell(tmp_path, **SHORT)
     try:
         with pytest.raises(ShiftedPathCollides):
@@ -142,13 +141,34 @@ def test_a_refused_shifted_path_moves_none_of_it_and_leaves_no_table_active(tmp_
         run = cell.db.latest_run()
         assert run is not None
         measured = {r.kind for r in cell.db.measurements(run.id)}
-        assert kind.value not in measured  # not one step of the refused path was moved
-        if kind is StepKind.VERIFY_AFTER:  # refused before any verification motion, nothing uploaded
-            assert StepKind.VERIFY_BEFORE.value not in measured
-        else:  # the station's table was active for its own steps, then put back to the run's start's
-            assert StepKind.VERIFY_AFTER.value in measured
+        # refused before any verification motion: not one step of the refused path, nothing uploaded
+        assert not measured & {StepKind.VERIFY_AFTER.value, StepKind.VERIFY_BEFORE.value}
         assert not cell.ctrl.status().table_active
         assert cell.srv.controller_server.active_table is None
+    finally:
+        cell.close()
+
+
+def test_a_refused_oracle_path_is_not_moved_and_the_stations_table_stays(tmp_path, monkeypatch):
+    """The oracle is a simulated session's figure beside the result: where its shifted path is refused,
+    its table is never uploaded, none of its steps moves, a warning says why, and the run ends on its
+    own verification with its own table active (it ended CONFIG_ERROR before)."""
+    from station.cell.run.facts.events import Notice
+    from tests.cell.test_pipeline import SHORT, Cell
+
+    _refusing(StepKind.REFERENCE, monkeypatch)
+    cell = Cell(tmp_path, **SHORT)
+    try:
+        summary = cell.run(options=Options(judge=CellJudge(cell.srv.cell.truth)))
+        assert summary.oracle is None and summary.after is not None and summary.upload is not None
+        run = cell.db.latest_run()
+        assert run is not None
+        measured = {r.kind for r in cell.db.measurements(run.id)}
+        assert StepKind.REFERENCE.value not in measured and StepKind.VERIFY_AFTER.value in measured
+        assert any(isinstance(e, Notice) and e.level == "warning" and e.message.startswith(
+            "oracle reference not measured") for e in cell.events)
+        assert cell.ctrl.status().table_active
+        assert f"{cell.ctrl.table_crcs()['active']:08x}" == summary.upload.crc32  # the station's own, read back
     finally:
         cell.close()
 
