@@ -2,11 +2,11 @@
 (issue 40), beside the pre-motion check of the whole plan: poses, least clearance [mm] and seconds, each
 the median of ``--repeat`` runs (a fresh configuration each: nothing cached from the run before).
 
-A SCARA (station/cell/plan/shifted_check.py): the verification-after steps with a uniform table of
+A SCARA (station/cell/plan/moved_path/shifted_check.py): the verification-after steps with a uniform table of
 ``--dq-deg`` in every revolute joint, as last stop checked them (the steps alone: no transition, no
 re-measure) and as now (from the retract of the last step before correction, with a redundant head's
 re-measures); the difference is the added cost. An articulated arm
-(station/cell/plan/compensated_check.py): the compensated targets of a robot whose joint 1 zero is off by
+(station/cell/plan/moved_path/compensated_check.py): the compensated targets of a robot whose joint 1 zero is off by
 ``--dq-deg``, from the last verification step before correction.
 Usage: python benchmarks/bench_shifted_check.py examples/scara600/cell.toml [--dq-deg 0.3] [--repeat 5]"""
 
@@ -21,8 +21,8 @@ import numpy as np
 
 from station.cell.config.cell_config import load_config
 from station.cell.plan.measurement_plan import build_plan
+from station.cell.plan.moved_path.shifted_check import check_shifted, preceding, remeasures, shifted_path
 from station.cell.plan.run_path import check_plan
-from station.cell.plan.shifted_check import check_shifted, preceding, remeasures, shifted_path
 from station.cell.plan.steps import StepKind
 from station.core.table.values import CorrectionTableData, TableAxis
 
@@ -62,7 +62,7 @@ def _scara(cfg, steps, dq_deg: float):
 def _arm(cfg, steps, dq_deg: float):
     """The compensated targets' check, the targets' computation included."""
     from station.cell.pipeline.articulated import articulated_targets
-    from station.cell.plan.compensated_check import check_compensated, standing_at
+    from station.cell.plan.moved_path.compensated_check import check_compensated, standing_at
 
     R = cfg.model.nominal[:6]
     p = np.array(cfg.model.nominal, dtype=float)

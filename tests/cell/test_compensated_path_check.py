@@ -2,7 +2,7 @@
 no table but compensated Cartesian targets, whose joints (the controller's nominal inverse kinematics of
 the command) differ from the plan's by the identified errors, a path the pre-motion check never saw.
 Before any verification motion the run checks the remaining steps at those joints, from where the step
-before them leaves the robot (station/cell/plan/compensated_check.py), and refuses a path that collides,
+before them leaves the robot (station/cell/plan/moved_path/compensated_check.py), and refuses a path that collides,
 as a SCARA's shifted table path (tests/cell/test_shifted_path_check.py)."""
 
 from __future__ import annotations
@@ -15,10 +15,10 @@ import pytest
 from station.cell.config.cell_config import parse_text
 from station.cell.pipeline.articulated import articulated_targets
 from station.cell.pipeline.outcomes import classify, hint_for
-from station.cell.plan.compensated_check import check_compensated, compensated_path, standing_at
 from station.cell.plan.measurement_plan import above_offset, build_plan
+from station.cell.plan.moved_path.compensated_check import check_compensated, compensated_path, standing_at
+from station.cell.plan.moved_path.shifted_check import ShiftedPathCollides, preceding, remeasures
 from station.cell.plan.run_path import check_plan
-from station.cell.plan.shifted_check import ShiftedPathCollides, preceding, remeasures
 from station.cell.plan.steps import StepKind
 from station.errors import Outcome
 

@@ -1,7 +1,7 @@
 """An articulated arm's verification before correction as the controller moves it (issue 40): the plain
 Cartesian targets, commanded in the frame the uncorrected robot located the body in, and their path
 checked at the joints the controller's nominal inverse kinematics gives them before any verification
-motion (station/cell/plan/plain_check.py). The built-in IRB 2600 cell at seed 5 commanded them through
+motion (station/cell/plan/moved_path/plain_check.py). The built-in IRB 2600 cell at seed 5 commanded them through
 the identified set-up (its turn about axis 1 merged with A1's zero): joint 1 0.43° from the plan's, and
 the simulated controller's own collision check refused the first Cartesian move (UNREACHABLE)."""
 
@@ -16,8 +16,8 @@ from station.cell.config.cell_config import parse_text
 from station.cell.pipeline.articulated import articulated_targets
 from station.cell.pipeline.outcomes import classify, hint_for
 from station.cell.plan.measurement_plan import build_plan
-from station.cell.plan.plain_check import check_plain, joint_turn_deg
-from station.cell.plan.shifted_check import ShiftedPathCollides
+from station.cell.plan.moved_path.plain_check import check_plain, joint_turn_deg
+from station.cell.plan.moved_path.shifted_check import ShiftedPathCollides
 from station.cell.plan.steps import StepKind
 from station.core.kinematics.transforms import matrix_to_pose, pose_to_matrix
 from station.errors import Outcome

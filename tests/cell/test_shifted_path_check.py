@@ -1,7 +1,7 @@
 """The verification path as the controller will move it (issue 40): with a table active, a SCARA's
 Cartesian touch lands at its nominal joints plus the table's Δq, a path the pre-motion check never
 saw. Once the table is designed and before it is active, the run checks the remaining verification
-steps shifted by it (station/cell/plan/shifted_check.py) and refuses a path that collides."""
+steps shifted by it (station/cell/plan/moved_path/shifted_check.py) and refuses a path that collides."""
 
 from __future__ import annotations
 
@@ -15,8 +15,8 @@ from station.cell.config.cell_config import parse_text
 from station.cell.pipeline.calibration import Options
 from station.cell.pipeline.outcomes import classify, hint_for
 from station.cell.plan.measurement_plan import approach_pose, build_plan
+from station.cell.plan.moved_path.shifted_check import ShiftedPathCollides, check_shifted, remeasures, shifted_path
 from station.cell.plan.run_path import check_plan
-from station.cell.plan.shifted_check import ShiftedPathCollides, check_shifted, remeasures, shifted_path
 from station.cell.plan.steps import StepKind
 from station.cell.records.summary import RunSummary
 from station.core.table.values import CorrectionTableData, TableAxis

@@ -31,7 +31,7 @@ from station.cell.pipeline.terms import (
     terms_note,
 )
 from station.cell.plan.measurement_plan import head_targets_world
-from station.cell.plan.shifted_check import ShiftedPathCollides
+from station.cell.plan.moved_path.shifted_check import ShiftedPathCollides
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.judge import RunJudge
 from station.cell.records.run_records import MeasurementRecord

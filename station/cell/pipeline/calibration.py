@@ -44,8 +44,8 @@ from station.cell.pipeline.results import (
 )
 from station.cell.pipeline.shifted import checked_shifted, clearance_of, reference_skipped, scara_standing
 from station.cell.plan.measurement_plan import head_targets_world, joints_for
+from station.cell.plan.moved_path.shifted_check import ShiftedPathCollides
 from station.cell.plan.path_record import PATH_RESULT, checked_path_record
-from station.cell.plan.shifted_check import ShiftedPathCollides
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.fingerprint import check_same_cell, current_like, fingerprint, resume_note
 from station.cell.records.judge import RunJudge

@@ -1,7 +1,7 @@
 """The run's collision clearances (issue 40): the pre-motion check's, and each correction table's
-verification path as the controller will move it (:mod:`station.cell.plan.shifted_check`), checked
+verification path as the controller will move it (:mod:`station.cell.plan.moved_path.shifted_check`), checked
 after the table is designed and before it is activated, and an articulated arm's compensated targets
-(:mod:`station.cell.plan.compensated_check`) before its verification; a path that collides is refused
+(:mod:`station.cell.plan.moved_path.compensated_check`) before its verification; a path that collides is refused
 there (ConfigError, exit 2) and :func:`station.cell.pipeline.calibration.run_calibration` puts the table
 of the run's start back, as after every refusal once measuring began. Each checked step's clearance
 replaces the pre-motion one the runner streams when the step starts (its NextMove, the TUI's line)."""
@@ -14,9 +14,9 @@ import numpy as np
 
 from station.cell.config.cell_config import CellConfig
 from station.cell.plan.collision import CollisionReport
-from station.cell.plan.compensated_check import Targets, check_compensated, standing_at
-from station.cell.plan.plain_check import check_plain
-from station.cell.plan.shifted_check import at_setup, check_shifted, preceding, shifted_path
+from station.cell.plan.moved_path.compensated_check import Targets, check_compensated, standing_at
+from station.cell.plan.moved_path.plain_check import check_plain
+from station.cell.plan.moved_path.shifted_check import at_setup, check_shifted, preceding, shifted_path
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.records.summary import ClearanceSummary, RunSummary
 from station.cell.run.facts.events import Event, Notice
@@ -113,7 +113,7 @@ def reference_skipped(exc: Exception) -> str:
     """The notice of a simulated session's reference (the oracle) left unmeasured because its path's
     check refused it. The reference is a figure beside the result, not the result: its check shifts
     the head by the whole of the reference's correction on the nominal links (the conservative model,
-    see :func:`~station.cell.plan.compensated_check.check_compensated`), so it can refuse a path the
+    see :func:`~station.cell.plan.moved_path.compensated_check.check_compensated`), so it can refuse a path the
     robot clears (the built-in six-axis cell, seed 8: 1.8 mm under the 2 mm margin, where the
     simulated controller's own check moved it clear). The run's own verification stands; after/oracle
     is not stated."""

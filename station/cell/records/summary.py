@@ -251,10 +251,10 @@ class RecentringStats:
 class ClearanceSummary:
     """A collision check's least clearance [mm] (issue 40, docs/collision.md): ``check`` says which
     ("pre-motion": the plan at its nominal joints; "after (shifted)" / "oracle (shifted)":
-    the verification path with that table's correction added, station/cell/plan/shifted_check.py;
+    the verification path with that table's correction added, station/cell/plan/moved_path/shifted_check.py;
     "after (compensated)" / "oracle (compensated)": an arm's at its compensated joints,
-    station/cell/plan/compensated_check.py; "before (plain)": an arm's plain targets before correction,
-    station/cell/plan/plain_check.py),
+    station/cell/plan/moved_path/compensated_check.py; "before (plain)": an arm's plain targets before correction,
+    station/cell/plan/moved_path/plain_check.py),
     ``least_mm`` None where no pair held to the margin came within twice ``margin_mm``; the pair and
     where it comes closest."""
 

@@ -13,7 +13,7 @@ pose as the runner commands it (:mod:`station.cell.run.runner`, ``_touch``, with
 stands (:func:`station.cell.plan.vias.travel_vias`, the runner's ``Travel``), the approach (the
 target's retract pose, backed off along the corner's diagonal), the pose short of it by the approach
 offset, the Cartesian touch at q', and the retract from there; a redundant head's re-measures as
-:func:`station.cell.plan.shifted_check.shifted_path` holds them. A pose or move that collides or comes
+:func:`station.cell.plan.moved_path.shifted_check.shifted_path` holds them. A pose or move that collides or comes
 under the margin is refused with the SCARA's error (:class:`ShiftedPathCollides`, exit 2).
 """
 
@@ -28,7 +28,7 @@ from station.cell.config.cell_config import CellConfig
 from station.cell.plan.arm_motion import retract_poses
 from station.cell.plan.collision import CollisionReport, check_path, require_fcl
 from station.cell.plan.measurement_plan import above_offset
-from station.cell.plan.shifted_check import Pose, at_setup, refuse_clash, remeasures
+from station.cell.plan.moved_path.shifted_check import Pose, at_setup, refuse_clash, remeasures
 from station.cell.plan.steps import PlannedStep, StepKind
 from station.cell.plan.via_memo import memo_travel_vias
 from station.errors import UnreachableError
@@ -89,14 +89,14 @@ def compensated_path(cfg: CellConfig, steps: Sequence[PlannedStep], targets: Tar
 def check_compensated(cfg: CellConfig, steps: Sequence[PlannedStep], targets: Targets, kinds: Collection[StepKind],
                       done: Collection[int] = (), what: str = "the compensated targets",
                       start: Pose | None = None, R_world_base: np.ndarray | None = None) -> CollisionReport | None:
-    """Refuse (:class:`~station.cell.plan.shifted_check.ShiftedPathCollides`, exit 2) the path of an
+    """Refuse (:class:`~station.cell.plan.moved_path.shifted_check.ShiftedPathCollides`, exit 2) the path of an
     arm's verification steps of ``kinds`` not in ``done`` at ``targets`` where a pose or a move collides
     or comes under ``[plan] collision_margin_mm``, naming the step, the pair and the clearance; the
     report of a clear path, None where no such step is left (or the robot is a SCARA: its table's
-    path is :func:`~station.cell.plan.shifted_check.check_shifted`'s). ``start``: where the robot
+    path is :func:`~station.cell.plan.moved_path.shifted_check.check_shifted`'s). ``start``: where the robot
     stands before the first of them; the move from there is checked too. ``R_world_base``: a set-up
     that places the body and the obstacles in the robot's base frame (None: the configured one;
-    :func:`~station.cell.plan.shifted_check.at_setup`). The links are the nominal robot's: an arm's
+    :func:`~station.cell.plan.moved_path.shifted_check.at_setup`). The links are the nominal robot's: an arm's
     identified parameters are a minimal set (its set-up and first joint's frame merge), no link's place,
     so the check sees the compensated joints on the nominal robot, the correction's whole move."""
     todo = [st for st in steps if st.kind in kinds and st.index not in done]

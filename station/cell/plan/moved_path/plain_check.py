@@ -14,7 +14,7 @@ the frame the uncorrected robot located the body in, at the joints its identific
 :func:`check_plain` checks those steps' path (the runner's poses: :func:`compensated_path`, from where
 the step before leaves the robot) on the nominal robot, before any verification motion; a pose or a
 move that collides or comes under the margin is refused
-(:class:`~station.cell.plan.shifted_check.ShiftedPathCollides`, exit 2) naming the step, the pair, the
+(:class:`~station.cell.plan.moved_path.shifted_check.ShiftedPathCollides`, exit 2) naming the step, the pair, the
 clearance and how far the targets turned the joints from the plan's.
 """
 
@@ -27,8 +27,8 @@ import numpy as np
 
 from station.cell.config.cell_config import CellConfig
 from station.cell.plan.collision import CollisionReport, check_path, require_fcl
-from station.cell.plan.compensated_check import Targets, compensated_path
-from station.cell.plan.shifted_check import Pose, ShiftedPathCollides, at_setup, remeasures
+from station.cell.plan.moved_path.compensated_check import Targets, compensated_path
+from station.cell.plan.moved_path.shifted_check import Pose, ShiftedPathCollides, at_setup, remeasures
 from station.cell.plan.steps import PlannedStep, StepKind
 
 __all__ = ["check_plain", "joint_turn_deg"]
@@ -57,7 +57,7 @@ def check_plain(cfg: CellConfig, steps: Sequence[PlannedStep], targets: Targets,
     or comes under ``[plan] collision_margin_mm``; the report of a clear path, None where no such step is
     left or the robot is a SCARA. ``start``: where the robot stands before the first of them;
     ``R_world_base``: where the body and the obstacles are placed (None: ``cfg``'s set-up, the located
-    one after locating, as :func:`~station.cell.plan.compensated_check.check_compensated` places them)."""
+    one after locating, as :func:`~station.cell.plan.moved_path.compensated_check.check_compensated` places them)."""
     todo = [st for st in steps if st.kind is StepKind.VERIFY_BEFORE and st.index not in done]
     if not todo or cfg.model.is_scara:
         return None

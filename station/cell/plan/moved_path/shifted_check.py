@@ -27,7 +27,7 @@ re-measure, :func:`station.cell.plan.measurement_plan.approach_pose`); where the
 too, as the runner moves them: retract, the re-measure's approach, above the point, the touch.
 
 An articulated arm's correction takes no table: its compensated joint targets are checked by
-:mod:`station.cell.plan.compensated_check`, refused with the same error.
+:mod:`station.cell.plan.moved_path.compensated_check`, refused with the same error.
 """
 
 from __future__ import annotations
