@@ -7,46 +7,29 @@ the simulated controller's own collision check refused the first Cartesian move 
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-from station.cell.config.cell_config import parse_text
 from station.cell.pipeline.articulated import articulated_targets
 from station.cell.pipeline.outcomes import classify, hint_for
-from station.cell.plan.measurement_plan import build_plan
 from station.cell.plan.moved_path.plain_check import check_plain, joint_turn_deg
 from station.cell.plan.moved_path.shifted_check import ShiftedPathCollides
 from station.cell.plan.steps import StepKind
 from station.core.kinematics.transforms import matrix_to_pose, pose_to_matrix
 from station.errors import Outcome
+from tests.cell.test_compensated_path_check import POST
+from tests.cell.test_compensated_path_check import _cell as compensated_cell
 
 pytest.importorskip("fcl")
 
-CELL = Path(__file__).resolve().parents[2] / "examples" / "puma560" / "cell.toml"
-SHORT = {"repeats = 2": "repeats = 1", "verification_cycles = 3": "verification_cycles = 1"}
-
-#: tests/cell/test_compensated_path_check.py's post: 10 mm beside the head's mount at P1c (elbow +1),
-#: where a turn of joint 1 by -0.15° brings the head 1.9 mm toward it; the plan clears it by 2.7 mm
-POST = """
-[[obstacle]]
-name = "post"
-shape = "box"
-frame = "body"
-pose = [126.455, -256.252, 150.0, 0.0, 0.0, 0.0]
-size_mm = [10.0, 10.0, 10.0]
-"""
+#: POST: the compensated test's post, 10 mm beside the head's mount at P1c (elbow +1), where a turn of
+#: joint 1 by -0.15° brings the head 1.9 mm toward it; the plan clears it by 2.7 mm
 
 
 def _cell(extra: str = ""):
-    text = CELL.read_text(encoding="utf-8")
-    for old, new in SHORT.items():
-        assert old in text, f"the example has no {old!r} to shorten"
-        text = text.replace(old, new)
-    cfg = parse_text(text + extra, str(CELL))
-    plan = build_plan(cfg)
-    return cfg, plan.run_steps(cfg.plan.verification_cycles, False)
+    """The short puma560 plan of tests/cell/test_compensated_path_check.py: its config and steps."""
+    cfg, _, steps = compensated_cell(extra)
+    return cfg, steps
 
 
 def _turned(R: np.ndarray, deg: float) -> np.ndarray:
