@@ -86,6 +86,16 @@ def compensated_path(cfg: CellConfig, steps: Sequence[PlannedStep], targets: Tar
     return out
 
 
+def path_report(cfg: CellConfig, placed: CellConfig, path: list[Pose], n_steps: int,
+                start: Pose | None) -> CollisionReport:
+    """The collision report of an arm's verification ``path`` of ``n_steps`` steps in the cell as
+    ``placed``, its ``vias`` counted: every pose but the steps' own (four a step and a re-measure's
+    four, :func:`compensated_path`) and the start."""
+    report = check_path(placed, path)
+    own = 4 * n_steps * (remeasures(cfg) + 1) + (start is not None)
+    return dataclasses.replace(report, vias=report.poses - own)
+
+
 def check_compensated(cfg: CellConfig, steps: Sequence[PlannedStep], targets: Targets, kinds: Collection[StepKind],
                       done: Collection[int] = (), what: str = "the compensated targets",
                       start: Pose | None = None, R_world_base: np.ndarray | None = None) -> CollisionReport | None:
@@ -104,9 +114,7 @@ def check_compensated(cfg: CellConfig, steps: Sequence[PlannedStep], targets: Ta
         return None
     require_fcl()
     placed = cfg if R_world_base is None else at_setup(cfg, R_world_base)
-    report = check_path(placed, compensated_path(cfg, todo, targets, start))
-    own = 4 * len(todo) * (remeasures(cfg) + 1) + (start is not None)  # the steps' poses and the start; the rest vias
-    report = dataclasses.replace(report, vias=report.poses - own)
+    report = path_report(cfg, placed, compensated_path(cfg, todo, targets, start), len(todo), start)
     refuse_clash(report, len(todo), what, "at their compensated joints (the controller's inverse kinematics of the "
                  "compensated Cartesian targets)", "the compensation moves the head")
     return report

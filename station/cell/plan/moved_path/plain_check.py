@@ -20,15 +20,14 @@ clearance and how far the targets turned the joints from the plan's.
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Collection, Sequence
 
 import numpy as np
 
 from station.cell.config.cell_config import CellConfig
-from station.cell.plan.collision import CollisionReport, check_path, require_fcl
-from station.cell.plan.moved_path.compensated_check import Targets, compensated_path
-from station.cell.plan.moved_path.shifted_check import Pose, ShiftedPathCollides, at_setup, remeasures
+from station.cell.plan.collision import CollisionReport, require_fcl
+from station.cell.plan.moved_path.compensated_check import Targets, compensated_path, path_report
+from station.cell.plan.moved_path.shifted_check import Pose, ShiftedPathCollides, at_setup
 from station.cell.plan.steps import PlannedStep, StepKind
 
 __all__ = ["check_plain", "joint_turn_deg"]
@@ -63,9 +62,7 @@ def check_plain(cfg: CellConfig, steps: Sequence[PlannedStep], targets: Targets,
         return None
     require_fcl()
     placed = cfg if R_world_base is None else at_setup(cfg, R_world_base)
-    report = check_path(placed, compensated_path(placed, todo, targets, start))
-    own = 4 * len(todo) * (remeasures(cfg) + 1) + (start is not None)  # the steps' poses and the start; the rest vias
-    report = dataclasses.replace(report, vias=report.poses - own)
+    report = path_report(cfg, placed, compensated_path(placed, todo, targets, start), len(todo), start)
     if report.clash is None:
         return report
     turn, joint, label = joint_turn_deg(todo, targets)
