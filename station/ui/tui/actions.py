@@ -79,6 +79,11 @@ class SideActions(App[RunSummary | None]):
     _activity_end: bool = False
     _waits: tuple[str, ...] = ()
 
+    def _panels_gone(self) -> bool:
+        """The app is closing: its main screen's panels are removed. An event, a question or a timer
+        that arrives then has nothing to show on (the run's database keeps the facts)."""
+        return not self.query("#summary")
+
     # Implemented by station.ui.tui.app.StationApp (the only subclass); declared here so that the side
     # actions type-check against them. Not abc.abstractmethod: Textual's App has its own metaclass.
     @property
@@ -244,7 +249,7 @@ class SideActions(App[RunSummary | None]):
     # ------------------------------------------------------------------ the pipeline's questions
     def on_question_message(self, message: QuestionMessage) -> None:
         # aborted, or the app is closing (its panels are gone, no dialog can open): "no", as an abort answers
-        if (self.control is not None and self.control.aborted) or not self.query("#summary"):
+        if (self.control is not None and self.control.aborted) or self._panels_gone():
             message.reply(False)
             return
         if self.abort_asked:

@@ -331,7 +331,7 @@ class StationApp(RunEnd):
         # line says so. The notice is the Paused event's alone; a note here as well raced with it (two
         # lines or one, as the timer fell: a flaky 80×24 snapshot).
         # The 0.1 s timer can fire while the app closes and its panels are gone (as the ETA's can).
-        if self.state == PAUSING and self.control is not None and self.control.waiting and self.query("#state"):
+        if self.state == PAUSING and self.control is not None and self.control.waiting and not self._panels_gone():
             self._set_state(PAUSED)
 
     def _show_phases(self, current: str | None) -> None:
@@ -465,7 +465,7 @@ class StationApp(RunEnd):
     # ------------------------------------------------------------------ events from the runner
     def on_event_message(self, message: EventMessage) -> None:
         ev = message.event
-        if not self.query("#summary"):  # the app is closing (its panels are gone): the run's record has the event
+        if self._panels_gone():
             return
         if isinstance(ev, DeviceSnapshot):
             self.query_one("#devices", DevicePanel).show(ev)

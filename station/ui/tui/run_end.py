@@ -44,7 +44,7 @@ class RunEnd(SideActions):
         over the event's copy (the session completes it, e.g. with the database path)."""
         if summary == self.summary:
             return
-        if not self.query("#summary"):  # the app is closing and its panels are gone: nothing to show it on
+        if self._panels_gone():
             return
         first = self.summary is None
         self.summary = summary  # the title stays the cell's as the UI started: it names the station, not the run
