@@ -172,8 +172,7 @@ class RobotModel:
         params = np.asarray(params, dtype=float)
         if params.shape != self.nominal.shape:
             raise ValueError(f"expected {self.nominal.shape} parameters, got {params.shape}")
-        return RobotModel(self.name, self.transforms, params, self.joint_limits, self.description, self.prefer,
-                          self.max_speed, self.repeatability_mm)
+        return dataclasses.replace(self, nominal=params)  # every other field kept, a new one too
 
     def with_setup(self, pose: np.ndarray) -> "RobotModel":
         """The same robot with the set-up transform R set to ``pose`` (6,) [mm, rad]."""
