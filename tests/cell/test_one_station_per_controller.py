@@ -32,6 +32,7 @@ class ModbusTcpRelay:
         self._listener = socket.create_server(("127.0.0.1", 0))
         self.port = self._listener.getsockname()[1]
         self._threads: list[threading.Thread] = []
+        self._sockets: list[socket.socket] = []  # the relay's ends of the connection, shut down by close()
         self._spawn(self._accept)
 
     def _spawn(self, target, *args) -> None:
@@ -45,6 +46,7 @@ class ModbusTcpRelay:
         except OSError:
             return  # closed before anyone connected
         server = socket.create_connection(self.target)
+        self._sockets += [client, server]
         self._spawn(self._pump, client, server, True)
         self._spawn(self._pump, server, client, False)
 
@@ -73,11 +75,22 @@ class ModbusTcpRelay:
                     pass  # already shut down by the other pump
 
     def close(self) -> None:
+        """End the relay once the station's session has returned: every request it sent was answered,
+        so the pumps have forwarded it. The relay shuts its own ends down (the station may close its
+        connection later, or leave that to its client's clean-up: CI once saw the pumps still waiting on
+        it after 60 s), then waits for the pumps, which append a request after forwarding it, so the
+        list read next is whole."""
+        for s in (self._listener, *self._sockets):
+            try:
+                s.shutdown(socket.SHUT_RDWR)  # wakes a blocked accept() or recv(); close() alone does not
+            except OSError:
+                pass  # not connected, or already shut down by a pump
         self._listener.close()
         for t in self._threads:
-            t.join(timeout=60)  # a hang guard: the pumps end when the station has closed its connection
-        # a pump appends a request after forwarding it: one still running could add to the list read next
+            t.join(timeout=60)  # a hang guard only: the shutdown ends every pump at once
         assert not any(t.is_alive() for t in self._threads), "the relay's pumps did not end"
+        for s in self._sockets:
+            s.close()
 
 
 @pytest.mark.slow
