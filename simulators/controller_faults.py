@@ -16,6 +16,9 @@ QUIRKS: dict[str, str] = {
     "swapped_word_order": "every 32-bit value (limits, joints, pose, table, CRCs) is written and read with its "
                           "two words in the other order than the link's word_order",
     "ack_without_seq": "ack_seq is set to 1 (a flag) instead of the command's sequence number",
+    "ack_after_answer": "ack_seq is written after the answer (when the next command arrives), so one status read "
+                        "shows a command's done_seq / error_seq beside the previous ack_seq: as a program whose "
+                        "tasks write the registers while a read copies them, without a lock",
     "no_heartbeat": "hb_robot never advances (the program does not run its heartbeat)",
     "crc_mismatch": "TABLE_STAGE computes the CRC-32 over little-endian i32 bytes instead of big-endian ones, "
                     "so a correct table is refused with TABLE_CRC_MISMATCH",

@@ -172,6 +172,7 @@ class SimulatedController(FaultInjection):
         self._faults: list[ModbusFault] = []
         self._latency = 0.0
         self._lose_ack = False
+        self._last_ack_late = 0  # quirk ack_after_answer: the seq whose ack is still due
         self._estop_next = False
         self._drive_fault_next: int = 0
         self._hb_frozen = "no_heartbeat" in self.quirks
@@ -430,7 +431,11 @@ class SimulatedController(FaultInjection):
                 self._lose_ack = False
                 log.info("fault: command seq %d lost (not acknowledged)", seq)
                 return
-            self._set("ack_seq", 1 if "ack_without_seq" in self.quirks else seq)
+            if "ack_after_answer" in self.quirks:  # the previous command's ack, late
+                self._set("ack_seq", self._last_ack_late)
+                self._last_ack_late = seq
+            else:
+                self._set("ack_seq", 1 if "ack_without_seq" in self.quirks else seq)
         if seq != expected:
             return self._error(seq, ErrorCode.SEQUENCE_ERROR)
         try:

@@ -105,6 +105,16 @@
 '     background task cannot be recovered in AUTO mode" - hence OnErr in ServeConnection and
 '     HeartbeatLoop, each called again by an endless loop: [UG-BG]. Program lines at most 512
 '     characters: [UG-RULES].
+'   * One register image, three writers (main, the heartbeat, the Modbus server): every access
+'     to Regs that a Modbus read must see whole (a 32-bit value's two words; ack_seq with the
+'     done_seq / error_seq after it) happens while the task holds SyncLock REGS_LOCK, and the
+'     server copies a read's registers under the same lock, so one Modbus read never returns a
+'     half-written update. Tasks are switched preemptively; without the lock a read of the
+'     status block could show error_seq = n beside the old ack_seq (found by `station
+'     conformance`; 7 of 1178 commands over loopback). No task waits (Wait, a motion, the
+'     network) while it holds the lock: StopMotion releases it while the arm stops.
+'     [REF-SYNCLOCK]; held IDs are released when a task ends (RC+ 6.0 and later), so an
+'     emergency stop that aborts main frees the lock.
 '   * Xqt funcName, task numbers (normal 1-32, background 65-80): [REF-HALT], [REF-TASKINFO].
 '     TaskInfo(MAIN_TASK, 3): main is up only in state 1 (running) or 2 (waiting); MoveTask is
 '     Xqt'd from main, never from the background side: [REF-TASKINFO].
@@ -136,6 +146,9 @@
 '     Motor used as a function; only the Motor On / Off statement).
 '   * ErrAxis: that it returns the axis of the last error (0 for none) inside an OnErr handler;
 '     no page for it was found. Without it error_joint of a DRIVE_FAULT is wrong, not the code.
+'   * That main's SyncLock REGS_LOCK is released when an emergency stop aborts main, as
+'     [REF-SYNCLOCK] says for a task that is finished (RC+ 6.0 and later); otherwise the server
+'     and the heartbeat would wait on it until main runs again.
 '   * That the emergency stop aborts main and not BgMain [UG-BG] (the program reports the running
 '     motion as ESTOP and refuses commands NOT_READY until main runs again).
 '   * ReadBin / WriteBin "#port, buf(), n", ChkNet's return values and WaitNet's timeout beyond
@@ -174,6 +187,11 @@
 '                  030-230-010-170.html (condition functions incl. MemSw; TillOn / Stat).
 '   [REF-JA]       SPEL+ Language Reference, "JA Function", SPEL_RC800/ja/030/030-140/
 '                  030-140-010/030-140-010-130.html and SPEL/tc/... same path.
+'   [REF-SYNCLOCK] SPEL+ Language Reference (RC800), "SyncLock Statement" and "SyncUnlock
+'                  Statement", SPEL_RC800/en/030/030-220/030-220-010/030-220-010-600.html and
+'                  -610.html (syncID 0..63; a second SyncLock of the same ID is an error; only
+'                  the task that locked an ID unlocks it; RC+ 6.0 and later release the IDs of a
+'                  task that ends).
 '   [REF-GLOBAL]   SPEL+ Language Reference (RC800), "Global", SPEL_RC800/ja/030/030-110/
 '                  030-110-010/030-110-010-040.html (types, 100,000 elements, Preserve 4,000,
 '                  Globals cleared when a function starts from the Run / Operator window).
@@ -209,6 +227,8 @@
 #define STOP_BIT 0
 ' the task number of main (the motion side), for TaskInfo [REF-TASKINFO]
 #define MAIN_TASK 1
+' the SyncLock ID that guards the register image Regs [REF-SYNCLOCK]: any free ID 0..63
+#define REGS_LOCK 1
 
 ' ---------------- register map 3 (tests/test_robot_programs.py keeps these true) -------------
 #define MAP_VERSION 3
@@ -363,6 +383,9 @@ Global Static Long LastSeq, MotionSeq, HbRobot, LastXfer, HbIdle
 Global Static Long OwnHi, OwnLo
 ' errors the background tasks handled (a client gone mid-frame), for the integrator
 Global Static Long NetErrors, HbErrors
+' whether the server / the heartbeat holds REGS_LOCK, for their error handlers: a task that
+' locks an ID it holds gets an error [REF-SYNCLOCK]
+Global Static Boolean SrvHolds, HbHolds
 Global Static Double Tq(3), Dq(3)
 ' the controller's pose of the tool (x, y, z mm, u deg), kept by main for READ_INFO
 Global Static Double ActPose(3)
@@ -412,6 +435,8 @@ Function HeartbeatLoop
     hbPcLast = Regs(R_HB_PC)
     HbIdle = 0
     Do
+        SyncLock REGS_LOCK
+        HbHolds = True
         HbRobot = HbRobot + 1
         If HbRobot > 65535 Then HbRobot = 0
         Regs(R_HB_ROBOT) = HbRobot
@@ -439,9 +464,15 @@ Function HeartbeatLoop
             Refuse(MotionSeq, E_ESTOP, 0, 0)
         EndIf
         PublishStatus()
+        HbHolds = False
+        SyncUnlock REGS_LOCK
         Wait 0.1
     Loop
 HbErr:
+    If HbHolds Then
+        HbHolds = False
+        SyncUnlock REGS_LOCK
+    EndIf
 Fend
 
 ' ---------------- the claim block: one station per controller ---------------------------
@@ -732,12 +763,16 @@ MoveErr:
     MoveResult = 3
 Fend
 
-' stop the running motion and wait until the motion task has ended
+' stop the running motion and wait until the motion task has ended. Called from CommandLoop,
+' which holds REGS_LOCK: released while the arm stops, so that the server and the heartbeat go
+' on meanwhile (nothing here has written a register yet)
 Function StopMotion
     MemOn STOP_BIT
+    SyncUnlock REGS_LOCK
     Do While MoveResult = 0 And Not EStopOn
         Wait 0.01
     Loop
+    SyncLock REGS_LOCK
     Moving = False
     WriteActJoints()
     PublishStatus()
@@ -750,6 +785,8 @@ Function CommandLoop
     Integer tick
     tick = 0
     Do
+        ' main ends by an error or an abort only: the controller then releases the lock
+        SyncLock REGS_LOCK
         If Moving And EStopOn And Not Latched Then
             Moving = False
             WriteActJoints()
@@ -790,6 +827,7 @@ Function CommandLoop
             tick = 0
             WriteActJoints()
         EndIf
+        SyncUnlock REGS_LOCK
         Wait 0.002
     Loop
 Fend
@@ -1410,10 +1448,15 @@ Function ServeConnection
                 Else
                     Tx(7) = fc
                     Tx(8) = 2 * cnt
+                    ' one read sees one state of the image: copied under the lock, sent after
+                    SyncLock REGS_LOCK
+                    SrvHolds = True
                     For i = 0 To cnt - 1
                         Tx(9 + 2 * i) = RShift(Regs(ofs + i), 8) And &HFF
                         Tx(10 + 2 * i) = Regs(ofs + i) And &HFF
                     Next
+                    SrvHolds = False
+                    SyncUnlock REGS_LOCK
                     Reply(tid, unit, 2 + 2 * cnt)
                 EndIf
             ElseIf fc = 6 Then
@@ -1424,8 +1467,12 @@ Function ServeConnection
                 ElseIf Not PcMayWrite(ofs) Then
                     MbException(tid, unit, fc, 2)
                 Else
+                    SyncLock REGS_LOCK
+                    SrvHolds = True
                     Regs(ofs) = wval
                     AfterWrite(ofs, 1)
+                    SrvHolds = False
+                    SyncUnlock REGS_LOCK
                     For i = 0 To 4
                         Tx(7 + i) = Rx(i)
                     Next
@@ -1444,10 +1491,14 @@ Function ServeConnection
                     If bad Then
                         MbException(tid, unit, fc, 2)
                     Else
+                        SyncLock REGS_LOCK
+                        SrvHolds = True
                         For i = 0 To cnt - 1
                             Regs(ofs + i) = Rx(6 + 2 * i) * 256 + Rx(7 + 2 * i)
                         Next
                         AfterWrite(ofs, cnt)
+                        SrvHolds = False
+                        SyncUnlock REGS_LOCK
                         For i = 0 To 4
                             Tx(7 + i) = Rx(i)
                         Next
@@ -1461,6 +1512,10 @@ Function ServeConnection
     CloseNet #NET_PORT
     Exit Function
 NetErr:
+    If SrvHolds Then
+        SrvHolds = False
+        SyncUnlock REGS_LOCK
+    EndIf
     NetErrors = NetErrors + 1
     If NetErrors > 65535 Then NetErrors = 0
     Wait 0.01

@@ -20,6 +20,13 @@ tests never depend on the wall clock. Semantics, each from its document:
   in a background task it "cannot be recovered in AUTO mode": the task stays ended.
   ``OnErr GoTo label`` [EPSON-MODBUS]: the error continues at the label of the innermost function
   of the call chain that set a handler; ``Err`` is its number.
+* ``SyncLock syncID [, timeOut]`` / ``SyncUnlock syncID`` [REF-SYNCLOCK]: syncID 0..63; a task
+  waits while another holds the ID; with a time-out it goes on after it and ``Tw`` says whether
+  it timed out; a second ``SyncLock`` of an ID the task holds is an error, as is unlocking an ID
+  it does not hold; a task that ends (also by an error or an abort) releases its IDs (RC+ 6.0
+  and later; RC+ 5.0 did not). [REF-SYNCLOCK] SPEL+ Language Reference (RC800), "SyncLock
+  Statement" and "SyncUnlock Statement", SPEL_RC800/en/030/030-220/030-220-010/
+  030-220-010-600.html and -610.html.
 """
 
 from __future__ import annotations
@@ -165,6 +172,7 @@ class Task:
             self.state = 5
             self.rt.errors.append((self.number, self.fn.name, self.error))
         finally:
+            self.rt.release_sync(self.number)
             self.rt.baton.release()
 
     def pause(self) -> None:
@@ -201,6 +209,13 @@ class Runtime:
         self.globals = {name: Var(t, dims, q) for name, t, dims, q, _line in program.globals}
         self.points: dict[str, Point] = {}
         self.mem = [False] * 512
+        #: SyncLock IDs held: syncID -> task number [REF-SYNCLOCK]
+        self.sync: dict[int, int] = {}
+
+    def release_sync(self, number: int) -> None:
+        """A task that ends releases the sync IDs it holds (RC+ 6.0 and later) [REF-SYNCLOCK]."""
+        for sync_id in [i for i, holder in self.sync.items() if holder == number]:
+            del self.sync[sync_id]
 
     # ------------------------------------------------------------------ tasks
     def start(self, name: str, number: int | None = None, background: bool = False) -> Task:
@@ -362,8 +377,37 @@ class Evaluator:
             self.rt.start(st[1], background=task.background)
         elif kind == "onerr":
             fr.handler = st[1]
+        elif kind == "sync":
+            self.sync(st, fr, line)
         else:
             self.rt.dev.statement(self, st, fr)
+
+    def sync(self, st: Any, fr: _Frame, line: int) -> None:
+        """``SyncLock`` / ``SyncUnlock`` [REF-SYNCLOCK]."""
+        _k, op, id_expr, timeout_expr, _line = st
+        sync_id = _num(self.eval(id_expr, fr), line)
+        if sync_id != int(sync_id) or not 0 <= sync_id <= 63:
+            raise SpelRuntimeError(ERR_ARG, f"syncID {sync_id!r} outside 0..63", line)
+        sync_id = int(sync_id)
+        held, me = self.rt.sync, self.task.number
+        if op == "syncunlock":
+            if held.get(sync_id) != me:
+                raise SpelRuntimeError(ERR_ARG, f"SyncUnlock {sync_id}: this task did not lock it", line)
+            del held[sync_id]
+            return
+        if held.get(sync_id) == me:
+            raise SpelRuntimeError(ERR_ARG, f"SyncLock {sync_id} twice in a row", line)
+        deadline = None
+        if timeout_expr is not None:
+            sec = _num(self.eval(timeout_expr, fr), line)
+            if sec < 0:
+                raise SpelRuntimeError(ERR_ARG, "SyncLock with a negative time-out", line)
+            deadline = self.rt.now + sec
+        if sync_id in held:
+            self.task.wait_until(lambda: sync_id not in held or (deadline is not None and self.rt.now >= deadline))
+        self.tw = sync_id in held
+        if not self.tw:
+            held[sync_id] = me
 
     def for_(self, st: Any, fr: _Frame) -> None:
         _k, var, start, end, step, body, line = st

@@ -51,6 +51,7 @@ KEYWORDS = frozenset(w.lower() for w in """
  Speed Static NonStatic Step Stat String Sw TaskInfo Then Till TillOn Time To Tool True Val Wait
  WaitNet While WriteBin Xor XY Xqt Boolean Byte UByte Short UShort Int32 UInt32 Arm Point Error
  Halt Quit Resume Select Case Default Sin Cos Tan Sqr Atan Atan2 Str Hex Motor High Low TW
+ SyncLock SyncUnlock
 """.split())
 
 _TOKEN = re.compile(r"""
@@ -533,6 +534,19 @@ def _s_xqt(p, e, n):
     return ("xqt", name, n)
 
 
+def _s_sync(p, e, n):
+    """``SyncLock syncID [, timeOut]`` and ``SyncUnlock syncID`` [REF-SYNCLOCK]."""
+    op = e.take().low
+    sync_id = e.expr()
+    timeout = None
+    if op == "synclock" and e.at(","):
+        e.take(",")
+        timeout = e.expr()
+    if not e.done():
+        raise _Parse(f"unexpected {e.peek().text!r}")
+    return ("sync", op, sync_id, timeout, n)
+
+
 def _s_onerr(p, e, n):
     e.take()
     e.take("goto")
@@ -588,7 +602,7 @@ def _s_go(p, e, n):
 _SIMPLE = {"wait": _s_wait, "xqt": _s_xqt, "onerr": _s_onerr, "opennet": _s_net, "waitnet": _s_net,
            "closenet": _s_net, "readbin": _s_net, "writebin": _s_net, "memon": _s_onoff,
            "memoff": _s_onoff, "tool": _s_onoff, "speed": _s_onoff, "motor": _s_onoff, "power": _s_onoff,
-           "accel": _s_accel, "go": _s_go}
+           "accel": _s_accel, "go": _s_go, "synclock": _s_sync, "syncunlock": _s_sync}
 
 
 def _const(node: Any) -> Any:

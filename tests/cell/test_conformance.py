@@ -88,6 +88,7 @@ def test_the_simulator_passes_every_requirement_inside_the_park_zone(order, base
     ("swapped_word_order", "word_order"),
     ("ack_without_seq", "ack"),
     ("no_heartbeat", "heartbeat"),
+    ("ack_after_answer", "ack"),
     ("crc_mismatch", "table"),
     ("done_before_motion", "done"),
     ("page_crc_ignored", "pages"),
@@ -347,3 +348,15 @@ def test_the_kit_stops_at_a_controller_another_station_holds():
             assert sim.register("claim_owner") == holder.claim_token  # the holder keeps the controller
         finally:
             holder.close()
+
+
+def test_an_answer_seen_before_its_acknowledgement_is_named_as_such():
+    """The CI failure of the Epson program: one status read showed error_seq = n beside the old
+    ack_seq. The kit names that pattern, and its fix (one read sees one state: a lock), rather
+    than a missing acknowledgement."""
+    with SimulatedController(time_scale=1.0, quirks={"ack_after_answer"}) as sim:
+        report = cf.run_conformance(parse_text(config_text(sim.port)))
+    ack = report.requirement("ack")
+    assert ack.status == cf.FAILED
+    assert any("one status read showed the answer but not the acknowledgement" in d for d in ack.detail), ack.detail
+    assert any("lock" in f for f in ack.fix)

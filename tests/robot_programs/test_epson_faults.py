@@ -184,7 +184,7 @@ def test_the_same_restart_with_plain_globals_loses_the_table_and_the_claim():
     """The check above can fail: the program with its Globals not Static (the first version)
     loses the active table and the claim at the same restart, as the issue found."""
     source, n = re.subn(r"(?m)^Global Static ", "Global ", SOURCE)
-    assert n == 24
+    assert n == 25
     ep, s = started(source)
     try:
         table = small_table()

@@ -132,3 +132,86 @@ def test_readbin_into_a_byte_buffer_overflows_on_a_byte_over_127(typ):
     finally:
         link.close()
         ep.stop()
+
+
+# SyncLock / SyncUnlock [REF-SYNCLOCK]: SPEL+ Language Reference (RC800), "SyncLock Statement",
+# SPEL_RC800/en/030/030-220/030-220-010/030-220-010-600.html and "SyncUnlock Statement" (-610)
+COUNTER = """Global Long Count, Done
+Function main
+  Xqt Adder
+  Xqt Adder
+Fend
+Function Adder
+  Integer i
+  Long c
+  For i = 1 To 20
+    {lock}
+    c = Count
+    Wait 0.001
+    Count = c + 1
+    {unlock}
+  Next
+  Done = Done + 1
+Fend
+"""
+
+
+@pytest.mark.parametrize("locked", [True, False])
+def test_synclock_keeps_a_read_modify_write_whole_across_tasks(locked):
+    """Two tasks add 20 each to one Global, reading it, waiting, writing it back: with the lock
+    the sum is 40; without it (the check can fail) updates are lost."""
+    source = COUNTER.format(lock="SyncLock 1" if locked else "", unlock="SyncUnlock 1" if locked else "")
+    ep = EpsonController(source)
+    try:
+        ep.rt.start("main", 1)
+        ep.run_until(lambda: ep.rt.globals["done"].data[0] == 2, 2.0)
+        assert not ep.rt.errors
+        count = ep.rt.globals["count"].data[0]
+        assert count == 40 if locked else count < 40
+        assert ep.rt.sync == {}
+    finally:
+        ep.stop()
+
+
+@pytest.mark.parametrize("body, message", [
+    ("SyncLock 3\n  SyncLock 3", "SyncLock 3 twice in a row"),
+    ("SyncUnlock 3", "SyncUnlock 3: this task did not lock it"),
+    ("SyncLock 64", "syncID 64 outside 0..63"),
+])
+def test_synclock_misuse_is_an_error(body, message):
+    ep = run_main(f"Function main\n  {body}\nFend")
+    try:
+        [(_task, _fn, exc)] = ep.rt.errors
+        assert message in str(exc)
+        assert ep.rt.sync == {}  # the task that ended released what it held
+    finally:
+        ep.stop()
+
+
+def test_synclock_waits_for_the_holder_and_a_timeout_sets_tw():
+    """A task that ends releases its IDs (RC+ 6.0 and later); SyncLock with a time-out goes on
+    after it with Tw = True, and takes the ID with Tw = False once it is free."""
+    source = """Global Boolean First, Second
+Function main
+  Xqt Holder
+  Wait 0.01
+  SyncLock 5, 0.05
+  First = Tw
+  SyncLock 5, 1
+  Second = Tw
+  SyncUnlock 5
+Fend
+Function Holder
+  SyncLock 5
+  Wait 0.2
+Fend
+"""
+    ep = EpsonController(source)
+    try:
+        ep.rt.start("main", 1)
+        ep.run_until(lambda: ep.rt.task_state(1) in (-1, 5), 2.0)
+        assert not ep.rt.errors
+        assert ep.rt.globals["first"].data[0] is True and ep.rt.globals["second"].data[0] is False
+        assert ep.rt.now == pytest.approx(0.2, abs=0.005)  # main took the ID when Holder ended
+    finally:
+        ep.stop()

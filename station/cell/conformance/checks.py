@@ -445,8 +445,16 @@ class _HandshakeChecks(_KitBase):
     def judge_ack(self) -> None:
         r = self.req["ack"]
         bad = [a for a in self.answers if not a.ack_seen]
+        torn = [a for a in self.answers if a.torn]
         if not self.answers:
             r.not_checked("no command was sent")
+        elif torn:
+            shown = ", ".join(f"seq {a.seq} ({a.result}_seq {a.seq} beside ack_seq {a.last_ack})" for a in torn[:5])
+            r.failed(f"{len(torn)} of {len(self.answers)} commands: one status read showed the answer but not the "
+                     f"acknowledgement: {shown}",
+                     "one Modbus read must see one state of the registers: write ack_seq before the answer, and "
+                     "copy a read's registers and publish the status under one lock (Epson SPEL+: SyncLock), "
+                     "so that no read sees half an update")
         elif bad:
             shown = ", ".join(f"seq {a.seq} (ack_seq read {a.last_ack})" for a in bad[:5])
             r.failed(f"{len(bad)} of {len(self.answers)} commands never showed ack_seq = their number: {shown}",

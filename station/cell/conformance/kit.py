@@ -136,6 +136,9 @@ class _Answer:
     status: ControllerStatus | None = None  # the snapshot that carried the result
     moving_seen: bool = False
     stopped: bool = False
+    #: one status read showed the command's done_seq / error_seq beside another ack_seq: the
+    #: program wrote the block while the read copied it (or wrote the result before the ack)
+    torn: bool = False
 
     @property
     def name(self) -> str:
@@ -223,6 +226,7 @@ class _KitBase:
                 self.notes.append(f"the controller started moving towards the out-of-limits target of seq {seq}: "
                                   f"STOP sent")
             if st.done_seq == seq or st.error_seq == seq:
+                ans.torn |= st.ack_seq != seq
                 ans.result = "done" if st.done_seq == seq else "error"
                 ans.status = st
                 break
