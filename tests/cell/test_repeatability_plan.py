@@ -11,6 +11,7 @@ import pytest
 
 from station.cell.config.cell_config import load_config
 from station.cell.pipeline.preview import preview
+from station.cell.session.new_cell import ASSUMED_SIGMA_UM, HEAD_SIGMA_UM
 from station.core.measurement.repeatability import RP_PER_SIGMA
 from station.ui.cli.main import main
 
@@ -56,4 +57,16 @@ def test_init_takes_the_robots_repeatability_from_its_data_sheet(tmp_path, capsy
     assert main(["init", "new.toml", "--robot", "robot.toml", "--head", "head.toml", "--body", "body.csv"]) == 0
     said = capsys.readouterr().out
     assert f"repeatability σ {0.02 / RP_PER_SIGMA * 1e3:.1f} µm per axis from the robot file's RP 20 µm" in said
-    assert load_config(folder / "new.toml").identification.repeatability_mm == 0.02
+    written = load_config(folder / "new.toml").identification
+    assert written.repeatability_mm == 0.02
+    # the position σ it writes is the head's alone: the fit adds the RP, so it is not counted twice
+    assert written.sigma_position_um == pytest.approx(HEAD_SIGMA_UM) and HEAD_SIGMA_UM < ASSUMED_SIGMA_UM
+    assert written.pose_sigma()[0] * 1e3 == pytest.approx(np.hypot(HEAD_SIGMA_UM, 20 / RP_PER_SIGMA))
+
+
+def test_init_without_a_repeatability_writes_the_sigma_that_includes_it(tmp_path, monkeypatch):
+    folder = _cell(tmp_path, None).parent
+    monkeypatch.chdir(folder)
+    assert main(["init", "new.toml", "--robot", "robot.toml", "--head", "head.toml", "--body", "body.csv"]) == 0
+    written = load_config(folder / "new.toml").identification
+    assert written.repeatability_mm is None and written.sigma_position_um == ASSUMED_SIGMA_UM

@@ -53,6 +53,14 @@ class NewCell:
     notes: tuple[str, ...]
 
 
+#: the position σ init writes for a cell with a head [µm]: the head's reading noise on a robot
+#: whose repeatability σ is about ASSUMED_REPEATABILITY_UM per axis; where the robot file states
+#: its RP, the fit adds that and init writes the head's part alone, HEAD_SIGMA_UM
+ASSUMED_SIGMA_UM = 6.0
+ASSUMED_REPEATABILITY_UM = 5.0
+HEAD_SIGMA_UM = round(math.sqrt(ASSUMED_SIGMA_UM ** 2 - ASSUMED_REPEATABILITY_UM ** 2), 1)
+
+
 def _kv(setting: str, comment: str) -> str:
     """A template line: the setting, its comment at the template's column."""
     return f"{setting:<32} # {comment}"
@@ -258,8 +266,15 @@ def new_cell_text(dest: str | Path, robot: str | None = None, head: str | None =
     if head is not None:
         text = _set(text, r'^# \[head\]\n# file = "head\.toml" .*$',
                     "[head]\n" + _kv(f'file = "{_rel(head, dest)}"', "the probe-head file (docs/probe-head.md)"))
-        text = _set(text, r"^sigma_position_um = 15\.0 .*$", _kv("sigma_position_um = 6.0", "0.01 … 1000 (the head's "
-                                                                   "reading noise on the robot's ≈ 5 µm repeatability)"))
+        rp = model.repeatability_mm if robot is not None else None
+        if rp is None:
+            sigma_line = _kv(f"sigma_position_um = {ASSUMED_SIGMA_UM:g}", f"0.01 … 1000 (the head's reading noise on "
+                             f"the robot's ≈ {ASSUMED_REPEATABILITY_UM:g} µm repeatability; with [robot] "
+                             f"repeatability_mm in the robot file, {HEAD_SIGMA_UM:g} µm)")
+        else:  # the fit adds the robot file's RP in quadrature (issue 38): not counted twice
+            sigma_line = _kv(f"sigma_position_um = {HEAD_SIGMA_UM:g}", f"0.01 … 1000 (the head's reading noise "
+                             f"alone: the robot file's RP {rp * 1e3:g} µm is added to it)")
+        text = _set(text, r"^sigma_position_um = 15\.0 .*$", sigma_line)
         text = _set(text, r"^sigma_angle_arcsec = 20\.0 .*$", _kv("sigma_angle_arcsec = 6.0", "0.01 … 3600"))
     cfg = parse_text(text, str(dest))
     stroke = float(np.min(cfg.head.strokes)) if cfg.head is not None else 10.0
