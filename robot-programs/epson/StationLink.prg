@@ -112,7 +112,8 @@
 '     half-written update. Tasks are switched preemptively; without the lock a read of the
 '     status block could show error_seq = n beside the old ack_seq (found by `station
 '     conformance`; 7 of 1178 commands over loopback). No task waits (Wait, a motion, the
-'     network) while it holds the lock: StopMotion releases it while the arm stops.
+'     network) while it holds the lock: StopMotion releases it while the arm stops, and a
+'     TABLE_STAGE's checks and copy run without it (StageTable keeps its own running CRC).
 '     [REF-SYNCLOCK]; held IDs are released when a task ends (RC+ 6.0 and later), so an
 '     emergency stop that aborts main frees the lock.
 '   * Xqt funcName, task numbers (normal 1-32, background 65-80): [REF-HALT], [REF-TASKINFO].
@@ -229,6 +230,9 @@
 #define MAIN_TASK 1
 ' the SyncLock ID that guards the register image Regs [REF-SYNCLOCK]: any free ID 0..63
 #define REGS_LOCK 1
+' the running CRC each user keeps (CrcHi / CrcLo index)
+#define CRC_XFER 0
+#define CRC_STAGE 1
 
 ' ---------------- register map 3 (tests/test_robot_programs.py keeps these true) -------------
 #define MAP_VERSION 3
@@ -371,9 +375,10 @@ Global Static Integer StoreLen(1103)
 Global Static Long TBuf(2, 31999)
 Global Static Long THdr(2, 29)
 Global Static Integer SlotRef(2)
-' CRC-32 table in two 16-bit halves, and the running CRC
+' CRC-32 table in two 16-bit halves, and the running CRCs: one for the server's transfer pages
+' (CRC_XFER), one for main's TABLE_STAGE (CRC_STAGE), which runs without the lock beside it
 Global Static Long CrcTabHi(255), CrcTabLo(255)
-Global Static Long CrcHi, CrcLo
+Global Static Long CrcHi(1), CrcLo(1)
 ' robot state
 Global Static Double SoftLo(3), SoftHi(3)
 Global Static Long Status
@@ -596,7 +601,7 @@ Fend
 ' ---------------- CRC-32 (zlib / ISO-HDLC), table-driven in 16-bit halves ----------------
 ' The page CRC of the map: CRC-32 with the reflected polynomial 0xEDB88320, start 0xFFFFFFFF,
 ' final xor 0xFFFFFFFF, over each register high byte first (= zlib.crc32 of the big-endian
-' bytes). CrcHi / CrcLo are its high and low 16 bits.
+' bytes). CrcHi(who) / CrcLo(who) are its high and low 16 bits, who = CRC_XFER or CRC_STAGE.
 Function CrcInit
     Integer n, k
     Long hi, lo, c
@@ -617,27 +622,27 @@ Function CrcInit
     Next
 Fend
 
-Function CrcStart
-    CrcHi = &HFFFF
-    CrcLo = &HFFFF
+Function CrcStart(who As Integer)
+    CrcHi(who) = &HFFFF
+    CrcLo(who) = &HFFFF
 Fend
 
-Function CrcByte(b As Long)
+Function CrcByte(who As Integer, b As Long)
     Integer idx
-    idx = (CrcLo And &HFF) Xor b
-    CrcLo = (RShift(CrcLo, 8) Or LShift(CrcHi And &HFF, 8)) Xor CrcTabLo(idx)
-    CrcHi = RShift(CrcHi, 8) Xor CrcTabHi(idx)
+    idx = (CrcLo(who) And &HFF) Xor b
+    CrcLo(who) = (RShift(CrcLo(who), 8) Or LShift(CrcHi(who) And &HFF, 8)) Xor CrcTabLo(idx)
+    CrcHi(who) = RShift(CrcHi(who), 8) Xor CrcTabHi(idx)
 Fend
 
 ' one register, high byte first
-Function CrcWord(w As Long)
-    CrcByte(RShift(w, 8) And &HFF)
-    CrcByte(w And &HFF)
+Function CrcWord(who As Integer, w As Long)
+    CrcByte(who, RShift(w, 8) And &HFF)
+    CrcByte(who, w And &HFF)
 Fend
 
-Function CrcEnd
-    CrcHi = CrcHi Xor &HFFFF
-    CrcLo = CrcLo Xor &HFFFF
+Function CrcEnd(who As Integer)
+    CrcHi(who) = CrcHi(who) Xor &HFFFF
+    CrcLo(who) = CrcLo(who) Xor &HFFFF
 Fend
 
 ' ---------------- status and results ---------------------------------------------------
@@ -950,7 +955,13 @@ Function Dispatch(seq As Long, code As Long)
         MemOff STOP_BIT
         Xqt MoveTask
     ElseIf code = C_TABLE_STAGE Then
+        ' the checks, the CRC and the copy of a 32,000-value table take seconds: StageTable runs
+        ' without REGS_LOCK (it takes it for the slot switch), so the server and the heartbeat
+        ' go on meanwhile. It reads the transfer store, which the station does not write while
+        ' it waits for this answer.
+        SyncUnlock REGS_LOCK
         ec = StageTable()
+        SyncLock REGS_LOCK
         PublishStatus()
         If ec <> E_NONE Then
             Refuse(seq, ec, 0, 0)
@@ -1059,19 +1070,19 @@ Function StageTable As Integer
     Next
     If total <> 2 * nValues Then Exit Function
     ' first pass: the CRC over the values as big-endian two's-complement bytes
-    CrcStart()
+    CrcStart(CRC_STAGE)
     For k = 0 To nPages - 1
         For i = 0 To StoreLen(k) - 1 Step 2
             If WORD_ORDER_BIG = 1 Then
-                CrcWord(StoreReg(k, i))
-                CrcWord(StoreReg(k, i + 1))
+                CrcWord(CRC_STAGE, StoreReg(k, i))
+                CrcWord(CRC_STAGE, StoreReg(k, i + 1))
             Else
-                CrcWord(StoreReg(k, i + 1))
-                CrcWord(StoreReg(k, i))
+                CrcWord(CRC_STAGE, StoreReg(k, i + 1))
+                CrcWord(CRC_STAGE, StoreReg(k, i))
             EndIf
         Next
     Next
-    CrcEnd()
+    CrcEnd(CRC_STAGE)
     If WORD_ORDER_BIG = 1 Then
         wantHi = StoreHdr(H_TABLE_CRC)
         wantLo = StoreHdr(H_TABLE_CRC + 1)
@@ -1079,12 +1090,16 @@ Function StageTable As Integer
         wantHi = StoreHdr(H_TABLE_CRC + 1)
         wantLo = StoreHdr(H_TABLE_CRC)
     EndIf
-    If CrcHi <> wantHi Or CrcLo <> wantLo Then
+    If CrcHi(CRC_STAGE) <> wantHi Or CrcLo(CRC_STAGE) <> wantLo Then
         StageTable = E_TABLE_CRC_MISMATCH
         Exit Function
     EndIf
-    ' second pass: into the staged slot's buffer, or one no slot uses
+    ' second pass: into the staged slot's buffer, or one no slot uses. The staged slot is empty
+    ' while its buffer is rewritten, so no read (its CRC, a slot read) sees half a table
+    SyncLock REGS_LOCK
     b = SlotOf(SLOT_STAGED)
+    SlotRef(SLOT_STAGED) = 0
+    SyncUnlock REGS_LOCK
     If b < 0 Then
         For b = 0 To 2
             used = 0
@@ -1118,7 +1133,9 @@ Function StageTable As Integer
         THdr(b, H_TABLE_STEP + 2 * i + 1) = 0
     Next
     THdr(b, H_TABLE_PERIODIC) = StoreHdr(H_TABLE_PERIODIC) And (LShift(1, nAxes) - 1)
+    SyncLock REGS_LOCK
     SlotRef(SLOT_STAGED) = b + 1
+    SyncUnlock REGS_LOCK
     StageTable = E_NONE
 Fend
 
@@ -1230,16 +1247,16 @@ Fend
 ' ---------------- the transfer block (called by ModbusServer inside the request) -------------
 Function PageOut(n As Long)
     Long i
-    CrcStart()
+    CrcStart(CRC_XFER)
     For i = 0 To n - 1
-        CrcWord(Regs(R_PAGE_DATA + i))
+        CrcWord(CRC_XFER, Regs(R_PAGE_DATA + i))
     Next
-    CrcEnd()
+    CrcEnd(CRC_XFER)
     For i = n To PAGE_DATA_REGISTERS - 1
         Regs(R_PAGE_DATA + i) = 0
     Next
     Regs(R_PAGE_LEN) = n
-    PutWords(R_PAGE_CRC, CrcHi, CrcLo)
+    PutWords(R_PAGE_CRC, CrcHi(CRC_XFER), CrcLo(CRC_XFER))
 Fend
 
 Function ServeTransfer
@@ -1254,12 +1271,12 @@ Function ServeTransfer
         If n > PAGE_DATA_REGISTERS Then
             ec = E_PAGE_INVALID
         Else
-            CrcStart()
+            CrcStart(CRC_XFER)
             For i = 0 To n - 1
-                CrcWord(Regs(R_PAGE_DATA + i))
+                CrcWord(CRC_XFER, Regs(R_PAGE_DATA + i))
             Next
-            CrcEnd()
-            If CrcHi <> U32Hi(R_PAGE_CRC) Or CrcLo <> U32Lo(R_PAGE_CRC) Then
+            CrcEnd(CRC_XFER)
+            If CrcHi(CRC_XFER) <> U32Hi(R_PAGE_CRC) Or CrcLo(CRC_XFER) <> U32Lo(R_PAGE_CRC) Then
                 ec = E_PAGE_CRC_MISMATCH
             ElseIf op = X_WRITE_HEADER Then
                 If k <> 0 Or n <> TABLE_HEADER_REGISTERS Then

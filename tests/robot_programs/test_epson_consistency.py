@@ -12,9 +12,11 @@ from __future__ import annotations
 import math
 import re
 
+import numpy as np
 from pymodbus.pdu.register_message import ReadHoldingRegistersRequest, WriteMultipleRegistersRequest
 
-from drivers.controller_map import REG, encode
+from drivers.controller_map import REG, Command, XferOp, encode
+from drivers.correction_table import WireAxis, WireTable, header_registers, value_pages
 from simulators.epson.bench import Station
 from simulators.epson.controller import SHIPPED_PRG, EpsonController
 
@@ -30,8 +32,8 @@ COMMANDS = 4 * len(FILLER)
 def without_the_lock(source: str) -> str:
     stripped, n = re.subn(r"(?m)^[ \t]*Sync(?:Lock|Unlock) REGS_LOCK[ \t]*\n", "", source)
     # the server's three sections and its error handler's unlock, the heartbeat's section and its
-    # handler's, main's loop and StopMotion's pair
-    assert n == 14, n
+    # handler's, main's loop, StopMotion's pair, TABLE_STAGE's pair and StageTable's two sections
+    assert n == 20, n
     return stripped
 
 
@@ -107,3 +109,58 @@ def test_the_same_reads_without_the_lock_see_half_written_updates():
     _commands, _reads, torn = status_reads(without_the_lock(SOURCE))
     assert len(torn) >= 2, torn
     assert all(ack == seq - 1 for seq, ack, _done, _err in torn), torn
+
+
+def test_the_server_answers_while_a_table_is_staged():
+    """TABLE_STAGE's checks, CRC and copy take long with a large table (the default SCARA table
+    has 31,680 values: about 2.6 s of executor time): they run without the lock, so the server
+    answers reads meanwhile and the station's 1 s Modbus timeout never fires. The same
+    program holding the lock through StageTable (the check can fail) stops answering for the
+    whole stage."""
+    gaps = {name: stage_read_gaps(src) for name, src in (
+        ("shipped", SOURCE),
+        ("locked through the stage", SOURCE.replace("        SyncUnlock REGS_LOCK\n        ec = StageTable()\n"
+                                                    "        SyncLock REGS_LOCK\n", "        ec = StageTable()\n")
+         .replace("    SyncLock REGS_LOCK\n    b = SlotOf(SLOT_STAGED)\n", "    b = SlotOf(SLOT_STAGED)\n")
+         .replace("    SlotRef(SLOT_STAGED) = 0\n    SyncUnlock REGS_LOCK\n", "    SlotRef(SLOT_STAGED) = 0\n")
+         .replace("    SyncLock REGS_LOCK\n    SlotRef(SLOT_STAGED) = b + 1\n    SyncUnlock REGS_LOCK\n",
+                  "    SlotRef(SLOT_STAGED) = b + 1\n")))}
+    (stage_s, longest_s), (stage_locked_s, longest_locked_s) = gaps["shipped"], gaps["locked through the stage"]
+    assert stage_s > 0.1 and stage_locked_s > 0.1  # a stage long enough to see
+    assert longest_s < 0.03, gaps  # the server's own 10 ms receive poll, and a read's copy
+    assert longest_locked_s > 0.8 * stage_locked_s, gaps
+
+
+def stage_read_gaps(source: str) -> tuple[float, float]:
+    """Uploads a 2048-value table, sends TABLE_STAGE and reads the status block until it is
+    answered; returns the stage's controller time and the longest controller time between two
+    answered reads."""
+    n = 16
+    values = np.random.default_rng(0).normal(0.0, 1e-4, (2, n, n, 4))
+    table = WireTable((WireAxis(-1.0, 0.5, n), WireAxis(-1.0, 0.5, n)), values)
+    ep = EpsonController(source, q0=PARK)
+    ep.power_up()
+    s = Station(ep)
+    try:
+        s.connect()
+        s.until(lambda: s.read("map_version") == 3)
+        assert s.claim() == s.token
+        assert s.transfer(XferOp.WRITE_HEADER, 0, header_registers(table))[0] == 0
+        for k, page in enumerate(value_pages(table)):
+            assert s.transfer(XferOp.WRITE_PAGE, k, page)[0] == 0
+        assert s.claim() == s.token  # the upload's ticks carried no PC heartbeat: claimed again
+        t0 = ep.rt.now
+        seq = s.command(Command.TABLE_STAGE)
+        last, longest = ep.rt.now, 0.0
+        while True:
+            words = s.read_words(REG["done_seq"].address, 2)
+            longest, last = max(longest, ep.rt.now - last), ep.rt.now
+            if seq in words:
+                break
+        assert words[0] == seq, (words, s.read("error_code"))  # done, not refused
+        assert s.read("table_staged_crc") == table.crc32()
+        assert not ep.rt.errors, ep.rt.errors
+        return ep.rt.now - t0, longest
+    finally:
+        s.close()
+        ep.stop()
