@@ -474,3 +474,39 @@ def test_bad_paths(tmp_path):
         RunDB(tmp_path)
     with pytest.raises(RunDatabaseError, match="does not exist"):
         RunDB(tmp_path / "missing" / "runs.db")
+
+
+def _write_locked_for(path: Path, seconds: float) -> threading.Thread:
+    """Another connection takes the write lock of ``path`` (a new file: rollback journal, as a
+    process that is creating it has) and gives it back after ``seconds``."""
+    other = sqlite3.connect(str(path), isolation_level=None, check_same_thread=False)
+    other.execute("BEGIN IMMEDIATE")
+
+    def release() -> None:
+        time.sleep(seconds)  # the other process's work: wall time is what SQLite's lock waits on
+        other.execute("COMMIT")
+        other.close()
+
+    t = threading.Thread(target=release, daemon=True)
+    t.start()
+    return t
+
+
+def test_a_database_another_process_is_creating_is_waited_for_not_refused(tmp_path):
+    """A watcher (committed_steps) opening the file while the station creates it took the write
+    lock; SQLite's busy timeout does not cover PRAGMA journal_mode, which failed at once: the
+    starting calibration ended DATABASE_ERROR (seen under load in the suite). Now the setup is
+    tried again until the lock is free."""
+    path = tmp_path / "runs.sqlite"
+    holder = _write_locked_for(path, 0.3)
+    with RunDB(path) as db:
+        assert db.latest_run() is None
+    holder.join()
+
+
+def test_a_lock_held_beyond_the_timeout_is_still_a_clear_error(tmp_path):
+    path = tmp_path / "runs.sqlite"
+    holder = _write_locked_for(path, 2.0)
+    with pytest.raises(RunDatabaseError, match="database is locked"):
+        RunDB(path, timeout_s=0.2)
+    holder.join()

@@ -28,6 +28,7 @@ import json
 import math
 import sqlite3
 import threading
+import time
 import tomllib
 from contextlib import contextmanager
 from pathlib import Path
@@ -99,7 +100,7 @@ class RunDB:
                                    f"path and its permissions") from e
         self._conn = conn
         try:
-            self._setup(timeout_s)
+            self._setup_waiting(timeout_s)
         except sqlite3.DatabaseError as e:
             conn.close()
             self._conn = None
@@ -116,6 +117,23 @@ class RunDB:
             raise
 
     # -- opening -------------------------------------------------------------------------------
+
+    def _setup_waiting(self, timeout_s: float) -> None:
+        """:meth:`_setup`, tried again for up to ``timeout_s`` while SQLite answers 'database is
+        locked'. SQLite's busy timeout does not cover every statement: ``PRAGMA journal_mode``
+        fails at once while another process holds the write lock, e.g. a watcher or a second
+        station creating the same new file (a script reading committed_steps() made a starting
+        calibration fail with DATABASE_ERROR). Every step of the setup may run again: the schema
+        is created under BEGIN IMMEDIATE after a second look."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            try:
+                self._setup(timeout_s)
+                return
+            except sqlite3.OperationalError as e:
+                if "locked" not in str(e) or time.monotonic() >= deadline:
+                    raise
+            time.sleep(0.05)
 
     def _setup(self, timeout_s: float) -> None:
         c = self._conn
