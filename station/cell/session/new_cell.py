@@ -218,7 +218,7 @@ def _repeats_cycles(cfg: CellConfig) -> tuple[int, int, str]:
         rep_um = sigma_from_rp(rp) * 1e3
         rep_text = f"repeatability σ {rep_um:.1f} µm per axis from the robot file's RP {rp * 1e3:g} µm"
     else:
-        rep_um = float(getattr(sim, "repeatability_um", 5.0) or 5.0)
+        rep_um = float(getattr(sim, "repeatability_um", ASSUMED_REPEATABILITY_UM) or ASSUMED_REPEATABILITY_UM)
         rep_text = f"repeatability {rep_um:g} µm"
     plan_cfg = dataclasses.replace(cfg, plan=dataclasses.replace(cfg.plan, repeats=1))
     p1 = preview(plan_cfg, with_upload=True)
