@@ -190,9 +190,9 @@
 '                  030-140-010/030-140-010-130.html and SPEL/tc/... same path.
 '   [REF-SYNCLOCK] SPEL+ Language Reference (RC800), "SyncLock Statement" and "SyncUnlock
 '                  Statement", SPEL_RC800/en/030/030-220/030-220-010/030-220-010-600.html and
-'                  -610.html (syncID 0..63; a second SyncLock of the same ID is an error; only
-'                  the task that locked an ID unlocks it; RC+ 6.0 and later release the IDs of a
-'                  task that ends).
+'                  -610.html (syncID 0..63, SyncUnlock's page 1..63; a second SyncLock of
+'                  the same ID is an error; only the task that locked an ID unlocks it; RC+ 6.0
+'                  and later release the IDs of a task that ends).
 '   [REF-GLOBAL]   SPEL+ Language Reference (RC800), "Global", SPEL_RC800/ja/030/030-110/
 '                  030-110-010/030-110-010-040.html (types, 100,000 elements, Preserve 4,000,
 '                  Globals cleared when a function starts from the Run / Operator window).
@@ -228,7 +228,8 @@
 #define STOP_BIT 0
 ' the task number of main (the motion side), for TaskInfo [REF-TASKINFO]
 #define MAIN_TASK 1
-' the SyncLock ID that guards the register image Regs [REF-SYNCLOCK]: any free ID 0..63
+' the SyncLock ID that guards the register image Regs [REF-SYNCLOCK]: a free ID 1..63
+' (SyncLock's page allows 0..63, SyncUnlock's 1..63)
 #define REGS_LOCK 1
 ' the running CRC each user keeps (CrcHi / CrcLo index)
 #define CRC_XFER 0

@@ -20,7 +20,8 @@ tests never depend on the wall clock. Semantics, each from its document:
   in a background task it "cannot be recovered in AUTO mode": the task stays ended.
   ``OnErr GoTo label`` [EPSON-MODBUS]: the error continues at the label of the innermost function
   of the call chain that set a handler; ``Err`` is its number.
-* ``SyncLock syncID [, timeOut]`` / ``SyncUnlock syncID`` [REF-SYNCLOCK]: syncID 0..63; a task
+* ``SyncLock syncID [, timeOut]`` / ``SyncUnlock syncID`` [REF-SYNCLOCK]: syncID 0..63 for
+  SyncLock, 1..63 for SyncUnlock (their pages differ; strict: ID 0 is never unlocked); a task
   waits while another holds the ID; with a time-out it goes on after it and ``Tw`` says whether
   it timed out; a second ``SyncLock`` of an ID the task holds is an error, as is unlocking an ID
   it does not hold; a task that ends (also by an error or an abort) releases its IDs (RC+ 6.0
@@ -386,8 +387,10 @@ class Evaluator:
         """``SyncLock`` / ``SyncUnlock`` [REF-SYNCLOCK]."""
         _k, op, id_expr, timeout_expr, _line = st
         sync_id = _num(self.eval(id_expr, fr), line)
-        if sync_id != int(sync_id) or not 0 <= sync_id <= 63:
-            raise SpelRuntimeError(ERR_ARG, f"syncID {sync_id!r} outside 0..63", line)
+        # SyncLock's page gives 0..63, SyncUnlock's 1..63: strict, an ID 0 cannot be unlocked
+        lowest = 1 if op == "syncunlock" else 0
+        if sync_id != int(sync_id) or not lowest <= sync_id <= 63:
+            raise SpelRuntimeError(ERR_ARG, f"syncID {sync_id!r} outside {lowest}..63", line)
         sync_id = int(sync_id)
         held, me = self.rt.sync, self.task.number
         if op == "syncunlock":

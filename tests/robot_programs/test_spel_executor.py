@@ -177,6 +177,7 @@ def test_synclock_keeps_a_read_modify_write_whole_across_tasks(locked):
     ("SyncLock 3\n  SyncLock 3", "SyncLock 3 twice in a row"),
     ("SyncUnlock 3", "SyncUnlock 3: this task did not lock it"),
     ("SyncLock 64", "syncID 64 outside 0..63"),
+    ("SyncLock 0\n  SyncUnlock 0", "syncID 0 outside 1..63"),  # the two pages differ: strict
 ])
 def test_synclock_misuse_is_an_error(body, message):
     ep = run_main(f"Function main\n  {body}\nFend")
